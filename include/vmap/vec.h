@@ -39,6 +39,12 @@ VMAP_HD Vec3 cross(Vec3 a, Vec3 b) {
 }
 VMAP_HD float length2(Vec3 a) { return dot(a, a); }
 VMAP_HD float length(Vec3 a) { return sqrtf(dot(a, a)); }
-VMAP_HD bool is_finite(Vec3 a) { return isfinite(a.x) && isfinite(a.y) && isfinite(a.z); }
+VMAP_HD bool is_finite(Vec3 a) {
+#if defined(__CUDA_ARCH__)
+    return isfinite(a.x) && isfinite(a.y) && isfinite(a.z);
+#else
+    return std::isfinite(a.x) && std::isfinite(a.y) && std::isfinite(a.z);
+#endif
+}
 
 }  // namespace vmap

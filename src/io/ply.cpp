@@ -1,0 +1,969 @@
+// PLY reading (ascii, binary little- and big-endian) and point-cloud writing.
+//
+// The whole file is read into memory and parsed in place: per-token iostream extraction is an
+// order of magnitude too slow for the full-resolution scanned models (tens of MB of ascii).
+// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
+// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
+// clang-format off
+#include <math.h>
+// clang-format on
+
+#include <algorithm>
+#include <bit>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <system_error>
+#include <vector>
+
+#include "vmap/error.h"
+#include "vmap/io.h"
+
+namespace vmap {
+namespace {
+
+template <class... Parts>
+[[noreturn]] void fail(const std::string& path, const Parts&... parts) {
+    std::ostringstream out;
+    out << path << ": ";
+    (out << ... << parts);
+    throw Error(out.str());
+}
+
+// Tokens from a broken or binary file end up in messages; keep those one short printable line.
+std::string quoted(std::string_view text) {
+    constexpr size_t kMax = 32;
+    std::string out = "'";
+    for (size_t i = 0; i < text.size() && i < kMax; ++i) {
+        const unsigned char c = static_cast<unsigned char>(text[i]);
+        out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+    }
+    if (text.size() > kMax) out += "...";
+    return out + "'";
+}
+
+struct FileBuffer {
+    std::unique_ptr<char[]> bytes;
+    size_t size = 0;
+    const char* begin() const { return bytes.get(); }
+    const char* end() const { return bytes.get() + size; }
+};
+
+FileBuffer load_file(const std::string& path) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not a file");
+    std::FILE* file = std::fopen(path.c_str(), "rb");
+    if (file == nullptr) {
+        if (errno == ENOENT) fail(path, "no such file");
+        fail(path, "cannot open: ", std::strerror(errno));
+    }
+    std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(file, &std::fclose);
+    const auto size = std::filesystem::file_size(path, ec);
+    if (ec) fail(path, "cannot determine the file size: ", ec.message());
+    FileBuffer buffer;
+    // make_unique_for_overwrite: zero-filling tens of megabytes first would be wasted work.
+    buffer.bytes = std::make_unique_for_overwrite<char[]>(size + 1);
+    buffer.size = static_cast<size_t>(size);
+    if (std::fread(buffer.bytes.get(), 1, buffer.size, file) != buffer.size) {
+        fail(path, "read error: ", std::ferror(file) ? std::strerror(errno) : "file shrank");
+    }
+    buffer.bytes[buffer.size] = '\0';
+    return buffer;
+}
+
+bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
+
+// from_chars rejects a leading '+', which some writers emit; "+-1" must still be rejected.
+const char* skip_plus(const char* b, const char* e) {
+    if (e - b >= 2 && b[0] == '+' && b[1] != '-' && b[1] != '+') return b + 1;
+    return b;
+}
+
+// from_chars reports values beyond the type's range as errors; overflow should become an
+// infinity (rejected later with a clear message) and underflow a zero, as strtod would give.
+template <class T>
+bool parse_real(std::string_view token, T& out) {
+    const char* b = skip_plus(token.data(), token.data() + token.size());
+    const char* e = token.data() + token.size();
+    auto [ptr, ec] = std::from_chars(b, e, out);
+    if (ptr != e) return false;
+    if (ec == std::errc()) return true;
+    if (ec != std::errc::result_out_of_range) return false;
+    double wide = 0;
+    auto [wptr, wec] = std::from_chars(b, e, wide);
+    if (wptr == e && wec == std::errc()) {
+        out = static_cast<T>(wide);
+        return true;
+    }
+    const bool negative = *b == '-';
+    const char* mantissa = negative ? b + 1 : b;
+    const char* exponent = std::find_if(mantissa, e, [](char c) { return c == 'e' || c == 'E'; });
+    const bool underflow = exponent != e ? (exponent + 1 != e && exponent[1] == '-')
+                                         : (*mantissa == '0' || *mantissa == '.');
+    const T magnitude = underflow ? T(0) : std::numeric_limits<T>::infinity();
+    out = negative ? -magnitude : magnitude;
+    return true;
+}
+
+bool parse_int(std::string_view token, int64_t& out) {
+    const char* e = token.data() + token.size();
+    auto [ptr, ec] = std::from_chars(skip_plus(token.data(), e), e, out);
+    return ec == std::errc() && ptr == e && !token.empty();
+}
+
+// ---- header --------------------------------------------------------------------------------
+
+enum class Format { kAscii, kBinaryLittle, kBinaryBig };
+enum class Type : uint8_t { kInt8, kUInt8, kInt16, kUInt16, kInt32, kUInt32, kFloat32, kFloat64 };
+
+struct TypeName {
+    std::string_view name;
+    Type type;
+};
+constexpr TypeName kTypeNames[] = {
+    {"char", Type::kInt8},       {"int8", Type::kInt8},       {"uchar", Type::kUInt8},
+    {"uint8", Type::kUInt8},     {"short", Type::kInt16},     {"int16", Type::kInt16},
+    {"ushort", Type::kUInt16},   {"uint16", Type::kUInt16},   {"int", Type::kInt32},
+    {"int32", Type::kInt32},     {"uint", Type::kUInt32},     {"uint32", Type::kUInt32},
+    {"float", Type::kFloat32},   {"float32", Type::kFloat32}, {"double", Type::kFloat64},
+    {"float64", Type::kFloat64},
+};
+
+size_t type_size(Type t) {
+    switch (t) {
+        case Type::kInt8:
+        case Type::kUInt8:
+            return 1;
+        case Type::kInt16:
+        case Type::kUInt16:
+            return 2;
+        case Type::kInt32:
+        case Type::kUInt32:
+        case Type::kFloat32:
+            return 4;
+        case Type::kFloat64:
+            return 8;
+    }
+    return 0;
+}
+
+bool is_integer(Type t) { return t != Type::kFloat32 && t != Type::kFloat64; }
+
+std::string_view type_name(Type t) {
+    for (const auto& entry : kTypeNames) {
+        if (entry.type == t) return entry.name;
+    }
+    return "?";
+}
+
+// What a property feeds in the result; everything else is read (to validate and to advance)
+// and dropped.
+enum Role : uint8_t {
+    kSkip,
+    kX,
+    kY,
+    kZ,
+    kNx,
+    kNy,
+    kNz,
+    kRed,
+    kGreen,
+    kBlue,
+    kRadius,
+    kIndices,
+    kRoleCount
+};
+
+struct Property {
+    std::string name;
+    Type type = Type::kFloat32;  // the item type for a list
+    bool is_list = false;
+    Type count_type = Type::kUInt8;
+    Role role = kSkip;
+};
+
+struct Element {
+    std::string name;
+    uint64_t count = 0;
+    std::vector<Property> properties;
+    bool has_lists = false;
+};
+
+struct Header {
+    Format format = Format::kAscii;
+    std::vector<Element> elements;
+    size_t data_offset = 0;
+    size_t data_line = 0;  // line number of the first data line, for ascii messages
+    uint64_t vertex_count = 0;
+};
+
+std::vector<std::string_view> split_words(std::string_view line) {
+    std::vector<std::string_view> words;
+    size_t i = 0;
+    while (i < line.size()) {
+        while (i < line.size() && is_blank(line[i])) ++i;
+        const size_t start = i;
+        while (i < line.size() && !is_blank(line[i])) ++i;
+        if (i > start) words.push_back(line.substr(start, i - start));
+    }
+    return words;
+}
+
+std::string_view trim(std::string_view s) {
+    while (!s.empty() && is_blank(s.front())) s.remove_prefix(1);
+    while (!s.empty() && is_blank(s.back())) s.remove_suffix(1);
+    return s;
+}
+
+Type parse_type(const std::string& path, size_t line, std::string_view word) {
+    for (const auto& entry : kTypeNames) {
+        if (entry.name == word) return entry.type;
+    }
+    fail(path, "header line ", line, ": unknown property type ", quoted(word));
+}
+
+Role vertex_role(std::string_view name) {
+    static constexpr std::pair<std::string_view, Role> kNames[] = {
+        {"x", kX},
+        {"y", kY},
+        {"z", kZ},
+        {"nx", kNx},
+        {"ny", kNy},
+        {"nz", kNz},
+        {"red", kRed},
+        {"green", kGreen},
+        {"blue", kBlue},
+        {"r", kRed},
+        {"g", kGreen},
+        {"b", kBlue},
+        {"diffuse_red", kRed},
+        {"diffuse_green", kGreen},
+        {"diffuse_blue", kBlue},
+        {"radius", kRadius},
+    };
+    for (const auto& [n, role] : kNames) {
+        if (n == name) return role;
+    }
+    return kSkip;
+}
+
+// Assigns roles to the vertex and face properties and checks that the ones vmap needs exist.
+void assign_roles(const std::string& path, Header& header) {
+    bool seen_vertex = false;
+    bool seen_face = false;
+    for (Element& element : header.elements) {
+        if (element.name == "vertex") {
+            if (seen_vertex) fail(path, "header: more than one 'vertex' element");
+            seen_vertex = true;
+            header.vertex_count = element.count;
+            const Property* by_role[kRoleCount] = {};
+            for (Property& p : element.properties) {
+                p.role = vertex_role(p.name);
+                if (p.role == kSkip) continue;
+                if (by_role[p.role] != nullptr) {
+                    fail(path, "header: element vertex: properties '", by_role[p.role]->name,
+                         "' and '", p.name, "' both give the same value");
+                }
+                if (p.is_list) {
+                    fail(path, "header: element vertex: property '", p.name,
+                         "' must be a scalar, not a list");
+                }
+                by_role[p.role] = &p;
+            }
+            for (Role r : {kX, kY, kZ}) {
+                if (by_role[r] == nullptr) {
+                    fail(path, "header: element vertex has no '", "xyz"[r - kX], "' property");
+                }
+            }
+            auto all_or_none = [&](Role a, const char* what) {
+                const int n = (by_role[a] != nullptr) + (by_role[a + 1] != nullptr) +
+                              (by_role[a + 2] != nullptr);
+                if (n != 0 && n != 3) {
+                    fail(path, "header: element vertex has only ", n, " of the 3 ", what,
+                         " properties");
+                }
+            };
+            all_or_none(kNx, "normal (nx, ny, nz)");
+            all_or_none(kRed, "colour (red, green, blue)");
+        } else if (element.name == "face") {
+            if (seen_face) fail(path, "header: more than one 'face' element");
+            seen_face = true;
+            Property* indices = nullptr;
+            for (Property& p : element.properties) {
+                if (p.name != "vertex_indices" && p.name != "vertex_index") continue;
+                if (indices != nullptr) {
+                    fail(path, "header: element face has both '", indices->name, "' and '", p.name,
+                         "'");
+                }
+                if (!p.is_list) fail(path, "header: element face: '", p.name, "' must be a list");
+                if (!is_integer(p.type) || !is_integer(p.count_type)) {
+                    fail(path, "header: element face: '", p.name,
+                         "' must have integer count and index types");
+                }
+                p.role = kIndices;
+                indices = &p;
+            }
+            if (indices == nullptr) {
+                fail(path, "header: element face has no 'vertex_indices' list property");
+            }
+        }
+    }
+    if (!seen_vertex) fail(path, "header: no 'vertex' element");
+}
+
+// A hostile or corrupt count must not turn into a huge allocation or a near-endless loop: every
+// element needs some minimum number of bytes, and the file has only so many left.
+void check_counts_fit(const std::string& path, const Header& header, size_t data_size) {
+    const bool ascii = header.format == Format::kAscii;
+    // An ascii value is at least one character plus a separator; the very last needs no
+    // separator, hence the one byte of slack.
+    uint64_t left = data_size + (ascii ? 1 : 0);
+    for (const Element& element : header.elements) {
+        uint64_t per_element = 0;
+        for (const Property& p : element.properties) {
+            per_element += ascii ? 2 : type_size(p.is_list ? p.count_type : p.type);
+        }
+        if (per_element == 0) continue;
+        if (element.count > left / per_element) {
+            fail(path, "truncated: element ", element.name, ": ", element.count,
+                 " elements of at least ", per_element, " bytes each cannot fit in the ", data_size,
+                 " bytes after the header");
+        }
+        left -= element.count * per_element;
+    }
+}
+
+Header parse_header(const std::string& path, const FileBuffer& file) {
+    const std::string_view text(file.begin(), file.size);
+    const size_t first_end = text.find('\n');
+    if (trim(text.substr(0, first_end)) != "ply") {
+        fail(path, "header: bad magic (not a PLY file: the first line is not 'ply')");
+    }
+    // Find the end of the header before interpreting it, so that a header cut short is reported
+    // as such and not as garbage keywords from the data that follows.
+    std::vector<std::string_view> lines;
+    size_t pos = 0;
+    bool found_end = false;
+    while (pos < text.size()) {
+        size_t eol = text.find('\n', pos);
+        const size_t next = eol == std::string_view::npos ? text.size() : eol + 1;
+        if (eol == std::string_view::npos) eol = text.size();
+        const std::string_view line = text.substr(pos, eol - pos);
+        pos = next;
+        if (trim(line) == "end_header") {
+            found_end = true;
+            break;
+        }
+        lines.push_back(line);
+    }
+    if (!found_end) fail(path, "header: missing 'end_header'");
+
+    Header header;
+    header.data_offset = pos;
+    header.data_line = lines.size() + 2;
+    bool have_format = false;
+    for (size_t i = 1; i < lines.size(); ++i) {
+        const size_t line_no = i + 1;
+        const auto words = split_words(lines[i]);
+        if (words.empty()) continue;
+        const std::string_view keyword = words[0];
+        if (keyword == "comment" || keyword == "obj_info") continue;
+        if (keyword == "format") {
+            if (have_format) fail(path, "header line ", line_no, ": second 'format' line");
+            if (words.size() != 3) {
+                fail(path, "header line ", line_no, ": expected 'format <type> 1.0'");
+            }
+            if (words[1] == "ascii") {
+                header.format = Format::kAscii;
+            } else if (words[1] == "binary_little_endian") {
+                header.format = Format::kBinaryLittle;
+            } else if (words[1] == "binary_big_endian") {
+                header.format = Format::kBinaryBig;
+            } else {
+                fail(path, "header line ", line_no, ": unknown format ", quoted(words[1]));
+            }
+            if (words[2] != "1.0" && words[2] != "1") {
+                fail(path, "header line ", line_no, ": unsupported PLY version ", quoted(words[2]));
+            }
+            have_format = true;
+        } else if (keyword == "element") {
+            if (words.size() != 3) {
+                fail(path, "header line ", line_no, ": expected 'element <name> <count>'");
+            }
+            int64_t count = 0;
+            if (!words[2].empty() && words[2][0] == '-' && parse_int(words[2], count)) {
+                fail(path, "header: element ", words[1], ": negative count ", count);
+            }
+            Element element;
+            element.name = words[1];
+            const char* e = words[2].data() + words[2].size();
+            auto [ptr, ec] = std::from_chars(words[2].data(), e, element.count);
+            if (ec == std::errc::result_out_of_range) {
+                fail(path, "header: element ", words[1], ": count ", quoted(words[2]),
+                     " is too large");
+            }
+            if (ec != std::errc() || ptr != e) {
+                fail(path, "header: element ", words[1], ": invalid count ", quoted(words[2]));
+            }
+            header.elements.push_back(std::move(element));
+        } else if (keyword == "property") {
+            if (header.elements.empty()) {
+                fail(path, "header line ", line_no, ": property before any element");
+            }
+            Element& element = header.elements.back();
+            Property p;
+            if (words.size() >= 2 && words[1] == "list") {
+                if (words.size() != 5) {
+                    fail(path, "header line ", line_no,
+                         ": expected 'property list <count type> <item type> <name>'");
+                }
+                p.is_list = true;
+                p.count_type = parse_type(path, line_no, words[2]);
+                if (!is_integer(p.count_type)) {
+                    fail(path, "header line ", line_no, ": list count type must be an integer");
+                }
+                p.type = parse_type(path, line_no, words[3]);
+                p.name = words[4];
+                element.has_lists = true;
+            } else {
+                if (words.size() != 3) {
+                    fail(path, "header line ", line_no, ": expected 'property <type> <name>'");
+                }
+                p.type = parse_type(path, line_no, words[1]);
+                p.name = words[2];
+            }
+            for (const Property& other : element.properties) {
+                if (other.name == p.name) {
+                    fail(path, "header: element ", element.name, ": duplicate property '", p.name,
+                         "'");
+                }
+            }
+            element.properties.push_back(std::move(p));
+        } else {
+            fail(path, "header line ", line_no, ": unknown keyword ", quoted(keyword));
+        }
+    }
+    if (!have_format) fail(path, "header: missing 'format' line");
+    assign_roles(path, header);
+    check_counts_fit(path, header, file.size - header.data_offset);
+    return header;
+}
+
+// ---- data sources --------------------------------------------------------------------------
+//
+// Both sources present the data as a stream of values for the element loop below; each knows
+// how to say where it is in an error message.
+
+class BinarySource {
+  public:
+    BinarySource(const std::string& path, const char* begin, const char* end, bool big_endian)
+        : path_(path),
+          p_(begin),
+          end_(end),
+          swap_(big_endian != (std::endian::native == std::endian::big)) {}
+
+    void begin_element(const Element& element, uint64_t index) {
+        element_ = &element;
+        index_ = index;
+    }
+    void end_element() {}
+
+    double value(Type t) {
+        const size_t n = type_size(t);
+        if (static_cast<size_t>(end_ - p_) < n) truncated();
+        const char* at = p_;
+        p_ += n;
+        switch (t) {
+            case Type::kInt8:
+                return load<int8_t>(at);
+            case Type::kUInt8:
+                return load<uint8_t>(at);
+            case Type::kInt16:
+                return load<int16_t>(at);
+            case Type::kUInt16:
+                return load<uint16_t>(at);
+            case Type::kInt32:
+                return load<int32_t>(at);
+            case Type::kUInt32:
+                return load<uint32_t>(at);
+            case Type::kFloat32:
+                return load<float>(at);
+            case Type::kFloat64:
+                return load<double>(at);
+        }
+        return 0;
+    }
+
+    uint64_t list_count(Type t) {
+        const double n = value(t);
+        if (n < 0) fail(path_, where(), ": negative list length ", static_cast<int64_t>(n));
+        return static_cast<uint64_t>(n);
+    }
+
+    void skip_list(uint64_t count, Type t) {
+        const size_t n = type_size(t);
+        if (count > static_cast<uint64_t>(end_ - p_) / n) truncated();
+        p_ += count * n;
+    }
+
+    void finish() {
+        if (p_ != end_) {
+            fail(path_, "unexpected ", end_ - p_,
+                 " bytes after the last element (the header does not describe the data)");
+        }
+    }
+
+    std::string where() const { return element_->name + " " + std::to_string(index_); }
+
+  private:
+    template <class T>
+    T load(const char* at) const {
+        unsigned char bytes[sizeof(T)];
+        std::memcpy(bytes, at, sizeof(T));
+        if (swap_) std::reverse(bytes, bytes + sizeof(T));
+        T v;
+        std::memcpy(&v, bytes, sizeof(T));
+        return v;
+    }
+
+    [[noreturn]] void truncated() const {
+        fail(path_, "truncated: expected ", element_->count, " ", element_->name,
+             " elements, found ", index_);
+    }
+
+    const std::string& path_;
+    const char* p_;
+    const char* end_;
+    bool swap_;
+    const Element* element_ = nullptr;
+    uint64_t index_ = 0;
+};
+
+class AsciiSource {
+  public:
+    AsciiSource(const std::string& path, const char* begin, const char* end, size_t first_line)
+        : path_(path), p_(begin), end_(end), line_(first_line - 1) {}
+
+    // Each element is one line; its tokens are split up front so that a short or long line is
+    // reported with the counts that make the mistake obvious.
+    void begin_element(const Element& element, uint64_t index) {
+        element_ = &element;
+        index_ = index;
+        if (!next_line()) {
+            fail(path_, "truncated: expected ", element.count, " ", element.name,
+                 " elements, found ", index);
+        }
+        next_ = 0;
+        size_t expected = element.properties.size();
+        bool at_least = false;
+        if (element.has_lists) {
+            expected = 0;
+            for (const Property& p : element.properties) {
+                if (!p.is_list) {
+                    ++expected;
+                } else if (expected < tokens_.size()) {
+                    expected += 1 + static_cast<size_t>(std::min<uint64_t>(
+                                        integer(tokens_[expected], p.count_type), SIZE_MAX / 2));
+                } else {
+                    // The count itself is missing; the rest cannot be known.
+                    at_least = true;
+                    ++expected;
+                }
+            }
+        }
+        if (expected != tokens_.size()) {
+            fail(path_, where(), ": expected ", at_least ? "at least " : "", expected,
+                 " values, found ", tokens_.size());
+        }
+    }
+    void end_element() {}
+
+    double value(Type t) {
+        const std::string_view token = tokens_[next_++];
+        if (is_integer(t)) return static_cast<double>(integer(token, t));
+        if (t == Type::kFloat32) {
+            float v;
+            if (parse_real(token, v)) return v;
+        } else {
+            double v;
+            if (parse_real(token, v)) return v;
+        }
+        fail(path_, where(), ": invalid number ", quoted(token));
+    }
+
+    uint64_t list_count(Type t) { return static_cast<uint64_t>(value(t)); }
+
+    void skip_list(uint64_t count, Type t) {
+        for (uint64_t i = 0; i < count; ++i) value(t);
+    }
+
+    void finish() {
+        while (p_ != end_ && (is_blank(*p_) || *p_ == '\n')) {
+            if (*p_ == '\n') ++line_;
+            ++p_;
+        }
+        if (p_ != end_) {
+            fail(path_, "line ", line_ + 1, ": unexpected data after the last element");
+        }
+    }
+
+    std::string where() const {
+        return element_->name + " " + std::to_string(index_) + " (line " + std::to_string(line_) +
+               ")";
+    }
+
+  private:
+    bool next_line() {
+        tokens_.clear();
+        while (p_ != end_ && tokens_.empty()) {
+            const char* eol = static_cast<const char*>(std::memchr(p_, '\n', end_ - p_));
+            if (eol == nullptr) eol = end_;
+            ++line_;
+            const char* q = p_;
+            while (q != eol) {
+                while (q != eol && is_blank(*q)) ++q;
+                const char* start = q;
+                while (q != eol && !is_blank(*q)) ++q;
+                if (q != start) tokens_.emplace_back(start, q - start);
+            }
+            p_ = eol == end_ ? end_ : eol + 1;
+        }
+        return !tokens_.empty();
+    }
+
+    // Integers are checked against their declared type: a value that does not fit means the
+    // file and its header disagree.
+    int64_t integer(std::string_view token, Type t) const {
+        int64_t v = 0;
+        if (!parse_int(token, v)) fail(path_, where(), ": invalid integer ", quoted(token));
+        int64_t lo = 0, hi = 0;
+        switch (t) {
+            case Type::kInt8:
+                lo = INT8_MIN, hi = INT8_MAX;
+                break;
+            case Type::kUInt8:
+                lo = 0, hi = UINT8_MAX;
+                break;
+            case Type::kInt16:
+                lo = INT16_MIN, hi = INT16_MAX;
+                break;
+            case Type::kUInt16:
+                lo = 0, hi = UINT16_MAX;
+                break;
+            case Type::kInt32:
+                lo = INT32_MIN, hi = INT32_MAX;
+                break;
+            default:
+                lo = 0, hi = UINT32_MAX;
+                break;
+        }
+        if (v < lo || v > hi) {
+            fail(path_, where(), ": value ", v, " out of range for ", type_name(t));
+        }
+        return v;
+    }
+
+    const std::string& path_;
+    const char* p_;
+    const char* end_;
+    size_t line_;
+    std::vector<std::string_view> tokens_;
+    size_t next_ = 0;
+    const Element* element_ = nullptr;
+    uint64_t index_ = 0;
+};
+
+// Colours stored as integers are taken to use the full range of their type (8 or 16 bits);
+// 32-bit integer colours in the wild hold 0..255.
+float colour_range(Type t) {
+    switch (t) {
+        case Type::kFloat32:
+        case Type::kFloat64:
+            return 1.0f;
+        case Type::kInt16:
+        case Type::kUInt16:
+            return 65535.0f;
+        default:
+            return 255.0f;
+    }
+}
+
+template <class Source>
+void read_data(const std::string& path, const Header& header, Source& source, ModelData& out) {
+    PointSet& points = out.points;
+    std::vector<int64_t> corners;
+    for (const Element& element : header.elements) {
+        if (element.properties.empty()) continue;
+        const bool is_vertex = element.name == "vertex";
+        const bool is_face = element.name == "face";
+        bool has_normals = false, has_colors = false, has_radii = false;
+        float range[3] = {1, 1, 1};
+        if (is_vertex) {
+            for (const Property& p : element.properties) {
+                has_normals |= p.role == kNx;
+                has_colors |= p.role == kRed;
+                has_radii |= p.role == kRadius;
+                if (p.role >= kRed && p.role <= kBlue) range[p.role - kRed] = colour_range(p.type);
+            }
+            points.positions.reserve(element.count);
+            if (has_normals) points.normals.reserve(element.count);
+            if (has_colors) points.colors.reserve(element.count);
+            if (has_radii) points.radii.reserve(element.count);
+        }
+        if (is_face) out.triangles.reserve(element.count);
+
+        double v[kRoleCount] = {};
+        for (uint64_t i = 0; i < element.count; ++i) {
+            source.begin_element(element, i);
+            for (const Property& p : element.properties) {
+                if (!p.is_list) {
+                    v[p.role] = source.value(p.type);
+                    continue;
+                }
+                const uint64_t count = source.list_count(p.count_type);
+                if (p.role != kIndices) {
+                    source.skip_list(count, p.type);
+                    continue;
+                }
+                corners.clear();
+                for (uint64_t k = 0; k < count; ++k) {
+                    corners.push_back(static_cast<int64_t>(source.value(p.type)));
+                }
+            }
+            source.end_element();
+
+            if (is_vertex) {
+                const Vec3 pos{static_cast<float>(v[kX]), static_cast<float>(v[kY]),
+                               static_cast<float>(v[kZ])};
+                if (!is_finite(pos)) {
+                    fail(path, source.where(), ": non-finite coordinate (", v[kX], ", ", v[kY],
+                         ", ", v[kZ], ")");
+                }
+                points.positions.push_back(pos);
+                if (has_normals) {
+                    const Vec3 n{static_cast<float>(v[kNx]), static_cast<float>(v[kNy]),
+                                 static_cast<float>(v[kNz])};
+                    if (!is_finite(n)) {
+                        fail(path, source.where(), ": non-finite normal (", v[kNx], ", ", v[kNy],
+                             ", ", v[kNz], ")");
+                    }
+                    points.normals.push_back(n);
+                }
+                if (has_colors) {
+                    const Vec3 c{static_cast<float>(v[kRed]) / range[0],
+                                 static_cast<float>(v[kGreen]) / range[1],
+                                 static_cast<float>(v[kBlue]) / range[2]};
+                    if (!is_finite(c)) {
+                        fail(path, source.where(), ": non-finite colour (", v[kRed], ", ",
+                             v[kGreen], ", ", v[kBlue], ")");
+                    }
+                    points.colors.push_back(c);
+                }
+                if (has_radii) {
+                    const float r = static_cast<float>(v[kRadius]);
+                    if (!std::isfinite(r) || r < 0) {
+                        fail(path, source.where(), ": invalid radius ", v[kRadius]);
+                    }
+                    points.radii.push_back(r);
+                }
+            } else if (is_face) {
+                if (corners.size() < 3) {
+                    fail(path, source.where(), ": degenerate face with ", corners.size(),
+                         corners.size() == 1 ? " vertex" : " vertices");
+                }
+                for (int64_t c : corners) {
+                    if (c < 0 || static_cast<uint64_t>(c) >= header.vertex_count) {
+                        fail(path, source.where(), ": vertex index ", c, " out of range (",
+                             header.vertex_count, " vertices)");
+                    }
+                }
+                for (size_t k = 1; k + 1 < corners.size(); ++k) {
+                    out.triangles.push_back({static_cast<uint32_t>(corners[0]),
+                                             static_cast<uint32_t>(corners[k]),
+                                             static_cast<uint32_t>(corners[k + 1])});
+                }
+            }
+        }
+    }
+    source.finish();
+}
+
+// ---- writing -------------------------------------------------------------------------------
+
+// Owns the temporary file until it is renamed into place, so every early exit cleans up.
+class TempFile {
+  public:
+    explicit TempFile(const std::string& path) : path_(path), temp_(path + ".tmp") {
+        file_ = std::fopen(temp_.c_str(), "wb");
+        if (file_ == nullptr) fail(path_, "cannot create '", temp_, "': ", std::strerror(errno));
+    }
+    ~TempFile() {
+        if (file_ != nullptr) std::fclose(file_);
+        if (!committed_) std::remove(temp_.c_str());
+    }
+    TempFile(const TempFile&) = delete;
+    TempFile& operator=(const TempFile&) = delete;
+
+    void write(const std::string& bytes) {
+        if (std::fwrite(bytes.data(), 1, bytes.size(), file_) != bytes.size()) {
+            fail(path_, "write error: ", std::strerror(errno));
+        }
+    }
+
+    void commit() {
+        std::FILE* f = file_;
+        file_ = nullptr;
+        if (std::fclose(f) != 0) fail(path_, "write error: ", std::strerror(errno));
+        if (std::rename(temp_.c_str(), path_.c_str()) != 0) {
+            fail(path_, "cannot rename '", temp_, "' onto it: ", std::strerror(errno));
+        }
+        committed_ = true;
+    }
+
+  private:
+    std::string path_;
+    std::string temp_;
+    std::FILE* file_ = nullptr;
+    bool committed_ = false;
+};
+
+template <class T>
+void put_le(std::string& out, T v) {
+    char bytes[sizeof(T)];
+    std::memcpy(bytes, &v, sizeof(T));
+    if constexpr (std::endian::native == std::endian::big) std::reverse(bytes, bytes + sizeof(T));
+    out.append(bytes, sizeof(T));
+}
+
+void put_text(std::string& out, float v) {
+    char buffer[32];
+    // Shortest representation that reads back to the same float.
+    const auto result = std::to_chars(buffer, buffer + sizeof(buffer), v);
+    out.append(buffer, result.ptr);
+}
+
+uint8_t colour_byte(float c) {
+    if (!(c > 0.0f)) return 0;  // also NaN
+    if (c >= 1.0f) return 255;
+    return static_cast<uint8_t>(std::lround(c * 255.0f));
+}
+
+}  // namespace
+
+ModelData read_ply(const std::string& path) {
+    const FileBuffer file = load_file(path);
+    if (file.size == 0) fail(path, "empty file");
+    const Header header = parse_header(path, file);
+    ModelData out;
+    const char* data = file.begin() + header.data_offset;
+    if (header.format == Format::kAscii) {
+        AsciiSource source(path, data, file.end(), header.data_line);
+        read_data(path, header, source, out);
+    } else {
+        BinarySource source(path, data, file.end(), header.format == Format::kBinaryBig);
+        read_data(path, header, source, out);
+    }
+    return out;
+}
+
+void write_ply(const std::string& path, const PointSet& points, bool binary) {
+    const size_t n = points.size();
+    auto check_size = [&](size_t size, const char* what) {
+        if (size != 0 && size != n) {
+            fail(path, "cannot write: ", size, " ", what, " for ", n, " points");
+        }
+    };
+    check_size(points.normals.size(), "normals");
+    check_size(points.colors.size(), "colours");
+    check_size(points.radii.size(), "radii");
+    // Refuse what read_ply would refuse, so that every file written can be read back.
+    for (size_t i = 0; i < n; ++i) {
+        if (!is_finite(points.positions[i])) fail(path, "point ", i, ": non-finite position");
+        if (points.has_normals() && !is_finite(points.normals[i])) {
+            fail(path, "point ", i, ": non-finite normal");
+        }
+        if (points.has_radii() && !(points.radii[i] >= 0 && std::isfinite(points.radii[i]))) {
+            fail(path, "point ", i, ": invalid radius ", points.radii[i]);
+        }
+    }
+
+    std::string header = "ply\nformat ";
+    header += binary ? "binary_little_endian" : "ascii";
+    header += " 1.0\ncomment written by vmap\nelement vertex " + std::to_string(n) + "\n";
+    header += "property float x\nproperty float y\nproperty float z\n";
+    if (points.has_normals()) header += "property float nx\nproperty float ny\nproperty float nz\n";
+    if (points.has_colors()) {
+        header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    }
+    if (points.has_radii()) header += "property float radius\n";
+    header += "end_header\n";
+
+    TempFile file(path);
+    file.write(header);
+    std::string chunk;
+    constexpr size_t kChunk = 1 << 20;
+    chunk.reserve(kChunk + 256);
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3 p = points.positions[i];
+        if (binary) {
+            put_le(chunk, p.x);
+            put_le(chunk, p.y);
+            put_le(chunk, p.z);
+            if (points.has_normals()) {
+                const Vec3 q = points.normals[i];
+                put_le(chunk, q.x);
+                put_le(chunk, q.y);
+                put_le(chunk, q.z);
+            }
+            if (points.has_colors()) {
+                const Vec3 c = points.colors[i];
+                chunk += static_cast<char>(colour_byte(c.x));
+                chunk += static_cast<char>(colour_byte(c.y));
+                chunk += static_cast<char>(colour_byte(c.z));
+            }
+            if (points.has_radii()) put_le(chunk, points.radii[i]);
+        } else {
+            put_text(chunk, p.x);
+            chunk += ' ';
+            put_text(chunk, p.y);
+            chunk += ' ';
+            put_text(chunk, p.z);
+            if (points.has_normals()) {
+                const Vec3 q = points.normals[i];
+                for (float f : {q.x, q.y, q.z}) {
+                    chunk += ' ';
+                    put_text(chunk, f);
+                }
+            }
+            if (points.has_colors()) {
+                const Vec3 c = points.colors[i];
+                for (float channel : {c.x, c.y, c.z}) {
+                    chunk += ' ';
+                    chunk += std::to_string(colour_byte(channel));
+                }
+            }
+            if (points.has_radii()) {
+                chunk += ' ';
+                put_text(chunk, points.radii[i]);
+            }
+            chunk += '\n';
+        }
+        if (chunk.size() >= kChunk) {
+            file.write(chunk);
+            chunk.clear();
+        }
+    }
+    file.write(chunk);
+    file.commit();
+}
+
+}  // namespace vmap

@@ -1,0 +1,513 @@
+// Normal estimation: k-NN plane fits (PCA), oriented along a minimum spanning tree (Hoppe 1992).
+//
+// Everything that runs in parallel writes only to its own point's slots, and everything that
+// depends on visiting order (spanning tree, sums over the cloud) runs serially, so the result
+// does not depend on the number of threads.
+
+// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
+// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
+// clang-format off
+#include <math.h>
+// clang-format on
+
+#include "vmap/normals.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cfloat>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+#include <nanoflann.hpp>
+#include <numeric>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+constexpr size_t kMinK = 3;
+constexpr size_t kMaxK = 1000;
+
+// Spreads at or below this fraction of the coordinates' magnitude are rounding noise, not
+// geometry: a plane fitted through them would be arbitrary. Storing a coordinate as float moves
+// it by at most FLT_EPSILON / 2 of its magnitude, so collinear points stay inside this; it is
+// kept that small so that fine sampling far from the origin still counts as a surface (1 mm
+// spacing 1 km out spreads about 4 times the limit).
+constexpr double kRoundingUlps = 2.0 * FLT_EPSILON;
+
+// Edges touching a point without a plane of its own cost more than any real edge (which cost
+// at most 1), so Prim's reaches such points last and they rarely relay orientation.
+constexpr float kDegenerateEdgeWeight = 2.0f;
+
+struct Dvec {
+    double x = 0, y = 0, z = 0;
+};
+
+Dvec to_d(Vec3 v) { return {v.x, v.y, v.z}; }
+Dvec operator-(Dvec a, Dvec b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+double ddot(Dvec a, Dvec b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+double max_abs(Vec3 v) {
+    return std::max({std::fabs(double(v.x)), std::fabs(double(v.y)), std::fabs(double(v.z))});
+}
+
+// Symmetric 3x3 eigen-decomposition by cyclic Jacobi rotations. Small, unconditionally stable
+// and exact enough for covariance matrices whose eigenvalues span many orders of magnitude
+// (a flat neighbourhood's smallest one is near zero), which closed-form cubic roots are not.
+struct Eigen3 {
+    double values[3];  // ascending
+    Dvec vectors[3];   // unit, vectors[i] belongs to values[i]
+};
+
+Eigen3 symmetric_eigen(const double m[3][3]) {
+    double a[3][3];
+    double v[3][3] = {{1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) a[i][j] = m[i][j];
+
+    for (int sweep = 0; sweep < 50; ++sweep) {
+        const double off = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+        const double diag = a[0][0] * a[0][0] + a[1][1] * a[1][1] + a[2][2] * a[2][2];
+        if (off == 0.0 || off <= 1e-36 * diag) break;
+        for (int p = 0; p < 2; ++p) {
+            for (int q = p + 1; q < 3; ++q) {
+                const double apq = a[p][q];
+                if (apq == 0.0) continue;
+                // Rotation angle that zeroes a[p][q]; taking the smaller root of
+                // t^2 + 2 theta t - 1 = 0 keeps |angle| <= pi/4, which is what makes it stable.
+                const double theta = (a[q][q] - a[p][p]) / (2.0 * apq);
+                const double t =
+                    (theta >= 0 ? 1.0 : -1.0) / (std::fabs(theta) + std::sqrt(theta * theta + 1.0));
+                const double c = 1.0 / std::sqrt(t * t + 1.0);
+                const double s = t * c;
+                for (int k = 0; k < 3; ++k) {  // a <- a * J
+                    const double akp = a[k][p], akq = a[k][q];
+                    a[k][p] = c * akp - s * akq;
+                    a[k][q] = s * akp + c * akq;
+                }
+                for (int k = 0; k < 3; ++k) {  // a <- J^T * a
+                    const double apk = a[p][k], aqk = a[q][k];
+                    a[p][k] = c * apk - s * aqk;
+                    a[q][k] = s * apk + c * aqk;
+                }
+                a[p][q] = a[q][p] = 0.0;
+                for (int k = 0; k < 3; ++k) {  // v <- v * J
+                    const double vkp = v[k][p], vkq = v[k][q];
+                    v[k][p] = c * vkp - s * vkq;
+                    v[k][q] = s * vkp + c * vkq;
+                }
+            }
+        }
+    }
+
+    int order[3] = {0, 1, 2};
+    std::sort(order, order + 3,
+              [&](int i, int j) { return a[i][i] < a[j][j] || (a[i][i] == a[j][j] && i < j); });
+    Eigen3 e;
+    for (int r = 0; r < 3; ++r) {
+        const int i = order[r];
+        e.values[r] = a[i][i];
+        Dvec col{v[0][i], v[1][i], v[2][i]};
+        const double len = std::sqrt(ddot(col, col));
+        e.vectors[r] = {col.x / len, col.y / len, col.z / len};
+    }
+    return e;
+}
+
+// nanoflann's dataset interface over the positions, read in place.
+struct CloudAdaptor {
+    const std::vector<Vec3>& pts;
+
+    size_t kdtree_get_point_count() const { return pts.size(); }
+    float kdtree_get_pt(uint32_t i, size_t dim) const {
+        const Vec3& p = pts[i];
+        return dim == 0 ? p.x : (dim == 1 ? p.y : p.z);
+    }
+    template <class Bbox>
+    bool kdtree_get_bbox(Bbox&) const {
+        return false;
+    }
+};
+
+using KdTree =
+    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>,
+                                        CloudAdaptor, 3, uint32_t>;
+
+std::string prefix(const char* source) {
+    return std::string(source ? source : "point cloud") + ": ";
+}
+
+Dvec centroid_of(const std::vector<Vec3>& pts) {
+    // Serial on purpose: a parallel reduction would round differently per thread count.
+    Dvec c;
+    for (const Vec3& p : pts) {
+        c.x += p.x;
+        c.y += p.y;
+        c.z += p.z;
+    }
+    const double n = double(pts.size());
+    return {c.x / n, c.y / n, c.z / n};
+}
+
+// Rejects clouds through which no plane can be fitted at all, so that the per-point fits below
+// always have some 2D structure to find.
+void check_not_degenerate(const std::vector<Vec3>& pts, Dvec c, const char* source) {
+    const Vec3 first = pts[0];
+    if (std::all_of(pts.begin(), pts.end(), [&](Vec3 p) { return p == first; })) {
+        throw Error(prefix(source) + "all " + std::to_string(pts.size()) +
+                    " points coincide, so no plane can be fitted to estimate normals; supply "
+                    "normals with the points");
+    }
+    double cov[3][3] = {};
+    double scale = 0;
+    for (const Vec3& p : pts) {
+        const Dvec d = to_d(p) - c;
+        const double dv[3] = {d.x, d.y, d.z};
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) cov[i][j] += dv[i] * dv[j];
+        scale = std::max(scale, max_abs(p));
+    }
+    // The dominant axis is the line's direction if the points are collinear; measure the
+    // largest distance from that line rather than an eigenvalue ratio, so that a single point
+    // off the line is enough to count as a plane.
+    const Dvec axis = symmetric_eigen(cov).vectors[2];
+    double off_line2 = 0;
+    for (const Vec3& p : pts) {
+        const Dvec d = to_d(p) - c;
+        const double along = ddot(d, axis);
+        off_line2 = std::max(off_line2, ddot(d, d) - along * along);
+    }
+    const double tol = kRoundingUlps * scale;
+    if (off_line2 <= tol * tol) {
+        throw Error(prefix(source) + "all " + std::to_string(pts.size()) +
+                    " points are collinear, so no plane can be fitted to estimate normals; "
+                    "supply normals with the points");
+    }
+}
+
+// Per point: its k nearest neighbours (itself or a duplicate of it among them) and the
+// unoriented normal of their best-fit plane.
+struct LocalFits {
+    size_t k = 0;
+    std::vector<uint32_t> neighbours;  // k per point
+    std::vector<Vec3> normals;
+    std::vector<uint8_t> degenerate;  // neighbourhood coincident or collinear: normal unknown
+};
+
+// The least-squares plane normal of the given points, or nothing if they span no plane.
+std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* idx, size_t m) {
+    Dvec mean;
+    double scale = 0;
+    for (size_t j = 0; j < m; ++j) {
+        const Vec3 p = pts[idx[j]];
+        mean.x += p.x;
+        mean.y += p.y;
+        mean.z += p.z;
+        scale = std::max(scale, max_abs(p));
+    }
+    mean = {mean.x / double(m), mean.y / double(m), mean.z / double(m)};
+    double cov[3][3] = {};
+    for (size_t j = 0; j < m; ++j) {
+        const Dvec d = to_d(pts[idx[j]]) - mean;
+        const double dv[3] = {d.x, d.y, d.z};
+        for (int a = 0; a < 3; ++a)
+            for (int b = a; b < 3; ++b) cov[a][b] += dv[a] * dv[b];
+    }
+    for (int a = 0; a < 3; ++a)
+        for (int b = 0; b < a; ++b) cov[a][b] = cov[b][a];
+
+    const Eigen3 e = symmetric_eigen(cov);
+    // The middle eigenvalue is the spread across the points' main direction; if that is
+    // rounding noise they lie on a line or coincide, and the smallest eigenvector is arbitrary.
+    const double across = std::sqrt(std::max(e.values[1], 0.0) / double(m));
+    if (across <= kRoundingUlps * scale) return std::nullopt;
+    const Dvec v = e.vectors[0];
+    return Vec3{float(v.x), float(v.y), float(v.z)};
+}
+
+LocalFits fit_local_planes(const std::vector<Vec3>& pts, size_t k) {
+    const size_t n = pts.size();
+    LocalFits fits;
+    const size_t kk = fits.k = std::min(k, n);
+    fits.neighbours.resize(n * kk);
+    fits.normals.resize(n);
+    fits.degenerate.assign(n, 0);
+
+    const CloudAdaptor adaptor{pts};
+    const KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
+        std::vector<float> dist2(kk);
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            uint32_t* nb = &fits.neighbours[i * kk];
+            const float query[3] = {pts[i].x, pts[i].y, pts[i].z};
+            const size_t found = tree.knnSearch(query, kk, nb, dist2.data());
+            // The tree holds n >= kk points so it always finds kk; fill defensively regardless.
+            for (size_t j = found; j < kk; ++j) nb[j] = uint32_t(i);
+
+            const std::optional<Vec3> normal = plane_normal(pts, nb, kk);
+            fits.degenerate[i] = !normal;
+            fits.normals[i] = normal.value_or(Vec3{0, 0, 1});
+        }
+    });
+    return fits;
+}
+
+// Symmetrised k-NN graph in compressed rows. An edge listed by both ends appears twice;
+// Prim's copes, and skipping the deduplication keeps this a single serial pass.
+struct Graph {
+    std::vector<size_t> offsets;  // n + 1
+    std::vector<uint32_t> adjacent;
+};
+
+Graph symmetrise(const LocalFits& fits, size_t n) {
+    Graph g;
+    g.offsets.assign(n + 1, 0);
+    const size_t k = fits.k;
+    for (size_t i = 0; i < n; ++i) {
+        for (size_t j = 0; j < k; ++j) {
+            const uint32_t o = fits.neighbours[i * k + j];
+            if (o == i) continue;
+            ++g.offsets[i + 1];
+            ++g.offsets[o + 1];
+        }
+    }
+    std::partial_sum(g.offsets.begin(), g.offsets.end(), g.offsets.begin());
+    g.adjacent.resize(g.offsets[n]);
+    std::vector<size_t> fill(g.offsets.begin(), g.offsets.end() - 1);
+    for (size_t i = 0; i < n; ++i) {
+        for (size_t j = 0; j < k; ++j) {
+            const uint32_t o = fits.neighbours[i * k + j];
+            if (o == i) continue;
+            g.adjacent[fill[i]++] = o;
+            g.adjacent[fill[o]++] = uint32_t(i);
+        }
+    }
+    return g;
+}
+
+// Binary min-heap of points keyed by (weight, point), with decrease-key: each point sits in
+// it at most once, where a plain priority queue would pile up stale entries for points that
+// many neighbours reach. The point index breaks ties, so equal weights come out in a fixed order.
+class PointHeap {
+  public:
+    explicit PointHeap(size_t n) : slot_(n, kAbsent) {}
+
+    bool empty() const { return items_.empty(); }
+
+    // Inserts `point` with key `weight`, or lowers its key to `weight`; returns whether it did
+    // either (false when the point is already queued with a key no larger).
+    bool push_or_lower(uint32_t point, float weight) {
+        uint32_t i = slot_[point];
+        if (i == kAbsent) {
+            i = uint32_t(items_.size());
+            items_.push_back({weight, point});
+        } else if (weight < items_[i].weight) {
+            items_[i].weight = weight;
+        } else {
+            return false;
+        }
+        sift_up(i);
+        return true;
+    }
+
+    uint32_t pop() {
+        const uint32_t top = items_[0].point;
+        slot_[top] = kAbsent;
+        items_[0] = items_.back();
+        items_.pop_back();
+        if (!items_.empty()) sift_down(0);
+        return top;
+    }
+
+  private:
+    struct Item {
+        float weight;
+        uint32_t point;
+    };
+    static constexpr uint32_t kAbsent = std::numeric_limits<uint32_t>::max();
+
+    static bool before(const Item& a, const Item& b) {
+        return a.weight < b.weight || (a.weight == b.weight && a.point < b.point);
+    }
+    void place(uint32_t i, const Item& item) {
+        items_[i] = item;
+        slot_[item.point] = i;
+    }
+    void sift_up(uint32_t i) {
+        const Item item = items_[i];
+        while (i > 0) {
+            const uint32_t up = (i - 1) / 2;
+            if (!before(item, items_[up])) break;
+            place(i, items_[up]);
+            i = up;
+        }
+        place(i, item);
+    }
+    void sift_down(uint32_t i) {
+        const Item item = items_[i];
+        const uint32_t size = uint32_t(items_.size());
+        for (;;) {
+            uint32_t child = 2 * i + 1;
+            if (child >= size) break;
+            if (child + 1 < size && before(items_[child + 1], items_[child])) ++child;
+            if (!before(items_[child], item)) break;
+            place(i, items_[child]);
+            i = child;
+        }
+        place(i, item);
+    }
+
+    std::vector<Item> items_;
+    std::vector<uint32_t> slot_;  // where each point is in items_, or kAbsent
+};
+
+// Orients the normals in place: Prim's algorithm over each connected component, from the
+// component's point farthest from the centroid (where "outward" is least ambiguous), flipping
+// each newly reached normal to agree with the one it was reached from.
+void orient(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
+            const std::vector<uint8_t>& degenerate, std::vector<Vec3>& normals) {
+    const size_t n = pts.size();
+    std::vector<double> far2(n);
+    for (size_t i = 0; i < n; ++i) {
+        const Dvec d = to_d(pts[i]) - centroid;
+        far2[i] = ddot(d, d);
+    }
+    std::vector<uint32_t> by_distance(n);
+    std::iota(by_distance.begin(), by_distance.end(), 0u);
+    std::sort(by_distance.begin(), by_distance.end(), [&](uint32_t a, uint32_t b) {
+        return far2[a] > far2[b] || (far2[a] == far2[b] && a < b);
+    });
+
+    auto weight = [&](uint32_t a, uint32_t b) {
+        if (degenerate[a] || degenerate[b]) return kDegenerateEdgeWeight;
+        return 1.0f - std::fabs(dot(normals[a], normals[b]));
+    };
+
+    std::vector<uint8_t> in_tree(n, 0);
+    std::vector<uint32_t> parent(n);
+    PointHeap heap(n);
+
+    auto reach = [&](uint32_t v) {
+        in_tree[v] = 1;
+        for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
+            const uint32_t u = g.adjacent[e];
+            if (!in_tree[u] && heap.push_or_lower(u, weight(v, u))) parent[u] = v;
+        }
+    };
+
+    // Every point farther out than the first unvisited one lies in a component already
+    // finished, so that point is the farthest of its own component.
+    for (const uint32_t root : by_distance) {
+        if (in_tree[root]) continue;
+        const Dvec away = to_d(pts[root]) - centroid;
+        if (degenerate[root]) {
+            const double len = std::sqrt(ddot(away, away));
+            normals[root] =
+                len > 0 ? Vec3{float(away.x / len), float(away.y / len), float(away.z / len)}
+                        : Vec3{0, 0, 1};
+        } else if (ddot(to_d(normals[root]), away) < 0) {
+            normals[root] = -normals[root];
+        }
+        reach(root);
+        while (!heap.empty()) {
+            const uint32_t v = heap.pop();
+            const Vec3 from = normals[parent[v]];
+            if (degenerate[v]) {
+                normals[v] = from;
+            } else if (dot(normals[v], from) < 0) {
+                normals[v] = -normals[v];
+            }
+            reach(v);
+        }
+    }
+}
+
+// Spreads the low 21 bits of v so that two zero bits follow each.
+uint64_t spread_bits(uint64_t v) {
+    v &= 0x1fffff;
+    v = (v | v << 32) & 0x1f00000000ffffULL;
+    v = (v | v << 16) & 0x1f0000ff0000ffULL;
+    v = (v | v << 8) & 0x100f00f00f00f00fULL;
+    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+    v = (v | v << 2) & 0x1249249249249249ULL;
+    return v;
+}
+
+// Point indices in Morton (Z-curve) order. Working on the points in this order keeps
+// neighbours near each other in memory, which is most of the speed of the k-NN queries and of
+// the spanning tree on clouds stored in scan or random order.
+std::vector<uint32_t> spatial_order(const std::vector<Vec3>& pts) {
+    Vec3 lo = pts[0], hi = pts[0];
+    for (const Vec3& p : pts) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    const double extent = std::max({double(hi.x) - lo.x, double(hi.y) - lo.y, double(hi.z) - lo.z});
+    const double to_cell = extent > 0 ? double((1 << 21) - 1) / extent : 0.0;
+    auto cell = [&](float v, float l) { return uint64_t((double(v) - l) * to_cell); };
+
+    const size_t n = pts.size();
+    std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            const Vec3 p = pts[i];
+            const uint64_t code = spread_bits(cell(p.x, lo.x)) << 2 |
+                                  spread_bits(cell(p.y, lo.y)) << 1 | spread_bits(cell(p.z, lo.z));
+            keyed[i] = {code, uint32_t(i)};
+        }
+    });
+    // Keys are unique (the index is part of them), so the order is the same however sorted.
+    std::sort(keyed.begin(), keyed.end());
+    std::vector<uint32_t> order(n);
+    for (size_t r = 0; r < n; ++r) order[r] = keyed[r].second;
+    return order;
+}
+
+}  // namespace
+
+void estimate_normals(PointSet& points, const NormalEstimationParams& params, const char* source) {
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    if (n < 3) {
+        throw Error(prefix(source) + "normal estimation needs at least 3 points, got " +
+                    std::to_string(n));
+    }
+    if (params.k < kMinK || params.k > kMaxK) {
+        throw Error(prefix(source) +
+                    "normal estimation: k (neighbours per plane fit) must be in [" +
+                    std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " +
+                    std::to_string(params.k));
+    }
+    if (n > size_t(std::numeric_limits<uint32_t>::max())) {
+        throw Error(prefix(source) + "normal estimation supports at most " +
+                    std::to_string(std::numeric_limits<uint32_t>::max()) + " points, got " +
+                    std::to_string(n));
+    }
+    for (size_t i = 0; i < n; ++i) {
+        if (!is_finite(pts[i])) {
+            throw Error(prefix(source) + "point " + std::to_string(i) +
+                        " has a non-finite coordinate; cannot estimate normals");
+        }
+    }
+    const Dvec centroid = centroid_of(pts);
+    check_not_degenerate(pts, centroid, source);
+
+    const std::vector<uint32_t> order = spatial_order(pts);
+    std::vector<Vec3> sorted(n);
+    for (size_t r = 0; r < n; ++r) sorted[r] = pts[order[r]];
+
+    LocalFits fits = fit_local_planes(sorted, params.k);
+    const Graph graph = symmetrise(fits, n);
+    orient(sorted, centroid, graph, fits.degenerate, fits.normals);
+
+    points.normals.resize(n);
+    for (size_t r = 0; r < n; ++r) points.normals[order[r]] = fits.normals[r];
+}
+
+}  // namespace vmap

@@ -1,0 +1,237 @@
+// vmap: view-independent mutual visibility for point models.
+//   vmap build [SCENE.json | CLOUD.ply] -o out.vmap   octree + V-map, with a summary
+//   vmap info out.vmap                                what a .vmap holds
+//   vmap query out.vmap --pair I J | --from I         visibility from the V-map
+// Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
+#include <CLI/CLI.hpp>
+#include <fmt/format.h>
+#include <tbb/global_control.h>
+#include <tbb/info.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+
+#include "util/progress.h"
+#include "vmap/error.h"
+#include "vmap/scene.h"
+#include "vmap/vmap.h"
+
+namespace {
+
+using namespace vmap;
+namespace fs = std::filesystem;
+
+bool ends_with_ci(std::string s, const std::string& suf) {
+    std::transform(s.begin(), s.end(), s.begin(), ::tolower);
+    return s.size() >= suf.size() && s.compare(s.size() - suf.size(), suf.size(), suf) == 0;
+}
+
+void print_tree_summary(const VisibilityMap& vm) {
+    const Octree& t = vm.octree;
+    const int h = t.height();
+    std::vector<uint64_t> nodes(h + 1), leaves(h + 1), links(h + 1);
+    for (int32_t n = 0; n < t.num_nodes(); ++n) {
+        nodes[t.level[n]]++;
+        if (t.is_leaf(n)) leaves[t.level[n]]++;
+        for (int32_t m : vm.links(n))
+            if (m > n) links[t.level[n]]++;  // count each link once, at its first end's level
+    }
+    fmt::print("  level      nodes     leaves      links\n");
+    for (int l = 0; l <= h; ++l)
+        fmt::print("  {:5d} {:10d} {:10d} {:10d}\n", l, nodes[l], leaves[l], links[l]);
+}
+
+void print_params(const VisibilityMap& vm) {
+    const auto& o = vm.octree_params;
+    const auto& v = vm.visibility_params;
+    fmt::print("octree:     max_height {}, leaf_points {} -> height {}, {} nodes, {} leaves\n",
+               o.max_height, o.leaf_points, vm.octree.height(), vm.octree.num_nodes(),
+               vm.octree.num_leaves());
+    fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}\n", v.K, v.eps,
+               v.facing_tol, v.parallel_tol);
+}
+
+struct BuildOptions {
+    std::string input;
+    std::string output;
+    std::optional<uint64_t> points, seed;
+    std::optional<int> max_height, leaf_points;
+    BuildParams params;
+};
+
+int run_build(BuildOptions& o) {
+    if (o.input.empty()) o.input = default_scene_path();
+    PointSet pts;
+    std::string what;
+    std::optional<OctreeParams> file_octree;
+    if (ends_with_ci(o.input, ".json")) {
+        Scene sc = load_scene(o.input);
+        if (o.points) sc.points = *o.points;
+        if (o.seed) sc.seed = *o.seed;
+        file_octree = sc.octree;
+        pts = sample_scene(sc);
+        what = fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size());
+    } else {
+        if (o.points || o.seed)
+            throw Error("--points/--seed apply to scene files, not point clouds");
+        pts = load_point_cloud(o.input);
+        what = fmt::format("point cloud {}", o.input);
+    }
+    BuildParams& bp = o.params;
+    if (file_octree) bp.octree = *file_octree;
+    if (o.max_height) bp.octree.max_height = *o.max_height;
+    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
+    bp.progress = detail::stderr_is_terminal();
+
+    BuildStats st;
+    const size_t npts = pts.size();
+    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
+    save_vmap(o.output, vm);
+
+    const auto& w = st.work;
+    const int cores = tbb::this_task_arena::max_concurrency();
+    fmt::print("input:      {}\n", what);
+    fmt::print("points:     {}\n", npts);
+    print_params(vm);
+    if (!st.note.empty()) fmt::print("note:       {}\n", st.note);
+    fmt::print("backend:    {}\n", st.backend);
+    fmt::print("leaf pairs: {} tested, {} facing ({:.1f}%), {} visible ({:.1f}%)\n", w.pairs,
+               w.facing_pairs, 100.0 * w.facing_pairs / std::max<uint64_t>(1, w.pairs),
+               w.visible_pairs, 100.0 * w.visible_pairs / std::max<uint64_t>(1, w.pairs));
+    fmt::print("work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
+               double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
+               double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
+    fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(), vm.link_targets.size() * 4);
+    const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
+    fmt::print("time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
+               st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
+    fmt::print("throughput: {:.3g} leaf pairs/s ({:.3g} per core on {} cores)\n", pps, pps / cores,
+               cores);
+    if (st.peak_device_bytes)
+        fmt::print("device:     peak {:.1f} MiB\n", st.peak_device_bytes / 1048576.0);
+    print_tree_summary(vm);
+    fmt::print("wrote:      {}\n", o.output);
+    return 0;
+}
+
+int run_info(const std::string& path) {
+    VisibilityMap vm = load_vmap(path);
+    fmt::print("file:       {} ({} bytes)\n", path, fs::file_size(path));
+    fmt::print("points:     {}\n", vm.points.size());
+    print_params(vm);
+    fmt::print("links:      {}\n", vm.num_links());
+    print_tree_summary(vm);
+    return 0;
+}
+
+int run_query(const std::string& path, const std::vector<uint32_t>& pair,
+              std::optional<uint32_t> from, bool ids) {
+    VisibilityMap vm = load_vmap(path);
+    if (!pair.empty()) {
+        const PairVisibility v = vm.query(pair[0], pair[1]);
+        fmt::print("{} {} {}\n", pair[0], pair[1],
+                   v == PairVisibility::kVisible  ? "visible"
+                   : v == PairVisibility::kHidden ? "hidden"
+                                                  : "same-leaf");
+    }
+    if (from) {
+        const auto set = vm.visible_set(*from);
+        fmt::print("{} points visible from {} (of {})\n", set.size(), *from, vm.points.size());
+        if (ids)
+            for (uint32_t i : set) fmt::print("{}\n", i);
+    }
+    return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    CLI::App app{
+        "vmap: view-independent mutual visibility for point models.\n"
+        "Builds an adaptive octree over a point model, computes which leaf pairs see each other\n"
+        "(on a CUDA GPU or on all CPU cores) and stores the result as a visibility map of links\n"
+        "between octree nodes.\n\n"
+        "Start:  vmap build                       (the default scene, scenes/cornell-bunny.json)\n"
+        "        vmap build scenes/cornell-dragon.json -o dragon.vmap --max-height 8\n"
+        "        vmap query dragon.vmap --pair 10 2000\n"};
+    app.require_subcommand(1);
+    int threads = 0;
+    app.add_option("--threads", threads, "CPU threads (default: all cores)")->check(CLI::Range(0, 4096));
+
+    BuildOptions bo;
+    auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
+    build->add_option("input", bo.input,
+                      "Scene file (.json) or point cloud (.ply/.off; normals estimated if absent). "
+                      "Default: scenes/cornell-bunny.json");
+    build->add_option("-o,--output", bo.output, "Output .vmap file (default: <input name>.vmap)");
+    build->add_option("--points", bo.points, "Override the scene's number of sample points")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    build->add_option("--seed", bo.seed, "Override the scene's sampling seed");
+    build->add_option("--max-height", bo.max_height, "Deepest octree level (root = 0)")
+        ->check(CLI::Range(1, 21));
+    build->add_option("--leaf-points", bo.leaf_points, "Split nodes with more points than this")
+        ->check(CLI::Range(1, 1000000));
+    auto& vp = bo.params.visibility;
+    build->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
+        ->check(CLI::Range(1, 1000))->capture_default_str();
+    build->add_option("--eps", vp.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
+        ->check(CLI::Range(0.0f, 0.49f))->capture_default_str();
+    build->add_option("--facing-tol", vp.facing_tol, "Facing test: n.d > tol |d|")
+        ->check(CLI::Range(0.0f, 0.99f))->capture_default_str();
+    build->add_option("--parallel-tol", vp.parallel_tol, "Occluder planes with |n.d| <= tol |d| are ignored")
+        ->check(CLI::Range(0.0f, 0.99f))->capture_default_str();
+    build->add_option("--backend", bo.params.backend, "auto (GPU when present), cpu or cuda")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))->capture_default_str();
+    build->add_option("--batch-pairs", bo.params.max_batch_pairs,
+                      "Leaf pairs evaluated per batch (bounds memory)")
+        ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))->capture_default_str();
+
+    std::string info_path;
+    auto* info = app.add_subcommand("info", "Describe a .vmap file");
+    info->add_option("file", info_path, "The .vmap file")->required();
+
+    std::string query_path;
+    std::vector<uint32_t> pair;
+    std::optional<uint32_t> from;
+    bool ids = false;
+    auto* query = app.add_subcommand("query", "Answer visibility queries from a .vmap file");
+    query->add_option("file", query_path, "The .vmap file")->required();
+    query->add_option("--pair", pair, "Are input points I and J mutually visible?")->expected(2);
+    query->add_option("--from", from, "Points visible from input point I (count)");
+    query->add_flag("--ids", ids, "With --from: list the ids too");
+
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::ParseError& e) {
+        const int rc = app.exit(e);
+        return rc == 0 ? 0 : 2;
+    }
+    if (*query && pair.empty() && !from) {
+        fmt::print(stderr, "vmap query: give --pair I J or --from I\n");
+        return 2;
+    }
+    std::unique_ptr<tbb::global_control> limit;
+    if (threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      threads);
+    try {
+        if (*build) return run_build(bo);
+        if (*info) return run_info(info_path);
+        if (*query) return run_query(query_path, pair, from, ids);
+    } catch (const vmap::Error& e) {
+        fmt::print(stderr, "vmap: error: {}\n", e.what());
+        return 1;
+    } catch (const std::bad_alloc&) {
+        fmt::print(stderr, "vmap: error: out of memory (try a smaller --max-height or --points)\n");
+        return 1;
+    } catch (const std::exception& e) {
+        fmt::print(stderr, "vmap: internal error: {}\n", e.what());
+        return 1;
+    }
+    return 0;
+}

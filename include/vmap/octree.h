@@ -1,0 +1,94 @@
+// The adaptive octree over a point set (DESIGN.md "Octree").
+//
+// Nodes are stored in depth-first preorder: a node's first child (if any) is the next node, and
+// skip[n] is the index just past its subtree, so "m is in the subtree of n" is
+// n <= m < skip[n], and any subtree is one contiguous index range. Leaves are numbered in the
+// same order, so the leaves under a node are the contiguous range [leaf_begin, leaf_end), and
+// points are reordered so the points of a node are [point_begin, point_end).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "vmap/mesh.h"
+#include "vmap/vec.h"
+
+namespace vmap {
+
+struct OctreeParams {
+    int max_height = 9;   // deepest level a leaf may have (root = level 0); 1..21
+    int leaf_points = 4;  // a node splits while it holds more points than this (and is not at
+                          // max_height); >= 1
+};
+
+// A bounding sphere: centre and radius.
+struct Sphere {
+    Vec3 center;
+    float radius = 0;
+};
+
+// What the visibility predicate needs of a leaf, packed in 32 bytes (one load on the GPU).
+struct LeafDisc {
+    Vec3 centroid;    // mean of its points
+    float delta = 0;  // occluder disc radius: farthest point from the centroid, >= splat radius
+    Vec3 normal;      // normalised mean of its points' normals (zero when flagged)
+    uint32_t flags = 0;
+};
+inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no usable plane
+
+// A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
+struct OctreeView {
+    const Sphere* spheres = nullptr;    // per node
+    const int32_t* skip = nullptr;      // per node: end of its subtree
+    const int32_t* node_leaf = nullptr; // per node: leaf index, or -1 for internal nodes
+    const LeafDisc* leaves = nullptr;   // per leaf
+    int32_t num_nodes = 0;
+    int32_t num_leaves = 0;
+};
+
+class Octree {
+  public:
+    // Builds the octree over `points` (which must have normals; radii optional) and permutes
+    // `points` into octree order. `order[k]` is then the input index of the k-th point.
+    // Throws vmap::Error for an empty cloud, non-finite coordinates or normals, zero normals,
+    // or parameters out of range, naming `source`.
+    static Octree build(PointSet& points, const OctreeParams& params,
+                        std::vector<uint32_t>& order, const std::string& source = "points");
+
+    OctreeView view() const;
+
+    int32_t num_nodes() const { return static_cast<int32_t>(skip.size()); }
+    int32_t num_leaves() const { return static_cast<int32_t>(leaf_node.size()); }
+    int height() const;  // deepest leaf level
+    bool is_leaf(int32_t n) const { return node_leaf[n] >= 0; }
+
+    // Children of n, in order (empty for a leaf).
+    template <class F>
+    void for_each_child(int32_t n, F&& f) const {
+        for (int32_t c = n + 1; c < skip[n]; c = skip[c]) f(c);
+    }
+
+    // The leaf holding the point at octree position k (0 <= k < number of points).
+    int32_t leaf_of_point(uint32_t k) const;
+
+    // Per node (all indexed by node): the cell, the bounding sphere, structure, ranges.
+    OctreeParams params;
+    Vec3 root_min;  // corner of the root cube
+    float root_size = 0;
+    std::vector<Sphere> spheres;
+    std::vector<float> half_size;  // half the cell edge
+    std::vector<int32_t> skip;
+    std::vector<int32_t> parent;  // -1 for the root
+    std::vector<uint8_t> level;
+    std::vector<int32_t> node_leaf;
+    std::vector<uint32_t> point_begin, point_end;
+    std::vector<int32_t> leaf_begin, leaf_end;
+
+    // Per leaf.
+    std::vector<int32_t> leaf_node;
+    std::vector<LeafDisc> leaves;
+    std::vector<float> leaf_splat;  // largest splat radius of its points
+};
+
+}  // namespace vmap

@@ -1,0 +1,80 @@
+// The visibility map (paper §3, DESIGN.md "The V-map"): links between octree nodes, each saying
+// that every leaf under one end sees every leaf under the other.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "vmap/mesh.h"
+#include "vmap/octree.h"
+#include "vmap/visibility.h"
+
+namespace vmap {
+
+struct BuildParams {
+    OctreeParams octree;
+    VisibilityParams visibility;
+    std::string backend = "auto";        // auto | cpu | cuda
+    uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
+    bool progress = false;               // progress bar on stderr (callers pass isatty(2))
+};
+
+struct BuildStats {
+    WorkCounters work;
+    std::string backend;       // which backend ran, in words
+    std::string note;          // e.g. why the requested backend was not used
+    double seconds_octree = 0;
+    double seconds_visibility = 0;  // leaf pairs and link extraction
+    double seconds_total = 0;
+    uint64_t batches = 0;
+    uint64_t peak_device_bytes = 0;
+};
+
+// Visibility of one point pair, from the V-map.
+enum class PairVisibility { kHidden, kVisible, kSameLeaf };
+
+class VisibilityMap {
+  public:
+    OctreeParams octree_params;
+    VisibilityParams visibility_params;
+    PointSet points;               // in octree order (normals, colours (albedo), radii)
+    std::vector<uint32_t> order;   // octree position -> input index
+    std::vector<uint32_t> inverse; // input index -> octree position
+    Octree octree;
+    std::vector<uint32_t> link_offsets;  // per node + 1: node n's links are
+    std::vector<int32_t> link_targets;   // link_targets[link_offsets[n] .. link_offsets[n+1]),
+                                         // sorted; every link is stored at both ends
+
+    size_t num_links() const { return link_targets.size() / 2; }
+    std::span<const int32_t> links(int32_t node) const {
+        return {link_targets.data() + link_offsets[node],
+                link_targets.data() + link_offsets[node + 1]};
+    }
+
+    // Is leaf b covered by a link of leaf a or one of its ancestors? O(height x log degree).
+    bool leaves_visible(int32_t leaf_a, int32_t leaf_b) const;
+    // Point pair by input indices. Throws vmap::Error for an index out of range.
+    PairVisibility query(uint32_t i, uint32_t j) const;
+    // All input indices visible from input point i (paper Fig. 9): the points of every subtree
+    // linked to i's leaf or an ancestor, sorted. Points sharing i's leaf are not included.
+    std::vector<uint32_t> visible_set(uint32_t i) const;
+};
+
+// Builds the octree over `points` (which need normals) and the V-map. Throws vmap::Error naming
+// `source` for bad input or parameters.
+VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
+                         const std::string& source = "points");
+
+// Sets the links from a list of unordered node pairs (each once): sorts into both-direction
+// compact arrays. Exposed for the file reader and tests.
+void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs);
+
+// The .vmap file (versioned binary with a checksum; io/vmap_file.cpp). save writes to a
+// temporary name and renames it; load throws vmap::Error for a missing, truncated, corrupt or
+// wrong-version file, naming the file and the section.
+void save_vmap(const std::string& path, const VisibilityMap& vm);
+VisibilityMap load_vmap(const std::string& path);
+
+}  // namespace vmap

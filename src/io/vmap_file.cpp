@@ -1,0 +1,269 @@
+// The .vmap file: everything later commands need (parameters, points, octree, point order,
+// links), versioned and checksummed.
+//
+// Layout (little-endian):
+//   header: "VMAPFILE" | u32 version | u32 reserved | u64 payload bytes | u64 FNV-1a-64 of payload
+//   payload: sections, each: 4-char tag | u64 bytes | data
+//     PARM: octree and visibility parameters
+//     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission) | positions, normals, [colours],
+//           [radii], [emission]  (octree order)
+//     ORDR: u32 order[n] (octree position -> input index)
+//     TREE: the octree's arrays (include/vmap/octree.h)
+//     LINK: u32 offsets[nodes + 1] | i32 targets[offsets[nodes]]
+#include <fmt/format.h>
+
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <type_traits>
+
+#include "vmap/error.h"
+#include "vmap/vmap.h"
+
+namespace vmap {
+namespace {
+
+constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
+constexpr uint32_t kVersion = 1;
+constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
+
+uint64_t fnv1a(const uint8_t* p, size_t n) {
+    uint64_t h = 0xcbf29ce484222325ULL;
+    for (size_t i = 0; i < n; ++i) h = (h ^ p[i]) * 0x100000001b3ULL;
+    return h;
+}
+
+struct Writer {
+    std::vector<uint8_t> buf;
+    template <class T>
+    void put(const T& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        const auto* p = reinterpret_cast<const uint8_t*>(&v);
+        buf.insert(buf.end(), p, p + sizeof(T));
+    }
+    template <class T>
+    void vec(const std::vector<T>& v) {
+        static_assert(std::is_trivially_copyable_v<T>);
+        const auto* p = reinterpret_cast<const uint8_t*>(v.data());
+        buf.insert(buf.end(), p, p + v.size() * sizeof(T));
+    }
+    size_t begin(const char (&tag)[5]) {
+        buf.insert(buf.end(), tag, tag + 4);
+        put(uint64_t(0));
+        return buf.size();
+    }
+    void end(size_t start) {
+        const uint64_t n = buf.size() - start;
+        std::memcpy(buf.data() + start - 8, &n, 8);
+    }
+};
+
+struct Reader {
+    const uint8_t* p;
+    const uint8_t* end;
+    std::string file, section;
+    [[noreturn]] void fail(const std::string& what) const {
+        throw Error(fmt::format("{}: section {}: {}", file, section, what));
+    }
+    template <class T>
+    T get() {
+        if (size_t(end - p) < sizeof(T)) fail("truncated");
+        T v;
+        std::memcpy(&v, p, sizeof(T));
+        p += sizeof(T);
+        return v;
+    }
+    template <class T>
+    void vec(std::vector<T>& v, uint64_t n) {
+        if (n > uint64_t(end - p) / sizeof(T)) fail(fmt::format("truncated: {} items expected", n));
+        v.resize(n);
+        std::memcpy(v.data(), p, n * sizeof(T));
+        p += n * sizeof(T);
+    }
+};
+
+}  // namespace
+
+void save_vmap(const std::string& path, const VisibilityMap& vm) {
+    Writer w;
+    const Octree& t = vm.octree;
+    const PointSet& ps = vm.points;
+    size_t s = w.begin("PARM");
+    w.put(int32_t(vm.octree_params.max_height));
+    w.put(int32_t(vm.octree_params.leaf_points));
+    w.put(int32_t(vm.visibility_params.K));
+    w.put(vm.visibility_params.eps);
+    w.put(vm.visibility_params.facing_tol);
+    w.put(vm.visibility_params.parallel_tol);
+    w.end(s);
+    s = w.begin("PNTS");
+    const uint64_t n = ps.size();
+    w.put(n);
+    const uint8_t mask = (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) |
+                         (ps.emission.empty() ? 0 : 4);
+    w.put(mask);
+    w.vec(ps.positions);
+    w.vec(ps.normals);
+    if (mask & 1) w.vec(ps.colors);
+    if (mask & 2) w.vec(ps.radii);
+    if (mask & 4) w.vec(ps.emission);
+    w.end(s);
+    s = w.begin("ORDR");
+    w.vec(vm.order);
+    w.end(s);
+    s = w.begin("TREE");
+    w.put(int32_t(t.num_nodes()));
+    w.put(int32_t(t.num_leaves()));
+    w.put(t.root_min);
+    w.put(t.root_size);
+    w.vec(t.spheres), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent), w.vec(t.level);
+    w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
+    w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
+    w.end(s);
+    s = w.begin("LINK");
+    w.vec(vm.link_offsets);
+    w.vec(vm.link_targets);
+    w.end(s);
+
+    std::vector<uint8_t> head;
+    head.insert(head.end(), kMagic, kMagic + 8);
+    auto put = [&](auto v) {
+        const auto* p = reinterpret_cast<const uint8_t*>(&v);
+        head.insert(head.end(), p, p + sizeof(v));
+    };
+    put(kVersion);
+    put(uint32_t(0));
+    put(uint64_t(w.buf.size()));
+    put(fnv1a(w.buf.data(), w.buf.size()));
+
+    // Temporary name, then rename: a failure never leaves half a file under `path`.
+    const std::string tmp = path + ".tmp";
+    {
+        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
+        if (!out) throw Error(fmt::format("{}: cannot write", tmp));
+        out.write(reinterpret_cast<const char*>(head.data()), head.size());
+        out.write(reinterpret_cast<const char*>(w.buf.data()), w.buf.size());
+        out.flush();
+        if (!out) {
+            std::error_code ec;
+            std::filesystem::remove(tmp, ec);
+            throw Error(fmt::format("{}: write failed (disk full?)", tmp));
+        }
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) {
+        std::filesystem::remove(tmp, ec);
+        throw Error(fmt::format("{}: cannot rename the finished file into place", path));
+    }
+}
+
+VisibilityMap load_vmap(const std::string& path) {
+    std::ifstream in(path, std::ios::binary | std::ios::ate);
+    if (!in) throw Error(fmt::format("{}: cannot open (no such file?)", path));
+    const auto size = static_cast<uint64_t>(in.tellg());
+    in.seekg(0);
+    std::vector<uint8_t> data(size);
+    if (!in.read(reinterpret_cast<char*>(data.data()), size))
+        throw Error(fmt::format("{}: read error", path));
+    if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));
+    if (std::memcmp(data.data(), kMagic, 8) != 0)
+        throw Error(fmt::format("{}: header: not a .vmap file (bad magic)", path));
+    uint32_t version;
+    uint64_t payload, sum;
+    std::memcpy(&version, data.data() + 8, 4);
+    std::memcpy(&payload, data.data() + 16, 8);
+    std::memcpy(&sum, data.data() + 24, 8);
+    if (version != kVersion)
+        throw Error(fmt::format("{}: header: version {} not supported (this vmap reads version {})",
+                                path, version, kVersion));
+    if (payload != size - kHeader)
+        throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}", path,
+                                payload, size - kHeader));
+    if (fnv1a(data.data() + kHeader, payload) != sum)
+        throw Error(fmt::format("{}: checksum mismatch: the file is corrupt", path));
+
+    VisibilityMap vm;
+    Reader r{data.data() + kHeader, data.data() + size, path, "header"};
+    auto section = [&](const char* tag) {
+        r.section = tag;
+        char got[4];
+        if (size_t(r.end - r.p) < 12) r.fail("missing");
+        std::memcpy(got, r.p, 4);
+        if (std::memcmp(got, tag, 4) != 0) r.fail(fmt::format("expected here, found '{}'", std::string(got, 4)));
+        r.p += 4;
+        const uint64_t len = r.get<uint64_t>();
+        if (len > uint64_t(r.end - r.p)) r.fail("truncated");
+        return r.p + len;
+    };
+    auto finish = [&](const uint8_t* e) {
+        if (r.p != e) r.fail("length does not match its contents");
+    };
+
+    const uint8_t* e = section("PARM");
+    vm.octree_params.max_height = r.get<int32_t>();
+    vm.octree_params.leaf_points = r.get<int32_t>();
+    vm.visibility_params.K = r.get<int32_t>();
+    vm.visibility_params.eps = r.get<float>();
+    vm.visibility_params.facing_tol = r.get<float>();
+    vm.visibility_params.parallel_tol = r.get<float>();
+    finish(e);
+
+    e = section("PNTS");
+    const uint64_t n = r.get<uint64_t>();
+    const uint8_t mask = r.get<uint8_t>();
+    PointSet& ps = vm.points;
+    r.vec(ps.positions, n);
+    r.vec(ps.normals, n);
+    if (mask & 1) r.vec(ps.colors, n);
+    if (mask & 2) r.vec(ps.radii, n);
+    if (mask & 4) r.vec(ps.emission, n);
+    finish(e);
+
+    e = section("ORDR");
+    r.vec(vm.order, n);
+    finish(e);
+    vm.inverse.assign(n, UINT32_MAX);
+    for (uint32_t k = 0; k < n; ++k) {
+        if (vm.order[k] >= n || vm.inverse[vm.order[k]] != UINT32_MAX) r.fail("not a permutation");
+        vm.inverse[vm.order[k]] = k;
+    }
+
+    e = section("TREE");
+    Octree& t = vm.octree;
+    const int32_t nn = r.get<int32_t>(), nl = r.get<int32_t>();
+    if (nn < 1 || nl < 1 || nl > nn) r.fail(fmt::format("bad counts: {} nodes, {} leaves", nn, nl));
+    t.params = vm.octree_params;
+    t.root_min = r.get<Vec3>();
+    t.root_size = r.get<float>();
+    r.vec(t.spheres, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn), r.vec(t.parent, nn);
+    r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
+    r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
+    r.vec(t.leaf_splat, nl);
+    finish(e);
+    // Structure checks, so that even a well-checksummed but inconsistent file cannot make a
+    // query index out of bounds.
+    for (int32_t i = 0; i < nn; ++i) {
+        if (t.skip[i] <= i || t.skip[i] > nn || t.parent[i] >= i || (i > 0 && t.parent[i] < 0) ||
+            t.node_leaf[i] >= nl || t.point_begin[i] > t.point_end[i] || t.point_end[i] > n ||
+            t.leaf_begin[i] < 0 || t.leaf_begin[i] > t.leaf_end[i] || t.leaf_end[i] > nl)
+            r.fail(fmt::format("node {} is inconsistent", i));
+    }
+    for (int32_t l = 0; l < nl; ++l)
+        if (t.leaf_node[l] < 0 || t.leaf_node[l] >= nn || t.node_leaf[t.leaf_node[l]] != l)
+            r.fail(fmt::format("leaf {} is inconsistent", l));
+
+    e = section("LINK");
+    r.vec(vm.link_offsets, uint64_t(nn) + 1);
+    if (vm.link_offsets[0] != 0) r.fail("bad offsets");
+    for (int32_t i = 0; i < nn; ++i)
+        if (vm.link_offsets[i + 1] < vm.link_offsets[i]) r.fail("bad offsets");
+    r.vec(vm.link_targets, vm.link_offsets[nn]);
+    for (int32_t x : vm.link_targets)
+        if (x < 0 || x >= nn) r.fail("link target out of range");
+    finish(e);
+    if (r.p != r.end) throw Error(fmt::format("{}: trailing bytes after the last section", path));
+    return vm;
+}
+
+}  // namespace vmap

@@ -1,0 +1,28 @@
+// Backend selection: --backend auto|cpu|cuda.
+#include <fmt/format.h>
+
+#include "visibility/backend.h"
+#include "vmap/error.h"
+
+namespace vmap::detail {
+
+#ifndef VMAP_HAVE_CUDA
+std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
+    if (why) *why = "this vmap was built without CUDA (nvcc was not found at build time)";
+    return nullptr;
+}
+#endif
+
+std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note) {
+    if (name == "cpu") return make_cpu_backend();
+    if (name == "auto" || name == "cuda") {
+        std::string why;
+        if (auto b = make_cuda_backend(&why)) return b;
+        if (name == "cuda" && note)
+            *note = fmt::format("--backend cuda: {}; using the CPU backend", why);
+        return make_cpu_backend();
+    }
+    throw Error(fmt::format("--backend: unknown backend '{}' (expected auto, cpu or cuda)", name));
+}
+
+}  // namespace vmap::detail

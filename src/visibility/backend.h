@@ -1,0 +1,53 @@
+// Backends that evaluate leaf-pair visibility in bulk (paper §4.3: the leaf visibility status
+// table, LVS). The V-map builder hands a backend batches of node-pair rectangles of the
+// leaf-by-leaf matrix and reads back bit-packed answers; link extraction stays on the host.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <string>
+
+#include "vmap/octree.h"
+#include "vmap/visibility.h"
+
+namespace vmap::detail {
+
+// One rectangle: leaves [row0, row0 + rows) (under node a) by [col0, col0 + cols) (under
+// node b, after a in preorder, so every leaf pair in it has row < col). Bit (r, c) is at word
+// word_offset + r * row_words(cols) + c / 32, bit c % 32 (rows padded to whole 32-bit words).
+struct PairJob {
+    int32_t a = 0, b = 0;
+    int32_t row0 = 0, rows = 0, col0 = 0, cols = 0;
+    uint64_t word_offset = 0;
+};
+
+inline uint64_t row_words(int32_t cols) { return (static_cast<uint64_t>(cols) + 31) / 32; }
+inline uint64_t job_words(const PairJob& j) { return j.rows * row_words(j.cols); }
+
+class Backend {
+  public:
+    virtual ~Backend() = default;
+    virtual std::string name() const = 0;       // "cpu (16 threads)", "cuda (NVIDIA H100 ...)"
+    // Called once per build, before any batch.
+    virtual void prepare(const Octree& tree, const VisibilityParams& vp,
+                         uint64_t max_batch_words) = 0;
+    // Starts evaluating a batch into buffer `slot` (0 or 1); may return before it is done, so
+    // the host can extract links from the other slot meanwhile (paper §6.2: asynchronous).
+    virtual void submit(std::span<const PairJob> jobs, uint64_t words, int slot) = 0;
+    // Waits for the batch in `slot`, adds its work to `wc`, returns its bits (host memory, valid
+    // until the next submit to that slot).
+    virtual const uint32_t* wait(int slot, WorkCounters& wc) = 0;
+    // Peak device memory the backend held, bytes (0 for the CPU).
+    virtual uint64_t peak_device_bytes() const { return 0; }
+};
+
+std::unique_ptr<Backend> make_cpu_backend();
+// nullptr with *why set when CUDA is not built in or no device is present.
+std::unique_ptr<Backend> make_cuda_backend(std::string* why);
+
+// "auto" (CUDA when a device is present, else CPU), "cpu" or "cuda". For "cuda" without a
+// device, falls back to the CPU and puts the reason in *note. Throws vmap::Error for other names.
+std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note);
+
+}  // namespace vmap::detail

@@ -1,0 +1,246 @@
+// Leaf-pair visibility on a CUDA GPU (paper §4.3: the GPU fills the leaf visibility status table
+// while the host extracts links). The predicate is leaf_pair.h, the same code the CPU runs.
+//
+// Work decomposition: an item is one 32-bit word of a job's table, i.e. one row leaf a against
+// 32 consecutive column leaves. One warp evaluates one item, a lane per column; a ballot packs
+// the 32 answers and lane 0 stores the word. Neighbouring lanes walk nearly the same segment, so
+// their traversals diverge little.
+#include <cuda_runtime.h>
+#include <string>
+
+#include <algorithm>
+#include <vector>
+
+#include "visibility/backend.h"
+#include "visibility/leaf_pair.h"
+#include "vmap/error.h"
+
+#define VMAP_CUDA_CHECK(call)                                                                   \
+    do {                                                                                        \
+        cudaError_t err_ = (call);                                                              \
+        if (err_ != cudaSuccess)                                                                \
+            throw ::vmap::Error(std::string("CUDA error: ") + #call + " failed: " +             \
+                                cudaGetErrorString(err_) + " (" + __FILE__ + ":" +              \
+                                std::to_string(__LINE__) + ")");                                \
+    } while (0)
+
+namespace vmap::detail {
+namespace {
+
+struct DeviceCounters {
+    unsigned long long pairs, facing_pairs, visible_pairs, node_tests, occluder_tests;
+};
+
+constexpr int kWarpsPerBlock = 8;
+
+__global__ void __launch_bounds__(kWarpsPerBlock * 32)
+    leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
+                      const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_items,
+                      uint32_t* __restrict__ bits, DeviceCounters* counters) {
+    const int lane = threadIdx.x & 31;
+    const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
+    const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
+    WorkCounters wc;
+    for (uint64_t item = warp; item < num_items; item += warps) {
+        // The job holding this item: last j with first[j] <= item.
+        int32_t lo = 0, hi = num_jobs;
+        while (hi - lo > 1) {
+            const int32_t mid = (lo + hi) >> 1;
+            if (first[mid] <= item) lo = mid;
+            else hi = mid;
+        }
+        const PairJob job = jobs[lo];
+        const uint64_t rw = (uint64_t(job.cols) + 31) / 32;
+        const uint64_t local = item - first[lo];
+        const int32_t r = int32_t(local / rw);
+        const int32_t c = int32_t(local % rw) * 32 + lane;
+        bool vis = false;
+        if (c < job.cols) {
+            vis = leaf_pair_visible<true>(t, job.row0 + r, job.col0 + c, vp, &wc);
+            wc.pairs++;
+        }
+        const uint32_t word = __ballot_sync(0xffffffffu, vis);
+        if (lane == 0) bits[job.word_offset + local] = word;
+        wc.visible_pairs += vis;
+    }
+    // Warp-reduce the counters, one atomic per warp.
+    unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
+                               wc.occluder_tests};
+#pragma unroll
+    for (int k = 0; k < 5; ++k)
+        for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
+    if (lane == 0) {
+        atomicAdd(&counters->pairs, v[0]);
+        atomicAdd(&counters->facing_pairs, v[1]);
+        atomicAdd(&counters->visible_pairs, v[2]);
+        atomicAdd(&counters->node_tests, v[3]);
+        atomicAdd(&counters->occluder_tests, v[4]);
+    }
+}
+
+template <class T>
+struct DeviceBuffer {
+    T* ptr = nullptr;
+    size_t n = 0;
+    ~DeviceBuffer() {
+        if (ptr) cudaFree(ptr);
+    }
+    void reserve(size_t count, uint64_t& held, uint64_t& peak) {
+        if (count <= n) return;
+        if (ptr) {
+            VMAP_CUDA_CHECK(cudaFree(ptr));
+            held -= n * sizeof(T);
+        }
+        ptr = nullptr;
+        n = 0;
+        VMAP_CUDA_CHECK(cudaMalloc(&ptr, count * sizeof(T)));
+        n = count;
+        held += n * sizeof(T);
+        peak = std::max(peak, held);
+    }
+    void upload(const T* src, size_t count, cudaStream_t s, uint64_t& held, uint64_t& peak) {
+        reserve(count, held, peak);
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(ptr, src, count * sizeof(T), cudaMemcpyHostToDevice, s));
+    }
+};
+
+template <class T>
+struct PinnedBuffer {
+    T* ptr = nullptr;
+    size_t n = 0;
+    ~PinnedBuffer() {
+        if (ptr) cudaFreeHost(ptr);
+    }
+    void reserve(size_t count) {
+        if (count <= n) return;
+        if (ptr) VMAP_CUDA_CHECK(cudaFreeHost(ptr));
+        ptr = nullptr;
+        n = 0;
+        VMAP_CUDA_CHECK(cudaMallocHost(&ptr, count * sizeof(T)));
+        n = count;
+    }
+};
+
+class CudaBackend final : public Backend {
+  public:
+    explicit CudaBackend(int device) : device_(device) {
+        VMAP_CUDA_CHECK(cudaSetDevice(device_));
+        VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
+        for (auto& s : slots_) {
+            VMAP_CUDA_CHECK(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
+            VMAP_CUDA_CHECK(cudaEventCreateWithFlags(&s.done, cudaEventDisableTiming));
+        }
+    }
+    ~CudaBackend() override {
+        for (auto& s : slots_) {
+            if (s.stream) cudaStreamSynchronize(s.stream);
+            if (s.done) cudaEventDestroy(s.done);
+            if (s.stream) cudaStreamDestroy(s.stream);
+        }
+    }
+
+    std::string name() const override {
+        // (fmt's compile-time format strings do not build under nvcc: plain strings here.)
+        return std::string("cuda (") + prop_.name + ", " +
+               std::to_string(prop_.multiProcessorCount) + " SMs)";
+    }
+
+    void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
+        vp_ = vp;
+        cudaStream_t s = slots_[0].stream;
+        spheres_.upload(tree.spheres.data(), tree.spheres.size(), s, held_, peak_);
+        skip_.upload(tree.skip.data(), tree.skip.size(), s, held_, peak_);
+        node_leaf_.upload(tree.node_leaf.data(), tree.node_leaf.size(), s, held_, peak_);
+        leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
+        VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
+        view_ = OctreeView{spheres_.ptr, skip_.ptr, node_leaf_.ptr, leaves_.ptr, tree.num_nodes(),
+                           tree.num_leaves()};
+    }
+
+    void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
+        Slot& sl = slots_[slot];
+        // The previous batch in this slot has been waited for; its buffers may be reused.
+        const size_t nj = jobs.size();
+        sl.h_jobs.reserve(nj);
+        sl.h_first.reserve(nj + 1);
+        std::copy(jobs.begin(), jobs.end(), sl.h_jobs.ptr);
+        sl.h_first.ptr[0] = 0;
+        for (size_t i = 0; i < nj; ++i) sl.h_first.ptr[i + 1] = sl.h_first.ptr[i] + job_words(jobs[i]);
+        const uint64_t items = sl.h_first.ptr[nj];
+        sl.d_jobs.upload(sl.h_jobs.ptr, nj, sl.stream, held_, peak_);
+        sl.d_first.upload(sl.h_first.ptr, nj + 1, sl.stream, held_, peak_);
+        sl.d_bits.reserve(std::max<uint64_t>(words, 1), held_, peak_);
+        sl.d_counters.reserve(1, held_, peak_);
+        sl.h_bits.reserve(std::max<uint64_t>(words, 1));
+        sl.h_counters.reserve(1);
+        VMAP_CUDA_CHECK(cudaMemsetAsync(sl.d_counters.ptr, 0, sizeof(DeviceCounters), sl.stream));
+        if (items > 0) {
+            const int threads = kWarpsPerBlock * 32;
+            const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
+            const int blocks = int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
+            leaf_pairs_kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr,
+                                                                 sl.d_first.ptr, int32_t(nj), items,
+                                                                 sl.d_bits.ptr, sl.d_counters.ptr);
+            VMAP_CUDA_CHECK(cudaGetLastError());
+        }
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_bits.ptr, sl.d_bits.ptr, words * sizeof(uint32_t),
+                                        cudaMemcpyDeviceToHost, sl.stream));
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_counters.ptr, sl.d_counters.ptr, sizeof(DeviceCounters),
+                                        cudaMemcpyDeviceToHost, sl.stream));
+        VMAP_CUDA_CHECK(cudaEventRecord(sl.done, sl.stream));
+    }
+
+    const uint32_t* wait(int slot, WorkCounters& wc) override {
+        Slot& sl = slots_[slot];
+        VMAP_CUDA_CHECK(cudaEventSynchronize(sl.done));
+        const DeviceCounters& c = *sl.h_counters.ptr;
+        wc.pairs += c.pairs;
+        wc.facing_pairs += c.facing_pairs;
+        wc.visible_pairs += c.visible_pairs;
+        wc.node_tests += c.node_tests;
+        wc.occluder_tests += c.occluder_tests;
+        return sl.h_bits.ptr;
+    }
+
+    uint64_t peak_device_bytes() const override { return peak_; }
+
+  private:
+    struct Slot {
+        cudaStream_t stream = nullptr;
+        cudaEvent_t done = nullptr;
+        PinnedBuffer<PairJob> h_jobs;
+        PinnedBuffer<uint64_t> h_first;
+        PinnedBuffer<uint32_t> h_bits;
+        PinnedBuffer<DeviceCounters> h_counters;
+        DeviceBuffer<PairJob> d_jobs;
+        DeviceBuffer<uint64_t> d_first;
+        DeviceBuffer<uint32_t> d_bits;
+        DeviceBuffer<DeviceCounters> d_counters;
+    };
+    int device_;
+    cudaDeviceProp prop_{};
+    VisibilityParams vp_;
+    OctreeView view_;
+    DeviceBuffer<Sphere> spheres_;
+    DeviceBuffer<int32_t> skip_, node_leaf_;
+    DeviceBuffer<LeafDisc> leaves_;
+    Slot slots_[2];
+    uint64_t held_ = 0, peak_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
+    int count = 0;
+    const cudaError_t err = cudaGetDeviceCount(&count);
+    if (err != cudaSuccess || count == 0) {
+        if (why)
+            *why = err != cudaSuccess
+                       ? std::string("no CUDA device (") + cudaGetErrorString(err) + ")"
+                       : std::string("no CUDA device found");
+        return nullptr;
+    }
+    return std::make_unique<CudaBackend>(0);
+}
+
+}  // namespace vmap::detail

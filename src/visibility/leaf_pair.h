@@ -1,0 +1,93 @@
+// The leaf-pair visibility predicate (paper §5, DESIGN.md "Leaf-pair visibility"), written once
+// for the CPU and the CUDA backends. Plain inline functions on plain structs: no allocation, no
+// exceptions, no virtual calls. The build turns off FMA contraction on both sides, so the same
+// inputs give the same bits on the host and on the device.
+#pragma once
+
+#include "vmap/octree.h"
+#include "vmap/vec.h"
+#include "vmap/visibility.h"
+
+namespace vmap::detail {
+
+// Does segment p + t d, t in [0, 1], come within r of c? (paper §5.2: only the Boolean.)
+// Closest point of the segment to c is at t* = clamp((c - p) . d / |d|^2, 0, 1). Spheres carry a
+// conservative slack for rounding (octree.cpp), so a float evaluation never drops a true hit.
+VMAP_HD bool segment_meets_sphere(Vec3 p, Vec3 d, float dd, Sphere s) {
+    const Vec3 v = s.center - p;
+    float t = dot(v, d);
+    if (t <= 0.f) return length2(v) <= s.radius * s.radius;
+    if (t >= dd) return length2(v - d) <= s.radius * s.radius;
+    t = t / dd;
+    const Vec3 w = v - d * t;
+    return length2(w) <= s.radius * s.radius;
+}
+
+// Is leaf x an actual occluder of segment p + t d (paper §5.1, Fig. 7)?
+VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
+                                const VisibilityParams& vp) {
+    if (x.flags & kLeafNormalDegenerate) {
+        // No tangent plane: the disc degenerates to its sphere; occludes if the segment's
+        // interior passes within Delta of the centroid.
+        const float dd = len * len;
+        const Vec3 v = x.centroid - p;
+        const float t = dot(v, d) / dd;
+        if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
+        return length2(v - d * t) <= x.delta * x.delta;
+    }
+    const float nd = dot(x.normal, d);
+    // Tangent plane (nearly) parallel to pq: no proper crossing (x5 in Fig. 7).
+    if (fabsf(nd) <= vp.parallel_tol * len) return false;
+    const float t = dot(x.normal, x.centroid - p) / nd;
+    // The plane is cut outside the segment's interior (x1 in Fig. 7).
+    if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
+    // The crossing lies farther than Delta from the centroid (x4 in Fig. 7).
+    const Vec3 hit = p + d * t;
+    return length2(hit - x.centroid) <= x.delta * x.delta;
+}
+
+// Facing test: n_a . d > tol |d| and n_b . (-d) > tol |d|. A leaf whose normals cancel out has
+// no side, so it faces everything.
+VMAP_HD bool leaves_face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len,
+                         const VisibilityParams& vp) {
+    const float lim = vp.facing_tol * len;
+    const bool fa = (a.flags & kLeafNormalDegenerate) || dot(a.normal, d) > lim;
+    const bool fb = (b.flags & kLeafNormalDegenerate) || -dot(b.normal, d) > lim;
+    return fa && fb;
+}
+
+// Visibility of leaves a != b. Potential occluders are the leaves reached by descending from
+// the root into every node whose sphere meets segment pq (stackless walk over the preorder
+// skip links), other than a and b; K actual occluders make the pair invisible (any-hit: stop at
+// the K-th). kCount selects whether work is counted into `wc`.
+template <bool kCount>
+VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
+                               const VisibilityParams& vp, WorkCounters* wc) {
+    const LeafDisc la = t.leaves[a], lb = t.leaves[b];
+    const Vec3 p = la.centroid;
+    const Vec3 d = lb.centroid - p;
+    const float dd = length2(d);
+    const float len = sqrtf(dd);
+    if (!(len > 0.f)) return false;  // coincident centroids: no direction to see along
+    if (!leaves_face(la, lb, d, len, vp)) return false;
+    if (kCount) wc->facing_pairs++;
+    int occluders = 0;
+    int32_t n = 0;
+    while (n < t.num_nodes) {
+        if (kCount) wc->node_tests++;
+        if (!segment_meets_sphere(p, d, dd, t.spheres[n])) {
+            n = t.skip[n];
+            continue;
+        }
+        const int32_t l = t.node_leaf[n];
+        if (l >= 0 && l != a && l != b) {
+            if (kCount) wc->occluder_tests++;
+            if (is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K)
+                return false;
+        }
+        ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
+    }
+    return true;
+}
+
+}  // namespace vmap::detail

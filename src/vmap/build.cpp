@@ -1,0 +1,296 @@
+// V-map construction (paper §3 and §4.3, DESIGN.md "The V-map").
+//
+// Every unordered leaf pair (a, b) lies in exactly one "sibling rectangle": leaves(A) x leaves(B)
+// for the two distinct children A, B of the lowest common ancestor of a and b. Since leaves are in
+// depth-first order, each such rectangle is contiguous in the leaf-by-leaf matrix. The builder
+// lists those rectangles (splitting any larger than a job into sub-rectangles of child pairs),
+// has a backend evaluate them in batches into bit-packed tables (the paper's LVS), and extracts
+// links from each table on the host while the backend works on the next batch.
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <chrono>
+#include <numeric>
+
+#include "util/progress.h"
+#include "visibility/backend.h"
+#include "vmap/error.h"
+#include "vmap/vmap.h"
+
+namespace vmap {
+namespace {
+
+using detail::PairJob;
+using Link = std::pair<int32_t, int32_t>;
+using Clock = std::chrono::steady_clock;
+
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// A node pair to resolve: either one job (a rectangle evaluated whole) or split into the pairs
+// of its children (kids), when its rectangle is larger than a job may be.
+struct Entry {
+    int32_t a, b;
+    int32_t job = -1;
+    uint32_t kids_begin = 0, kids_end = 0;
+};
+
+struct Planner {
+    const Octree& t;
+    uint64_t max_job_pairs;
+    std::vector<Entry> entries;
+    std::vector<int32_t> kids;
+    std::vector<PairJob> jobs;
+
+    uint64_t area(int32_t a, int32_t b) const {
+        return uint64_t(t.leaf_end[a] - t.leaf_begin[a]) * uint64_t(t.leaf_end[b] - t.leaf_begin[b]);
+    }
+
+    int32_t expand(int32_t a, int32_t b) {
+        const int32_t e = static_cast<int32_t>(entries.size());
+        entries.push_back({a, b});
+        if (area(a, b) <= max_job_pairs) {
+            PairJob j;
+            j.a = a, j.b = b;
+            j.row0 = t.leaf_begin[a], j.rows = t.leaf_end[a] - t.leaf_begin[a];
+            j.col0 = t.leaf_begin[b], j.cols = t.leaf_end[b] - t.leaf_begin[b];
+            entries[e].job = static_cast<int32_t>(jobs.size());
+            jobs.push_back(j);
+            return e;
+        }
+        std::vector<int32_t> mine;
+        if (!t.is_leaf(a) && !t.is_leaf(b)) {
+            t.for_each_child(a, [&](int32_t ca) {
+                t.for_each_child(b, [&](int32_t cb) { mine.push_back(expand(ca, cb)); });
+            });
+        } else if (t.is_leaf(a)) {
+            t.for_each_child(b, [&](int32_t cb) { mine.push_back(expand(a, cb)); });
+        } else {
+            t.for_each_child(a, [&](int32_t ca) { mine.push_back(expand(ca, b)); });
+        }
+        entries[e].kids_begin = static_cast<uint32_t>(kids.size());
+        kids.insert(kids.end(), mine.begin(), mine.end());
+        entries[e].kids_end = static_cast<uint32_t>(kids.size());
+        return e;
+    }
+};
+
+// Link extraction from one job's bit table (paper §3, Fig. 5 (b)-(d)): resolve(A, B) stores a
+// link when all leaf pairs under (A, B) are visible, else splits, down to leaf pairs.
+struct Extractor {
+    const Octree& t;
+    const PairJob& job;
+    const uint32_t* bits;  // this job's table
+    std::vector<Link>& out;
+
+    // Set bits in rows [r0, r1) x cols [c0, c1), job-relative.
+    uint64_t count(int32_t r0, int32_t r1, int32_t c0, int32_t c1) const {
+        const uint64_t rw = detail::row_words(job.cols);
+        uint64_t n = 0;
+        const int32_t w0 = c0 / 32, w1 = (c1 - 1) / 32;
+        const uint32_t m0 = ~0u << (c0 % 32);
+        const uint32_t m1 = ~0u >> (31 - (c1 - 1) % 32);
+        for (int32_t r = r0; r < r1; ++r) {
+            const uint32_t* row = bits + r * rw;
+            if (w0 == w1) {
+                n += __builtin_popcount(row[w0] & m0 & m1);
+                continue;
+            }
+            n += __builtin_popcount(row[w0] & m0);
+            for (int32_t w = w0 + 1; w < w1; ++w) n += __builtin_popcount(row[w]);
+            n += __builtin_popcount(row[w1] & m1);
+        }
+        return n;
+    }
+
+    void resolve(int32_t a, int32_t b) {
+        const int32_t r0 = t.leaf_begin[a] - job.row0, r1 = t.leaf_end[a] - job.row0;
+        const int32_t c0 = t.leaf_begin[b] - job.col0, c1 = t.leaf_end[b] - job.col0;
+        const uint64_t n = count(r0, r1, c0, c1);
+        if (n == 0) return;  // nothing visible below either: no link anywhere under (a, b)
+        if (n == uint64_t(r1 - r0) * uint64_t(c1 - c0)) {
+            out.emplace_back(a, b);
+            return;
+        }
+        const bool la = t.is_leaf(a), lb = t.is_leaf(b);
+        if (!la && !lb) {
+            t.for_each_child(a, [&](int32_t ca) {
+                t.for_each_child(b, [&](int32_t cb) { resolve(ca, cb); });
+            });
+        } else if (la) {
+            t.for_each_child(b, [&](int32_t cb) { resolve(a, cb); });
+        } else {
+            t.for_each_child(a, [&](int32_t ca) { resolve(ca, b); });
+        }
+    }
+};
+
+}  // namespace
+
+void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs) {
+    const int32_t nn = vm.octree.num_nodes();
+    std::vector<uint32_t> deg(nn + 1, 0);
+    for (auto [a, b] : pairs) {
+        if (a < 0 || b < 0 || a >= nn || b >= nn || a == b)
+            throw Error(fmt::format("link ({}, {}) out of range ({} nodes)", a, b, nn));
+        deg[a + 1]++, deg[b + 1]++;
+    }
+    std::partial_sum(deg.begin(), deg.end(), deg.begin());
+    vm.link_offsets = deg;
+    vm.link_targets.assign(deg.back(), 0);
+    std::vector<uint32_t> fill(deg.begin(), deg.end() - 1);
+    for (auto [a, b] : pairs) {
+        vm.link_targets[fill[a]++] = b;
+        vm.link_targets[fill[b]++] = a;
+    }
+    tbb::parallel_for(int32_t(0), nn, [&](int32_t n) {
+        std::sort(vm.link_targets.begin() + deg[n], vm.link_targets.begin() + deg[n + 1]);
+    });
+}
+
+VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
+                         const std::string& source) {
+    const auto t0 = Clock::now();
+    const VisibilityParams& vp = params.visibility;
+    if (vp.K < 1 || vp.K > 1000) throw Error(fmt::format("{}: K {} out of range (1..1000)", source, vp.K));
+    if (!(vp.eps >= 0 && vp.eps < 0.5f))
+        throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", source, vp.eps));
+    if (!(vp.facing_tol >= 0 && vp.facing_tol < 1))
+        throw Error(fmt::format("{}: facing tolerance {} out of range [0, 1)", source, vp.facing_tol));
+    if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
+        throw Error(fmt::format("{}: parallel tolerance {} out of range [0, 1)", source,
+                                vp.parallel_tol));
+    if (params.max_batch_pairs < 1024)
+        throw Error(fmt::format("{}: batch of {} pairs is too small (>= 1024)", source,
+                                params.max_batch_pairs));
+
+    BuildStats st;
+    VisibilityMap vm;
+    vm.octree_params = params.octree;
+    vm.visibility_params = vp;
+    vm.octree = Octree::build(points, params.octree, vm.order, source);
+    vm.points = std::move(points);
+    vm.inverse.resize(vm.order.size());
+    for (uint32_t k = 0; k < vm.order.size(); ++k) vm.inverse[vm.order[k]] = k;
+    st.seconds_octree = seconds_since(t0);
+
+    const auto t1 = Clock::now();
+    const Octree& t = vm.octree;
+    Planner plan{t, std::max<uint64_t>(1, params.max_batch_pairs / 16), {}, {}, {}};
+    std::vector<int32_t> roots;
+    for (int32_t n = 0; n < t.num_nodes(); ++n) {
+        if (t.is_leaf(n)) continue;
+        std::vector<int32_t> ch;
+        t.for_each_child(n, [&](int32_t c) { ch.push_back(c); });
+        for (size_t i = 0; i < ch.size(); ++i)
+            for (size_t j = i + 1; j < ch.size(); ++j) roots.push_back(plan.expand(ch[i], ch[j]));
+    }
+
+    std::string note;
+    auto backend = detail::make_backend(params.backend, &note);
+    st.backend = backend->name();
+    st.note = note;
+    // Words per batch: a batch's rows are padded to 32 bits, so allow for that.
+    const uint64_t max_words = params.max_batch_pairs / 32 + 1;
+    uint64_t max_job_words = 0;
+    for (const PairJob& j : plan.jobs) max_job_words = std::max(max_job_words, detail::job_words(j));
+    const uint64_t batch_words = std::max(max_words, max_job_words);
+    backend->prepare(t, vp, batch_words);
+
+    // Batches: consecutive jobs up to batch_words.
+    struct Batch {
+        size_t begin, end;
+        uint64_t words;
+    };
+    std::vector<Batch> batches;
+    for (size_t j = 0; j < plan.jobs.size();) {
+        Batch b{j, j, 0};
+        while (b.end < plan.jobs.size() &&
+               (b.end == b.begin || b.words + detail::job_words(plan.jobs[b.end]) <= batch_words)) {
+            plan.jobs[b.end].word_offset = b.words;
+            b.words += detail::job_words(plan.jobs[b.end]);
+            ++b.end;
+        }
+        batches.push_back(b);
+        j = b.end;
+    }
+
+    // Per job: full (its pair is one link) and its links in `links`.
+    std::vector<Link> links;
+    std::vector<uint64_t> job_links(plan.jobs.size() + 1, 0);
+    std::vector<uint8_t> job_full(plan.jobs.size(), 0);
+    const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+    detail::Progress progress("leaf pairs", total_pairs, params.progress);
+    uint64_t done_pairs = 0;
+
+    auto submit = [&](size_t i) {
+        const Batch& b = batches[i];
+        backend->submit(std::span<const PairJob>(plan.jobs.data() + b.begin, b.end - b.begin),
+                        b.words, int(i % 2));
+    };
+    if (!batches.empty()) submit(0);
+    for (size_t i = 0; i < batches.size(); ++i) {
+        if (i + 1 < batches.size()) submit(i + 1);
+        const uint32_t* bits = backend->wait(int(i % 2), st.work);
+        const Batch& b = batches[i];
+        // Extract in chunks of jobs (parallel), then append in job order (deterministic).
+        const size_t nj = b.end - b.begin;
+        const size_t chunk = std::max<size_t>(1, nj / 256);
+        const size_t nchunks = (nj + chunk - 1) / chunk;
+        std::vector<std::vector<Link>> out(nchunks);
+        std::vector<uint64_t> counts(nj);
+        tbb::parallel_for(size_t(0), nchunks, [&](size_t c) {
+            for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
+                const PairJob& job = plan.jobs[b.begin + k];
+                const size_t before = out[c].size();
+                Extractor{t, job, bits + job.word_offset, out[c]}.resolve(job.a, job.b);
+                counts[k] = out[c].size() - before;
+                job_full[b.begin + k] = counts[k] == 1 && out[c].back() == Link{job.a, job.b};
+            }
+        });
+        for (size_t k = 0; k < nj; ++k) job_links[b.begin + k + 1] = job_links[b.begin + k] + counts[k];
+        for (auto& v : out) links.insert(links.end(), v.begin(), v.end());
+        for (size_t k = b.begin; k < b.end; ++k)
+            done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
+        progress.update(done_pairs);
+    }
+    st.batches = batches.size();
+    st.peak_device_bytes = backend->peak_device_bytes();
+
+    // Split entries: a link at the entry's own level if every part was fully visible.
+    std::vector<int8_t> full(plan.entries.size(), -1);
+    auto is_full = [&](auto&& self, int32_t e) -> bool {
+        if (full[e] >= 0) return full[e];
+        const Entry& en = plan.entries[e];
+        bool f = true;
+        if (en.job >= 0) f = job_full[en.job];
+        else
+            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) f = self(self, plan.kids[k]) && f;
+        full[e] = f;
+        return f;
+    };
+    std::vector<Link> result;
+    result.reserve(links.size());
+    auto emit = [&](auto&& self, int32_t e) -> void {
+        const Entry& en = plan.entries[e];
+        if (is_full(is_full, e)) {
+            result.emplace_back(en.a, en.b);
+        } else if (en.job >= 0) {
+            result.insert(result.end(), links.begin() + job_links[en.job],
+                          links.begin() + job_links[en.job + 1]);
+        } else {
+            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
+        }
+    };
+    for (int32_t r : roots) emit(emit, r);
+    set_links(vm, std::move(result));
+    st.seconds_visibility = seconds_since(t1);
+    st.seconds_total = seconds_since(t0);
+    if (stats) *stats = st;
+    return vm;
+}
+
+}  // namespace vmap

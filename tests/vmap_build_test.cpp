@@ -1,1 +1,212 @@
+// V-map construction against a brute-force leaf-pair matrix (DESIGN.md "The V-map": the
+// invariant is the oracle).
 #include <gtest/gtest.h>
+
+#include <algorithm>
+#include <set>
+
+#include <tbb/global_control.h>
+
+#include "test_util.h"
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+using LinkSet = std::set<std::pair<int32_t, int32_t>>;
+
+LinkSet links_of(const VisibilityMap& vm) {
+    LinkSet s;
+    for (int32_t n = 0; n < vm.octree.num_nodes(); ++n)
+        for (int32_t m : vm.links(n)) s.insert({std::min(n, m), std::max(n, m)});
+    return s;
+}
+
+// The construction of DESIGN.md, written as plainly as possible over the dense matrix.
+struct Naive {
+    const Octree& t;
+    const std::vector<uint8_t>& m;
+    LinkSet out;
+    bool full(int32_t a, int32_t b) const {
+        const int32_t L = t.num_leaves();
+        for (int32_t x = t.leaf_begin[a]; x < t.leaf_end[a]; ++x)
+            for (int32_t y = t.leaf_begin[b]; y < t.leaf_end[b]; ++y)
+                if (!m[size_t(x) * L + y]) return false;
+        return true;
+    }
+    std::vector<int32_t> kids(int32_t n) const {
+        std::vector<int32_t> k;
+        t.for_each_child(n, [&](int32_t c) { k.push_back(c); });
+        return k;
+    }
+    void resolve(int32_t a, int32_t b) {
+        if (full(a, b)) {
+            out.insert({std::min(a, b), std::max(a, b)});
+            return;
+        }
+        if (t.is_leaf(a) && t.is_leaf(b)) return;
+        if (!t.is_leaf(a) && !t.is_leaf(b)) {
+            for (int32_t x : kids(a))
+                for (int32_t y : kids(b)) resolve(x, y);
+        } else if (t.is_leaf(a)) {
+            for (int32_t y : kids(b)) resolve(a, y);
+        } else {
+            for (int32_t x : kids(a)) resolve(x, b);
+        }
+    }
+    LinkSet run() {
+        for (int32_t n = 0; n < t.num_nodes(); ++n) {
+            const auto k = kids(n);
+            for (size_t i = 0; i < k.size(); ++i)
+                for (size_t j = i + 1; j < k.size(); ++j) resolve(k[i], k[j]);
+        }
+        return out;
+    }
+};
+
+std::vector<int32_t> ancestors_or_self(const Octree& t, int32_t leaf) {
+    std::vector<int32_t> v;
+    for (int32_t n = t.leaf_node[leaf]; n >= 0; n = t.parent[n]) v.push_back(n);
+    return v;
+}
+
+void check_invariant(const VisibilityMap& vm) {
+    const Octree& t = vm.octree;
+    const int32_t L = t.num_leaves();
+    const auto m = test::brute_matrix(vm);
+    const LinkSet links = links_of(vm);
+    // Exactly the links of the plain construction.
+    EXPECT_EQ(links, (Naive{t, m, {}}.run()));
+    // Every leaf pair covered by exactly one link when visible, by none when not.
+    std::vector<std::vector<int32_t>> anc(L);
+    for (int32_t l = 0; l < L; ++l) anc[l] = ancestors_or_self(t, l);
+    uint64_t visible = 0;
+    for (int32_t a = 0; a < L; ++a)
+        for (int32_t b = a + 1; b < L; ++b) {
+            int cover = 0;
+            for (int32_t x : anc[a])
+                for (int32_t y : anc[b]) cover += links.count({std::min(x, y), std::max(x, y)});
+            ASSERT_EQ(cover, m[size_t(a) * L + b] ? 1 : 0) << "leaves " << a << ", " << b;
+            ASSERT_EQ(vm.leaves_visible(a, b), bool(m[size_t(a) * L + b]));
+            ASSERT_EQ(vm.leaves_visible(b, a), bool(m[size_t(a) * L + b]));
+            visible += m[size_t(a) * L + b];
+        }
+    EXPECT_GT(visible, 0u);
+    // No link could be moved up a level: for a link between non-siblings, the pair of parents
+    // (when they are disjoint subtrees) is not fully visible.
+    auto disjoint = [&](int32_t x, int32_t y) {
+        return !(x <= y && y < t.skip[x]) && !(y <= x && x < t.skip[y]);
+    };
+    for (auto [a, b] : links) {
+        const int32_t p = t.parent[a], q = t.parent[b];
+        if (p == q) continue;
+        if (disjoint(p, q)) EXPECT_FALSE((Naive{t, m, {}}.full(p, q))) << a << " " << b;
+    }
+}
+
+struct Case {
+    const char* scene;
+    uint64_t points;
+    int height, leaf_points;
+};
+
+class VmapOracle : public ::testing::TestWithParam<Case> {};
+
+TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
+    const Case c = GetParam();
+    const std::string file = std::string(c.scene).find('/') == std::string::npos
+                                 ? test::scene_path(c.scene)
+                                 : test::oracle_path(c.scene);
+    BuildStats st;
+    VisibilityMap vm = build_vmap(test::sample(file, c.points, 3),
+                                  test::cpu_params(c.height, c.leaf_points), &st);
+    const int32_t L = vm.octree.num_leaves();
+    EXPECT_EQ(st.work.pairs, uint64_t(L) * (L - 1) / 2) << "each unordered pair once";
+    std::set<int> levels;
+    for (int32_t l : vm.octree.leaf_node) levels.insert(vm.octree.level[l]);
+    EXPECT_GE(levels.size(), 2u) << "the case should have leaves at mixed depths";
+    check_invariant(vm);
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    Scenes, VmapOracle,
+    ::testing::Values(Case{"cornell-empty", 1500, 4, 4}, Case{"cornell-bunny", 2000, 5, 2},
+                      Case{"cornell-bunny", 2500, 7, 4}, Case{"cornell-two-models", 2500, 8, 6},
+                      Case{"./room-with-block.json", 2000, 6, 1},
+                      Case{"./room-with-block.json", 3000, 9, 8}),
+    [](const ::testing::TestParamInfo<Case>& i) {
+        std::string s = std::string(i.param.scene) + "_h" + std::to_string(i.param.height) + "_lp" +
+                        std::to_string(i.param.leaf_points) + "_n" + std::to_string(i.param.points);
+        for (char& ch : s)
+            if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
+        return s;
+    });
+
+TEST(VmapBuild, TinyBatchesGiveTheSameLinks) {
+    // Batches of 1024 pairs force jobs of 64 pairs: node pairs split into sub-rectangles, links
+    // reassembled across jobs and batches.
+    const PointSet ps = test::sample(test::oracle_path("room-with-block.json"), 2500, 4);
+    const VisibilityMap ref = build_vmap(ps, test::cpu_params(7, 3));
+    BuildParams bp = test::cpu_params(7, 3);
+    bp.max_batch_pairs = 1024;
+    BuildStats st;
+    const VisibilityMap small = build_vmap(ps, bp, &st);
+    EXPECT_GT(st.batches, 10u);
+    EXPECT_EQ(small.link_offsets, ref.link_offsets);
+    EXPECT_EQ(small.link_targets, ref.link_targets);
+}
+
+TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 3000, 8);
+    VisibilityMap many = build_vmap(ps, test::cpu_params(7, 3));
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    VisibilityMap single = build_vmap(ps, test::cpu_params(7, 3));
+    EXPECT_EQ(single.link_targets, many.link_targets);
+    EXPECT_EQ(single.order, many.order);
+}
+
+TEST(VmapBuild, LinksAreStoredAtBothEndsSorted) {
+    const VisibilityMap vm =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 2000, 1), test::cpu_params(6, 4));
+    for (int32_t n = 0; n < vm.octree.num_nodes(); ++n) {
+        const auto ls = vm.links(n);
+        EXPECT_TRUE(std::is_sorted(ls.begin(), ls.end()));
+        for (int32_t m : ls) {
+            const auto back = vm.links(m);
+            EXPECT_TRUE(std::binary_search(back.begin(), back.end(), n));
+        }
+    }
+}
+
+TEST(VmapBuild, AbsurdParametersAreRejected) {
+    const PointSet ps = test::sample(test::scene_path("cornell-empty"), 500, 1);
+    auto expect = [&](BuildParams bp, const char* needle) {
+        try {
+            build_vmap(ps, bp, nullptr, "scene.json");
+            FAIL() << needle;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(needle), std::string::npos) << e.what();
+            EXPECT_NE(std::string(e.what()).find("scene.json"), std::string::npos) << e.what();
+        }
+    };
+    BuildParams bp = test::cpu_params(5, 4);
+    bp.visibility.K = 0;
+    expect(bp, "K");
+    bp = test::cpu_params(5, 4);
+    bp.visibility.eps = 0.7f;
+    expect(bp, "eps");
+    bp = test::cpu_params(5, 4);
+    bp.visibility.facing_tol = -1;
+    expect(bp, "facing");
+    bp = test::cpu_params(40, 4);
+    expect(bp, "max_height");
+}
+
+TEST(VmapBuild, UnknownBackendIsAUsageError) {
+    BuildParams bp = test::cpu_params(5, 4);
+    bp.backend = "tpu";
+    EXPECT_THROW(build_vmap(test::sample(test::scene_path("cornell-empty"), 300, 1), bp), Error);
+}
+
+}  // namespace
+}  // namespace vmap

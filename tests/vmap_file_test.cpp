@@ -1,1 +1,480 @@
+// The .vmap file: exact round trips, and truncated, corrupt, wrong-version or missing files, and
+// writes that never leave half a file behind.
 #include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <initializer_list>
+#include <memory>
+#include <sstream>
+#include <string>
+#include <string_view>
+#include <vector>
+
+#include "vmap/error.h"
+#include "vmap/scene.h"
+#include "vmap/vmap.h"
+
+namespace vmap {
+namespace {
+
+namespace fs = std::filesystem;
+
+constexpr size_t kHeaderBytes = 8 + 4 + 4 + 8 + 8;  // magic, version, reserved, size, checksum
+
+// A directory of its own for each test, so tests can run in parallel (ctest -j).
+class ScratchDir {
+  public:
+    ScratchDir() {
+        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+        dir_ = fs::temp_directory_path() / ("vmap_file_test_" + std::to_string(::getpid()) + "_" +
+                                            info->test_suite_name() + "_" + info->name());
+        fs::remove_all(dir_);
+        fs::create_directories(dir_);
+    }
+    ~ScratchDir() {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+    ScratchDir(const ScratchDir&) = delete;
+    ScratchDir& operator=(const ScratchDir&) = delete;
+
+    std::string path(const std::string& name) const { return (dir_ / name).string(); }
+    const fs::path& dir() const { return dir_; }
+
+    std::vector<std::string> files() const {
+        std::vector<std::string> names;
+        for (const auto& entry : fs::directory_iterator(dir_))
+            names.push_back(entry.path().filename().string());
+        std::sort(names.begin(), names.end());
+        return names;
+    }
+
+  private:
+    fs::path dir_;
+};
+
+std::string slurp(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    std::ostringstream out;
+    out << in.rdbuf();
+    return out.str();
+}
+
+void spit(const std::string& path, std::string_view bytes) {
+    std::ofstream out(path, std::ios::binary | std::ios::trunc);
+    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    ASSERT_TRUE(out.good()) << path;
+}
+
+uint64_t fnv1a(const char* p, size_t n) {
+    uint64_t h = 0xcbf29ce484222325ULL;
+    for (size_t i = 0; i < n; ++i) h = (h ^ uint8_t(p[i])) * 0x100000001b3ULL;
+    return h;
+}
+
+// After editing the payload of a file image: set the header's size and checksum to match, so
+// that only the loader's structure checks stand between the edit and a query.
+void reseal(std::string& bytes) {
+    const uint64_t payload = bytes.size() - kHeaderBytes;
+    const uint64_t sum = fnv1a(bytes.data() + kHeaderBytes, payload);
+    std::memcpy(bytes.data() + 16, &payload, 8);
+    std::memcpy(bytes.data() + 24, &sum, 8);
+}
+
+// Byte offset of section `tag`'s data (just past its tag and length) in a file image.
+size_t section_data(const std::string& bytes, const char* tag) {
+    size_t p = kHeaderBytes;
+    while (p + 12 <= bytes.size()) {
+        uint64_t len;
+        std::memcpy(&len, bytes.data() + p + 4, 8);
+        if (bytes.compare(p, 4, tag) == 0) return p + 12;
+        p += 12 + len;
+    }
+    ADD_FAILURE() << "no section " << tag;
+    return 0;
+}
+
+// Calls f, which must throw vmap::Error whose one-line message holds every one of `parts`.
+void expect_error(const std::function<void()>& f, std::initializer_list<std::string_view> parts) {
+    try {
+        f();
+    } catch (const Error& e) {
+        const std::string what = e.what();
+        EXPECT_EQ(what.find('\n'), std::string::npos) << "message is not one line: " << what;
+        for (std::string_view part : parts) {
+            EXPECT_NE(what.find(part), std::string::npos)
+                << "message \"" << what << "\" lacks \"" << part << "\"";
+        }
+        return;
+    } catch (const std::exception& e) {
+        ADD_FAILURE() << "threw a non-vmap exception: " << e.what();
+        return;
+    }
+    ADD_FAILURE() << "did not throw";
+}
+
+#define EXPECT_LOAD_ERROR(path, ...)                                     \
+    do {                                                                 \
+        SCOPED_TRACE(path);                                              \
+        expect_error([&] { (void)load_vmap(path); }, {path, __VA_ARGS__}); \
+    } while (0)
+
+// ---- field-by-field comparison -------------------------------------------------------------
+
+template <class T>
+void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+    ASSERT_EQ(a.size(), b.size()) << what;
+    if (a.empty()) return;
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(T)), 0) << what << " differ";
+}
+
+void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
+    EXPECT_EQ(a.octree_params.max_height, b.octree_params.max_height);
+    EXPECT_EQ(a.octree_params.leaf_points, b.octree_params.leaf_points);
+    EXPECT_EQ(a.visibility_params.K, b.visibility_params.K);
+    EXPECT_EQ(a.visibility_params.eps, b.visibility_params.eps);
+    EXPECT_EQ(a.visibility_params.facing_tol, b.visibility_params.facing_tol);
+    EXPECT_EQ(a.visibility_params.parallel_tol, b.visibility_params.parallel_tol);
+
+    expect_same_bytes(a.points.positions, b.points.positions, "positions");
+    expect_same_bytes(a.points.normals, b.points.normals, "normals");
+    expect_same_bytes(a.points.colors, b.points.colors, "colours");
+    expect_same_bytes(a.points.radii, b.points.radii, "radii");
+    expect_same_bytes(a.points.emission, b.points.emission, "emission");
+    expect_same_bytes(a.order, b.order, "order");
+    expect_same_bytes(a.inverse, b.inverse, "inverse");
+
+    const Octree &s = a.octree, &t = b.octree;
+    EXPECT_EQ(s.params.max_height, t.params.max_height);
+    EXPECT_EQ(s.params.leaf_points, t.params.leaf_points);
+    EXPECT_EQ(s.root_min, t.root_min);
+    EXPECT_EQ(s.root_size, t.root_size);
+    EXPECT_EQ(s.num_nodes(), t.num_nodes());
+    EXPECT_EQ(s.num_leaves(), t.num_leaves());
+    EXPECT_EQ(s.height(), t.height());
+    expect_same_bytes(s.spheres, t.spheres, "spheres");
+    expect_same_bytes(s.half_size, t.half_size, "half_size");
+    expect_same_bytes(s.skip, t.skip, "skip");
+    expect_same_bytes(s.parent, t.parent, "parent");
+    expect_same_bytes(s.level, t.level, "level");
+    expect_same_bytes(s.node_leaf, t.node_leaf, "node_leaf");
+    expect_same_bytes(s.point_begin, t.point_begin, "point_begin");
+    expect_same_bytes(s.point_end, t.point_end, "point_end");
+    expect_same_bytes(s.leaf_begin, t.leaf_begin, "leaf_begin");
+    expect_same_bytes(s.leaf_end, t.leaf_end, "leaf_end");
+    expect_same_bytes(s.leaf_node, t.leaf_node, "leaf_node");
+    expect_same_bytes(s.leaves, t.leaves, "leaves");
+    expect_same_bytes(s.leaf_splat, t.leaf_splat, "leaf_splat");
+
+    expect_same_bytes(a.link_offsets, b.link_offsets, "link_offsets");
+    expect_same_bytes(a.link_targets, b.link_targets, "link_targets");
+    EXPECT_EQ(a.num_links(), b.num_links());
+}
+
+// ---- one small V-map, built once ------------------------------------------------------------
+
+class VmapFile : public ::testing::Test {
+  protected:
+    static void SetUpTestSuite() {
+        Scene sc = load_scene(std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-empty.json");
+        sc.points = 1500;
+        BuildParams bp;
+        bp.backend = "cpu";
+        bp.octree.max_height = 5;
+        bp.octree.leaf_points = 4;
+        bp.visibility.K = 3;  // not the default, so a lost parameter shows
+        map_ = std::make_unique<VisibilityMap>(build_vmap(sample_scene(sc), bp, nullptr, "test"));
+    }
+    static void TearDownTestSuite() { map_.reset(); }
+
+    static const VisibilityMap& map() { return *map_; }
+
+    // The map saved under `name` in `dir`; returns the path.
+    static std::string saved(const ScratchDir& dir, const std::string& name = "map.vmap") {
+        const std::string p = dir.path(name);
+        save_vmap(p, map());
+        return p;
+    }
+
+  private:
+    static inline std::unique_ptr<VisibilityMap> map_;
+};
+
+TEST_F(VmapFile, TheTestMapIsNotTrivial) {
+    EXPECT_EQ(map().points.size(), 1500u);
+    EXPECT_GT(map().octree.num_leaves(), 50);
+    EXPECT_GT(map().num_links(), 10u);
+    EXPECT_EQ(map().octree_params.max_height, 5);
+    EXPECT_EQ(map().visibility_params.K, 3);
+    EXPECT_FALSE(map().points.colors.empty());
+    EXPECT_FALSE(map().points.radii.empty());
+    EXPECT_FALSE(map().points.emission.empty());
+}
+
+TEST_F(VmapFile, RoundTripKeepsEveryField) {
+    ScratchDir dir;
+    const VisibilityMap back = load_vmap(saved(dir));
+    expect_same_map(map(), back);
+}
+
+TEST_F(VmapFile, RoundTripAnswersEveryQueryTheSame) {
+    ScratchDir dir;
+    const VisibilityMap back = load_vmap(saved(dir));
+    const uint32_t n = uint32_t(map().points.size());
+    size_t differ = 0, visible = 0, hidden = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+        for (uint32_t j = 0; j < n; j += 3) {
+            const PairVisibility a = map().query(i, j), b = back.query(i, j);
+            if (a != b && differ++ < 5) ADD_FAILURE() << "query(" << i << ", " << j << ") differs";
+            visible += a == PairVisibility::kVisible;
+            hidden += a == PairVisibility::kHidden;
+        }
+    }
+    EXPECT_EQ(differ, 0u);
+    EXPECT_GT(visible, 0u);
+    EXPECT_GT(hidden, 0u);
+    for (uint32_t i = 0; i < n; i += 7) ASSERT_EQ(map().visible_set(i), back.visible_set(i)) << i;
+}
+
+TEST_F(VmapFile, SavingTheSameMapTwiceGivesTheSameBytes) {
+    ScratchDir dir;
+    const std::string a = slurp(saved(dir, "a.vmap")), b = slurp(saved(dir, "b.vmap"));
+    EXPECT_EQ(a, b);
+    // And a loaded map saves back to the same bytes.
+    save_vmap(dir.path("c.vmap"), load_vmap(dir.path("a.vmap")));
+    EXPECT_EQ(a, slurp(dir.path("c.vmap")));
+}
+
+TEST_F(VmapFile, AMapWithoutColoursRadiiOrEmissionRoundTrips) {
+    // Points with normals only: the optional arrays must stay absent, not come back empty-sized
+    // or filled in.
+    PointSet ps;
+    for (int i = 0; i < 200; ++i) {
+        const float x = float(i % 20) * 0.01f, z = float(i / 20) * 0.01f;
+        ps.positions.push_back({x, 0, z});
+        ps.normals.push_back({0, 1, 0});
+        ps.positions.push_back({x, 0.3f, z});
+        ps.normals.push_back({0, -1, 0});
+    }
+    BuildParams bp;
+    bp.backend = "cpu";
+    bp.octree.max_height = 4;
+    const VisibilityMap vm = build_vmap(ps, bp, nullptr, "plates");
+    ScratchDir dir;
+    save_vmap(dir.path("plates.vmap"), vm);
+    const VisibilityMap back = load_vmap(dir.path("plates.vmap"));
+    expect_same_map(vm, back);
+    EXPECT_EQ(back.points.colors.empty(), vm.points.colors.empty());
+    EXPECT_EQ(back.points.radii.empty(), vm.points.radii.empty());
+    EXPECT_TRUE(back.points.emission.empty());
+}
+
+// ---- bad files -----------------------------------------------------------------------------
+
+TEST_F(VmapFile, TruncatedFilesAreRejectedNamingTheFile) {
+    ScratchDir dir;
+    const std::string whole = slurp(saved(dir));
+    ASSERT_GT(whole.size(), 1000u);
+    for (size_t cut : {size_t(0), size_t(10), kHeaderBytes, whole.size() / 2, whole.size() - 1}) {
+        SCOPED_TRACE(::testing::Message() << "cut at " << cut << " of " << whole.size());
+        const std::string p = dir.path("cut_" + std::to_string(cut) + ".vmap");
+        spit(p, std::string_view(whole).substr(0, cut));
+        EXPECT_LOAD_ERROR(p, "truncated");
+    }
+}
+
+TEST_F(VmapFile, ATruncatedFileWithAMatchingHeaderIsRejected) {
+    // Cut in the middle of the last section, with the header's size and checksum made to
+    // match: the section reader must notice.
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    bytes.resize(bytes.size() - 6);
+    reseal(bytes);
+    const std::string p = dir.path("resealed.vmap");
+    spit(p, bytes);
+    EXPECT_LOAD_ERROR(p, "LINK");
+}
+
+TEST_F(VmapFile, AFlippedPayloadByteFailsTheChecksum) {
+    ScratchDir dir;
+    const std::string whole = slurp(saved(dir));
+    for (size_t at : {kHeaderBytes, kHeaderBytes + 1000, whole.size() / 2, whole.size() - 1}) {
+        SCOPED_TRACE(::testing::Message() << "byte " << at);
+        std::string bytes = whole;
+        bytes[at] = char(bytes[at] ^ 0x10);
+        const std::string p = dir.path("flipped_" + std::to_string(at) + ".vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "checksum");
+    }
+}
+
+TEST_F(VmapFile, AFlippedChecksumByteFailsTheChecksum) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    bytes[24] = char(bytes[24] ^ 0x01);
+    const std::string p = dir.path("sum.vmap");
+    spit(p, bytes);
+    EXPECT_LOAD_ERROR(p, "checksum");
+}
+
+TEST_F(VmapFile, BadMagicIsRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    bytes[0] = 'X';
+    const std::string p = dir.path("magic.vmap");
+    spit(p, bytes);
+    EXPECT_LOAD_ERROR(p, "magic");
+
+    // A different kind of file altogether.
+    const std::string ply = dir.path("cloud.vmap");
+    spit(ply, "ply\nformat ascii 1.0\nelement vertex 0\nend_header\n");
+    EXPECT_LOAD_ERROR(ply, "magic");
+}
+
+TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
+    ScratchDir dir;
+    const std::string whole = slurp(saved(dir));
+    for (uint32_t version : {0u, 2u, 0xffffffffu}) {
+        SCOPED_TRACE(version);
+        std::string bytes = whole;
+        std::memcpy(bytes.data() + 8, &version, 4);
+        const std::string p = dir.path("v" + std::to_string(version) + ".vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "version", std::to_string(version));
+    }
+}
+
+TEST_F(VmapFile, AMissingFileIsNamed) {
+    ScratchDir dir;
+    const std::string p = dir.path("there_is_no.vmap");
+    EXPECT_LOAD_ERROR(p);
+}
+
+TEST_F(VmapFile, ADirectoryIsNotAVmapFile) {
+    ScratchDir dir;
+    fs::create_directories(dir.path("a_directory.vmap"));
+    const std::string p = dir.path("a_directory.vmap");
+    EXPECT_LOAD_ERROR(p);
+}
+
+TEST_F(VmapFile, TrailingBytesAreRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    bytes += std::string(8, '\0');
+    reseal(bytes);
+    const std::string p = dir.path("trailing.vmap");
+    spit(p, bytes);
+    EXPECT_LOAD_ERROR(p, "trailing");
+}
+
+TEST_F(VmapFile, AHugePointCountIsRejectedNotAllocated) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    const size_t at = section_data(bytes, "PNTS");
+    for (uint64_t n : {uint64_t(1) << 40, ~uint64_t(0)}) {
+        SCOPED_TRACE(n);
+        std::memcpy(bytes.data() + at, &n, 8);
+        reseal(bytes);
+        const std::string p = dir.path("huge.vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "PNTS");
+    }
+}
+
+TEST_F(VmapFile, AnOrderThatIsNotAPermutationIsRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    const size_t at = section_data(bytes, "ORDR");
+    std::memcpy(bytes.data() + at + 4, bytes.data() + at, 4);  // order[1] = order[0]
+    reseal(bytes);
+    const std::string p = dir.path("order.vmap");
+    spit(p, bytes);
+    EXPECT_LOAD_ERROR(p, "ORDR", "permutation");
+}
+
+TEST_F(VmapFile, ALinkTargetOutOfRangeIsRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    ASSERT_GT(map().link_targets.size(), 0u);
+    for (int32_t bad : {-1, map().octree.num_nodes(), INT32_MAX}) {
+        SCOPED_TRACE(bad);
+        std::memcpy(bytes.data() + bytes.size() - 4, &bad, 4);  // the last link target
+        reseal(bytes);
+        const std::string p = dir.path("link.vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "LINK");
+    }
+}
+
+TEST_F(VmapFile, AnInconsistentTreeIsRejected) {
+    ScratchDir dir;
+    const std::string whole = slurp(saved(dir));
+    const size_t at = section_data(whole, "TREE");
+    const int32_t nn = map().octree.num_nodes();
+    // TREE: i32 nodes, i32 leaves, Vec3 root_min, f32 root_size, spheres, half_size, skip, ...
+    const size_t skip = at + 4 + 4 + 12 + 4 + size_t(nn) * (sizeof(Sphere) + 4);
+    {
+        std::string bytes = whole;
+        const int32_t bad = nn + 5;  // the root's subtree runs past the last node
+        std::memcpy(bytes.data() + skip, &bad, 4);
+        reseal(bytes);
+        const std::string p = dir.path("skip.vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "TREE");
+    }
+    {
+        std::string bytes = whole;
+        const int32_t bad = -7;  // leaf count
+        std::memcpy(bytes.data() + at + 4, &bad, 4);
+        reseal(bytes);
+        const std::string p = dir.path("leaves.vmap");
+        spit(p, bytes);
+        EXPECT_LOAD_ERROR(p, "TREE");
+    }
+}
+
+// ---- writing -------------------------------------------------------------------------------
+
+TEST_F(VmapFile, SavingIntoAMissingDirectoryThrowsAndLeavesNothing) {
+    ScratchDir dir;
+    const fs::path missing = dir.dir() / "no_such_dir";
+    const std::string p = (missing / "map.vmap").string();
+    expect_error([&] { save_vmap(p, map()); }, {p});
+    EXPECT_FALSE(fs::exists(missing));
+    EXPECT_TRUE(dir.files().empty());
+}
+
+TEST_F(VmapFile, SavingOverAnExistingFileReplacesItAndLeavesNoTemporary) {
+    ScratchDir dir;
+    const std::string p = dir.path("map.vmap");
+    spit(p, "an old file that is not a V-map at all");
+    save_vmap(p, map());
+    EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
+    expect_same_map(map(), load_vmap(p));
+
+    // Over a stale temporary from an earlier, interrupted run, too.
+    spit(p + ".tmp", "left over");
+    save_vmap(p, map());
+    EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
+    expect_same_map(map(), load_vmap(p));
+}
+
+TEST_F(VmapFile, SavingOntoADirectoryThrowsAndLeavesNoTemporary) {
+    ScratchDir dir;
+    const std::string p = dir.path("taken");
+    fs::create_directories(dir.path("taken/inside"));
+    expect_error([&] { save_vmap(p, map()); }, {p});
+    EXPECT_TRUE(fs::is_directory(p));
+    EXPECT_TRUE(fs::exists(dir.path("taken/inside")));
+    EXPECT_EQ(dir.files(), std::vector<std::string>{"taken"});
+}
+
+}  // namespace
+}  // namespace vmap

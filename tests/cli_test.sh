@@ -1,2 +1,286 @@
 #!/usr/bin/env bash
-echo TODO
+# The vmap command-line tool end to end: summaries, exit codes (0 success, 1 input error,
+# 2 usage error), one-line error messages that name the file, and no half-written files.
+#
+# Usage: cli_test.sh <path-to-vmap-binary> <source-dir>
+# Runs every check, prints "ok:" or "FAIL:" for each, and exits non-zero if any failed.
+set -u
+
+if [ $# -ne 2 ]; then
+    echo "usage: $0 <path-to-vmap-binary> <source-dir>" >&2
+    exit 2
+fi
+VMAP=$(realpath "$1")
+SRC=$(realpath "$2")
+DATA="$SRC/tests/data/cli"
+SCENE="$SRC/scenes/cornell-empty.json"
+[ -x "$VMAP" ] || { echo "FAIL: $VMAP is not an executable" >&2; exit 1; }
+[ -f "$SCENE" ] || { echo "FAIL: $SCENE is missing" >&2; exit 1; }
+
+WORK=$(mktemp -d "${TMPDIR:-/tmp}/vmap_cli_test.XXXXXX")
+trap 'rm -rf "$WORK"' EXIT
+cd "$WORK" || exit 1
+
+failures=0
+fail() {
+    echo "FAIL: $*"
+    failures=$((failures + 1))
+}
+ok() { echo "ok:   $*"; }
+
+# run ARGS...: runs vmap, leaving stdout in out.txt, stderr in err.txt and the status in $rc.
+rc=0
+run() {
+    "$VMAP" "$@" >out.txt 2>err.txt
+    rc=$?
+}
+show() {
+    echo "  command: vmap $*"
+    echo "  exit status: $rc"
+    sed 's/^/  stdout: /' out.txt | head -20
+    sed 's/^/  stderr: /' err.txt | head -20
+}
+
+# expect_ok NAME ARGS...: exit status 0 and nothing that looks like an error on stderr.
+expect_ok() {
+    local name=$1
+    shift
+    run "$@"
+    if [ "$rc" -ne 0 ]; then
+        fail "$name: exit status $rc, expected 0"
+        show "$@"
+        return 1
+    fi
+    if grep -qi 'error' err.txt; then
+        fail "$name: succeeded but printed an error"
+        show "$@"
+        return 1
+    fi
+    ok "$name"
+}
+
+# expect_stdout NAME REGEX: the last command's stdout has a line matching REGEX (grep -E).
+expect_stdout() {
+    if grep -Eq -- "$2" out.txt; then
+        ok "$1"
+    else
+        fail "$1: no stdout line matches '$2'"
+        sed 's/^/  stdout: /' out.txt | head -30
+    fi
+}
+
+# expect_usage_error NAME ARGS...: exit status 2 and something on stderr.
+expect_usage_error() {
+    local name=$1
+    shift
+    run "$@"
+    if [ "$rc" -ne 2 ]; then
+        fail "$name: exit status $rc, expected 2 (usage error)"
+        show "$@"
+    elif [ ! -s err.txt ]; then
+        fail "$name: exit status 2 but nothing on stderr"
+        show "$@"
+    else
+        ok "$name"
+    fi
+}
+
+# expect_input_error NAME FILE ARGS...: exit status 1, exactly one line on stderr, starting
+# "vmap: error:" and naming FILE, and nothing on stdout.
+expect_input_error() {
+    local name=$1 file=$2
+    shift 2
+    run "$@"
+    local lines
+    lines=$(wc -l <err.txt)
+    if [ "$rc" -ne 1 ]; then
+        fail "$name: exit status $rc, expected 1 (input error)"
+        show "$@"
+    elif [ "$lines" -ne 1 ]; then
+        fail "$name: $lines lines on stderr, expected one"
+        show "$@"
+    elif ! grep -q '^vmap: error: ' err.txt; then
+        fail "$name: stderr does not start with 'vmap: error: '"
+        show "$@"
+    elif ! grep -qF -- "$file" err.txt; then
+        fail "$name: the message does not name '$file'"
+        show "$@"
+    elif [ -s out.txt ]; then
+        fail "$name: printed to stdout although it failed"
+        show "$@"
+    else
+        ok "$name"
+    fi
+}
+
+# expect_no_file NAME PATH: neither PATH nor PATH.tmp exists.
+expect_no_file() {
+    if [ -e "$2" ] || [ -e "$2.tmp" ]; then
+        fail "$1: left $(ls -d "$2" "$2.tmp" 2>/dev/null | tr '\n' ' ')behind"
+    else
+        ok "$1"
+    fi
+}
+
+# ---- build, info, query ----------------------------------------------------------------------
+
+if expect_ok "build the empty Cornell room" \
+    build "$SCENE" --points 3000 --max-height 5 -o x.vmap --backend cpu; then
+    expect_stdout "build prints the point count" '^points: +3000$'
+    expect_stdout "build prints the link count" '^links: +[1-9][0-9]*'
+    expect_stdout "build prints the octree" '^octree: +max_height 5'
+    expect_stdout "build says which backend ran" '^backend: +cpu'
+    expect_stdout "build says what it wrote" '^wrote: +x\.vmap$'
+fi
+if [ -s x.vmap ]; then ok "x.vmap exists"; else fail "x.vmap was not written"; fi
+if [ -e x.vmap.tmp ]; then fail "build left x.vmap.tmp behind"; else ok "no x.vmap.tmp"; fi
+links=$(sed -nE 's/^links: +([0-9]+).*/\1/p' out.txt)
+
+if expect_ok "info" info x.vmap; then
+    expect_stdout "info prints the point count" '^points: +3000$'
+    expect_stdout "info prints the same link count as build" "^links: +${links:-none}\$"
+    expect_stdout "info prints the octree" '^octree: +max_height 5'
+fi
+
+if expect_ok "query --pair 0 1" query x.vmap --pair 0 1; then
+    expect_stdout "query --pair answers visible, hidden or same-leaf" \
+        '^0 1 (visible|hidden|same-leaf)$'
+fi
+if expect_ok "query --pair 2999 0" query x.vmap --pair 2999 0; then
+    expect_stdout "query --pair works for the last point" '^2999 0 (visible|hidden|same-leaf)$'
+fi
+
+if expect_ok "query --from 0" query x.vmap --from 0; then
+    expect_stdout "query --from prints a count" '^[0-9]+ points visible from 0 \(of 3000\)$'
+fi
+count=$(sed -nE 's/^([0-9]+) points visible.*/\1/p' out.txt)
+if expect_ok "query --from 0 --ids" query x.vmap --from 0 --ids; then
+    ids=$(($(wc -l <out.txt) - 1))
+    if [ "$ids" = "${count:-none}" ]; then
+        ok "--ids lists as many ids as the count"
+    else
+        fail "--ids listed $ids ids for a count of ${count:-none}"
+    fi
+fi
+
+# The same scene built on one thread gives the same file, byte for byte.
+if expect_ok "build on one thread" \
+    --threads 1 build "$SCENE" --points 3000 --max-height 5 -o one.vmap --backend cpu; then
+    if cmp -s x.vmap one.vmap; then
+        ok "one thread and all threads write identical files"
+    else
+        fail "one thread and all threads write different files"
+    fi
+fi
+
+# A raw point cloud without normals (they are estimated): 400 points on a sphere.
+awk 'BEGIN {
+    n = 400; pi = 3.14159265358979; g = pi * (3 - sqrt(5));
+    printf "ply\nformat ascii 1.0\nelement vertex %d\n", n;
+    printf "property float x\nproperty float y\nproperty float z\nend_header\n";
+    for (i = 0; i < n; i++) {
+        y = 1 - 2 * (i + 0.5) / n; r = sqrt(1 - y * y); a = g * i;
+        printf "%.6f %.6f %.6f\n", 0.1 * r * cos(a), 0.1 * y, 0.1 * r * sin(a);
+    }
+}' >sphere.ply
+if expect_ok "build a point cloud" build sphere.ply --max-height 4 -o sphere.vmap --backend cpu
+then
+    expect_stdout "build of a cloud prints its point count" '^points: +400$'
+    expect_stdout "build of a cloud says what it wrote" '^wrote: +sphere\.vmap$'
+fi
+
+# ---- help ------------------------------------------------------------------------------------
+
+run --help
+if [ "$rc" -eq 0 ] && grep -q 'build' out.txt; then
+    ok "vmap --help"
+else
+    fail "vmap --help: exit status $rc, or no mention of 'build'"
+    show --help
+fi
+run build --help
+if [ "$rc" -eq 0 ] && grep -q -- '--max-height' out.txt; then
+    ok "vmap build --help"
+else
+    fail "vmap build --help: exit status $rc, or no mention of --max-height"
+    show build --help
+fi
+
+# ---- usage errors: exit 2 --------------------------------------------------------------------
+
+expect_usage_error "no subcommand"
+expect_usage_error "unknown subcommand" frobnicate
+expect_usage_error "unknown option" build "$SCENE" --bogus -o never.vmap
+expect_usage_error "unknown global option" --bogus info x.vmap
+expect_usage_error "--max-height 99" build "$SCENE" --max-height 99 -o never.vmap
+expect_usage_error "--max-height 0" build "$SCENE" --max-height 0 -o never.vmap
+expect_usage_error "--points not a number" build "$SCENE" --points many -o never.vmap
+expect_usage_error "--backend unknown" build "$SCENE" --backend abacus -o never.vmap
+expect_usage_error "query without --pair or --from" query x.vmap
+expect_usage_error "query --pair with one id" query x.vmap --pair 0
+expect_usage_error "info without a file" info
+expect_no_file "usage errors write nothing" never.vmap
+
+# ---- input errors: exit 1, one line naming the file ------------------------------------------
+
+expect_input_error "missing scene file" "$WORK/no_such_scene.json" \
+    build "$WORK/no_such_scene.json" -o y.vmap --backend cpu
+expect_no_file "a missing scene writes nothing" y.vmap
+
+expect_input_error "malformed scene JSON" "$DATA/malformed.json" \
+    build "$DATA/malformed.json" -o y.vmap --backend cpu
+expect_no_file "a malformed scene writes nothing" y.vmap
+
+expect_input_error "NaN in a point cloud" "$DATA/nan.ply" \
+    build "$DATA/nan.ply" -o y.vmap --backend cpu
+expect_no_file "a NaN cloud writes nothing" y.vmap
+
+expect_input_error "empty point cloud" "$DATA/empty.ply" \
+    build "$DATA/empty.ply" -o y.vmap --backend cpu
+expect_no_file "an empty cloud writes nothing" y.vmap
+
+expect_input_error "missing point cloud" "$WORK/no_such_cloud.ply" \
+    build "$WORK/no_such_cloud.ply" -o y.vmap --backend cpu
+expect_no_file "a missing cloud writes nothing" y.vmap
+
+expect_input_error "output in a missing directory" "no_such_dir/y.vmap" \
+    build "$SCENE" --points 300 --max-height 3 -o no_such_dir/y.vmap --backend cpu
+if [ -e no_such_dir ]; then fail "a failed build created no_such_dir"; else ok "no no_such_dir"; fi
+
+# A failed build leaves an existing output file as it was.
+cp x.vmap keep.vmap
+expect_input_error "failed build over an existing file" "$DATA/malformed.json" \
+    build "$DATA/malformed.json" -o keep.vmap --backend cpu
+if cmp -s x.vmap keep.vmap && [ ! -e keep.vmap.tmp ]; then
+    ok "a failed build leaves the existing output untouched"
+else
+    fail "a failed build changed keep.vmap or left keep.vmap.tmp"
+fi
+
+head -c 100 x.vmap >truncated.vmap
+expect_input_error "info on a truncated .vmap" truncated.vmap info truncated.vmap
+if grep -q 'truncated' err.txt; then
+    ok "the message says truncated"
+else
+    fail "the message for a truncated .vmap does not say truncated"
+    show info truncated.vmap
+fi
+expect_input_error "query on a truncated .vmap" truncated.vmap query truncated.vmap --pair 0 1
+expect_input_error "info on a missing .vmap" no_such.vmap info no_such.vmap
+expect_input_error "info on a scene file" "$SCENE" info "$SCENE"
+mkdir a_directory.vmap
+expect_input_error "info on a directory" a_directory.vmap info a_directory.vmap
+
+expect_input_error "query --pair id out of range" x.vmap query x.vmap --pair 0 3000
+expect_input_error "query --from id out of range" x.vmap query x.vmap --from 4000000000
+
+# ---- done ------------------------------------------------------------------------------------
+
+leftovers=$(ls -- *.tmp 2>/dev/null)
+if [ -n "$leftovers" ]; then fail "temporary files left behind: $leftovers"; else ok "no *.tmp"; fi
+
+if [ "$failures" -ne 0 ]; then
+    echo "$failures check(s) failed (search for FAIL above)"
+    exit 1
+fi
+echo "all checks passed"

@@ -1,11 +1,5 @@
 // Normal estimation on seeded random samples of shapes whose true normals are known.
 
-// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
-// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
-// clang-format off
-#include <math.h>
-// clang-format on
-
 #include "vmap/normals.h"
 
 #include <gtest/gtest.h>

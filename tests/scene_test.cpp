@@ -36,8 +36,8 @@ class ScratchDir {
   public:
     ScratchDir() {
         const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vmap_scene_test_" + std::to_string(::getpid()) +
-                                            "_" + info->test_suite_name() + "_" + info->name());
+        dir_ = fs::temp_directory_path() / ("vmap_scene_test_" + std::to_string(::getpid()) + "_" +
+                                            info->test_suite_name() + "_" + info->name());
         fs::remove_all(dir_);
         fs::create_directories(dir_);
     }
@@ -243,8 +243,8 @@ TEST(Scene, WallAndLightTrianglesFaceIntoTheRoom) {
     const Vec3 centre{kW / 2, kH / 2, kD / 2};
     for (const auto& s : sc.surfaces) {
         for (const auto& t : s.mesh.triangles) {
-            const Vec3 mid = (s.mesh.vertices[t[0]] + s.mesh.vertices[t[1]] +
-                              s.mesh.vertices[t[2]]) / 3.0f;
+            const Vec3 mid =
+                (s.mesh.vertices[t[0]] + s.mesh.vertices[t[1]] + s.mesh.vertices[t[2]]) / 3.0f;
             EXPECT_GT(dot(triangle_normal(s.mesh, t), centre - mid), 0.0f) << s.name;
         }
     }
@@ -342,7 +342,7 @@ TEST(Scene, MeshesAreScaledAndStoodOnTheirPosition) {
 
 // ---- sampling ------------------------------------------------------------------------------
 
-TEST(Sampling, TheSameSeedGivesIdenticalPoints) {
+TEST(SceneSampling, TheSameSeedGivesIdenticalPoints) {
     Scene sc = load_scene(kScenes + "cornell-bunny.json");
     sc.points = 5000;
     expect_bits_equal(sample_scene(sc), sample_scene(sc));
@@ -352,7 +352,7 @@ TEST(Sampling, TheSameSeedGivesIdenticalPoints) {
     expect_bits_equal(sample_scene(sc), sample_scene(again));
 }
 
-TEST(Sampling, ADifferentSeedGivesDifferentPoints) {
+TEST(SceneSampling, ADifferentSeedGivesDifferentPoints) {
     Scene sc = load_scene(kScenes + "cornell-empty.json");
     sc.points = 2000;
     const PointSet a = sample_scene(sc);
@@ -364,7 +364,7 @@ TEST(Sampling, ADifferentSeedGivesDifferentPoints) {
     EXPECT_LT(same, a.size() / 100) << same << " of " << a.size() << " points unchanged";
 }
 
-TEST(Sampling, TheThreadCountDoesNotChangeThePoints) {
+TEST(SceneSampling, TheThreadCountDoesNotChangeThePoints) {
     Scene sc = load_scene(kScenes + "cornell-two-models.json");
     sc.points = 30000;
     PointSet one, two, all;
@@ -381,7 +381,7 @@ TEST(Sampling, TheThreadCountDoesNotChangeThePoints) {
     expect_bits_equal(one, all);
 }
 
-TEST(Sampling, ThePointCountIsHonoured) {
+TEST(SceneSampling, ThePointCountIsHonoured) {
     Scene sc = load_scene(kScenes + "cornell-empty.json");
     for (uint64_t n : {1ull, 2ull, 7ull, 1000ull, 12345ull}) {
         sc.points = n;
@@ -394,7 +394,7 @@ TEST(Sampling, ThePointCountIsHonoured) {
     }
 }
 
-TEST(Sampling, RadiiShareTheTotalAreaEqually) {
+TEST(SceneSampling, RadiiShareTheTotalAreaEqually) {
     for (const char* name : {"cornell-empty", "cornell-bunny"}) {
         SCOPED_TRACE(name);
         Scene sc = load_scene(kScenes + std::string(name) + ".json");
@@ -405,7 +405,7 @@ TEST(Sampling, RadiiShareTheTotalAreaEqually) {
     }
 }
 
-TEST(Sampling, NormalsAreUnitLength) {
+TEST(SceneSampling, NormalsAreUnitLength) {
     Scene sc = load_scene(kScenes + "cornell-two-models.json");
     sc.points = 20000;
     const PointSet ps = sample_scene(sc);
@@ -413,7 +413,7 @@ TEST(Sampling, NormalsAreUnitLength) {
         ASSERT_NEAR(length(ps.normals[i]), 1.0f, 1e-5f) << "point " << i;
 }
 
-TEST(Sampling, PointsLieOnTheirSurfaces) {
+TEST(SceneSampling, PointsLieOnTheirSurfaces) {
     Scene sc = load_scene(kScenes + "cornell-empty.json");
     sc.points = 20000;
     const PointSet ps = sample_scene(sc);
@@ -422,8 +422,8 @@ TEST(Sampling, PointsLieOnTheirSurfaces) {
     size_t counted[6] = {};
     for (size_t i = 0; i < ps.size(); ++i) {
         const Vec3 p = ps.positions[i], n = ps.normals[i];
-        SCOPED_TRACE(::testing::Message() << "point " << i << " at (" << p.x << ", " << p.y
-                                          << ", " << p.z << ")");
+        SCOPED_TRACE(::testing::Message()
+                     << "point " << i << " at (" << p.x << ", " << p.y << ", " << p.z << ")");
         ASSERT_GE(p.x, 0.0f);
         ASSERT_LE(p.x, kW);
         ASSERT_GE(p.y, 0.0f);
@@ -465,7 +465,7 @@ TEST(Sampling, PointsLieOnTheirSurfaces) {
     for (size_t k = 0; k < 6; ++k) EXPECT_GT(counted[k], 0u) << "surface " << k;
 }
 
-TEST(Sampling, PointsAreSpreadByArea) {
+TEST(SceneSampling, PointsAreSpreadByArea) {
     Scene sc = load_scene(kScenes + "cornell-empty.json");
     const uint64_t n = 20000;
     sc.points = n;
@@ -494,7 +494,7 @@ TEST(Sampling, PointsAreSpreadByArea) {
     EXPECT_NEAR(double(half) / double(floor), 0.5, 4 * std::sqrt(0.25 / double(floor)));
 }
 
-TEST(Sampling, DensityGivesCeilOfDensityTimesArea) {
+TEST(SceneSampling, DensityGivesCeilOfDensityTimesArea) {
     const Scene sc = load_scene(kFixtures + "density.json");
     const double area = total_area(sc);
     EXPECT_EQ(sc.points, uint64_t(std::ceil(1000.0 * area)));
@@ -502,7 +502,7 @@ TEST(Sampling, DensityGivesCeilOfDensityTimesArea) {
     EXPECT_EQ(sample_scene(sc).size(), sc.points);
 }
 
-TEST(Sampling, DensityCountsMeshAreaToo) {
+TEST(SceneSampling, DensityCountsMeshAreaToo) {
     ScratchDir dir;
     const std::string tetra = fs::absolute(kFixtures + "tetra_inside_out.off").string();
     const std::string path = dir.write(
@@ -652,7 +652,7 @@ std::string ascii_ply(const Sphere3& s, bool normals, bool radius) {
     return out;
 }
 
-TEST(PointCloud, NormalsInTheFileAreKept) {
+TEST(ScenePointCloud, NormalsInTheFileAreKept) {
     ScratchDir dir;
     const Sphere3 s = fibonacci_sphere(400);
     const PointSet ps = load_point_cloud(dir.write("with_normals.ply", ascii_ply(s, true, false)));
@@ -664,7 +664,7 @@ TEST(PointCloud, NormalsInTheFileAreKept) {
     }
 }
 
-TEST(PointCloud, MissingNormalsAreEstimatedUnitLengthAndOutward) {
+TEST(ScenePointCloud, MissingNormalsAreEstimatedUnitLengthAndOutward) {
     ScratchDir dir;
     const Sphere3 s = fibonacci_sphere(600);
     const PointSet ps = load_point_cloud(dir.write("no_normals.ply", ascii_ply(s, false, false)));
@@ -680,13 +680,12 @@ TEST(PointCloud, MissingNormalsAreEstimatedUnitLengthAndOutward) {
     EXPECT_EQ(outward, ps.size());
 }
 
-TEST(PointCloud, MissingRadiiAndColoursAreFilledIn) {
+TEST(ScenePointCloud, MissingRadiiAndColoursAreFilledIn) {
     ScratchDir dir;
     const Sphere3 s = fibonacci_sphere(400);
     for (bool normals : {true, false}) {
         SCOPED_TRACE(normals ? "with normals" : "without normals");
-        const PointSet ps =
-            load_point_cloud(dir.write("cloud.ply", ascii_ply(s, normals, false)));
+        const PointSet ps = load_point_cloud(dir.write("cloud.ply", ascii_ply(s, normals, false)));
         ASSERT_EQ(ps.radii.size(), ps.size());
         ASSERT_EQ(ps.colors.size(), ps.size());
         // Spacing on this sphere is about sqrt(4 pi 0.1^2 / 400) = 0.0177 m.
@@ -698,7 +697,7 @@ TEST(PointCloud, MissingRadiiAndColoursAreFilledIn) {
     }
 }
 
-TEST(PointCloud, RadiiInTheFileAreKept) {
+TEST(ScenePointCloud, RadiiInTheFileAreKept) {
     ScratchDir dir;
     const Sphere3 s = fibonacci_sphere(100);
     const PointSet ps = load_point_cloud(dir.write("radius.ply", ascii_ply(s, true, true)));
@@ -707,7 +706,7 @@ TEST(PointCloud, RadiiInTheFileAreKept) {
         ASSERT_FLOAT_EQ(ps.radii[i], float(0.003 + 0.001 * double(i % 3))) << i;
 }
 
-TEST(PointCloud, AnEmptyPlyIsAClearError) {
+TEST(ScenePointCloud, AnEmptyPlyIsAClearError) {
     ScratchDir dir;
     const std::string path = dir.write("empty.ply",
                                        "ply\nformat ascii 1.0\nelement vertex 0\n"
@@ -716,12 +715,12 @@ TEST(PointCloud, AnEmptyPlyIsAClearError) {
     expect_error([&] { (void)load_point_cloud(path); }, {path, "empty"});
 }
 
-TEST(PointCloud, AMissingFileIsNamed) {
+TEST(ScenePointCloud, AMissingFileIsNamed) {
     const std::string path = kFixtures + "no_such_cloud.ply";
     expect_error([&] { (void)load_point_cloud(path); }, {path});
 }
 
-TEST(PointCloud, FacesInTheFileAreIgnored) {
+TEST(ScenePointCloud, FacesInTheFileAreIgnored) {
     const PointSet ps = load_point_cloud(kFixtures + "tetra_inside_out.off");
     EXPECT_EQ(ps.size(), 4u);
     EXPECT_EQ(ps.normals.size(), 4u);

@@ -120,9 +120,9 @@ void expect_error(const std::function<void()>& f, std::initializer_list<std::str
     ADD_FAILURE() << "did not throw";
 }
 
-#define EXPECT_LOAD_ERROR(path, ...)                                     \
-    do {                                                                 \
-        SCOPED_TRACE(path);                                              \
+#define EXPECT_LOAD_ERROR(path, ...)                                       \
+    do {                                                                   \
+        SCOPED_TRACE(path);                                                \
         expect_error([&] { (void)load_vmap(path); }, {path, __VA_ARGS__}); \
     } while (0)
 

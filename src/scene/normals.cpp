@@ -4,12 +4,6 @@
 // depends on visiting order (spanning tree, sums over the cloud) runs serially, so the result
 // does not depend on the number of threads.
 
-// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
-// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
-// clang-format off
-#include <math.h>
-// clang-format on
-
 #include "vmap/normals.h"
 
 #include <tbb/blocked_range.h>

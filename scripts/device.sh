@@ -1,0 +1,78 @@
+#!/usr/bin/env bash
+# GPU runs on the lent H100/H200 machine, in two halves:
+#   scripts/device.sh bundle   (here)   build for sm_90 with a static CUDA runtime and gather into
+#                                       .device/ (git-ignored) the binaries, the shared libraries
+#                                       they load (TBB, fmt, ...) and the compressed models.
+#   scripts/device.sh run [STEP...]     (there; carry .device) unpack, then run the steps:
+#        gpu       the gpu-labelled tests          sanitize  compute-sanitizer memcheck+racecheck
+#        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
+#        dragon    cornell-dragon at height 10, end to end, GPU
+#      Logs and tables go to $OUT.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+cmd="${1:-}"
+shift || true
+
+if [[ "$cmd" == bundle ]]; then
+    cmake --preset device >/dev/null
+    cmake --build build-device -j"$(nproc)"
+    rm -rf .device
+    mkdir -p .device/bin .device/lib .device/models
+    cp build-device/vmap .device/bin/
+    cp build-device/tests/*_test .device/bin/
+    find build-device/bench -maxdepth 1 -type f -executable -exec cp {} .device/bin/ \;
+    for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
+        grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree)' |
+        while read -r so; do cp -L "$so" .device/lib/; done
+    for f in models/*; do gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"; done
+    du -sh .device
+    exit 0
+fi
+
+if [[ "$cmd" == run ]]; then
+    : "${OUT:=$root/out/device}"
+    mkdir -p "$OUT"
+    # The binaries carry this checkout's absolute path for scenes and models: recreate it.
+    if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
+    export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+    mkdir -p models
+    for f in .device/models/*.gz; do
+        n="models/$(basename "$f" .gz)"
+        [[ -s "$n" ]] || gunzip -c "$f" > "$n"
+    done
+    nvidia-smi --query-gpu=name,memory.total,clocks.max.sm --format=csv > "$OUT/gpu.txt" 2>&1 || true
+    cat "$OUT/gpu.txt"
+    bin=.device/bin
+    san=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
+    rc=0
+    for step in "${@:-gpu}"; do
+        echo "=== $step" >&2
+        case "$step" in
+            gpu) "$bin/gpu_test" 2>&1 | tee "$OUT/gpu_test.log" | tail -25 || rc=1 ;;
+            sanitize)
+                "$san" --tool memcheck --error-exitcode 9 "$bin/gpu_test" \
+                    --gtest_filter='GpuBackend.*:*cornell_bunny_h7*:*room_with_block*' \
+                    > "$OUT/memcheck.log" 2>&1 || rc=1
+                tail -5 "$OUT/memcheck.log"
+                "$san" --tool racecheck --error-exitcode 9 "$bin/gpu_test" \
+                    --gtest_filter='GpuBackend.Rect*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
+                tail -5 "$OUT/racecheck.log" ;;
+            cpu)
+                for t in "$bin"/*_test; do
+                    [[ "$(basename "$t")" == gpu_test ]] && continue
+                    "$t" > "$OUT/$(basename "$t").log" 2>&1 || { rc=1; echo "FAILED $t"; }
+                done ;;
+            dragon)
+                for i in 1 2 3; do
+                    "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/dragon.vmap --backend cuda \
+                        --max-height 10 --leaf-points "${LEAF_POINTS:-4}" 2>&1 | tee "$OUT/dragon-$i.log" | head -14
+                done ;;
+            bench) "$bin/vmap" bench ${BENCH_ARGS:-} --out "$OUT" 2>&1 | tee "$OUT/bench.log" | tail -40 ;;
+            *) echo "unknown step $step" >&2; rc=2 ;;
+        esac
+    done
+    exit $rc
+fi
+echo "usage: scripts/device.sh bundle | run [gpu|sanitize|cpu|dragon|bench]..." >&2
+exit 2

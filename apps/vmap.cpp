@@ -132,6 +132,13 @@ int run_info(const std::string& path) {
 int run_query(const std::string& path, const std::vector<uint32_t>& pair,
               std::optional<uint32_t> from, bool ids) {
     VisibilityMap vm = load_vmap(path);
+    for (uint32_t id : pair)
+        if (id >= vm.points.size())
+            throw Error(fmt::format("{}: --pair: point id {} out of range (the V-map has {} points)",
+                                    path, id, vm.points.size()));
+    if (from && *from >= vm.points.size())
+        throw Error(fmt::format("{}: --from: point id {} out of range (the V-map has {} points)", path,
+                                *from, vm.points.size()));
     if (!pair.empty()) {
         const PairVisibility v = vm.query(pair[0], pair[1]);
         fmt::print("{} {} {}\n", pair[0], pair[1],
@@ -210,6 +217,11 @@ int main(int argc, char** argv) {
     } catch (const CLI::ParseError& e) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
+    }
+    if (*build && (bo.points || bo.seed) && !bo.input.empty() && !ends_with_ci(bo.input, ".json")) {
+        fmt::print(stderr, "vmap build: --points/--seed apply to scene files (.json), not to {}\n",
+                   bo.input);
+        return 2;
     }
     if (*query && pair.empty() && !from) {
         fmt::print(stderr, "vmap query: give --pair I J or --from I\n");

@@ -521,7 +521,9 @@ TEST(SceneErrors, AMissingSceneFileIsNamed) {
     expect_error([&] { (void)load_scene(path); }, {path});
 }
 
-TEST(SceneErrors, NotJsonIsNamedInTheError) { expect_scene_error("not_json.json", {"JSON"}); }
+TEST(SceneErrors, NotJsonIsNamedInTheError) {
+    expect_scene_error("not_json.json", {"JSON", "line"});
+}
 
 TEST(SceneErrors, AnUnknownKeyIsNamedInTheError) {
     expect_scene_error("unknown_key.json", {"meshs", "unknown key"});

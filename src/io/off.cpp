@@ -5,6 +5,7 @@
 //
 // The small file and number helpers are the same as in ply.cpp; they stay private to each
 // reader rather than grow an internal header for a few lines.
+
 // vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
 // <math.h> does, so it must come first. Remove once vec.h includes what it uses.
 // clang-format off
@@ -21,6 +22,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <new>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -167,7 +169,7 @@ int64_t parse_count(const std::string& path, std::string_view token, const char*
 
 }  // namespace
 
-ModelData read_off(const std::string& path) {
+ModelData read_off(const std::string& path) try {
     const FileBuffer file = load_file(path);
     if (file.size == 0) fail(path, "empty file");
     LineReader lines(file.begin(), file.end());
@@ -201,8 +203,10 @@ ModelData read_off(const std::string& path) {
     const uint64_t room = lines.remaining() + 1;
     if (static_cast<uint64_t>(vertex_count) > room / 6 ||
         static_cast<uint64_t>(face_count) > (room - 6 * static_cast<uint64_t>(vertex_count)) / 8) {
-        fail(path, "truncated: ", vertex_count, " vertices and ", face_count,
-             " faces cannot fit in the ", lines.remaining(), " bytes after the header");
+        fail(path, "truncated: ", vertex_count,
+             vertex_count == 1 ? " vertex and " : " vertices and ", face_count,
+             face_count == 1 ? " face" : " faces", " cannot fit in the ", lines.remaining(),
+             " bytes after the header");
     }
 
     ModelData out;
@@ -286,7 +290,8 @@ ModelData read_off(const std::string& path) {
                 fail(path, "face ", f, " (line ", lines.line(), "): invalid vertex index ",
                      quoted(tokens[k + 1]));
             }
-            if (v < 0 || v >= vertex_count) {
+            // Triangles hold 32-bit indices; only a file of tens of GB could exceed them.
+            if (v < 0 || v >= vertex_count || v > int64_t{UINT32_MAX}) {
                 fail(path, "face ", f, " (line ", lines.line(), "): vertex index ", v,
                      " out of range (", vertex_count, " vertices)");
             }
@@ -300,6 +305,9 @@ ModelData read_off(const std::string& path) {
         }
     }
     return out;
+} catch (const std::bad_alloc&) {
+    // Counts are checked against the file size, so only a file too big for memory gets here.
+    fail(path, "out of memory while reading");
 }
 
 }  // namespace vmap

@@ -2,6 +2,7 @@
 //
 // The whole file is read into memory and parsed in place: per-token iostream extraction is an
 // order of magnitude too slow for the full-resolution scanned models (tens of MB of ascii).
+
 // vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
 // <math.h> does, so it must come first. Remove once vec.h includes what it uses.
 // clang-format off
@@ -19,6 +20,7 @@
 #include <filesystem>
 #include <limits>
 #include <memory>
+#include <new>
 #include <sstream>
 #include <string>
 #include <string_view>
@@ -335,8 +337,8 @@ void check_counts_fit(const std::string& path, const Header& header, size_t data
         if (per_element == 0) continue;
         if (element.count > left / per_element) {
             fail(path, "truncated: element ", element.name, ": ", element.count,
-                 " elements of at least ", per_element, " bytes each cannot fit in the ", data_size,
-                 " bytes after the header");
+                 element.count == 1 ? " element" : " elements", " of at least ", per_element,
+                 " bytes each cannot fit in the ", data_size, " bytes after the header");
         }
         left -= element.count * per_element;
     }
@@ -571,8 +573,9 @@ class AsciiSource {
                 if (!p.is_list) {
                     ++expected;
                 } else if (expected < tokens_.size()) {
-                    expected += 1 + static_cast<size_t>(std::min<uint64_t>(
-                                        integer(tokens_[expected], p.count_type), SIZE_MAX / 2));
+                    const int64_t length = integer(tokens_[expected], p.count_type);
+                    if (length < 0) fail(path_, where(), ": negative list length ", length);
+                    expected += 1 + static_cast<size_t>(length);
                 } else {
                     // The count itself is missing; the rest cannot be known.
                     at_least = true;
@@ -859,7 +862,7 @@ uint8_t colour_byte(float c) {
 
 }  // namespace
 
-ModelData read_ply(const std::string& path) {
+ModelData read_ply(const std::string& path) try {
     const FileBuffer file = load_file(path);
     if (file.size == 0) fail(path, "empty file");
     const Header header = parse_header(path, file);
@@ -873,6 +876,9 @@ ModelData read_ply(const std::string& path) {
         read_data(path, header, source, out);
     }
     return out;
+} catch (const std::bad_alloc&) {
+    // Counts are checked against the file size, so only a file too big for memory gets here.
+    fail(path, "out of memory while reading");
 }
 
 void write_ply(const std::string& path, const PointSet& points, bool binary) {

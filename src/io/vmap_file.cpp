@@ -159,8 +159,13 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
 }
 
 VisibilityMap load_vmap(const std::string& path) {
+    std::error_code ec;
+    if (!std::filesystem::exists(path, ec))
+        throw Error(fmt::format("{}: no such file", path));
+    if (!std::filesystem::is_regular_file(path, ec))
+        throw Error(fmt::format("{}: not a regular file", path));
     std::ifstream in(path, std::ios::binary | std::ios::ate);
-    if (!in) throw Error(fmt::format("{}: cannot open (no such file?)", path));
+    if (!in) throw Error(fmt::format("{}: cannot open", path));
     const auto size = static_cast<uint64_t>(in.tellg());
     in.seekg(0);
     std::vector<uint8_t> data(size);

@@ -165,7 +165,12 @@ Scene load_scene(const std::string& path) {
         if (!fs::exists(file))
             cx.fail(f + ".file", fmt::format("{}: no such file (scripts/fetch-models.sh fetches "
                                              "the models)", file.string()));
-        ModelData md = read_model(file.string());
+        ModelData md;
+        try {
+            md = read_model(file.string());
+        } catch (const Error& e) {
+            cx.fail(f + ".file", e.what());
+        }
         if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
         SceneSurface s;
         s.name = m.value("name", fs::path(rel).stem().string());
@@ -180,6 +185,8 @@ Scene load_scene(const std::string& path) {
         }
         const Vec3 mid = (lo + hi) * 0.5f;
         const float ext = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+        if (!(ext > 0) || !std::isfinite(ext))
+            cx.fail(f + ".file", file.string() + ": the mesh has zero extent (all vertices coincide)");
         float scale = 1;
         if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
         if (m.contains("size")) scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;

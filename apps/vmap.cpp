@@ -110,6 +110,9 @@ int run_build(BuildOptions& o) {
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
     fmt::print("time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
                st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
+    fmt::print("            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+               "link arrays {:.3f} s\n",
+               st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links);
     fmt::print("throughput: {:.3g} leaf pairs/s ({:.3g} per core on {} cores)\n", pps, pps / cores,
                cores);
     if (st.peak_device_bytes)

@@ -418,8 +418,9 @@ TEST_F(VmapFile, AnInconsistentTreeIsRejected) {
     const std::string whole = slurp(saved(dir));
     const size_t at = section_data(whole, "TREE");
     const int32_t nn = map().octree.num_nodes();
-    // TREE: i32 nodes, i32 leaves, Vec3 root_min, f32 root_size, spheres, half_size, skip, ...
-    const size_t skip = at + 4 + 4 + 12 + 4 + size_t(nn) * (sizeof(Sphere) + 4);
+    // TREE: i32 nodes, i32 leaves, Vec3 root_min, f32 root_size, spheres, boxes, half_size,
+    // skip, ...
+    const size_t skip = at + 4 + 4 + 12 + 4 + size_t(nn) * (sizeof(Sphere) + sizeof(Box) + 4);
     {
         std::string bytes = whole;
         const int32_t bad = nn + 5;  // the root's subtree runs past the last node

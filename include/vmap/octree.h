@@ -28,6 +28,11 @@ struct Sphere {
     float radius = 0;
 };
 
+// An axis-aligned box: the tight bounds of a node's content (points and occluder discs).
+struct Box {
+    Vec3 lo, hi;
+};
+
 // What the visibility predicate needs of a leaf, packed in 32 bytes (one load on the GPU).
 struct LeafDisc {
     Vec3 centroid;    // mean of its points
@@ -40,6 +45,7 @@ inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {
     const Sphere* spheres = nullptr;    // per node
+    const Box* boxes = nullptr;         // per node
     const int32_t* skip = nullptr;      // per node: end of its subtree
     const int32_t* node_leaf = nullptr; // per node: leaf index, or -1 for internal nodes
     const LeafDisc* leaves = nullptr;   // per leaf
@@ -77,6 +83,7 @@ class Octree {
     Vec3 root_min;  // corner of the root cube
     float root_size = 0;
     std::vector<Sphere> spheres;
+    std::vector<Box> boxes;  // tight content bounds (points and discs), grown for rounding
     std::vector<float> half_size;  // half the cell edge
     std::vector<int32_t> skip;
     std::vector<int32_t> parent;  // -1 for the root

@@ -28,6 +28,10 @@ struct BuildStats {
     double seconds_octree = 0;
     double seconds_visibility = 0;  // leaf pairs and link extraction
     double seconds_total = 0;
+    double seconds_plan = 0;     // listing the node-pair rectangles
+    double seconds_wait = 0;     // host blocked on the backend (GPU busy, or CPU evaluation)
+    double seconds_extract = 0;  // link extraction from the tables
+    double seconds_links = 0;    // merging links into the compact per-node arrays
     uint64_t batches = 0;
     uint64_t peak_device_bytes = 0;
 };

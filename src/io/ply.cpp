@@ -3,12 +3,6 @@
 // The whole file is read into memory and parsed in place: per-token iostream extraction is an
 // order of magnitude too slow for the full-resolution scanned models (tens of MB of ascii).
 
-// vec.h calls isfinite unqualified, which <cmath> alone does not declare globally (libstdc++);
-// <math.h> does, so it must come first. Remove once vec.h includes what it uses.
-// clang-format off
-#include <math.h>
-// clang-format on
-
 #include <algorithm>
 #include <bit>
 #include <cerrno>
@@ -17,110 +11,27 @@
 #include <cstdint>
 #include <cstdio>
 #include <cstring>
-#include <filesystem>
-#include <limits>
-#include <memory>
 #include <new>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <system_error>
 #include <vector>
 
-#include "vmap/error.h"
+#include "io/text_util.h"
 #include "vmap/io.h"
 
 namespace vmap {
+
+using detail::append_words;
+using detail::fail;
+using detail::FileBuffer;
+using detail::is_blank;
+using detail::load_file;
+using detail::parse_int;
+using detail::parse_real;
+using detail::quoted;
+
 namespace {
-
-template <class... Parts>
-[[noreturn]] void fail(const std::string& path, const Parts&... parts) {
-    std::ostringstream out;
-    out << path << ": ";
-    (out << ... << parts);
-    throw Error(out.str());
-}
-
-// Tokens from a broken or binary file end up in messages; keep those one short printable line.
-std::string quoted(std::string_view text) {
-    constexpr size_t kMax = 32;
-    std::string out = "'";
-    for (size_t i = 0; i < text.size() && i < kMax; ++i) {
-        const unsigned char c = static_cast<unsigned char>(text[i]);
-        out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-    }
-    if (text.size() > kMax) out += "...";
-    return out + "'";
-}
-
-struct FileBuffer {
-    std::unique_ptr<char[]> bytes;
-    size_t size = 0;
-    const char* begin() const { return bytes.get(); }
-    const char* end() const { return bytes.get() + size; }
-};
-
-FileBuffer load_file(const std::string& path) {
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec)) fail(path, "is a directory, not a file");
-    std::FILE* file = std::fopen(path.c_str(), "rb");
-    if (file == nullptr) {
-        if (errno == ENOENT) fail(path, "no such file");
-        fail(path, "cannot open: ", std::strerror(errno));
-    }
-    std::unique_ptr<std::FILE, int (*)(std::FILE*)> closer(file, &std::fclose);
-    const auto size = std::filesystem::file_size(path, ec);
-    if (ec) fail(path, "cannot determine the file size: ", ec.message());
-    FileBuffer buffer;
-    // make_unique_for_overwrite: zero-filling tens of megabytes first would be wasted work.
-    buffer.bytes = std::make_unique_for_overwrite<char[]>(size + 1);
-    buffer.size = static_cast<size_t>(size);
-    if (std::fread(buffer.bytes.get(), 1, buffer.size, file) != buffer.size) {
-        fail(path, "read error: ", std::ferror(file) ? std::strerror(errno) : "file shrank");
-    }
-    buffer.bytes[buffer.size] = '\0';
-    return buffer;
-}
-
-bool is_blank(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\v' || c == '\f'; }
-
-// from_chars rejects a leading '+', which some writers emit; "+-1" must still be rejected.
-const char* skip_plus(const char* b, const char* e) {
-    if (e - b >= 2 && b[0] == '+' && b[1] != '-' && b[1] != '+') return b + 1;
-    return b;
-}
-
-// from_chars reports values beyond the type's range as errors; overflow should become an
-// infinity (rejected later with a clear message) and underflow a zero, as strtod would give.
-template <class T>
-bool parse_real(std::string_view token, T& out) {
-    const char* b = skip_plus(token.data(), token.data() + token.size());
-    const char* e = token.data() + token.size();
-    auto [ptr, ec] = std::from_chars(b, e, out);
-    if (ptr != e) return false;
-    if (ec == std::errc()) return true;
-    if (ec != std::errc::result_out_of_range) return false;
-    double wide = 0;
-    auto [wptr, wec] = std::from_chars(b, e, wide);
-    if (wptr == e && wec == std::errc()) {
-        out = static_cast<T>(wide);
-        return true;
-    }
-    const bool negative = *b == '-';
-    const char* mantissa = negative ? b + 1 : b;
-    const char* exponent = std::find_if(mantissa, e, [](char c) { return c == 'e' || c == 'E'; });
-    const bool underflow = exponent != e ? (exponent + 1 != e && exponent[1] == '-')
-                                         : (*mantissa == '0' || *mantissa == '.');
-    const T magnitude = underflow ? T(0) : std::numeric_limits<T>::infinity();
-    out = negative ? -magnitude : magnitude;
-    return true;
-}
-
-bool parse_int(std::string_view token, int64_t& out) {
-    const char* e = token.data() + token.size();
-    auto [ptr, ec] = std::from_chars(skip_plus(token.data(), e), e, out);
-    return ec == std::errc() && ptr == e && !token.empty();
-}
 
 // ---- header --------------------------------------------------------------------------------
 
@@ -210,13 +121,7 @@ struct Header {
 
 std::vector<std::string_view> split_words(std::string_view line) {
     std::vector<std::string_view> words;
-    size_t i = 0;
-    while (i < line.size()) {
-        while (i < line.size() && is_blank(line[i])) ++i;
-        const size_t start = i;
-        while (i < line.size() && !is_blank(line[i])) ++i;
-        if (i > start) words.push_back(line.substr(start, i - start));
-    }
+    append_words(line.data(), line.data() + line.size(), words);
     return words;
 }
 
@@ -631,13 +536,7 @@ class AsciiSource {
             const char* eol = static_cast<const char*>(std::memchr(p_, '\n', end_ - p_));
             if (eol == nullptr) eol = end_;
             ++line_;
-            const char* q = p_;
-            while (q != eol) {
-                while (q != eol && is_blank(*q)) ++q;
-                const char* start = q;
-                while (q != eol && !is_blank(*q)) ++q;
-                if (q != start) tokens_.emplace_back(start, q - start);
-            }
+            append_words(p_, eol, tokens_);
             p_ = eol == end_ ? end_ : eol + 1;
         }
         return !tokens_.empty();

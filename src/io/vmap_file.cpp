@@ -8,7 +8,8 @@
 //     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission) | positions, normals, [colours],
 //           [radii], [emission]  (octree order)
 //     ORDR: u32 order[n] (octree position -> input index)
-//     TREE: the octree's arrays (include/vmap/octree.h)
+//     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
+//           include/vmap/octree.h (spheres, boxes, half_size, skip, ...)
 //     LINK: u32 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include <fmt/format.h>
 
@@ -116,7 +117,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.put(int32_t(t.num_leaves()));
     w.put(t.root_min);
     w.put(t.root_size);
-    w.vec(t.spheres), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent), w.vec(t.level);
+    w.vec(t.spheres), w.vec(t.boxes), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent), w.vec(t.level);
     w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
     w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
     w.end(s);
@@ -241,7 +242,7 @@ VisibilityMap load_vmap(const std::string& path) {
     t.params = vm.octree_params;
     t.root_min = r.get<Vec3>();
     t.root_size = r.get<float>();
-    r.vec(t.spheres, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn), r.vec(t.parent, nn);
+    r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn), r.vec(t.parent, nn);
     r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
     r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
     r.vec(t.leaf_splat, nl);

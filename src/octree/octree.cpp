@@ -161,6 +161,7 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     const float slack = static_cast<float>((maxabs + size) * 1e-6);
     const int32_t L = t.num_leaves();
     t.leaves.resize(L);
+    t.boxes.resize(t.num_nodes());
     t.leaf_splat.resize(L);
     tbb::parallel_for(int32_t(0), L, [&](int32_t l) {
         const int32_t nd = t.leaf_node[l];
@@ -196,6 +197,22 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         d.delta = std::max(std::sqrt(far2), splat);
         t.leaves[l] = d;
         t.leaf_splat[l] = splat;
+        // The box encloses the points and the disc: along axis i a disc of radius Delta and
+        // normal n reaches Delta sqrt(1 - n_i^2) from its centre (the full Delta when flagged).
+        Box bx{d.centroid, d.centroid};
+        for (uint32_t k = b; k < e; ++k) {
+            const Vec3 q = points.positions[k];
+            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
+            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
+        }
+        auto reach = [&](float ni) {
+            return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
+        };
+        const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
+        const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
+        bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
+        bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
         // The sphere encloses the points and the occluder disc (centroid, normal, Delta).
         t.spheres[nd].radius =
             std::max(std::sqrt(rad2), length(d.centroid - c) + d.delta) * 1.00001f + slack;
@@ -206,17 +223,22 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
         if (t.is_leaf(nd)) continue;
         float r = 0;
+        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
         t.for_each_child(nd, [&](int32_t c) {
+            const Box& cb = t.boxes[c];
+            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y), std::min(bx.lo.z, cb.lo.z)};
+            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y), std::max(bx.hi.z, cb.hi.z)};
             r = std::max(r, length(t.spheres[c].center - t.spheres[nd].center) +
                                 t.spheres[c].radius);
         });
         t.spheres[nd].radius = r * 1.00001f + slack;
+        t.boxes[nd] = bx;
     }
     return t;
 }
 
 OctreeView Octree::view() const {
-    return OctreeView{spheres.data(), skip.data(), node_leaf.data(), leaves.data(), num_nodes(),
+    return OctreeView{spheres.data(), boxes.data(), skip.data(), node_leaf.data(), leaves.data(), num_nodes(),
                       num_leaves()};
 }
 

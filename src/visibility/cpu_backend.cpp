@@ -46,10 +46,9 @@ class CpuBackend final : public Backend {
                     const int32_t c1 = std::min(job.cols, c0 + 32);
                     const int32_t a = job.row0 + r;
                     uint32_t word = 0;
-                    for (int32_t c = c0; c < c1; ++c) {
+                    for (int32_t c = c0; c < c1; ++c)
                         if (leaf_pair_visible<true>(view_, a, job.col0 + c, vp_, &wc))
                             word |= 1u << (c - c0);
-                    }
                     wc.pairs += c1 - c0;
                     wc.visible_pairs += __builtin_popcount(word);
                     bits[job.word_offset + local] = word;

@@ -23,6 +23,40 @@ VMAP_HD bool segment_meets_sphere(Vec3 p, Vec3 d, float dd, Sphere s) {
     return length2(w) <= s.radius * s.radius;
 }
 
+// Plain min/max: the libm fminf/fmaxf are calls on the host (NaN rules); no NaN reaches these.
+VMAP_HD float min_f(float a, float b) { return a < b ? a : b; }
+VMAP_HD float max_f(float a, float b) { return a > b ? a : b; }
+
+// A segment p + t d, t in [t0, t1], prepared for slab tests against boxes.
+struct SlabRay {
+    Vec3 p, inv;  // inv = 1 / d per axis (infinite for a zero component)
+    Vec3 d;
+    float t0, t1;
+};
+VMAP_HD SlabRay slab_ray(Vec3 p, Vec3 d, float t0, float t1) {
+    return SlabRay{p, Vec3{1.f / d.x, 1.f / d.y, 1.f / d.z}, d, t0, t1};
+}
+// Does the segment meet the box grown by g? Boxes carry a rounding slack (octree.cpp). A
+// direction component too small to invert is handled apart, so every product is finite.
+VMAP_HD bool slab_meets_box(const SlabRay& r, const Box& b, float g) {
+    float tmin = r.t0, tmax = r.t1;
+    const float lo[3] = {b.lo.x - g, b.lo.y - g, b.lo.z - g};
+    const float hi[3] = {b.hi.x + g, b.hi.y + g, b.hi.z + g};
+    const float p[3] = {r.p.x, r.p.y, r.p.z}, inv[3] = {r.inv.x, r.inv.y, r.inv.z};
+    const float d[3] = {r.d.x, r.d.y, r.d.z};
+#pragma unroll
+    for (int i = 0; i < 3; ++i) {
+        if (fabsf(d[i]) < 1e-30f) {
+            if (p[i] < lo[i] || p[i] > hi[i]) return false;
+            continue;
+        }
+        const float ta = (lo[i] - p[i]) * inv[i], tb = (hi[i] - p[i]) * inv[i];
+        tmin = max_f(tmin, min_f(ta, tb));
+        tmax = min_f(tmax, max_f(ta, tb));
+    }
+    return tmin <= tmax;
+}
+
 // Is leaf x an actual occluder of segment p + t d (paper §5.1, Fig. 7)?
 VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
                                 const VisibilityParams& vp) {
@@ -56,6 +90,19 @@ VMAP_HD bool leaves_face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len
     return fa && fb;
 }
 
+struct Tri3 {
+    Vec3 p, d;
+    float dd;
+};
+VMAP_HD Tri3 inner_segment(Vec3 p, Vec3 d, float eps) {
+    const float t0 = eps * 0.999f, t1 = 1.f - eps * 0.999f;
+    Tri3 s;
+    s.p = p + d * t0;
+    s.d = d * (t1 - t0);
+    s.dd = length2(s.d);
+    return s;
+}
+
 // Visibility of leaves a != b. Potential occluders are the leaves reached by descending from
 // the root into every node whose sphere meets segment pq (stackless walk over the preorder
 // skip links), other than a and b; K actual occluders make the pair invisible (any-hit: stop at
@@ -71,11 +118,19 @@ VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
     if (!(len > 0.f)) return false;  // coincident centroids: no direction to see along
     if (!leaves_face(la, lb, d, len, vp)) return false;
     if (kCount) wc->facing_pairs++;
+    // An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside
+    // its sphere; so only the part of pq with t in [t0, t1] (a little wider than (eps, 1 - eps),
+    // for rounding) needs to meet the spheres. This skips the dense surface around both ends.
+    // The same range is tested against each node's tight box first (planar walls have flat
+    // boxes that the sphere test alone cannot see past), then against its sphere.
+    const Tri3 sub = inner_segment(p, d, vp.eps);
+    const SlabRay ray = slab_ray(p, d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
     int occluders = 0;
     int32_t n = 0;
     while (n < t.num_nodes) {
         if (kCount) wc->node_tests++;
-        if (!segment_meets_sphere(p, d, dd, t.spheres[n])) {
+        if (!slab_meets_box(ray, t.boxes[n], 0.f) ||
+            !segment_meets_sphere(sub.p, sub.d, sub.dd, t.spheres[n])) {
             n = t.skip[n];
             continue;
         }

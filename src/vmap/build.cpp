@@ -189,6 +189,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
             for (size_t j = i + 1; j < ch.size(); ++j) roots.push_back(plan.expand(ch[i], ch[j]));
     }
 
+    st.seconds_plan = seconds_since(t1);
     std::string note;
     auto backend = detail::make_backend(params.backend, &note);
     st.backend = backend->name();
@@ -231,10 +232,17 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         backend->submit(std::span<const PairJob>(plan.jobs.data() + b.begin, b.end - b.begin),
                         b.words, int(i % 2));
     };
-    if (!batches.empty()) submit(0);
+    if (!batches.empty()) {
+        const auto tw = Clock::now();
+        submit(0);
+        st.seconds_wait += seconds_since(tw);
+    }
     for (size_t i = 0; i < batches.size(); ++i) {
+        auto tw = Clock::now();
         if (i + 1 < batches.size()) submit(i + 1);
         const uint32_t* bits = backend->wait(int(i % 2), st.work);
+        st.seconds_wait += seconds_since(tw);
+        const auto te = Clock::now();
         const Batch& b = batches[i];
         // Extract in chunks of jobs (parallel), then append in job order (deterministic).
         const size_t nj = b.end - b.begin;
@@ -256,7 +264,9 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
         progress.update(done_pairs);
+        st.seconds_extract += seconds_since(te);
     }
+    const auto tl = Clock::now();
     st.batches = batches.size();
     st.peak_device_bytes = backend->peak_device_bytes();
 
@@ -287,6 +297,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     };
     for (int32_t r : roots) emit(emit, r);
     set_links(vm, std::move(result));
+    st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
     if (stats) *stats = st;

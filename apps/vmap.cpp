@@ -15,6 +15,7 @@
 #include <memory>
 #include <optional>
 
+#include "bench/bench.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
@@ -215,6 +216,25 @@ int main(int argc, char** argv) {
     query->add_option("--from", from, "Points visible from input point I (count)");
     query->add_flag("--ids", ids, "With --from: list the ids too");
 
+    bench::Options bo2;
+    auto* benchc = app.add_subcommand(
+        "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
+    benchc->add_option("--scene", bo2.scenes,
+                       "Scene files (default: cornell-bunny, cornell-dragon, cornell-two-models)");
+    benchc->add_option("--heights", bo2.heights, "Octree heights")->delimiter(',')
+        ->check(CLI::Range(1, 21));
+    benchc->add_option("--leaf-points", bo2.leaf_points, "leaf_points for every run")
+        ->check(CLI::Range(1, 1000000))->capture_default_str();
+    benchc->add_option("--runs", bo2.runs, "Timed runs per configuration (median, spread)")
+        ->check(CLI::Range(1, 100))->capture_default_str();
+    benchc->add_option("--backends", bo2.backends, "cpu and/or cuda (default: both when a GPU is present)")
+        ->delimiter(',')->check(CLI::IsMember({"cpu", "cuda"}));
+    benchc->add_option("--cpu-budget", bo2.cpu_budget_s,
+                       "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
+        ->capture_default_str();
+    benchc->add_option("--points", bo2.points, "Override every scene's point count");
+    benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -237,6 +257,12 @@ int main(int argc, char** argv) {
     try {
         if (*build) return run_build(bo);
         if (*info) return run_info(info_path);
+        if (*benchc) {
+            if (bo2.scenes.empty())
+                for (const char* n : {"cornell-bunny", "cornell-dragon", "cornell-two-models"})
+                    bo2.scenes.push_back(std::string(VMAP_SOURCE_DIR) + "/scenes/" + n + ".json");
+            return bench::run(bo2);
+        }
         if (*query) return run_query(query_path, pair, from, ids);
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());

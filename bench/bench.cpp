@@ -1,0 +1,261 @@
+// `vmap bench` (see bench.h). Each configuration: the points are sampled once, then the V-map is
+// built `runs` times per backend (after one untimed warm-up build), reporting the median and the
+// min-max spread. Where a full CPU run would take longer than the budget, the CPU's leaf-pair
+// rate is measured on a seeded uniform sample of the leaf pairs and scaled to all pairs; the
+// octree and link work of the GPU build (host work either way) is added; such entries are
+// marked "est.".
+#include "bench/bench.h"
+
+#include <fmt/format.h>
+#include <tbb/task_arena.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "visibility/backend.h"
+#include "vmap/error.h"
+#include "vmap/scene.h"
+#include "vmap/vmap.h"
+
+namespace vmap::bench {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Stat {
+    double median = 0, lo = 0, hi = 0;
+};
+Stat stat(std::vector<double> v) {
+    if (v.empty()) return {};
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return {n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v.front(), v.back()};
+}
+
+struct Row {
+    std::string scene;
+    uint64_t points = 0;
+    int height = 0, leaf_points = 0;
+    int32_t leaves = 0;
+    uint64_t pairs = 0, links = 0;
+    WorkCounters work;
+    Stat cpu, gpu, save;
+    bool cpu_done = false, cpu_estimated = false, gpu_done = false;
+    double cpu_pair_rate = 0;  // pairs/s on the CPU (sampled or full)
+    uint64_t device_bytes = 0;
+    double gpu_wait = 0;
+};
+
+// CPU leaf-pair rate on a seeded uniform sample of unordered leaf pairs (single-pair jobs).
+double sampled_cpu_rate(const PointSet& pts, const BuildParams& bp, uint64_t samples) {
+    PointSet copy = pts;
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(copy, bp.octree, order, "bench");
+    const int32_t L = t.num_leaves();
+    std::mt19937_64 rng(12345);
+    std::uniform_int_distribution<int32_t> pick(0, L - 1);
+    std::vector<detail::PairJob> jobs;
+    jobs.reserve(samples);
+    while (jobs.size() < samples) {
+        int32_t a = pick(rng), b = pick(rng);
+        if (a == b) continue;
+        if (a > b) std::swap(a, b);
+        detail::PairJob j;
+        j.row0 = a, j.rows = 1, j.col0 = b, j.cols = 1, j.word_offset = jobs.size();
+        jobs.push_back(j);
+    }
+    auto cpu = detail::make_cpu_backend();
+    cpu->prepare(t, bp.visibility, jobs.size());
+    WorkCounters wc;
+    const auto t0 = Clock::now();
+    cpu->submit(jobs, jobs.size(), 0);
+    cpu->wait(0, wc);
+    const double s = std::chrono::duration<double>(Clock::now() - t0).count();
+    return double(samples) / s;
+}
+
+std::string git_commit() {
+    std::string out;
+    if (FILE* f = popen("git -C " VMAP_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null", "r")) {
+        char buf[64];
+        if (fgets(buf, sizeof buf, f)) out = buf;
+        pclose(f);
+    }
+    while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
+    return out.empty() ? "unknown" : out;
+}
+
+std::string fmt_time(const Stat& s, bool done, bool est) {
+    if (!done) return "-";
+    if (est) return fmt::format("{:.3g} (est.)", s.median);
+    return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);
+}
+
+}  // namespace
+
+int run(const Options& o) {
+    if (o.runs < 1 || o.runs > 100) throw Error("--runs: must be 1..100");
+    std::vector<std::string> backends = o.backends;
+    std::string why;
+    const bool have_gpu = detail::make_cuda_backend(&why) != nullptr;
+    if (backends.empty()) {
+        backends.push_back("cpu");
+        if (have_gpu) backends.push_back("cuda");
+    }
+    const bool want_cpu = std::count(backends.begin(), backends.end(), "cpu") > 0;
+    const bool want_gpu = std::count(backends.begin(), backends.end(), "cuda") > 0;
+    if (want_gpu && !have_gpu) throw Error("--backends cuda: " + why);
+    const int cores = tbb::this_task_arena::max_concurrency();
+    const bool tty = isatty(2);
+
+    std::vector<Row> rows;
+    bool warmed = false;
+    const std::string tmp = (std::filesystem::temp_directory_path() /
+                             fmt::format("vmap-bench-{}.vmap", getpid())).string();
+    for (const std::string& file : o.scenes) {
+        Scene sc = load_scene(file);
+        if (o.points) sc.points = o.points;
+        const PointSet pts = sample_scene(sc);
+        for (int h : o.heights) {
+            Row r;
+            r.scene = sc.name;
+            r.points = pts.size();
+            r.height = h;
+            r.leaf_points = o.leaf_points;
+            BuildParams bp;
+            bp.octree = {h, o.leaf_points};
+            if (tty) fmt::print(stderr, "\r\033[Kbench: {} height {}", sc.name, h);
+            std::vector<double> gpu_t, cpu_t, save_t;
+            double non_pair = 0;
+            if (want_gpu) {
+                bp.backend = "cuda";
+                if (!warmed) {
+                    build_vmap(pts, bp);
+                    warmed = true;
+                }
+                for (int k = 0; k < o.runs; ++k) {
+                    BuildStats st;
+                    VisibilityMap vm = build_vmap(pts, bp, &st);
+                    gpu_t.push_back(st.seconds_total);
+                    non_pair = st.seconds_total - st.seconds_wait;
+                    r.gpu_wait = st.seconds_wait;
+                    r.work = st.work;
+                    r.device_bytes = st.peak_device_bytes;
+                    r.leaves = vm.octree.num_leaves();
+                    r.links = vm.num_links();
+                    if (o.save) {
+                        const auto t0 = Clock::now();
+                        save_vmap(tmp, vm);
+                        save_t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+                        std::filesystem::remove(tmp);
+                    }
+                }
+                r.gpu = stat(gpu_t);
+                r.gpu_done = true;
+            }
+            if (want_cpu) {
+                bp.backend = "cpu";
+                // Estimate first from a sample; run in full only when within the budget.
+                r.cpu_pair_rate = sampled_cpu_rate(pts, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
+                PointSet copy = pts;
+                std::vector<uint32_t> order;
+                const Octree t = Octree::build(copy, bp.octree, order, "bench");
+                const uint64_t pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+                const double est = pairs / r.cpu_pair_rate;
+                if (est * o.runs <= o.cpu_budget_s) {
+                    for (int k = 0; k < o.runs; ++k) {
+                        BuildStats st;
+                        VisibilityMap vm = build_vmap(pts, bp, &st);
+                        cpu_t.push_back(st.seconds_total);
+                        if (!r.gpu_done) {
+                            r.work = st.work;
+                            r.leaves = vm.octree.num_leaves();
+                            r.links = vm.num_links();
+                            non_pair = st.seconds_total - st.seconds_wait;
+                            if (o.save) {
+                                const auto t0 = Clock::now();
+                                save_vmap(tmp, vm);
+                                save_t.push_back(
+                                    std::chrono::duration<double>(Clock::now() - t0).count());
+                                std::filesystem::remove(tmp);
+                            }
+                        }
+                        r.cpu_pair_rate = st.work.pairs / std::max(1e-9, st.seconds_wait);
+                    }
+                    r.cpu = stat(cpu_t);
+                } else {
+                    r.cpu = {est + non_pair, est + non_pair, est + non_pair};
+                    r.cpu_estimated = true;
+                    if (!r.gpu_done) r.leaves = t.num_leaves();
+                }
+                r.cpu_done = true;
+            }
+            r.pairs = uint64_t(r.leaves) * (r.leaves - 1) / 2;
+            r.save = stat(save_t);
+            rows.push_back(r);
+        }
+    }
+    if (tty) fmt::print(stderr, "\r\033[K");
+
+    // ---- the table ----
+    char date[32];
+    const std::time_t now = std::time(nullptr);
+    std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&now));
+    std::string device = "none";
+    if (have_gpu) {
+        auto g = detail::make_cuda_backend(&why);
+        device = g->name();
+    }
+    std::string md;
+    md += fmt::format("vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, commit {}, {}\n\n",
+                      cores, device, o.runs, o.leaf_points, git_commit(), date);
+    md += "| scene | points | height | leaves | leaf pairs | links | CPU s | GPU s | speedup | "
+          "GPU pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s | save s | "
+          "device MiB |\n";
+    md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    std::string csv =
+        "scene,points,height,leaf_points,leaves,leaf_pairs,links,cpu_s,cpu_s_min,cpu_s_max,"
+        "cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,cpu_pairs_s_core,facing_pairs,"
+        "node_tests,occluder_tests,save_s,device_bytes,cpu_threads,device,commit,date\n";
+    for (const Row& r : rows) {
+        const double gpu_rate = r.gpu_done ? r.pairs / std::max(1e-9, r.gpu.median) : 0;
+        const double speed = r.gpu_done && r.cpu_done ? r.cpu.median / r.gpu.median : 0;
+        const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
+        md += fmt::format(
+            "| {} | {} | {} | {} | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {:.1f} | {} | {} | {} |\n",
+            r.scene, r.points, r.height, r.leaves, double(r.pairs), double(r.links),
+            fmt_time(r.cpu, r.cpu_done, r.cpu_estimated), fmt_time(r.gpu, r.gpu_done, false),
+            speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
+            r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
+            r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / cores) : "-", ntp,
+            r.gpu_done ? fmt::format("{:.3g}", r.work.node_tests / std::max(1e-9, r.gpu_wait)) : "-",
+            o.save ? fmt::format("{:.3g}", r.save.median) : "-",
+            r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
+        csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
+                           r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.links,
+                           r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated), r.gpu.median,
+                           r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0,
+                           r.cpu_pair_rate / cores, r.work.facing_pairs, r.work.node_tests,
+                           r.work.occluder_tests, r.save.median, r.device_bytes, cores, device,
+                           git_commit(), date);
+    }
+    md += "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "
+          "\"save s\" adds writing the .vmap. \"est.\": CPU leaf-pair rate measured on a sample "
+          "of pairs, scaled to all pairs, plus the host work of the GPU build. Pairs/s count every "
+          "unordered leaf pair, including those the facing test settles.\n";
+    fmt::print("{}", md);
+    if (!o.out_dir.empty()) {
+        std::filesystem::create_directories(o.out_dir);
+        std::ofstream(o.out_dir + "/bench.md") << md;
+        std::ofstream(o.out_dir + "/bench.csv") << csv;
+    }
+    return 0;
+}
+
+}  // namespace vmap::bench

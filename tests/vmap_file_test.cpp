@@ -1,6 +1,8 @@
 // The .vmap file: exact round trips, and truncated, corrupt, wrong-version or missing files, and
 // writes that never leave half a file behind.
 #include <gtest/gtest.h>
+
+#include "io/vmap_file.h"
 #include <unistd.h>
 
 #include <algorithm>
@@ -73,17 +75,12 @@ void spit(const std::string& path, std::string_view bytes) {
     ASSERT_TRUE(out.good()) << path;
 }
 
-uint64_t fnv1a(const char* p, size_t n) {
-    uint64_t h = 0xcbf29ce484222325ULL;
-    for (size_t i = 0; i < n; ++i) h = (h ^ uint8_t(p[i])) * 0x100000001b3ULL;
-    return h;
-}
-
 // After editing the payload of a file image: set the header's size and checksum to match, so
 // that only the loader's structure checks stand between the edit and a query.
 void reseal(std::string& bytes) {
     const uint64_t payload = bytes.size() - kHeaderBytes;
-    const uint64_t sum = fnv1a(bytes.data() + kHeaderBytes, payload);
+    const uint64_t sum = detail::payload_hash(
+        reinterpret_cast<const uint8_t*>(bytes.data()) + kHeaderBytes, payload);
     std::memcpy(bytes.data() + 16, &payload, 8);
     std::memcpy(bytes.data() + 24, &sum, 8);
 }

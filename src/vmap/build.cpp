@@ -11,6 +11,7 @@
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <numeric>
 
@@ -130,25 +131,59 @@ struct Extractor {
 
 }  // namespace
 
-void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs) {
+namespace {
+
+constexpr Link kDropped{-1, -1};  // a link replaced by one at its parents' level
+
+// Both-direction compact arrays from pieces of links, in parallel: count ends per node
+// (relaxed atomics), scatter, then sort each node's targets (so the result does not depend on
+// the scatter order).
+void set_links_from(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
     const int32_t nn = vm.octree.num_nodes();
-    std::vector<uint32_t> deg(nn + 1, 0);
-    for (auto [a, b] : pairs) {
-        if (a < 0 || b < 0 || a >= nn || b >= nn || a == b)
-            throw Error(fmt::format("link ({}, {}) out of range ({} nodes)", a, b, nn));
-        deg[a + 1]++, deg[b + 1]++;
-    }
-    std::partial_sum(deg.begin(), deg.end(), deg.begin());
+    std::vector<std::span<const Link>> tasks;
+    for (auto sp : pieces)
+        for (size_t i = 0; i < sp.size(); i += (1u << 20))
+            tasks.push_back(sp.subspan(i, std::min<size_t>(1u << 20, sp.size() - i)));
+    std::vector<uint32_t> deg(size_t(nn) + 1, 0);
+    std::atomic<bool> bad{false};
+    std::atomic<uint64_t> ends{0};
+    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+        uint64_t mine = 0;
+        for (auto [a, b] : tasks[k]) {
+            if (a == kDropped.first) continue;
+            if (a < 0 || b < 0 || a >= nn || b >= nn || a == b) {
+                bad = true;
+                return;
+            }
+            std::atomic_ref<uint32_t>(deg[a + 1]).fetch_add(1, std::memory_order_relaxed);
+            std::atomic_ref<uint32_t>(deg[b + 1]).fetch_add(1, std::memory_order_relaxed);
+            mine += 2;
+        }
+        ends += mine;
+    });
+    if (bad) throw Error(fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn));
+    if (ends.load() > UINT32_MAX)
+        throw Error(fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
+                                "(a larger --leaf-points or a smaller --max-height)", ends.load()));
+    for (int32_t n = 0; n < nn; ++n) deg[n + 1] += deg[n];
     vm.link_offsets = deg;
     vm.link_targets.assign(deg.back(), 0);
     std::vector<uint32_t> fill(deg.begin(), deg.end() - 1);
-    for (auto [a, b] : pairs) {
-        vm.link_targets[fill[a]++] = b;
-        vm.link_targets[fill[b]++] = a;
-    }
-    tbb::parallel_for(int32_t(0), nn, [&](int32_t n) {
-        std::sort(vm.link_targets.begin() + deg[n], vm.link_targets.begin() + deg[n + 1]);
+    int32_t* out = vm.link_targets.data();
+    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+        for (auto [a, b] : tasks[k]) {
+            if (a == kDropped.first) continue;
+            out[std::atomic_ref<uint32_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
+            out[std::atomic_ref<uint32_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
+        }
     });
+    tbb::parallel_for(int32_t(0), nn, [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
+}
+
+}  // namespace
+
+void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs) {
+    set_links_from(vm, {std::span<const Link>(pairs)});
 }
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
@@ -219,9 +254,10 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         j = b.end;
     }
 
-    // Per job: full (its pair is one link) and its links in `links`.
-    std::vector<Link> links;
-    std::vector<uint64_t> job_links(plan.jobs.size() + 1, 0);
+    // Links stay in the pieces the extraction wrote them to (no copies); per job: where its
+    // links start, how many, and whether its pair is fully visible (then its one link is itself).
+    std::vector<std::vector<Link>> pieces;
+    std::vector<uint32_t> job_piece(plan.jobs.size()), job_pos(plan.jobs.size());
     std::vector<uint8_t> job_full(plan.jobs.size(), 0);
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
     detail::Progress progress("leaf pairs", total_pairs, params.progress);
@@ -244,33 +280,35 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         st.seconds_wait += seconds_since(tw);
         const auto te = Clock::now();
         const Batch& b = batches[i];
-        // Extract in chunks of jobs (parallel), then append in job order (deterministic).
+        // Extract in chunks of jobs, in parallel, each into its own piece.
         const size_t nj = b.end - b.begin;
-        const size_t chunk = std::max<size_t>(1, nj / 256);
+        const size_t chunk = std::max<size_t>(1, nj / 1024);
         const size_t nchunks = (nj + chunk - 1) / chunk;
-        std::vector<std::vector<Link>> out(nchunks);
-        std::vector<uint64_t> counts(nj);
+        const size_t first_piece = pieces.size();
+        pieces.resize(first_piece + nchunks);
         tbb::parallel_for(size_t(0), nchunks, [&](size_t c) {
+            std::vector<Link>& out = pieces[first_piece + c];
             for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
-                const PairJob& job = plan.jobs[b.begin + k];
-                const size_t before = out[c].size();
-                Extractor{t, job, bits + job.word_offset, out[c]}.resolve(job.a, job.b);
-                counts[k] = out[c].size() - before;
-                job_full[b.begin + k] = counts[k] == 1 && out[c].back() == Link{job.a, job.b};
+                const size_t j = b.begin + k;
+                const PairJob& job = plan.jobs[j];
+                const size_t before = out.size();
+                Extractor{t, job, bits + job.word_offset, out}.resolve(job.a, job.b);
+                job_piece[j] = uint32_t(first_piece + c);
+                job_pos[j] = uint32_t(before);
+                job_full[j] = out.size() - before == 1 && out.back() == Link{job.a, job.b};
             }
         });
-        for (size_t k = 0; k < nj; ++k) job_links[b.begin + k + 1] = job_links[b.begin + k] + counts[k];
-        for (auto& v : out) links.insert(links.end(), v.begin(), v.end());
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
         progress.update(done_pairs);
         st.seconds_extract += seconds_since(te);
     }
-    const auto tl = Clock::now();
     st.batches = batches.size();
     st.peak_device_bytes = backend->peak_device_bytes();
+    const auto tl = Clock::now();
 
-    // Split entries: a link at the entry's own level if every part was fully visible.
+    // Split entries: one link at the entry's own level if every part was fully visible; the
+    // parts' links are then dropped.
     std::vector<int8_t> full(plan.entries.size(), -1);
     auto is_full = [&](auto&& self, int32_t e) -> bool {
         if (full[e] >= 0) return full[e];
@@ -282,21 +320,28 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         full[e] = f;
         return f;
     };
-    std::vector<Link> result;
-    result.reserve(links.size());
-    auto emit = [&](auto&& self, int32_t e) -> void {
+    auto drop = [&](auto&& self, int32_t e) -> void {
         const Entry& en = plan.entries[e];
+        if (en.job >= 0) pieces[job_piece[en.job]][job_pos[en.job]] = kDropped;
+        else
+            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
+    };
+    std::vector<Link> merged;
+    auto settle = [&](auto&& self, int32_t e) -> void {
+        const Entry& en = plan.entries[e];
+        if (en.job >= 0) return;
         if (is_full(is_full, e)) {
-            result.emplace_back(en.a, en.b);
-        } else if (en.job >= 0) {
-            result.insert(result.end(), links.begin() + job_links[en.job],
-                          links.begin() + job_links[en.job + 1]);
+            drop(drop, e);
+            merged.emplace_back(en.a, en.b);
         } else {
             for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
         }
     };
-    for (int32_t r : roots) emit(emit, r);
-    set_links(vm, std::move(result));
+    for (int32_t r : roots) settle(settle, r);
+    std::vector<std::span<const Link>> spans;
+    for (const auto& p : pieces) spans.emplace_back(p);
+    spans.emplace_back(merged);
+    set_links_from(vm, spans);
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);

@@ -26,6 +26,7 @@ if [[ "$cmd" == bundle ]]; then
         grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree)' |
         while read -r so; do cp -L "$so" .device/lib/; done
     for f in models/*; do gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"; done
+    git rev-parse --short HEAD > .device/commit
     du -sh .device
     exit 0
 fi
@@ -44,6 +45,8 @@ if [[ "$cmd" == run ]]; then
     nvidia-smi --query-gpu=name,memory.total,clocks.max.sm --format=csv > "$OUT/gpu.txt" 2>&1 || true
     cat "$OUT/gpu.txt"
     bin=.device/bin
+    VMAP_COMMIT="$(cat .device/commit 2>/dev/null || echo unknown)"
+    export VMAP_COMMIT
     san=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
     rc=0
     for step in "${@:-gpu}"; do
@@ -64,9 +67,10 @@ if [[ "$cmd" == run ]]; then
                     "$t" > "$OUT/$(basename "$t").log" 2>&1 || { rc=1; echo "FAILED $t"; }
                 done ;;
             dragon)
-                for i in 1 2 3; do
+                for lp in ${LEAF_POINTS:-4 8}; do
                     "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/dragon.vmap --backend cuda \
-                        --max-height 10 --leaf-points "${LEAF_POINTS:-4}" 2>&1 | tee "$OUT/dragon-$i.log" | head -14
+                        --max-height 10 --leaf-points "$lp" 2>&1 | tee "$OUT/dragon-lp$lp.log" | head -13
+                    rm -f /tmp/dragon.vmap
                 done ;;
             bench) "$bin/vmap" bench ${BENCH_ARGS:-} --out "$OUT" 2>&1 | tee "$OUT/bench.log" | tail -40 ;;
             *) echo "unknown step $step" >&2; rc=2 ;;

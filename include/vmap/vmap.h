@@ -30,6 +30,7 @@ struct BuildStats {
     double seconds_total = 0;
     double seconds_plan = 0;     // listing the node-pair rectangles
     double seconds_wait = 0;     // host blocked on the backend (GPU busy, or CPU evaluation)
+    double seconds_backend = 0;  // the backend evaluating leaf pairs (GPU: kernel time)
     double seconds_extract = 0;  // link extraction from the tables
     double seconds_links = 0;    // merging links into the compact per-node arrays
     uint64_t batches = 0;

@@ -38,6 +38,9 @@ class Backend {
     // Waits for the batch in `slot`, adds its work to `wc`, returns its bits (host memory, valid
     // until the next submit to that slot).
     virtual const uint32_t* wait(int slot, WorkCounters& wc) = 0;
+    // Seconds the backend spent evaluating (GPU: kernel time from events; CPU: wall time of
+    // the evaluation), summed over the batches waited for.
+    virtual double busy_seconds() const = 0;
     // Peak device memory the backend held, bytes (0 for the CPU).
     virtual uint64_t peak_device_bytes() const { return 0; }
 };

@@ -4,6 +4,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <chrono>
 #include <vector>
 
 #include "visibility/backend.h"
@@ -24,6 +25,7 @@ class CpuBackend final : public Backend {
     }
 
     void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
+        const auto t0 = std::chrono::steady_clock::now();
         std::vector<uint32_t>& bits = buf_[slot];
         bits.assign(words, 0u);
         // Work items are words: 32 consecutive columns of one row (neighbouring segments, so
@@ -58,6 +60,7 @@ class CpuBackend final : public Backend {
             x += y;
             return x;
         });
+        busy_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     }
 
     const uint32_t* wait(int slot, WorkCounters& wc) override {
@@ -66,7 +69,10 @@ class CpuBackend final : public Backend {
         return buf_[slot].data();
     }
 
+    double busy_seconds() const override { return busy_; }
+
   private:
+    double busy_ = 0;
     OctreeView view_;
     VisibilityParams vp_;
     std::vector<uint32_t> buf_[2];

@@ -305,6 +305,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     }
     st.batches = batches.size();
     st.peak_device_bytes = backend->peak_device_bytes();
+    st.seconds_backend = backend->busy_seconds();
     const auto tl = Clock::now();
 
     // Split entries: one link at the entry's own level if every part was fully visible; the

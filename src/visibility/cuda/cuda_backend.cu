@@ -129,12 +129,16 @@ class CudaBackend final : public Backend {
         for (auto& s : slots_) {
             VMAP_CUDA_CHECK(cudaStreamCreateWithFlags(&s.stream, cudaStreamNonBlocking));
             VMAP_CUDA_CHECK(cudaEventCreateWithFlags(&s.done, cudaEventDisableTiming));
+            VMAP_CUDA_CHECK(cudaEventCreate(&s.k0));
+            VMAP_CUDA_CHECK(cudaEventCreate(&s.k1));
         }
     }
     ~CudaBackend() override {
         for (auto& s : slots_) {
             if (s.stream) cudaStreamSynchronize(s.stream);
             if (s.done) cudaEventDestroy(s.done);
+            if (s.k0) cudaEventDestroy(s.k0);
+            if (s.k1) cudaEventDestroy(s.k1);
             if (s.stream) cudaStreamDestroy(s.stream);
         }
     }
@@ -175,6 +179,7 @@ class CudaBackend final : public Backend {
         sl.h_bits.reserve(std::max<uint64_t>(words, 1));
         sl.h_counters.reserve(1);
         VMAP_CUDA_CHECK(cudaMemsetAsync(sl.d_counters.ptr, 0, sizeof(DeviceCounters), sl.stream));
+        VMAP_CUDA_CHECK(cudaEventRecord(sl.k0, sl.stream));
         if (items > 0) {
             const int threads = kWarpsPerBlock * 32;
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
@@ -184,6 +189,7 @@ class CudaBackend final : public Backend {
                                                                  sl.d_bits.ptr, sl.d_counters.ptr);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
+        VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));
         VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_bits.ptr, sl.d_bits.ptr, words * sizeof(uint32_t),
                                         cudaMemcpyDeviceToHost, sl.stream));
         VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_counters.ptr, sl.d_counters.ptr, sizeof(DeviceCounters),
@@ -194,6 +200,9 @@ class CudaBackend final : public Backend {
     const uint32_t* wait(int slot, WorkCounters& wc) override {
         Slot& sl = slots_[slot];
         VMAP_CUDA_CHECK(cudaEventSynchronize(sl.done));
+        float ms = 0;
+        VMAP_CUDA_CHECK(cudaEventElapsedTime(&ms, sl.k0, sl.k1));
+        busy_ += ms * 1e-3;
         const DeviceCounters& c = *sl.h_counters.ptr;
         wc.pairs += c.pairs;
         wc.facing_pairs += c.facing_pairs;
@@ -204,11 +213,13 @@ class CudaBackend final : public Backend {
     }
 
     uint64_t peak_device_bytes() const override { return peak_; }
+    double busy_seconds() const override { return busy_; }
 
   private:
     struct Slot {
         cudaStream_t stream = nullptr;
         cudaEvent_t done = nullptr;
+        cudaEvent_t k0 = nullptr, k1 = nullptr;  // around the kernel, for busy_seconds
         PinnedBuffer<PairJob> h_jobs;
         PinnedBuffer<uint64_t> h_first;
         PinnedBuffer<uint32_t> h_bits;
@@ -228,6 +239,7 @@ class CudaBackend final : public Backend {
     DeviceBuffer<LeafDisc> leaves_;
     Slot slots_[2];
     uint64_t held_ = 0, peak_ = 0;
+    double busy_ = 0;
 };
 
 }  // namespace

@@ -104,6 +104,46 @@ void check_spheres(const Octree& t, const PointSet& ps) {
     }
 }
 
+bool inside(const Box& b, Vec3 p) {
+    return p.x >= b.lo.x && p.y >= b.lo.y && p.z >= b.lo.z && p.x <= b.hi.x && p.y <= b.hi.y &&
+           p.z <= b.hi.z;
+}
+
+void check_boxes(const Octree& t, const PointSet& ps) {
+    ASSERT_EQ(t.walk.size(), size_t(t.num_nodes()));
+    for (int32_t n = 0; n < t.num_nodes(); ++n) {
+        const Box& b = t.boxes[n];
+        EXPECT_EQ(t.walk[n].skip, t.skip[n]);
+        EXPECT_EQ(t.walk[n].leaf, t.node_leaf[n]);
+        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k)
+            ASSERT_TRUE(inside(b, ps.positions[k])) << "node " << n;
+        if (t.is_leaf(n)) {
+            // Points of the occluder disc: centroid + Delta (u cos + v sin) for a basis u, v.
+            const LeafDisc& d = t.leaves[t.node_leaf[n]];
+            Vec3 nr = (d.flags & kLeafNormalDegenerate) ? Vec3{0, 0, 1} : d.normal;
+            Vec3 u = std::fabs(nr.x) < 0.9f ? cross(nr, {1, 0, 0}) : cross(nr, {0, 1, 0});
+            u = u / length(u);
+            const Vec3 v = cross(nr, u);
+            for (int k = 0; k < 64; ++k) {
+                const float a = 6.2831853f * k / 64;
+                const Vec3 q = d.centroid + (u * std::cos(a) + v * std::sin(a)) * (d.delta * 0.999f);
+                ASSERT_TRUE(inside(b, q)) << "leaf node " << n << " disc point " << k;
+            }
+        } else {
+            t.for_each_child(n, [&](int32_t c) {
+                EXPECT_TRUE(inside(b, t.boxes[c].lo) && inside(b, t.boxes[c].hi));
+            });
+        }
+    }
+}
+
+TEST(Octree, ContentBoxesBoundPointsDiscsAndChildren) {
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 8000);
+    std::vector<uint32_t> order;
+    Octree t = Octree::build(ps, {8, 3}, order);
+    check_boxes(t, ps);
+}
+
 TEST(Octree, RandomCloudHasAValidPreorderStructure) {
     for (int lp : {1, 4, 16}) {
         for (int h : {1, 3, 6, 10}) {
@@ -114,6 +154,7 @@ TEST(Octree, RandomCloudHasAValidPreorderStructure) {
             Octree t = Octree::build(ps, p, order);
             check_structure(t, ps, p);
             check_spheres(t, ps);
+            check_boxes(t, ps);
             // The permutation is a permutation and moves the data with it.
             std::vector<uint32_t> sorted = order;
             std::sort(sorted.begin(), sorted.end());

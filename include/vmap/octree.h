@@ -33,6 +33,15 @@ struct Box {
     Vec3 lo, hi;
 };
 
+// A node as the predicate walks it, packed in 32 bytes (two 16-byte loads on the GPU): its
+// content box, the end of its subtree, its leaf index (-1 for internal nodes).
+struct WalkNode {
+    Vec3 lo;
+    int32_t skip = 0;
+    Vec3 hi;
+    int32_t leaf = -1;
+};
+
 // What the visibility predicate needs of a leaf, packed in 32 bytes (one load on the GPU).
 struct LeafDisc {
     Vec3 centroid;    // mean of its points
@@ -44,8 +53,8 @@ inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no
 
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {
+    const WalkNode* walk = nullptr;     // per node
     const Sphere* spheres = nullptr;    // per node
-    const Box* boxes = nullptr;         // per node
     const int32_t* skip = nullptr;      // per node: end of its subtree
     const int32_t* node_leaf = nullptr; // per node: leaf index, or -1 for internal nodes
     const LeafDisc* leaves = nullptr;   // per leaf
@@ -63,6 +72,8 @@ class Octree {
                         std::vector<uint32_t>& order, const std::string& source = "points");
 
     OctreeView view() const;
+    // Derives the packed walk array from boxes, skip and node_leaf (build and load call it).
+    void pack_walk();
 
     int32_t num_nodes() const { return static_cast<int32_t>(skip.size()); }
     int32_t num_leaves() const { return static_cast<int32_t>(leaf_node.size()); }
@@ -84,6 +95,7 @@ class Octree {
     float root_size = 0;
     std::vector<Sphere> spheres;
     std::vector<Box> boxes;  // tight content bounds (points and discs), grown for rounding
+    std::vector<WalkNode> walk;  // derived: boxes + skip + node_leaf, packed for the walk
     std::vector<float> half_size;  // half the cell edge
     std::vector<int32_t> skip;
     std::vector<int32_t> parent;  // -1 for the root

@@ -302,6 +302,8 @@ VisibilityMap load_vmap(const std::string& path) {
         if (t.leaf_node[l] < 0 || t.leaf_node[l] >= nn || t.node_leaf[t.leaf_node[l]] != l)
             r.fail(fmt::format("leaf {} is inconsistent", l));
 
+    t.pack_walk();
+
     e = section("LINK");
     r.vec(vm.link_offsets, uint64_t(nn) + 1);
     if (vm.link_offsets[0] != 0) r.fail("bad offsets");

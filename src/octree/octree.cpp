@@ -234,11 +234,18 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         t.spheres[nd].radius = r * 1.00001f + slack;
         t.boxes[nd] = bx;
     }
+    t.pack_walk();
     return t;
 }
 
+void Octree::pack_walk() {
+    walk.resize(skip.size());
+    for (size_t n = 0; n < skip.size(); ++n)
+        walk[n] = WalkNode{boxes[n].lo, skip[n], boxes[n].hi, node_leaf[n]};
+}
+
 OctreeView Octree::view() const {
-    return OctreeView{spheres.data(), boxes.data(), skip.data(), node_leaf.data(), leaves.data(), num_nodes(),
+    return OctreeView{walk.data(), spheres.data(), skip.data(), node_leaf.data(), leaves.data(), num_nodes(),
                       num_leaves()};
 }
 

@@ -90,21 +90,8 @@ VMAP_HD bool leaves_face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len
     return fa && fb;
 }
 
-struct Tri3 {
-    Vec3 p, d;
-    float dd;
-};
-VMAP_HD Tri3 inner_segment(Vec3 p, Vec3 d, float eps) {
-    const float t0 = eps * 0.999f, t1 = 1.f - eps * 0.999f;
-    Tri3 s;
-    s.p = p + d * t0;
-    s.d = d * (t1 - t0);
-    s.dd = length2(s.d);
-    return s;
-}
-
 // Visibility of leaves a != b. Potential occluders are the leaves reached by descending from
-// the root into every node whose sphere meets segment pq (stackless walk over the preorder
+// the root into every node whose bounds meet segment pq (stackless walk over the preorder
 // skip links), other than a and b; K actual occluders make the pair invisible (any-hit: stop at
 // the K-th). kCount selects whether work is counted into `wc`.
 template <bool kCount>
@@ -119,22 +106,24 @@ VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
     if (!leaves_face(la, lb, d, len, vp)) return false;
     if (kCount) wc->facing_pairs++;
     // An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside
-    // its sphere; so only the part of pq with t in [t0, t1] (a little wider than (eps, 1 - eps),
-    // for rounding) needs to meet the spheres. This skips the dense surface around both ends.
-    // The same range is tested against each node's tight box first (planar walls have flat
-    // boxes that the sphere test alone cannot see past), then against its sphere.
-    const Tri3 sub = inner_segment(p, d, vp.eps);
+    // the node's content box; so only the part of pq with t in [t0, t1] (a little wider than
+    // (eps, 1 - eps), for rounding) needs to meet the boxes. This skips the dense surface
+    // around both ends. DEVIATION from paper §5.2: the walk prunes with each node's tight box
+    // of its points and discs, not its sphere. Both bound every occluder disc, so the same
+    // occluders are found (tests/visibility_test.cpp checks against no pruning at all); the
+    // box of a planar wall patch is flat, its sphere is not, and after the box test the sphere
+    // test rejected almost nothing (docs/gpu-notes.md).
     const SlabRay ray = slab_ray(p, d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
     int occluders = 0;
     int32_t n = 0;
     while (n < t.num_nodes) {
         if (kCount) wc->node_tests++;
-        if (!slab_meets_box(ray, t.boxes[n], 0.f) ||
-            !segment_meets_sphere(sub.p, sub.d, sub.dd, t.spheres[n])) {
-            n = t.skip[n];
+        const WalkNode w = t.walk[n];
+        if (!slab_meets_box(ray, Box{w.lo, w.hi}, 0.f)) {
+            n = w.skip;
             continue;
         }
-        const int32_t l = t.node_leaf[n];
+        const int32_t l = w.leaf;
         if (l >= 0 && l != a && l != b) {
             if (kCount) wc->occluder_tests++;
             if (is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K)

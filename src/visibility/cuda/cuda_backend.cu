@@ -153,12 +153,12 @@ class CudaBackend final : public Backend {
         vp_ = vp;
         cudaStream_t s = slots_[0].stream;
         spheres_.upload(tree.spheres.data(), tree.spheres.size(), s, held_, peak_);
-        boxes_.upload(tree.boxes.data(), tree.boxes.size(), s, held_, peak_);
+        walk_.upload(tree.walk.data(), tree.walk.size(), s, held_, peak_);
         skip_.upload(tree.skip.data(), tree.skip.size(), s, held_, peak_);
         node_leaf_.upload(tree.node_leaf.data(), tree.node_leaf.size(), s, held_, peak_);
         leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
-        view_ = OctreeView{spheres_.ptr, boxes_.ptr, skip_.ptr, node_leaf_.ptr, leaves_.ptr, tree.num_nodes(),
+        view_ = OctreeView{walk_.ptr, spheres_.ptr, skip_.ptr, node_leaf_.ptr, leaves_.ptr, tree.num_nodes(),
                            tree.num_leaves()};
     }
 
@@ -234,7 +234,7 @@ class CudaBackend final : public Backend {
     VisibilityParams vp_;
     OctreeView view_;
     DeviceBuffer<Sphere> spheres_;
-    DeviceBuffer<Box> boxes_;
+    DeviceBuffer<WalkNode> walk_;
     DeviceBuffer<int32_t> skip_, node_leaf_;
     DeviceBuffer<LeafDisc> leaves_;
     Slot slots_[2];

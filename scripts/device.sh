@@ -6,7 +6,8 @@
 #   scripts/device.sh run [STEP...]     (there; carry .device) unpack, then run the steps:
 #        gpu       the gpu-labelled tests          sanitize  compute-sanitizer memcheck+racecheck
 #        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
-#        dragon    cornell-dragon at height 10, end to end, GPU
+#        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
+#        ab        the kernel with and without the successor prefetch (dragon, height 9)
 #      Logs and tables go to $OUT.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -71,6 +72,12 @@ if [[ "$cmd" == run ]]; then
                     "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/dragon.vmap --backend cuda \
                         --max-height 10 --leaf-points "$lp" 2>&1 | tee "$OUT/dragon-lp$lp.log" | head -13
                     rm -f /tmp/dragon.vmap
+                done ;;
+            ab)
+                for pf in 1 0; do
+                    VMAP_CUDA_PREFETCH=$pf "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/ab.vmap \
+                        --backend cuda --max-height 9 2>&1 | tee "$OUT/ab-prefetch$pf.log" | grep -E "throughput|time:"
+                    rm -f /tmp/ab.vmap
                 done ;;
             bench) "$bin/vmap" bench ${BENCH_ARGS:-} --out "$OUT" 2>&1 | tee "$OUT/bench.log" | tail -40 ;;
             *) echo "unknown step $step" >&2; rc=2 ;;

@@ -35,7 +35,7 @@ struct Box {
 
 // A node as the predicate walks it, packed in 32 bytes (two 16-byte loads on the GPU): its
 // content box, the end of its subtree, its leaf index (-1 for internal nodes).
-struct WalkNode {
+struct alignas(16) WalkNode {
     Vec3 lo;
     int32_t skip = 0;
     Vec3 hi;
@@ -43,7 +43,7 @@ struct WalkNode {
 };
 
 // What the visibility predicate needs of a leaf, packed in 32 bytes (one load on the GPU).
-struct LeafDisc {
+struct alignas(16) LeafDisc {
     Vec3 centroid;    // mean of its points
     float delta = 0;  // occluder disc radius: farthest point from the centroid, >= splat radius
     Vec3 normal;      // normalised mean of its points' normals (zero when flagged)

@@ -9,6 +9,7 @@
 #include <string>
 
 #include <algorithm>
+#include <cstdlib>
 #include <vector>
 
 #include "visibility/backend.h"
@@ -33,6 +34,7 @@ struct DeviceCounters {
 
 constexpr int kWarpsPerBlock = 8;
 
+template <bool kPrefetch>
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                       const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_items,
@@ -56,7 +58,7 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
         const int32_t c = int32_t(local % rw) * 32 + lane;
         bool vis = false;
         if (c < job.cols) {
-            vis = leaf_pair_visible<true>(t, job.row0 + r, job.col0 + c, vp, &wc);
+            vis = leaf_pair_visible<true, kPrefetch>(t, job.row0 + r, job.col0 + c, vp, &wc);
             wc.pairs++;
         }
         const uint32_t word = __ballot_sync(0xffffffffu, vis);
@@ -124,6 +126,8 @@ struct PinnedBuffer {
 class CudaBackend final : public Backend {
   public:
     explicit CudaBackend(int device) : device_(device) {
+        const char* pf = getenv("VMAP_CUDA_PREFETCH");
+        prefetch_ = !(pf && pf[0] == '0');
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
         for (auto& s : slots_) {
@@ -184,9 +188,15 @@ class CudaBackend final : public Backend {
             const int threads = kWarpsPerBlock * 32;
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks = int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
-            leaf_pairs_kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr,
-                                                                 sl.d_first.ptr, int32_t(nj), items,
-                                                                 sl.d_bits.ptr, sl.d_counters.ptr);
+            // VMAP_CUDA_PREFETCH=0 selects the plain walk (for A/B timing; same answers).
+            if (prefetch_)
+                leaf_pairs_kernel<true><<<blocks, threads, 0, sl.stream>>>(
+                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), items, sl.d_bits.ptr,
+                    sl.d_counters.ptr);
+            else
+                leaf_pairs_kernel<false><<<blocks, threads, 0, sl.stream>>>(
+                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), items, sl.d_bits.ptr,
+                    sl.d_counters.ptr);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));
@@ -230,6 +240,7 @@ class CudaBackend final : public Backend {
         DeviceBuffer<DeviceCounters> d_counters;
     };
     int device_;
+    bool prefetch_ = true;
     cudaDeviceProp prop_{};
     VisibilityParams vp_;
     OctreeView view_;

@@ -74,12 +74,16 @@ if [[ "$cmd" == run ]]; then
                     rm -f /tmp/dragon.vmap
                 done ;;
             ab)
-                for pf in 1 0; do
+                for pf in 0 1; do
                     VMAP_CUDA_PREFETCH=$pf "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/ab.vmap \
                         --backend cuda --max-height 9 2>&1 | tee "$OUT/ab-prefetch$pf.log" | grep -E "throughput|time:"
                     rm -f /tmp/ab.vmap
                 done ;;
-            bench) "$bin/vmap" bench ${BENCH_ARGS:-} --out "$OUT" 2>&1 | tee "$OUT/bench.log" | tail -40 ;;
+            bench)
+                for lp in ${BENCH_LEAF_POINTS:-4}; do
+                    "$bin/vmap" bench ${BENCH_ARGS:-} --leaf-points "$lp" --out "$OUT/lp$lp" 2>&1 |
+                        tee "$OUT/bench-lp$lp.log" | tail -12
+                done ;;
             *) echo "unknown step $step" >&2; rc=2 ;;
         esac
     done

@@ -127,7 +127,7 @@ class CudaBackend final : public Backend {
   public:
     explicit CudaBackend(int device) : device_(device) {
         const char* pf = getenv("VMAP_CUDA_PREFETCH");
-        prefetch_ = !(pf && pf[0] == '0');
+        prefetch_ = pf && pf[0] == '1';  // measured slower on an H200 (docs/gpu-notes.md)
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
         for (auto& s : slots_) {
@@ -188,7 +188,7 @@ class CudaBackend final : public Backend {
             const int threads = kWarpsPerBlock * 32;
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks = int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
-            // VMAP_CUDA_PREFETCH=0 selects the plain walk (for A/B timing; same answers).
+            // VMAP_CUDA_PREFETCH=1 selects the prefetching walk (for A/B timing; same answers).
             if (prefetch_)
                 leaf_pairs_kernel<true><<<blocks, threads, 0, sl.stream>>>(
                     view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), items, sl.d_bits.ptr,
@@ -240,7 +240,7 @@ class CudaBackend final : public Backend {
         DeviceBuffer<DeviceCounters> d_counters;
     };
     int device_;
-    bool prefetch_ = true;
+    bool prefetch_ = false;
     cudaDeviceProp prop_{};
     VisibilityParams vp_;
     OctreeView view_;

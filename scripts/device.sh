@@ -7,7 +7,7 @@
 #        gpu       the gpu-labelled tests          sanitize  compute-sanitizer memcheck+racecheck
 #        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
 #        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
-#        ab        the kernel with and without the successor prefetch (dragon, height 9)
+#        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
 #      Logs and tables go to $OUT.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -74,9 +74,11 @@ if [[ "$cmd" == run ]]; then
                     rm -f /tmp/dragon.vmap
                 done ;;
             ab)
-                for pf in 0 1; do
-                    VMAP_CUDA_PREFETCH=$pf "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/ab.vmap \
-                        --backend cuda --max-height 9 2>&1 | tee "$OUT/ab-prefetch$pf.log" | grep -E "throughput|time:"
+                for v in ${VARIANTS:-default prefetch occ5 occ6}; do
+                    echo "variant $v"
+                    VMAP_CUDA_VARIANT=$v "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/ab.vmap \
+                        --backend cuda --max-height 9 --leaf-points "${AB_LEAF_POINTS:-8}" 2>&1 |
+                        tee "$OUT/ab-$v.log" | grep -E "throughput|time:"
                     rm -f /tmp/ab.vmap
                 done ;;
             bench)

@@ -123,7 +123,7 @@ TEST_P(TraversalOracle, SpherePruningNeverDropsAnOccluder) {
         int32_t a = pick(rng), b = pick(rng);
         if (a == b) continue;
         if (a > b) std::swap(a, b);
-        const bool got = leaf_pair_visible<false>(v, a, b, vp, nullptr);
+        const bool got = leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr));
         ASSERT_EQ(got, visible_without_pruning(v, a, b, vp)) << a << " " << b;
         (got ? visible : hidden)++;
     }
@@ -146,7 +146,7 @@ TEST(Counting, CountedAndUncountedPredicatesAgree) {
     for (int32_t a = 0; a < 50; ++a)
         for (int32_t b = a + 1; b < v.num_leaves; b += 7)
             ASSERT_EQ(leaf_pair_visible<true>(v, a, b, vp, &wc),
-                      leaf_pair_visible<false>(v, a, b, vp, nullptr));
+                      leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
     EXPECT_GT(wc.node_tests, wc.facing_pairs);
 }
 

@@ -112,9 +112,11 @@ VMAP_HD WalkNode load_walk(const WalkNode* w) {
 // skip links), other than a and b; K actual occluders make the pair invisible (any-hit: stop at
 // the K-th). kCount selects whether work is counted into `wc`; kPrefetch whether the successor
 // node is loaded ahead (pays on the GPU, where the walk waits on dependent loads).
-template <bool kCount, bool kPrefetch = false>
+// Counters is WorkCounters, or any struct with the same fields (the GPU keeps 32-bit ones in
+// registers).
+template <bool kCount, bool kPrefetch = false, class Counters = WorkCounters>
 VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
-                               const VisibilityParams& vp, WorkCounters* wc) {
+                               const VisibilityParams& vp, Counters* wc) {
     const LeafDisc la = t.leaves[a], lb = t.leaves[b];
     const Vec3 p = la.centroid;
     const Vec3 d = lb.centroid - p;

@@ -34,15 +34,20 @@ struct DeviceCounters {
 
 constexpr int kWarpsPerBlock = 8;
 
-template <bool kPrefetch>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
+// Per-thread work counts; 32 bits suffice between the per-item flushes below.
+struct SmallCounters {
+    uint32_t pairs = 0, facing_pairs = 0, visible_pairs = 0, node_tests = 0, occluder_tests = 0;
+};
+
+template <bool kPrefetch, int kMinBlocks>
+__global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                       const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_items,
                       uint32_t* __restrict__ bits, DeviceCounters* counters) {
     const int lane = threadIdx.x & 31;
     const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
     const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
-    WorkCounters wc;
+    SmallCounters wc;
     for (uint64_t item = warp; item < num_items; item += warps) {
         // The job holding this item: last j with first[j] <= item.
         int32_t lo = 0, hi = num_jobs;
@@ -68,6 +73,8 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     // Warp-reduce the counters, one atomic per warp.
     unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
                                wc.occluder_tests};
+    // (A thread sees at most a few thousand items of 32 pairs and ~100 node tests a pair:
+    // far below 2^32.)
 #pragma unroll
     for (int k = 0; k < 5; ++k)
         for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
@@ -126,8 +133,7 @@ struct PinnedBuffer {
 class CudaBackend final : public Backend {
   public:
     explicit CudaBackend(int device) : device_(device) {
-        const char* pf = getenv("VMAP_CUDA_PREFETCH");
-        prefetch_ = pf && pf[0] == '1';  // measured slower on an H200 (docs/gpu-notes.md)
+        if (const char* v = getenv("VMAP_CUDA_VARIANT")) variant_ = v;
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
         for (auto& s : slots_) {
@@ -188,15 +194,17 @@ class CudaBackend final : public Backend {
             const int threads = kWarpsPerBlock * 32;
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks = int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
-            // VMAP_CUDA_PREFETCH=1 selects the prefetching walk (for A/B timing; same answers).
-            if (prefetch_)
-                leaf_pairs_kernel<true><<<blocks, threads, 0, sl.stream>>>(
-                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), items, sl.d_bits.ptr,
-                    sl.d_counters.ptr);
-            else
-                leaf_pairs_kernel<false><<<blocks, threads, 0, sl.stream>>>(
-                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), items, sl.d_bits.ptr,
-                    sl.d_counters.ptr);
+            // VMAP_CUDA_VARIANT selects a kernel variant for A/B timing (same answers):
+            // "prefetch" (successor loads ahead), "occ5"/"occ6" (register caps for occupancy).
+            auto launch = [&](auto kernel) {
+                kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr,
+                                                          int32_t(nj), items, sl.d_bits.ptr,
+                                                          sl.d_counters.ptr);
+            };
+            if (variant_ == "prefetch") launch(leaf_pairs_kernel<true, 1>);
+            else if (variant_ == "occ5") launch(leaf_pairs_kernel<false, 5>);
+            else if (variant_ == "occ6") launch(leaf_pairs_kernel<false, 6>);
+            else launch(leaf_pairs_kernel<false, 1>);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));
@@ -240,7 +248,7 @@ class CudaBackend final : public Backend {
         DeviceBuffer<DeviceCounters> d_counters;
     };
     int device_;
-    bool prefetch_ = false;
+    std::string variant_;  // "" = the default kernel (docs/gpu-notes.md)
     cudaDeviceProp prop_{};
     VisibilityParams vp_;
     OctreeView view_;

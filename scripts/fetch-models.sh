@@ -32,10 +32,14 @@ if ! have_all bunny.off armadillo.off elephant.off; then
     deb=$(ls "$cache"/libcgal-demo_*.deb 2>/dev/null | head -1 || true)
     if [[ -z "$deb" ]]; then
         echo "fetch-models: apt-get download libcgal-demo" >&2
-        (cd "$cache" && apt-get download -qq libcgal-demo >/dev/null 2>&1) || {
-            echo "fetch-models: apt-get download libcgal-demo failed; run 'apt-get update' first" >&2
-            exit 1
-        }
+        if ! (cd "$cache" && apt-get download -qq libcgal-demo >/dev/null 2>&1); then
+            # Package lists may be missing on a fresh machine: refresh them once (as root).
+            [[ $(id -u) -eq 0 ]] && apt-get update -qq >/dev/null 2>&1 || true
+            (cd "$cache" && apt-get download -qq libcgal-demo >/dev/null 2>&1) || {
+                echo "fetch-models: apt-get download libcgal-demo failed; run 'apt-get update'" >&2
+                exit 1
+            }
+        fi
         deb=$(ls "$cache"/libcgal-demo_*.deb | head -1)
     fi
     tmp=$(mktemp -d)

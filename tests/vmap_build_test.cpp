@@ -100,7 +100,9 @@ void check_invariant(const VisibilityMap& vm) {
     for (auto [a, b] : links) {
         const int32_t p = t.parent[a], q = t.parent[b];
         if (p == q) continue;
-        if (disjoint(p, q)) EXPECT_FALSE((Naive{t, m, {}}.full(p, q))) << a << " " << b;
+        if (disjoint(p, q)) {
+            EXPECT_FALSE((Naive{t, m, {}}.full(p, q))) << a << " " << b;
+        }
     }
 }
 

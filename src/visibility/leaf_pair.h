@@ -44,7 +44,9 @@ VMAP_HD bool slab_meets_box(const SlabRay& r, const Box& b, float g) {
     const float hi[3] = {b.hi.x + g, b.hi.y + g, b.hi.z + g};
     const float p[3] = {r.p.x, r.p.y, r.p.z}, inv[3] = {r.inv.x, r.inv.y, r.inv.z};
     const float d[3] = {r.d.x, r.d.y, r.d.z};
+#if defined(__CUDACC__)
 #pragma unroll
+#endif
     for (int i = 0; i < 3; ++i) {
         if (fabsf(d[i]) < 1e-30f) {
             if (p[i] < lo[i] || p[i] > hi[i]) return false;

@@ -176,6 +176,7 @@ int main(int argc, char** argv) {
         "        vmap build scenes/cornell-dragon.json -o dragon.vmap --max-height 8\n"
         "        vmap query dragon.vmap --pair 10 2000\n"};
     app.require_subcommand(1);
+    app.fallthrough();  // global options (--threads) may also follow the subcommand
     int threads = 0;
     app.add_option("--threads", threads, "CPU threads (default: all cores)")->check(CLI::Range(0, 4096));
 
@@ -188,9 +189,13 @@ int main(int argc, char** argv) {
     build->add_option("--points", bo.points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     build->add_option("--seed", bo.seed, "Override the scene's sampling seed");
-    build->add_option("--max-height", bo.max_height, "Deepest octree level (root = 0)")
+    build->add_option("--max-height", bo.max_height,
+                      "Deepest octree level (root = 0); default: the scene's octree.max_height, "
+                      "else 9")
         ->check(CLI::Range(1, 21));
-    build->add_option("--leaf-points", bo.leaf_points, "Split nodes with more points than this")
+    build->add_option("--leaf-points", bo.leaf_points,
+                      "Split nodes with more points than this; default: the scene's "
+                      "octree.leaf_points, else 4")
         ->check(CLI::Range(1, 1000000));
     auto& vp = bo.params.visibility;
     build->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")

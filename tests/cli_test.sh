@@ -223,25 +223,17 @@ expect_no_file "usage errors write nothing" never.vmap
 
 # ---- input errors: exit 1, one line naming the file ------------------------------------------
 
-expect_input_error "missing scene file" "$WORK/no_such_scene.json" \
-    build "$WORK/no_such_scene.json" -o y.vmap --backend cpu
-expect_no_file "a missing scene writes nothing" y.vmap
-
-expect_input_error "malformed scene JSON" "$DATA/malformed.json" \
-    build "$DATA/malformed.json" -o y.vmap --backend cpu
-expect_no_file "a malformed scene writes nothing" y.vmap
-
-expect_input_error "NaN in a point cloud" "$DATA/nan.ply" \
-    build "$DATA/nan.ply" -o y.vmap --backend cpu
-expect_no_file "a NaN cloud writes nothing" y.vmap
-
-expect_input_error "empty point cloud" "$DATA/empty.ply" \
-    build "$DATA/empty.ply" -o y.vmap --backend cpu
-expect_no_file "an empty cloud writes nothing" y.vmap
-
-expect_input_error "missing point cloud" "$WORK/no_such_cloud.ply" \
-    build "$WORK/no_such_cloud.ply" -o y.vmap --backend cpu
-expect_no_file "a missing cloud writes nothing" y.vmap
+# expect_bad_build_input NAME INPUT: building INPUT into y.vmap is an input error naming INPUT,
+# and writes nothing.
+expect_bad_build_input() {
+    expect_input_error "$1" "$2" build "$2" -o y.vmap --backend cpu
+    expect_no_file "$1 writes nothing" y.vmap
+}
+expect_bad_build_input "missing scene file" "$WORK/no_such_scene.json"
+expect_bad_build_input "malformed scene JSON" "$DATA/malformed.json"
+expect_bad_build_input "NaN in a point cloud" "$DATA/nan.ply"
+expect_bad_build_input "empty point cloud" "$DATA/empty.ply"
+expect_bad_build_input "missing point cloud" "$WORK/no_such_cloud.ply"
 
 expect_input_error "output in a missing directory" "no_such_dir/y.vmap" \
     build "$SCENE" --points 300 --max-height 3 -o no_such_dir/y.vmap --backend cpu

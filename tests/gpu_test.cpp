@@ -3,9 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 
+#include "test_files.h"
 #include "test_util.h"
 #include "visibility/backend.h"
 
@@ -14,32 +13,20 @@ namespace {
 
 bool have_device(std::string* why) { return detail::make_cuda_backend(why) != nullptr; }
 
-#define VMAP_REQUIRE_GPU()                                          \
-    do {                                                            \
-        std::string why_;                                           \
+#define VMAP_REQUIRE_GPU()                                           \
+    do {                                                             \
+        std::string why_;                                            \
         if (!have_device(&why_)) GTEST_SKIP() << "no GPU: " << why_; \
     } while (0)
 
-std::vector<char> file_bytes(const std::string& p) {
-    std::ifstream in(p, std::ios::binary);
-    return {std::istreambuf_iterator<char>(in), {}};
-}
+using test::BuildCase;
 
-struct Case {
-    const char* scene;
-    uint64_t points;
-    int height, leaf_points;
-};
-
-class GpuMatchesCpu : public ::testing::TestWithParam<Case> {};
+class GpuMatchesCpu : public ::testing::TestWithParam<BuildCase> {};
 
 TEST_P(GpuMatchesCpu, VmapIsByteIdentical) {
     VMAP_REQUIRE_GPU();
-    const Case c = GetParam();
-    const std::string file = std::string(c.scene).find('/') == std::string::npos
-                                 ? test::scene_path(c.scene)
-                                 : test::oracle_path(c.scene);
-    const PointSet ps = test::sample(file, c.points, 3);
+    const BuildCase c = GetParam();
+    const PointSet ps = test::sample(c.file(), c.points, 3);
     BuildParams bp = test::cpu_params(c.height, c.leaf_points);
     BuildStats cs, gs;
     const VisibilityMap cpu = build_vmap(ps, bp, &cs);
@@ -58,24 +45,21 @@ TEST_P(GpuMatchesCpu, VmapIsByteIdentical) {
     const std::string b = (dir / "vmap_gpu_test_gpu.vmap").string();
     save_vmap(a, cpu);
     save_vmap(b, gpu);
-    EXPECT_EQ(file_bytes(a), file_bytes(b));
+    EXPECT_EQ(test::slurp(a), test::slurp(b));
     std::filesystem::remove(a);
     std::filesystem::remove(b);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Scenes, GpuMatchesCpu,
-    ::testing::Values(Case{"cornell-empty", 3000, 5, 4}, Case{"cornell-bunny", 6000, 7, 4},
-                      Case{"cornell-bunny", 8000, 9, 2}, Case{"cornell-two-models", 8000, 8, 4},
-                      Case{"./room-with-block.json", 4000, 10, 1},
-                      Case{"cornell-dragon", 12000, 10, 4}),
-    [](const ::testing::TestParamInfo<Case>& i) {
-        std::string s = std::string(i.param.scene) + "_h" + std::to_string(i.param.height) + "_lp" +
-                        std::to_string(i.param.leaf_points);
-        for (char& ch : s)
-            if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
-        return s;
-    });
+INSTANTIATE_TEST_SUITE_P(Scenes, GpuMatchesCpu,
+                         ::testing::Values(BuildCase{"cornell-empty", 3000, 5, 4},
+                                           BuildCase{"cornell-bunny", 6000, 7, 4},
+                                           BuildCase{"cornell-bunny", 8000, 9, 2},
+                                           BuildCase{"cornell-two-models", 8000, 8, 4},
+                                           BuildCase{"./room-with-block.json", 4000, 10, 1},
+                                           BuildCase{"cornell-dragon", 12000, 10, 4}),
+                         [](const ::testing::TestParamInfo<BuildCase>& i) {
+                             return test::case_name(i.param, false);
+                         });
 
 TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
     VMAP_REQUIRE_GPU();

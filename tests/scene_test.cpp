@@ -4,20 +4,19 @@
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
-#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <functional>
 #include <initializer_list>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "test_files.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -31,55 +30,8 @@ const std::string kFixtures = std::string(VMAP_TEST_DATA) + "/scenes/";
 // The Cornell room as the shipped scenes give it.
 constexpr float kW = 0.5528f, kH = 0.5488f, kD = 0.5592f;
 
-// A directory of its own for each test, so tests can run in parallel (ctest -j).
-class ScratchDir {
-  public:
-    ScratchDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vmap_scene_test_" + std::to_string(::getpid()) + "_" +
-                                            info->test_suite_name() + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    ~ScratchDir() {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
-    ScratchDir(const ScratchDir&) = delete;
-    ScratchDir& operator=(const ScratchDir&) = delete;
-
-    std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
-    std::string write(const std::string& name, std::string_view text) const {
-        const std::string p = path(name);
-        std::ofstream out(p, std::ios::binary);
-        out.write(text.data(), static_cast<std::streamsize>(text.size()));
-        EXPECT_TRUE(out.good()) << p;
-        return p;
-    }
-
-  private:
-    fs::path dir_;
-};
-
-// Calls f, which must throw vmap::Error whose one-line message holds every one of `parts`.
-void expect_error(const std::function<void()>& f, std::initializer_list<std::string_view> parts) {
-    try {
-        f();
-    } catch (const Error& e) {
-        const std::string what = e.what();
-        EXPECT_EQ(what.find('\n'), std::string::npos) << "message is not one line: " << what;
-        for (std::string_view part : parts) {
-            EXPECT_NE(what.find(part), std::string::npos)
-                << "message \"" << what << "\" lacks \"" << part << "\"";
-        }
-        return;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "threw a non-vmap exception: " << e.what();
-        return;
-    }
-    ADD_FAILURE() << "did not throw";
-}
+using test::expect_error;
+using test::ScratchDir;
 
 // The scene fixture `name` must fail to load with an error naming the file and `parts`.
 void expect_scene_error(const std::string& name, std::initializer_list<std::string_view> parts) {

@@ -1,12 +1,12 @@
 // V-map construction against a brute-force leaf-pair matrix (DESIGN.md "The V-map": the
 // invariant is the oracle).
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <algorithm>
 #include <set>
 
-#include <tbb/global_control.h>
-
+#include "test_files.h"
 #include "test_util.h"
 #include "vmap/error.h"
 
@@ -106,21 +106,14 @@ void check_invariant(const VisibilityMap& vm) {
     }
 }
 
-struct Case {
-    const char* scene;
-    uint64_t points;
-    int height, leaf_points;
-};
+using test::BuildCase;
 
-class VmapOracle : public ::testing::TestWithParam<Case> {};
+class VmapOracle : public ::testing::TestWithParam<BuildCase> {};
 
 TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
-    const Case c = GetParam();
-    const std::string file = std::string(c.scene).find('/') == std::string::npos
-                                 ? test::scene_path(c.scene)
-                                 : test::oracle_path(c.scene);
+    const BuildCase c = GetParam();
     BuildStats st;
-    VisibilityMap vm = build_vmap(test::sample(file, c.points, 3),
+    VisibilityMap vm = build_vmap(test::sample(c.file(), c.points, 3),
                                   test::cpu_params(c.height, c.leaf_points), &st);
     const int32_t L = vm.octree.num_leaves();
     EXPECT_EQ(st.work.pairs, uint64_t(L) * (L - 1) / 2) << "each unordered pair once";
@@ -130,19 +123,16 @@ TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
     check_invariant(vm);
 }
 
-INSTANTIATE_TEST_SUITE_P(
-    Scenes, VmapOracle,
-    ::testing::Values(Case{"cornell-empty", 1500, 4, 4}, Case{"cornell-bunny", 2000, 5, 2},
-                      Case{"cornell-bunny", 2500, 7, 4}, Case{"cornell-two-models", 2500, 8, 6},
-                      Case{"./room-with-block.json", 2000, 6, 1},
-                      Case{"./room-with-block.json", 3000, 9, 8}),
-    [](const ::testing::TestParamInfo<Case>& i) {
-        std::string s = std::string(i.param.scene) + "_h" + std::to_string(i.param.height) + "_lp" +
-                        std::to_string(i.param.leaf_points) + "_n" + std::to_string(i.param.points);
-        for (char& ch : s)
-            if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
-        return s;
-    });
+INSTANTIATE_TEST_SUITE_P(Scenes, VmapOracle,
+                         ::testing::Values(BuildCase{"cornell-empty", 1500, 4, 4},
+                                           BuildCase{"cornell-bunny", 2000, 5, 2},
+                                           BuildCase{"cornell-bunny", 2500, 7, 4},
+                                           BuildCase{"cornell-two-models", 2500, 8, 6},
+                                           BuildCase{"./room-with-block.json", 2000, 6, 1},
+                                           BuildCase{"./room-with-block.json", 3000, 9, 8}),
+                         [](const ::testing::TestParamInfo<BuildCase>& i) {
+                             return test::case_name(i.param, true);
+                         });
 
 TEST(VmapBuild, TinyBatchesGiveTheSameLinks) {
     // Batches of 1024 pairs force jobs of 64 pairs: node pairs split into sub-rectangles, links
@@ -168,8 +158,8 @@ TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {
 }
 
 TEST(VmapBuild, LinksAreStoredAtBothEndsSorted) {
-    const VisibilityMap vm =
-        build_vmap(test::sample(test::scene_path("cornell-bunny"), 2000, 1), test::cpu_params(6, 4));
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 2000, 1),
+                                        test::cpu_params(6, 4));
     for (int32_t n = 0; n < vm.octree.num_nodes(); ++n) {
         const auto ls = vm.links(n);
         EXPECT_TRUE(std::is_sorted(ls.begin(), ls.end()));

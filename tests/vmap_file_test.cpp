@@ -1,24 +1,19 @@
 // The .vmap file: exact round trips, and truncated, corrupt, wrong-version or missing files, and
 // writes that never leave half a file behind.
+#include "io/vmap_file.h"
+
 #include <gtest/gtest.h>
 
-#include "io/vmap_file.h"
-#include <unistd.h>
-
-#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <functional>
-#include <initializer_list>
 #include <memory>
-#include <sstream>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "test_files.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
@@ -30,59 +25,23 @@ namespace fs = std::filesystem;
 
 constexpr size_t kHeaderBytes = 8 + 4 + 4 + 8 + 8;  // magic, version, reserved, size, checksum
 
-// A directory of its own for each test, so tests can run in parallel (ctest -j).
-class ScratchDir {
-  public:
-    ScratchDir() {
-        const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-        dir_ = fs::temp_directory_path() / ("vmap_file_test_" + std::to_string(::getpid()) + "_" +
-                                            info->test_suite_name() + "_" + info->name());
-        fs::remove_all(dir_);
-        fs::create_directories(dir_);
-    }
-    ~ScratchDir() {
-        std::error_code ec;
-        fs::remove_all(dir_, ec);
-    }
-    ScratchDir(const ScratchDir&) = delete;
-    ScratchDir& operator=(const ScratchDir&) = delete;
+using test::expect_error;
+using test::ScratchDir;
+using test::slurp;
+using test::spit;
 
-    std::string path(const std::string& name) const { return (dir_ / name).string(); }
-    const fs::path& dir() const { return dir_; }
-
-    std::vector<std::string> files() const {
-        std::vector<std::string> names;
-        for (const auto& entry : fs::directory_iterator(dir_))
-            names.push_back(entry.path().filename().string());
-        std::sort(names.begin(), names.end());
-        return names;
-    }
-
-  private:
-    fs::path dir_;
-};
-
-std::string slurp(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    std::ostringstream out;
-    out << in.rdbuf();
-    return out.str();
-}
-
-void spit(const std::string& path, std::string_view bytes) {
-    std::ofstream out(path, std::ios::binary | std::ios::trunc);
-    out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
-    ASSERT_TRUE(out.good()) << path;
-}
-
-// After editing the payload of a file image: set the header's size and checksum to match, so
-// that only the loader's structure checks stand between the edit and a query.
-void reseal(std::string& bytes) {
+// After editing the payload of a file image: writes it to `name` in `dir` with the header's size
+// and checksum set to match, so that only the loader's structure checks stand between the edit
+// and a query. Returns the path.
+std::string write_resealed(const ScratchDir& dir, const std::string& name, std::string bytes) {
     const uint64_t payload = bytes.size() - kHeaderBytes;
     const uint64_t sum = detail::payload_hash(
         reinterpret_cast<const uint8_t*>(bytes.data()) + kHeaderBytes, payload);
     std::memcpy(bytes.data() + 16, &payload, 8);
     std::memcpy(bytes.data() + 24, &sum, 8);
+    const std::string p = dir.path(name);
+    spit(p, bytes);
+    return p;
 }
 
 // Byte offset of section `tag`'s data (just past its tag and length) in a file image.
@@ -96,25 +55,6 @@ size_t section_data(const std::string& bytes, const char* tag) {
     }
     ADD_FAILURE() << "no section " << tag;
     return 0;
-}
-
-// Calls f, which must throw vmap::Error whose one-line message holds every one of `parts`.
-void expect_error(const std::function<void()>& f, std::initializer_list<std::string_view> parts) {
-    try {
-        f();
-    } catch (const Error& e) {
-        const std::string what = e.what();
-        EXPECT_EQ(what.find('\n'), std::string::npos) << "message is not one line: " << what;
-        for (std::string_view part : parts) {
-            EXPECT_NE(what.find(part), std::string::npos)
-                << "message \"" << what << "\" lacks \"" << part << "\"";
-        }
-        return;
-    } catch (const std::exception& e) {
-        ADD_FAILURE() << "threw a non-vmap exception: " << e.what();
-        return;
-    }
-    ADD_FAILURE() << "did not throw";
 }
 
 #define EXPECT_LOAD_ERROR(path, ...)                                       \
@@ -293,9 +233,7 @@ TEST_F(VmapFile, ATruncatedFileWithAMatchingHeaderIsRejected) {
     ScratchDir dir;
     std::string bytes = slurp(saved(dir));
     bytes.resize(bytes.size() - 6);
-    reseal(bytes);
-    const std::string p = dir.path("resealed.vmap");
-    spit(p, bytes);
+    const std::string p = write_resealed(dir, "resealed.vmap", bytes);
     EXPECT_LOAD_ERROR(p, "LINK");
 }
 
@@ -365,9 +303,7 @@ TEST_F(VmapFile, TrailingBytesAreRejected) {
     ScratchDir dir;
     std::string bytes = slurp(saved(dir));
     bytes += std::string(8, '\0');
-    reseal(bytes);
-    const std::string p = dir.path("trailing.vmap");
-    spit(p, bytes);
+    const std::string p = write_resealed(dir, "trailing.vmap", bytes);
     EXPECT_LOAD_ERROR(p, "trailing");
 }
 
@@ -378,9 +314,7 @@ TEST_F(VmapFile, AHugePointCountIsRejectedNotAllocated) {
     for (uint64_t n : {uint64_t(1) << 40, ~uint64_t(0)}) {
         SCOPED_TRACE(n);
         std::memcpy(bytes.data() + at, &n, 8);
-        reseal(bytes);
-        const std::string p = dir.path("huge.vmap");
-        spit(p, bytes);
+        const std::string p = write_resealed(dir, "huge.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "PNTS");
     }
 }
@@ -390,9 +324,7 @@ TEST_F(VmapFile, AnOrderThatIsNotAPermutationIsRejected) {
     std::string bytes = slurp(saved(dir));
     const size_t at = section_data(bytes, "ORDR");
     std::memcpy(bytes.data() + at + 4, bytes.data() + at, 4);  // order[1] = order[0]
-    reseal(bytes);
-    const std::string p = dir.path("order.vmap");
-    spit(p, bytes);
+    const std::string p = write_resealed(dir, "order.vmap", bytes);
     EXPECT_LOAD_ERROR(p, "ORDR", "permutation");
 }
 
@@ -403,9 +335,7 @@ TEST_F(VmapFile, ALinkTargetOutOfRangeIsRejected) {
     for (int32_t bad : {-1, map().octree.num_nodes(), INT32_MAX}) {
         SCOPED_TRACE(bad);
         std::memcpy(bytes.data() + bytes.size() - 4, &bad, 4);  // the last link target
-        reseal(bytes);
-        const std::string p = dir.path("link.vmap");
-        spit(p, bytes);
+        const std::string p = write_resealed(dir, "link.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "LINK");
     }
 }
@@ -422,18 +352,14 @@ TEST_F(VmapFile, AnInconsistentTreeIsRejected) {
         std::string bytes = whole;
         const int32_t bad = nn + 5;  // the root's subtree runs past the last node
         std::memcpy(bytes.data() + skip, &bad, 4);
-        reseal(bytes);
-        const std::string p = dir.path("skip.vmap");
-        spit(p, bytes);
+        const std::string p = write_resealed(dir, "skip.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "TREE");
     }
     {
         std::string bytes = whole;
         const int32_t bad = -7;  // leaf count
         std::memcpy(bytes.data() + at + 4, &bad, 4);
-        reseal(bytes);
-        const std::string p = dir.path("leaves.vmap");
-        spit(p, bytes);
+        const std::string p = write_resealed(dir, "leaves.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "TREE");
     }
 }

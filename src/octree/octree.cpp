@@ -9,23 +9,13 @@
 #include <cmath>
 #include <numeric>
 
+#include "geom/morton.h"
 #include "vmap/error.h"
 
 namespace vmap {
 namespace {
 
 constexpr int kMortonBits = 21;  // per axis: 63-bit codes, so max_height <= 21
-
-uint64_t spread_bits(uint64_t v) {
-    // Spreads the low 21 bits of v so that bit i lands at bit 3i.
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffULL;
-    v = (v | v << 16) & 0x1f0000ff0000ffULL;
-    v = (v | v << 8) & 0x100f00f00f00f00fULL;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-    v = (v | v << 2) & 0x1249249249249249ULL;
-    return v;
-}
 
 struct Builder {
     const PointSet& pts;
@@ -77,8 +67,8 @@ struct Builder {
 Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
                      const std::string& source) {
     if (params.max_height < 1 || params.max_height > kMortonBits)
-        throw Error(fmt::format("{}: max_height {} out of range (1..{})", source,
-                                params.max_height, kMortonBits));
+        throw Error(fmt::format("{}: max_height {} out of range (1..{})", source, params.max_height,
+                                kMortonBits));
     if (params.leaf_points < 1 || params.leaf_points > 1000000)
         throw Error(fmt::format("{}: leaf_points {} out of range (1..1000000)", source,
                                 params.leaf_points));
@@ -110,8 +100,8 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
                                     source, i, points.radii[i]));
         lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
         hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-        maxabs = std::max({maxabs, (double)std::fabs(p.x), (double)std::fabs(p.y),
-                           (double)std::fabs(p.z)});
+        maxabs = std::max(
+            {maxabs, (double)std::fabs(p.x), (double)std::fabs(p.y), (double)std::fabs(p.z)});
     }
 
     Octree t;
@@ -133,8 +123,9 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
             return static_cast<uint64_t>(std::clamp(c, 0.0, double((1u << kMortonBits) - 1)));
         };
         const Vec3 p = points.positions[i];
-        code[i] = spread_bits(q(p.x, t.root_min.x)) | spread_bits(q(p.y, t.root_min.y)) << 1 |
-                  spread_bits(q(p.z, t.root_min.z)) << 2;
+        code[i] = detail::spread_bits(q(p.x, t.root_min.x)) |
+                  detail::spread_bits(q(p.y, t.root_min.y)) << 1 |
+                  detail::spread_bits(q(p.z, t.root_min.z)) << 2;
     });
     order.resize(n);
     std::iota(order.begin(), order.end(), 0u);
@@ -226,10 +217,12 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
         t.for_each_child(nd, [&](int32_t c) {
             const Box& cb = t.boxes[c];
-            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y), std::min(bx.lo.z, cb.lo.z)};
-            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y), std::max(bx.hi.z, cb.hi.z)};
-            r = std::max(r, length(t.spheres[c].center - t.spheres[nd].center) +
-                                t.spheres[c].radius);
+            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y),
+                     std::min(bx.lo.z, cb.lo.z)};
+            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y),
+                     std::max(bx.hi.z, cb.hi.z)};
+            r = std::max(r,
+                         length(t.spheres[c].center - t.spheres[nd].center) + t.spheres[c].radius);
         });
         t.spheres[nd].radius = r * 1.00001f + slack;
         t.boxes[nd] = bx;
@@ -245,8 +238,8 @@ void Octree::pack_walk() {
 }
 
 OctreeView Octree::view() const {
-    return OctreeView{walk.data(), spheres.data(), skip.data(), node_leaf.data(), leaves.data(), num_nodes(),
-                      num_leaves()};
+    return OctreeView{walk.data(),   spheres.data(), skip.data(), node_leaf.data(),
+                      leaves.data(), num_nodes(),    num_leaves()};
 }
 
 int Octree::height() const {
@@ -260,8 +253,10 @@ int32_t Octree::leaf_of_point(uint32_t k) const {
     int32_t lo = 0, hi = num_leaves();
     while (hi - lo > 1) {
         const int32_t mid = (lo + hi) / 2;
-        if (point_begin[leaf_node[mid]] <= k) lo = mid;
-        else hi = mid;
+        if (point_begin[leaf_node[mid]] <= k)
+            lo = mid;
+        else
+            hi = mid;
     }
     return lo;
 }

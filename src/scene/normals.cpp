@@ -20,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "geom/morton.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -422,17 +423,6 @@ void orient(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
     }
 }
 
-// Spreads the low 21 bits of v so that two zero bits follow each.
-uint64_t spread_bits(uint64_t v) {
-    v &= 0x1fffff;
-    v = (v | v << 32) & 0x1f00000000ffffULL;
-    v = (v | v << 16) & 0x1f0000ff0000ffULL;
-    v = (v | v << 8) & 0x100f00f00f00f00fULL;
-    v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
-    v = (v | v << 2) & 0x1249249249249249ULL;
-    return v;
-}
-
 // Point indices in Morton (Z-curve) order. Working on the points in this order keeps
 // neighbours near each other in memory, which is most of the speed of the k-NN queries and of
 // the spanning tree on clouds stored in scan or random order.
@@ -451,8 +441,9 @@ std::vector<uint32_t> spatial_order(const std::vector<Vec3>& pts) {
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& range) {
         for (size_t i = range.begin(); i < range.end(); ++i) {
             const Vec3 p = pts[i];
-            const uint64_t code = spread_bits(cell(p.x, lo.x)) << 2 |
-                                  spread_bits(cell(p.y, lo.y)) << 1 | spread_bits(cell(p.z, lo.z));
+            const uint64_t code = detail::spread_bits(cell(p.x, lo.x)) << 2 |
+                                  detail::spread_bits(cell(p.y, lo.y)) << 1 |
+                                  detail::spread_bits(cell(p.z, lo.z));
             keyed[i] = {code, uint32_t(i)};
         }
     });

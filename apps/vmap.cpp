@@ -3,12 +3,14 @@
 //   vmap info out.vmap                                what a .vmap holds
 //   vmap query out.vmap --pair I J | --from I         visibility from the V-map
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
-#include <CLI/CLI.hpp>
+#include "vmap/vmap.h"
+
 #include <fmt/format.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
+#include <CLI/CLI.hpp>
 #include <algorithm>
 #include <chrono>
 #include <cstdio>
@@ -20,7 +22,6 @@
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
-#include "vmap/vmap.h"
 
 namespace {
 
@@ -95,7 +96,8 @@ int run_build(BuildOptions& o) {
     VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
     const auto ts = std::chrono::steady_clock::now();
     save_vmap(o.output, vm);
-    const double save_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    const double save_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
 
     const auto& w = st.work;
     const int cores = tbb::this_task_arena::max_concurrency();
@@ -107,20 +109,24 @@ int run_build(BuildOptions& o) {
     fmt::print("leaf pairs: {} tested, {} facing ({:.1f}%), {} visible ({:.1f}%)\n", w.pairs,
                w.facing_pairs, 100.0 * w.facing_pairs / std::max<uint64_t>(1, w.pairs),
                w.visible_pairs, 100.0 * w.visible_pairs / std::max<uint64_t>(1, w.pairs));
-    fmt::print("work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
-               double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
-               double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
-    fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(), vm.link_targets.size() * 4);
+    fmt::print(
+        "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
+        double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
+        double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
+    fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
+               vm.link_targets.size() * 4);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
-    fmt::print("time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
-               st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
-    fmt::print("            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
-               "link arrays {:.3f} s; saving {:.3f} s\n",
-               st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
-    fmt::print("throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
-               "backend alone {:.3g} leaf pairs/s ({:.3f} s)\n",
-               pps, pps / cores, cores, w.pairs / std::max(1e-9, st.seconds_backend),
-               st.seconds_backend);
+    fmt::print(
+        "time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
+        st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
+    fmt::print(
+        "            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+        "link arrays {:.3f} s; saving {:.3f} s\n",
+        st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
+    fmt::print(
+        "throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
+        "backend alone {:.3g} leaf pairs/s ({:.3f} s)\n",
+        pps, pps / cores, cores, w.pairs / std::max(1e-9, st.seconds_backend), st.seconds_backend);
     if (st.peak_device_bytes)
         fmt::print("device:     peak {:.1f} MiB\n", st.peak_device_bytes / 1048576.0);
     print_tree_summary(vm);
@@ -143,11 +149,12 @@ int run_query(const std::string& path, const std::vector<uint32_t>& pair,
     VisibilityMap vm = load_vmap(path);
     for (uint32_t id : pair)
         if (id >= vm.points.size())
-            throw Error(fmt::format("{}: --pair: point id {} out of range (the V-map has {} points)",
-                                    path, id, vm.points.size()));
+            throw Error(
+                fmt::format("{}: --pair: point id {} out of range (the V-map has {} points)", path,
+                            id, vm.points.size()));
     if (from && *from >= vm.points.size())
-        throw Error(fmt::format("{}: --from: point id {} out of range (the V-map has {} points)", path,
-                                *from, vm.points.size()));
+        throw Error(fmt::format("{}: --from: point id {} out of range (the V-map has {} points)",
+                                path, *from, vm.points.size()));
     if (!pair.empty()) {
         const PairVisibility v = vm.query(pair[0], pair[1]);
         fmt::print("{} {} {}\n", pair[0], pair[1],
@@ -178,7 +185,8 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.fallthrough();  // global options (--threads) may also follow the subcommand
     int threads = 0;
-    app.add_option("--threads", threads, "CPU threads (default: all cores)")->check(CLI::Range(0, 4096));
+    app.add_option("--threads", threads, "CPU threads (default: all cores)")
+        ->check(CLI::Range(0, 4096));
 
     BuildOptions bo;
     auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
@@ -189,28 +197,39 @@ int main(int argc, char** argv) {
     build->add_option("--points", bo.points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     build->add_option("--seed", bo.seed, "Override the scene's sampling seed");
-    build->add_option("--max-height", bo.max_height,
-                      "Deepest octree level (root = 0); default: the scene's octree.max_height, "
-                      "else 9")
+    build
+        ->add_option("--max-height", bo.max_height,
+                     "Deepest octree level (root = 0); default: the scene's octree.max_height, "
+                     "else 9")
         ->check(CLI::Range(1, 21));
-    build->add_option("--leaf-points", bo.leaf_points,
-                      "Split nodes with more points than this; default: the scene's "
-                      "octree.leaf_points, else 4")
+    build
+        ->add_option("--leaf-points", bo.leaf_points,
+                     "Split nodes with more points than this; default: the scene's "
+                     "octree.leaf_points, else 4")
         ->check(CLI::Range(1, 1000000));
     auto& vp = bo.params.visibility;
     build->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
-        ->check(CLI::Range(1, 1000))->capture_default_str();
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
     build->add_option("--eps", vp.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
-        ->check(CLI::Range(0.0f, 0.49f))->capture_default_str();
+        ->check(CLI::Range(0.0f, 0.49f))
+        ->capture_default_str();
     build->add_option("--facing-tol", vp.facing_tol, "Facing test: n.d > tol |d|")
-        ->check(CLI::Range(0.0f, 0.99f))->capture_default_str();
-    build->add_option("--parallel-tol", vp.parallel_tol, "Occluder planes with |n.d| <= tol |d| are ignored")
-        ->check(CLI::Range(0.0f, 0.99f))->capture_default_str();
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
+    build
+        ->add_option("--parallel-tol", vp.parallel_tol,
+                     "Occluder planes with |n.d| <= tol |d| are ignored")
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
     build->add_option("--backend", bo.params.backend, "auto (GPU when present), cpu or cuda")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))->capture_default_str();
-    build->add_option("--batch-pairs", bo.params.max_batch_pairs,
-                      "Leaf pairs evaluated per batch (bounds memory)")
-        ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))->capture_default_str();
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    build
+        ->add_option("--batch-pairs", bo.params.max_batch_pairs,
+                     "Leaf pairs evaluated per batch (bounds memory)")
+        ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
+        ->capture_default_str();
 
     std::string info_path;
     auto* info = app.add_subcommand("info", "Describe a .vmap file");
@@ -231,16 +250,23 @@ int main(int argc, char** argv) {
         "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
     benchc->add_option("--scene", bo2.scenes,
                        "Scene files (default: cornell-bunny, cornell-dragon, cornell-two-models)");
-    benchc->add_option("--heights", bo2.heights, "Octree heights")->delimiter(',')
+    benchc->add_option("--heights", bo2.heights, "Octree heights")
+        ->delimiter(',')
         ->check(CLI::Range(1, 21));
     benchc->add_option("--leaf-points", bo2.leaf_points, "leaf_points for every run")
-        ->check(CLI::Range(1, 1000000))->capture_default_str();
+        ->check(CLI::Range(1, 1000000))
+        ->capture_default_str();
     benchc->add_option("--runs", bo2.runs, "Timed runs per configuration (median, spread)")
-        ->check(CLI::Range(1, 100))->capture_default_str();
-    benchc->add_option("--backends", bo2.backends, "cpu and/or cuda (default: both when a GPU is present)")
-        ->delimiter(',')->check(CLI::IsMember({"cpu", "cuda"}));
-    benchc->add_option("--cpu-budget", bo2.cpu_budget_s,
-                       "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    benchc
+        ->add_option("--backends", bo2.backends,
+                     "cpu and/or cuda (default: both when a GPU is present)")
+        ->delimiter(',')
+        ->check(CLI::IsMember({"cpu", "cuda"}));
+    benchc
+        ->add_option("--cpu-budget", bo2.cpu_budget_s,
+                     "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
         ->capture_default_str();
     benchc->add_option("--points", bo2.points, "Override every scene's point count");
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");

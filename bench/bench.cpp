@@ -124,8 +124,9 @@ int run(const Options& o) {
 
     std::vector<Row> rows;
     bool warmed = false;
-    const std::string tmp = (std::filesystem::temp_directory_path() /
-                             fmt::format("vmap-bench-{}.vmap", getpid())).string();
+    const std::string tmp =
+        (std::filesystem::temp_directory_path() / fmt::format("vmap-bench-{}.vmap", getpid()))
+            .string();
     for (const std::string& file : o.scenes) {
         Scene sc = load_scene(file);
         if (o.points) sc.points = o.points;
@@ -171,7 +172,8 @@ int run(const Options& o) {
             if (want_cpu) {
                 bp.backend = "cpu";
                 // Estimate first from a sample; run in full only when within the budget.
-                r.cpu_pair_rate = sampled_cpu_rate(pts, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
+                r.cpu_pair_rate =
+                    sampled_cpu_rate(pts, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
                 PointSet copy = pts;
                 std::vector<uint32_t> order;
                 const Octree t = Octree::build(copy, bp.octree, order, "bench");
@@ -222,15 +224,19 @@ int run(const Options& o) {
         device = g->name();
     }
     std::string md;
-    md += fmt::format("vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, commit {}, {}\n\n",
-                      cores, device, o.runs, o.leaf_points, git_commit(), date);
-    md += "| scene | points | height | leaves | leaf pairs | links | CPU s | GPU s | speedup | "
-          "GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s | "
-          "save s | device MiB |\n";
+    md += fmt::format(
+        "vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, commit {}, {}\n\n", cores,
+        device, o.runs, o.leaf_points, git_commit(), date);
+    md +=
+        "| scene | points | height | leaves | leaf pairs | links | CPU s | GPU s | speedup | "
+        "GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s "
+        "| "
+        "save s | device MiB |\n";
     md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     std::string csv =
         "scene,points,height,leaf_points,leaves,leaf_pairs,links,cpu_s,cpu_s_min,cpu_s_max,"
-        "cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,gpu_kernel_s,cpu_pairs_s_core,facing_pairs,"
+        "cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,gpu_kernel_s,cpu_pairs_s_core,facing_"
+        "pairs,"
         "node_tests,occluder_tests,save_s,device_bytes,cpu_threads,device,commit,date\n";
     for (const Row& r : rows) {
         const double gpu_rate = r.gpu_done ? r.pairs / std::max(1e-9, r.gpu.median) : 0;
@@ -238,7 +244,8 @@ int run(const Options& o) {
         const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
         const double kern = stat(r.kernel).median;
         md += fmt::format(
-            "| {} | {} | {} | {} | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | {:.1f} | {} | {} | "
+            "| {} | {} | {} | {} | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | {:.1f} | {} | "
+            "{} | "
             "{} |\n",
             r.scene, r.points, r.height, r.leaves, double(r.pairs), double(r.links),
             fmt_time(r.cpu, r.cpu_done, r.cpu_estimated), fmt_time(r.gpu, r.gpu_done, false),
@@ -249,20 +256,22 @@ int run(const Options& o) {
             r.gpu_done ? fmt::format("{:.3g}", r.work.node_tests / std::max(1e-9, kern)) : "-",
             o.save ? fmt::format("{:.3g}", r.save.median) : "-",
             r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
-        csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
-                           r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.links,
-                           r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated), r.gpu.median,
-                           r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0, kern,
-                           r.cpu_pair_rate / cores, r.work.facing_pairs, r.work.node_tests,
-                           r.work.occluder_tests, r.save.median, r.device_bytes, cores, device,
-                           git_commit(), date);
+        csv += fmt::format(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
+            r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.links, r.cpu.median,
+            r.cpu.lo, r.cpu.hi, int(r.cpu_estimated), r.gpu.median, r.gpu.lo, r.gpu.hi,
+            r.gpu_done ? r.pairs / r.gpu.median : 0, kern, r.cpu_pair_rate / cores,
+            r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests, r.save.median,
+            r.device_bytes, cores, device, git_commit(), date);
     }
-    md += "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "
-          "\"save s\" adds writing the .vmap. \"est.\": CPU leaf-pair rate measured on a sample "
-          "of the matrix (blocks of 8 rows x 32 columns), scaled to all pairs, plus the host work "
-          "of the GPU build. Pairs/s count every "
-          "unordered leaf pair, including those the facing test settles; \"GPU pairs/s\" is end to end (octree, "
-          "visibility, links), \"GPU kernel pairs/s\" the leaf-pair kernel alone (CUDA events).\n";
+    md +=
+        "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "
+        "\"save s\" adds writing the .vmap. \"est.\": CPU leaf-pair rate measured on a sample "
+        "of the matrix (blocks of 8 rows x 32 columns), scaled to all pairs, plus the host work "
+        "of the GPU build. Pairs/s count every "
+        "unordered leaf pair, including those the facing test settles; \"GPU pairs/s\" is end to "
+        "end (octree, "
+        "visibility, links), \"GPU kernel pairs/s\" the leaf-pair kernel alone (CUDA events).\n";
     fmt::print("{}", md);
     if (!o.out_dir.empty()) {
         std::filesystem::create_directories(o.out_dir);

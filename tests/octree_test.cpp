@@ -1,4 +1,6 @@
 // The adaptive octree: structure, statistics and bounds (DESIGN.md "Octree").
+#include "vmap/octree.h"
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 
 #include "test_util.h"
 #include "vmap/error.h"
-#include "vmap/octree.h"
 
 namespace vmap {
 namespace {
@@ -126,7 +127,8 @@ void check_boxes(const Octree& t, const PointSet& ps) {
             const Vec3 v = cross(nr, u);
             for (int k = 0; k < 64; ++k) {
                 const float a = 6.2831853f * k / 64;
-                const Vec3 q = d.centroid + (u * std::cos(a) + v * std::sin(a)) * (d.delta * 0.999f);
+                const Vec3 q =
+                    d.centroid + (u * std::cos(a) + v * std::sin(a)) * (d.delta * 0.999f);
                 ASSERT_TRUE(inside(b, q)) << "leaf node " << n << " disc point " << k;
             }
         } else {

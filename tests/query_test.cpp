@@ -12,8 +12,9 @@ namespace {
 class QueryTest : public ::testing::Test {
   protected:
     static void SetUpTestSuite() {
-        vm_ = new VisibilityMap(build_vmap(
-            test::sample(test::oracle_path("room-with-block.json"), 3000, 2), test::cpu_params(7, 3)));
+        vm_ = new VisibilityMap(
+            build_vmap(test::sample(test::oracle_path("room-with-block.json"), 3000, 2),
+                       test::cpu_params(7, 3)));
         m_ = new std::vector<uint8_t>(test::brute_matrix(*vm_));
     }
     static void TearDownTestSuite() {

@@ -42,8 +42,8 @@ inline std::vector<uint8_t> brute_matrix(const VisibilityMap& vm) {
     std::vector<uint8_t> m(size_t(L) * L, 0);
     for (int32_t a = 0; a < L; ++a)
         for (int32_t b = a + 1; b < L; ++b) {
-            const bool vis =
-                detail::leaf_pair_visible<false>(v, a, b, vm.visibility_params, static_cast<WorkCounters*>(nullptr));
+            const bool vis = detail::leaf_pair_visible<false>(v, a, b, vm.visibility_params,
+                                                              static_cast<WorkCounters*>(nullptr));
             m[size_t(a) * L + b] = m[size_t(b) * L + a] = vis;
         }
     return m;

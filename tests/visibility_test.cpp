@@ -95,7 +95,8 @@ TEST(Facing, BothNormalsMustFaceTheOther) {
 }
 
 // The traversal (sphere pruning, early exit at K) against testing every leaf.
-bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b, const VisibilityParams& vp) {
+bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
+                             const VisibilityParams& vp) {
     const LeafDisc la = t.leaves[a], lb = t.leaves[b];
     const Vec3 d = lb.centroid - la.centroid;
     const float len = sqrtf(length2(d));

@@ -53,11 +53,11 @@ inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no
 
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {
-    const WalkNode* walk = nullptr;     // per node
-    const Sphere* spheres = nullptr;    // per node
-    const int32_t* skip = nullptr;      // per node: end of its subtree
-    const int32_t* node_leaf = nullptr; // per node: leaf index, or -1 for internal nodes
-    const LeafDisc* leaves = nullptr;   // per leaf
+    const WalkNode* walk = nullptr;      // per node
+    const Sphere* spheres = nullptr;     // per node
+    const int32_t* skip = nullptr;       // per node: end of its subtree
+    const int32_t* node_leaf = nullptr;  // per node: leaf index, or -1 for internal nodes
+    const LeafDisc* leaves = nullptr;    // per leaf
     int32_t num_nodes = 0;
     int32_t num_leaves = 0;
 };
@@ -68,8 +68,8 @@ class Octree {
     // `points` into octree order. `order[k]` is then the input index of the k-th point.
     // Throws vmap::Error for an empty cloud, non-finite coordinates or normals, zero normals,
     // or parameters out of range, naming `source`.
-    static Octree build(PointSet& points, const OctreeParams& params,
-                        std::vector<uint32_t>& order, const std::string& source = "points");
+    static Octree build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
+                        const std::string& source = "points");
 
     OctreeView view() const;
     // Derives the packed walk array from boxes, skip and node_leaf (build and load call it).
@@ -94,8 +94,8 @@ class Octree {
     Vec3 root_min;  // corner of the root cube
     float root_size = 0;
     std::vector<Sphere> spheres;
-    std::vector<Box> boxes;  // tight content bounds (points and discs), grown for rounding
-    std::vector<WalkNode> walk;  // derived: boxes + skip + node_leaf, packed for the walk
+    std::vector<Box> boxes;        // tight content bounds (points and discs), grown for rounding
+    std::vector<WalkNode> walk;    // derived: boxes + skip + node_leaf, packed for the walk
     std::vector<float> half_size;  // half the cell edge
     std::vector<int32_t> skip;
     std::vector<int32_t> parent;  // -1 for the root

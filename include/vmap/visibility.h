@@ -6,10 +6,10 @@
 namespace vmap {
 
 struct VisibilityParams {
-    int K = 2;                  // actual occluders that make a pair invisible (>= 1)
-    float eps = 0.01f;          // an occluder's plane must cut the segment at t in (eps, 1-eps)
-    float facing_tol = 0.01f;   // facing: n_a . d > facing_tol |d| (cosine of the angle to 90°)
-    float parallel_tol = 1e-3f; // a plane with |n . d| <= parallel_tol |d| is parallel to pq
+    int K = 2;                   // actual occluders that make a pair invisible (>= 1)
+    float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
+    float facing_tol = 0.01f;    // facing: n_a . d > facing_tol |d| (cosine of the angle to 90°)
+    float parallel_tol = 1e-3f;  // a plane with |n . d| <= parallel_tol |d| is parallel to pq
 };
 
 // Work counted while resolving leaf pairs.
@@ -17,7 +17,7 @@ struct WorkCounters {
     uint64_t pairs = 0;         // unordered leaf pairs resolved
     uint64_t facing_pairs = 0;  // pairs that passed the facing test (needed a traversal)
     uint64_t visible_pairs = 0;
-    uint64_t node_tests = 0;    // segment-sphere tests
+    uint64_t node_tests = 0;      // segment-sphere tests
     uint64_t occluder_tests = 0;  // tangent-plane tests on potential occluders
 
     WorkCounters& operator+=(const WorkCounters& o) {

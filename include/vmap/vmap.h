@@ -16,15 +16,15 @@ namespace vmap {
 struct BuildParams {
     OctreeParams octree;
     VisibilityParams visibility;
-    std::string backend = "auto";        // auto | cpu | cuda
+    std::string backend = "auto";           // auto | cpu | cuda
     uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
-    bool progress = false;               // progress bar on stderr (callers pass isatty(2))
+    bool progress = false;                  // progress bar on stderr (callers pass isatty(2))
 };
 
 struct BuildStats {
     WorkCounters work;
-    std::string backend;       // which backend ran, in words
-    std::string note;          // e.g. why the requested backend was not used
+    std::string backend;  // which backend ran, in words
+    std::string note;     // e.g. why the requested backend was not used
     double seconds_octree = 0;
     double seconds_visibility = 0;  // leaf pairs and link extraction
     double seconds_total = 0;
@@ -44,9 +44,9 @@ class VisibilityMap {
   public:
     OctreeParams octree_params;
     VisibilityParams visibility_params;
-    PointSet points;               // in octree order (normals, colours (albedo), radii)
-    std::vector<uint32_t> order;   // octree position -> input index
-    std::vector<uint32_t> inverse; // input index -> octree position
+    PointSet points;                // in octree order (normals, colours (albedo), radii)
+    std::vector<uint32_t> order;    // octree position -> input index
+    std::vector<uint32_t> inverse;  // input index -> octree position
     Octree octree;
     std::vector<uint32_t> link_offsets;  // per node + 1: node n's links are
     std::vector<int32_t> link_targets;   // link_targets[link_offsets[n] .. link_offsets[n+1]),

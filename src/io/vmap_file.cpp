@@ -12,6 +12,8 @@
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...)
 //     LINK: u32 offsets[nodes + 1] | i32 targets[offsets[nodes]]
+#include "io/vmap_file.h"
+
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
@@ -20,7 +22,6 @@
 #include <fstream>
 #include <type_traits>
 
-#include "io/vmap_file.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -143,8 +144,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
     w.put(n);
-    const uint8_t mask = (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) |
-                         (ps.emission.empty() ? 0 : 4);
+    const uint8_t mask =
+        (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) | (ps.emission.empty() ? 0 : 4);
     w.put(mask);
     w.vec(ps.positions);
     w.vec(ps.normals);
@@ -160,7 +161,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.put(int32_t(t.num_leaves()));
     w.put(t.root_min);
     w.put(t.root_size);
-    w.vec(t.spheres), w.vec(t.boxes), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent), w.vec(t.level);
+    w.vec(t.spheres), w.vec(t.boxes), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent),
+        w.vec(t.level);
     w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
     w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
     w.end(s);
@@ -204,8 +206,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
 
 VisibilityMap load_vmap(const std::string& path) {
     std::error_code ec;
-    if (!std::filesystem::exists(path, ec))
-        throw Error(fmt::format("{}: no such file", path));
+    if (!std::filesystem::exists(path, ec)) throw Error(fmt::format("{}: no such file", path));
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
     std::ifstream in(path, std::ios::binary | std::ios::ate);
@@ -227,8 +228,8 @@ VisibilityMap load_vmap(const std::string& path) {
         throw Error(fmt::format("{}: header: version {} not supported (this vmap reads version {})",
                                 path, version, kVersion));
     if (payload != size - kHeader)
-        throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}", path,
-                                payload, size - kHeader));
+        throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}",
+                                path, payload, size - kHeader));
     if (detail::payload_hash(data.data() + kHeader, payload) != sum)
         throw Error(fmt::format("{}: checksum mismatch: the file is corrupt", path));
 
@@ -239,7 +240,8 @@ VisibilityMap load_vmap(const std::string& path) {
         char got[4];
         if (size_t(r.end - r.p) < 12) r.fail("missing");
         std::memcpy(got, r.p, 4);
-        if (std::memcmp(got, tag, 4) != 0) r.fail(fmt::format("expected here, found '{}'", std::string(got, 4)));
+        if (std::memcmp(got, tag, 4) != 0)
+            r.fail(fmt::format("expected here, found '{}'", std::string(got, 4)));
         r.p += 4;
         const uint64_t len = r.get<uint64_t>();
         if (len > uint64_t(r.end - r.p)) r.fail("truncated");
@@ -285,7 +287,8 @@ VisibilityMap load_vmap(const std::string& path) {
     t.params = vm.octree_params;
     t.root_min = r.get<Vec3>();
     t.root_size = r.get<float>();
-    r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn), r.vec(t.parent, nn);
+    r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn),
+        r.vec(t.parent, nn);
     r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
     r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
     r.vec(t.leaf_splat, nl);

@@ -40,7 +40,8 @@ PointSet sample_scene(const Scene& scene) {
         for (const auto& t : m.triangles) {
             const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
             const Vec3 x = cross(b - a, c - a);
-            const double ar = 0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
+            const double ar =
+                0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
             if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
             tris.push_back({s, a, b, c, x / float(2 * ar)});
             area += ar;
@@ -59,7 +60,8 @@ PointSet sample_scene(const Scene& scene) {
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
     tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) {
-        const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1), r2 = mix(seed + 3 * i + 2);
+        const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
+                       r2 = mix(seed + 3 * i + 2);
         const double pick = u01(r0) * area;
         size_t k = std::upper_bound(cdf.begin(), cdf.end(), pick) - cdf.begin();
         k = std::min(k, tris.size() - 1);
@@ -81,9 +83,13 @@ namespace {
 struct CloudAdaptor {
     const std::vector<Vec3>& p;
     size_t kdtree_get_point_count() const { return p.size(); }
-    float kdtree_get_pt(size_t i, size_t d) const { return d == 0 ? p[i].x : d == 1 ? p[i].y : p[i].z; }
+    float kdtree_get_pt(size_t i, size_t d) const {
+        return d == 0 ? p[i].x : d == 1 ? p[i].y : p[i].z;
+    }
     template <class B>
-    bool kdtree_get_bbox(B&) const { return false; }
+    bool kdtree_get_bbox(B&) const {
+        return false;
+    }
 };
 }  // namespace
 
@@ -96,8 +102,9 @@ PointSet load_point_cloud(const std::string& path) {
     if (!ps.has_radii()) {
         // Splat radius from the local spacing: the disc that holds k neighbours' share of area,
         // r = d_k / sqrt(k) for d_k the distance to the k-th nearest neighbour.
-        using Tree = nanoflann::KDTreeSingleIndexAdaptor<
-            nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>, CloudAdaptor, 3, uint32_t>;
+        using Tree =
+            nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>,
+                                                CloudAdaptor, 3, uint32_t>;
         CloudAdaptor ad{ps.positions};
         Tree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
         tree.buildIndex();

@@ -1,4 +1,6 @@
 // Scene files: parsing, the Cornell room, placing meshes (DESIGN.md "Scenes").
+#include "vmap/scene.h"
+
 #include <fmt/format.h>
 
 #include <cmath>
@@ -8,7 +10,6 @@
 
 #include "vmap/error.h"
 #include "vmap/io.h"
-#include "vmap/scene.h"
 
 namespace vmap {
 namespace {
@@ -30,7 +31,8 @@ struct Ctx {
     }
     Vec3 vec3(const json& j, const std::string& field, double lo, double hi) const {
         if (!j.is_array() || j.size() != 3) fail(field, "expected an array of 3 numbers");
-        return {float(number(j[0], field + "[0]", lo, hi)), float(number(j[1], field + "[1]", lo, hi)),
+        return {float(number(j[0], field + "[0]", lo, hi)),
+                float(number(j[1], field + "[1]", lo, hi)),
                 float(number(j[2], field + "[2]", lo, hi))};
     }
     void known(const json& obj, const std::string& field,
@@ -76,7 +78,9 @@ double signed_volume(const Mesh& m) {
 
 }  // namespace
 
-std::string default_scene_path() { return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json"; }
+std::string default_scene_path() {
+    return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json";
+}
 
 Scene load_scene(const std::string& path) {
     Ctx cx{path};
@@ -88,8 +92,8 @@ Scene load_scene(const std::string& path) {
     } catch (const json::parse_error& e) {
         throw Error(fmt::format("{}: not valid JSON: {}", path, e.what()));
     }
-    cx.known(j, "", {"name", "description", "room", "light", "meshes", "sampling", "octree",
-                     "camera"});
+    cx.known(j, "",
+             {"name", "description", "room", "light", "meshes", "sampling", "octree", "camera"});
     Scene sc;
     sc.path = path;
     sc.name = j.value("name", fs::path(path).stem().string());
@@ -111,8 +115,18 @@ Scene load_scene(const std::string& path) {
         {"floor", {0, 0, 0}, {0, 0, D}, {W, 0, D}, {W, 0, 0}, albedo("floor", white)},
         {"ceiling", {0, H, 0}, {W, H, 0}, {W, H, D}, {0, H, D}, albedo("ceiling", white)},
         {"back", {0, 0, D}, {0, H, D}, {W, H, D}, {W, 0, D}, albedo("back", white)},
-        {"left", {W, 0, 0}, {W, 0, D}, {W, H, D}, {W, H, 0}, albedo("left", {0.63f, 0.065f, 0.05f})},
-        {"right", {0, 0, 0}, {0, H, 0}, {0, H, D}, {0, 0, D}, albedo("right", {0.14f, 0.45f, 0.091f})},
+        {"left",
+         {W, 0, 0},
+         {W, 0, D},
+         {W, H, D},
+         {W, H, 0},
+         albedo("left", {0.63f, 0.065f, 0.05f})},
+        {"right",
+         {0, 0, 0},
+         {0, H, 0},
+         {0, H, D},
+         {0, 0, D},
+         albedo("right", {0.14f, 0.45f, 0.091f})},
     };
     for (const Wall& w : walls) {
         SceneSurface s;
@@ -142,8 +156,9 @@ Scene load_scene(const std::string& path) {
         SceneSurface s;
         s.name = "light";
         s.albedo = {0.78f, 0.78f, 0.78f};
-        s.emission = light.contains("emission") ? cx.vec3(light["emission"], "light.emission", 0, 1e6)
-                                                : Vec3{17.f, 12.f, 4.f};
+        s.emission = light.contains("emission")
+                         ? cx.vec3(light["emission"], "light.emission", 0, 1e6)
+                         : Vec3{17.f, 12.f, 4.f};
         const float y = H * 0.999f;  // a hair below the ceiling, so the two never coincide
         const float x0 = lx - sx / 2, x1 = lx + sx / 2, z0 = lz - sz / 2, z1 = lz + sz / 2;
         add_quad(s, {x0, y, z0}, {x1, y, z0}, {x1, y, z1}, {x0, y, z1});
@@ -157,14 +172,15 @@ Scene load_scene(const std::string& path) {
     for (size_t i = 0; i < meshes.size(); ++i) {
         const std::string f = fmt::format("meshes[{}]", i);
         const json& m = meshes[i];
-        cx.known(m, f, {"file", "name", "size", "scale", "rotate", "position", "albedo",
-                        "flip_normals"});
+        cx.known(m, f,
+                 {"file", "name", "size", "scale", "rotate", "position", "albedo", "flip_normals"});
         if (!m.contains("file") || !m["file"].is_string()) cx.fail(f + ".file", "missing");
         const std::string rel = m["file"].get<std::string>();
         const fs::path file = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
         if (!fs::exists(file))
             cx.fail(f + ".file", fmt::format("{}: no such file (scripts/fetch-models.sh fetches "
-                                             "the models)", file.string()));
+                                             "the models)",
+                                             file.string()));
         ModelData md;
         try {
             md = read_model(file.string());
@@ -186,13 +202,14 @@ Scene load_scene(const std::string& path) {
         const Vec3 mid = (lo + hi) * 0.5f;
         const float ext = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
         if (!(ext > 0) || !std::isfinite(ext))
-            cx.fail(f + ".file", file.string() + ": the mesh has zero extent (all vertices coincide)");
+            cx.fail(f + ".file",
+                    file.string() + ": the mesh has zero extent (all vertices coincide)");
         float scale = 1;
         if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
         if (m.contains("size")) scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
         if (m.contains("scale")) scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
-        const Vec3 rot = m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600)
-                                              : Vec3{};
+        const Vec3 rot =
+            m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
         const Vec3 pos = m.contains("position") ? cx.vec3(m["position"], f + ".position", -1e6, 1e6)
                                                 : Vec3{W / 2, 0, D / 2};
         for (Vec3& v : s.mesh.vertices) v = rotate((v - mid) * scale, rot);
@@ -231,13 +248,15 @@ Scene load_scene(const std::string& path) {
         if (n > 5e7) cx.fail("sampling.density", fmt::format("gives {} points (at most 5e7)", n));
         sc.points = uint64_t(std::max(1.0, n));
     }
-    if (sampling.contains("seed")) sc.seed = uint64_t(cx.number(sampling["seed"], "sampling.seed", 0, 1e15));
+    if (sampling.contains("seed"))
+        sc.seed = uint64_t(cx.number(sampling["seed"], "sampling.seed", 0, 1e15));
 
     if (j.contains("octree")) {
         const json& o = j["octree"];
         cx.known(o, "octree", {"max_height", "leaf_points"});
         OctreeParams op;
-        if (o.contains("max_height")) op.max_height = int(cx.number(o["max_height"], "octree.max_height", 1, 21));
+        if (o.contains("max_height"))
+            op.max_height = int(cx.number(o["max_height"], "octree.max_height", 1, 21));
         if (o.contains("leaf_points"))
             op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
         sc.octree = op;

@@ -1,7 +1,8 @@
 // Backend selection: --backend auto|cpu|cuda.
+#include "visibility/backend.h"
+
 #include <fmt/format.h>
 
-#include "visibility/backend.h"
 #include "vmap/error.h"
 
 namespace vmap::detail {

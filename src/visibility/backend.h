@@ -28,7 +28,7 @@ inline uint64_t job_words(const PairJob& j) { return j.rows * row_words(j.cols);
 class Backend {
   public:
     virtual ~Backend() = default;
-    virtual std::string name() const = 0;       // "cpu (16 threads)", "cuda (NVIDIA H100 ...)"
+    virtual std::string name() const = 0;  // "cpu (16 threads)", "cuda (NVIDIA H100 ...)"
     // Called once per build, before any batch.
     virtual void prepare(const Octree& tree, const VisibilityParams& vp,
                          uint64_t max_batch_words) = 0;

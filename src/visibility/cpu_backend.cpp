@@ -36,8 +36,8 @@ class CpuBackend final : public Backend {
         tbb::parallel_for(
             tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
                 WorkCounters& wc = counters.local();
-                size_t j = std::upper_bound(first.begin(), first.end(), range.begin()) -
-                           first.begin() - 1;
+                size_t j =
+                    std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
                 for (uint64_t item = range.begin(); item < range.end(); ++item) {
                     while (item >= first[j + 1]) ++j;
                     const PairJob& job = jobs[j];

@@ -153,12 +153,13 @@ VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
         const int32_t l = w.leaf;
         if (l >= 0 && l != a && l != b) {
             if (kCount) wc->occluder_tests++;
-            if (is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K)
-                return false;
+            if (is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K) return false;
         }
         ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
-        if (kPrefetch) w = next;
-        else if (n < t.num_nodes) w = load_walk(t.walk + n);
+        if (kPrefetch)
+            w = next;
+        else if (n < t.num_nodes)
+            w = load_walk(t.walk + n);
     }
     return true;
 }

@@ -47,7 +47,8 @@ struct Planner {
     std::vector<PairJob> jobs;
 
     uint64_t area(int32_t a, int32_t b) const {
-        return uint64_t(t.leaf_end[a] - t.leaf_begin[a]) * uint64_t(t.leaf_end[b] - t.leaf_begin[b]);
+        return uint64_t(t.leaf_end[a] - t.leaf_begin[a]) *
+               uint64_t(t.leaf_end[b] - t.leaf_begin[b]);
     }
 
     int32_t expand(int32_t a, int32_t b) {
@@ -118,9 +119,8 @@ struct Extractor {
         }
         const bool la = t.is_leaf(a), lb = t.is_leaf(b);
         if (!la && !lb) {
-            t.for_each_child(a, [&](int32_t ca) {
-                t.for_each_child(b, [&](int32_t cb) { resolve(ca, cb); });
-            });
+            t.for_each_child(
+                a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { resolve(ca, cb); }); });
         } else if (la) {
             t.for_each_child(b, [&](int32_t cb) { resolve(a, cb); });
         } else {
@@ -161,10 +161,13 @@ void set_links_from(VisibilityMap& vm, const std::vector<std::span<const Link>>&
         }
         ends += mine;
     });
-    if (bad) throw Error(fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn));
+    if (bad)
+        throw Error(fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn));
     if (ends.load() > UINT32_MAX)
-        throw Error(fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
-                                "(a larger --leaf-points or a smaller --max-height)", ends.load()));
+        throw Error(
+            fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
+                        "(a larger --leaf-points or a smaller --max-height)",
+                        ends.load()));
     for (int32_t n = 0; n < nn; ++n) deg[n + 1] += deg[n];
     vm.link_offsets = deg;
     vm.link_targets.assign(deg.back(), 0);
@@ -177,7 +180,8 @@ void set_links_from(VisibilityMap& vm, const std::vector<std::span<const Link>>&
             out[std::atomic_ref<uint32_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
         }
     });
-    tbb::parallel_for(int32_t(0), nn, [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
+    tbb::parallel_for(int32_t(0), nn,
+                      [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
 }
 
 }  // namespace
@@ -190,14 +194,16 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
                          const std::string& source) {
     const auto t0 = Clock::now();
     const VisibilityParams& vp = params.visibility;
-    if (vp.K < 1 || vp.K > 1000) throw Error(fmt::format("{}: K {} out of range (1..1000)", source, vp.K));
+    if (vp.K < 1 || vp.K > 1000)
+        throw Error(fmt::format("{}: K {} out of range (1..1000)", source, vp.K));
     if (!(vp.eps >= 0 && vp.eps < 0.5f))
         throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", source, vp.eps));
     if (!(vp.facing_tol >= 0 && vp.facing_tol < 1))
-        throw Error(fmt::format("{}: facing tolerance {} out of range [0, 1)", source, vp.facing_tol));
+        throw Error(
+            fmt::format("{}: facing tolerance {} out of range [0, 1)", source, vp.facing_tol));
     if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
-        throw Error(fmt::format("{}: parallel tolerance {} out of range [0, 1)", source,
-                                vp.parallel_tol));
+        throw Error(
+            fmt::format("{}: parallel tolerance {} out of range [0, 1)", source, vp.parallel_tol));
     if (params.max_batch_pairs < 1024)
         throw Error(fmt::format("{}: batch of {} pairs is too small (>= 1024)", source,
                                 params.max_batch_pairs));
@@ -232,7 +238,8 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     // Words per batch: a batch's rows are padded to 32 bits, so allow for that.
     const uint64_t max_words = params.max_batch_pairs / 32 + 1;
     uint64_t max_job_words = 0;
-    for (const PairJob& j : plan.jobs) max_job_words = std::max(max_job_words, detail::job_words(j));
+    for (const PairJob& j : plan.jobs)
+        max_job_words = std::max(max_job_words, detail::job_words(j));
     const uint64_t batch_words = std::max(max_words, max_job_words);
     backend->prepare(t, vp, batch_words);
 
@@ -315,15 +322,18 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         if (full[e] >= 0) return full[e];
         const Entry& en = plan.entries[e];
         bool f = true;
-        if (en.job >= 0) f = job_full[en.job];
+        if (en.job >= 0)
+            f = job_full[en.job];
         else
-            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) f = self(self, plan.kids[k]) && f;
+            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k)
+                f = self(self, plan.kids[k]) && f;
         full[e] = f;
         return f;
     };
     auto drop = [&](auto&& self, int32_t e) -> void {
         const Entry& en = plan.entries[e];
-        if (en.job >= 0) pieces[job_piece[en.job]][job_pos[en.job]] = kDropped;
+        if (en.job >= 0)
+            pieces[job_piece[en.job]][job_pos[en.job]] = kDropped;
         else
             for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
     };

@@ -6,23 +6,23 @@
 // the 32 answers and lane 0 stores the word. Neighbouring lanes walk nearly the same segment, so
 // their traversals diverge little.
 #include <cuda_runtime.h>
-#include <string>
 
 #include <algorithm>
 #include <cstdlib>
+#include <string>
 #include <vector>
 
 #include "visibility/backend.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
 
-#define VMAP_CUDA_CHECK(call)                                                                   \
-    do {                                                                                        \
-        cudaError_t err_ = (call);                                                              \
-        if (err_ != cudaSuccess)                                                                \
-            throw ::vmap::Error(std::string("CUDA error: ") + #call + " failed: " +             \
-                                cudaGetErrorString(err_) + " (" + __FILE__ + ":" +              \
-                                std::to_string(__LINE__) + ")");                                \
+#define VMAP_CUDA_CHECK(call)                                                                    \
+    do {                                                                                         \
+        cudaError_t err_ = (call);                                                               \
+        if (err_ != cudaSuccess)                                                                 \
+            throw ::vmap::Error(std::string("CUDA error: ") + #call +                            \
+                                " failed: " + cudaGetErrorString(err_) + " (" + __FILE__ + ":" + \
+                                std::to_string(__LINE__) + ")");                                 \
     } while (0)
 
 namespace vmap::detail {
@@ -53,8 +53,10 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
         int32_t lo = 0, hi = num_jobs;
         while (hi - lo > 1) {
             const int32_t mid = (lo + hi) >> 1;
-            if (first[mid] <= item) lo = mid;
-            else hi = mid;
+            if (first[mid] <= item)
+                lo = mid;
+            else
+                hi = mid;
         }
         const PairJob job = jobs[lo];
         const uint64_t rw = (uint64_t(job.cols) + 31) / 32;
@@ -168,8 +170,8 @@ class CudaBackend final : public Backend {
         node_leaf_.upload(tree.node_leaf.data(), tree.node_leaf.size(), s, held_, peak_);
         leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
-        view_ = OctreeView{walk_.ptr, spheres_.ptr, skip_.ptr, node_leaf_.ptr, leaves_.ptr, tree.num_nodes(),
-                           tree.num_leaves()};
+        view_ = OctreeView{walk_.ptr,   spheres_.ptr,     skip_.ptr,        node_leaf_.ptr,
+                           leaves_.ptr, tree.num_nodes(), tree.num_leaves()};
     }
 
     void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
@@ -180,7 +182,8 @@ class CudaBackend final : public Backend {
         sl.h_first.reserve(nj + 1);
         std::copy(jobs.begin(), jobs.end(), sl.h_jobs.ptr);
         sl.h_first.ptr[0] = 0;
-        for (size_t i = 0; i < nj; ++i) sl.h_first.ptr[i + 1] = sl.h_first.ptr[i] + job_words(jobs[i]);
+        for (size_t i = 0; i < nj; ++i)
+            sl.h_first.ptr[i + 1] = sl.h_first.ptr[i] + job_words(jobs[i]);
         const uint64_t items = sl.h_first.ptr[nj];
         sl.d_jobs.upload(sl.h_jobs.ptr, nj, sl.stream, held_, peak_);
         sl.d_first.upload(sl.h_first.ptr, nj + 1, sl.stream, held_, peak_);
@@ -193,7 +196,8 @@ class CudaBackend final : public Backend {
         if (items > 0) {
             const int threads = kWarpsPerBlock * 32;
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
-            const int blocks = int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
+            const int blocks =
+                int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
             // VMAP_CUDA_VARIANT selects a kernel variant for A/B timing (same answers):
             // "prefetch" (successor loads ahead), "occ5"/"occ6" (register caps for occupancy).
             auto launch = [&](auto kernel) {
@@ -201,17 +205,21 @@ class CudaBackend final : public Backend {
                                                           int32_t(nj), items, sl.d_bits.ptr,
                                                           sl.d_counters.ptr);
             };
-            if (variant_ == "prefetch") launch(leaf_pairs_kernel<true, 1>);
-            else if (variant_ == "occ5") launch(leaf_pairs_kernel<false, 5>);
-            else if (variant_ == "occ6") launch(leaf_pairs_kernel<false, 6>);
-            else launch(leaf_pairs_kernel<false, 1>);
+            if (variant_ == "prefetch")
+                launch(leaf_pairs_kernel<true, 1>);
+            else if (variant_ == "occ5")
+                launch(leaf_pairs_kernel<false, 5>);
+            else if (variant_ == "occ6")
+                launch(leaf_pairs_kernel<false, 6>);
+            else
+                launch(leaf_pairs_kernel<false, 1>);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));
         VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_bits.ptr, sl.d_bits.ptr, words * sizeof(uint32_t),
                                         cudaMemcpyDeviceToHost, sl.stream));
-        VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_counters.ptr, sl.d_counters.ptr, sizeof(DeviceCounters),
-                                        cudaMemcpyDeviceToHost, sl.stream));
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(sl.h_counters.ptr, sl.d_counters.ptr,
+                                        sizeof(DeviceCounters), cudaMemcpyDeviceToHost, sl.stream));
         VMAP_CUDA_CHECK(cudaEventRecord(sl.done, sl.stream));
     }
 

@@ -136,58 +136,86 @@ namespace {
 constexpr Link kDropped{-1, -1};  // a link replaced by one at its parents' level
 
 // Both-direction compact arrays from pieces of links, in parallel: count ends per node
-// (relaxed atomics), scatter, then sort each node's targets (so the result does not depend on
-// the scatter order).
-void set_links_from(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
-    const int32_t nn = vm.octree.num_nodes();
-    std::vector<std::span<const Link>> tasks;
-    for (auto sp : pieces)
-        for (size_t i = 0; i < sp.size(); i += (1u << 20))
-            tasks.push_back(sp.subspan(i, std::min<size_t>(1u << 20, sp.size() - i)));
-    std::vector<uint32_t> deg(size_t(nn) + 1, 0);
-    std::atomic<bool> bad{false};
-    std::atomic<uint64_t> ends{0};
-    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
-        uint64_t mine = 0;
-        for (auto [a, b] : tasks[k]) {
-            if (a == kDropped.first) continue;
-            if (a < 0 || b < 0 || a >= nn || b >= nn || a == b) {
-                bad = true;
-                return;
+// (relaxed atomics; the builder counts each batch's links while the backend works on the next),
+// then scatter, then sort each node's targets (so the result does not depend on the order).
+class LinkArrays {
+  public:
+    explicit LinkArrays(int32_t nodes) : nn_(nodes), deg_(size_t(nodes) + 1, 0) {}
+
+    void count(const std::vector<std::span<const Link>>& pieces) {
+        const auto tasks = split(pieces);
+        std::atomic<bool> bad{false};
+        tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+            uint64_t mine = 0;
+            for (auto [a, b] : tasks[k]) {
+                if (a == kDropped.first) continue;
+                if (a < 0 || b < 0 || a >= nn_ || b >= nn_ || a == b) {
+                    bad = true;
+                    return;
+                }
+                std::atomic_ref<uint32_t>(deg_[a + 1]).fetch_add(1, std::memory_order_relaxed);
+                std::atomic_ref<uint32_t>(deg_[b + 1]).fetch_add(1, std::memory_order_relaxed);
+                mine += 2;
             }
-            std::atomic_ref<uint32_t>(deg[a + 1]).fetch_add(1, std::memory_order_relaxed);
-            std::atomic_ref<uint32_t>(deg[b + 1]).fetch_add(1, std::memory_order_relaxed);
-            mine += 2;
-        }
-        ends += mine;
-    });
-    if (bad)
-        throw Error(fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn));
-    if (ends.load() > UINT32_MAX)
-        throw Error(
-            fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
-                        "(a larger --leaf-points or a smaller --max-height)",
-                        ends.load()));
-    for (int32_t n = 0; n < nn; ++n) deg[n + 1] += deg[n];
-    vm.link_offsets = deg;
-    vm.link_targets.assign(deg.back(), 0);
-    std::vector<uint32_t> fill(deg.begin(), deg.end() - 1);
-    int32_t* out = vm.link_targets.data();
-    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
-        for (auto [a, b] : tasks[k]) {
-            if (a == kDropped.first) continue;
-            out[std::atomic_ref<uint32_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
-            out[std::atomic_ref<uint32_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
-        }
-    });
-    tbb::parallel_for(int32_t(0), nn,
-                      [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
-}
+            ends_ += mine;
+        });
+        if (bad)
+            throw Error(
+                fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn_));
+    }
+    // A counted link that is being replaced (by one at its parents' level).
+    void uncount(Link l) {
+        deg_[l.first + 1]--, deg_[l.second + 1]--;
+        ends_ -= 2;
+    }
+
+    void finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
+        if (ends_.load() > UINT32_MAX)
+            throw Error(
+                fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
+                            "(a larger --leaf-points or a smaller --max-height)",
+                            ends_.load()));
+        std::vector<uint32_t>& deg = deg_;
+        for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
+        vm.link_offsets = deg;
+        vm.link_targets.assign(deg.back(), 0);
+        std::vector<uint32_t> fill(deg.begin(), deg.end() - 1);
+        int32_t* out = vm.link_targets.data();
+        const auto tasks = split(pieces);
+        tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+            for (auto [a, b] : tasks[k]) {
+                if (a == kDropped.first) continue;
+                out[std::atomic_ref<uint32_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] =
+                    b;
+                out[std::atomic_ref<uint32_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] =
+                    a;
+            }
+        });
+        tbb::parallel_for(int32_t(0), nn_,
+                          [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
+    }
+
+  private:
+    static std::vector<std::span<const Link>> split(
+        const std::vector<std::span<const Link>>& pieces) {
+        std::vector<std::span<const Link>> tasks;
+        for (auto sp : pieces)
+            for (size_t i = 0; i < sp.size(); i += (1u << 20))
+                tasks.push_back(sp.subspan(i, std::min<size_t>(1u << 20, sp.size() - i)));
+        return tasks;
+    }
+    int32_t nn_;
+    std::vector<uint32_t> deg_;
+    std::atomic<uint64_t> ends_{0};
+};
 
 }  // namespace
 
 void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs) {
-    set_links_from(vm, {std::span<const Link>(pairs)});
+    LinkArrays la(vm.octree.num_nodes());
+    const std::vector<std::span<const Link>> one{std::span<const Link>(pairs)};
+    la.count(one);
+    la.finish(vm, one);
 }
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
@@ -264,6 +292,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     // Links stay in the pieces the extraction wrote them to (no copies); per job: where its
     // links start, how many, and whether its pair is fully visible (then its one link is itself).
     std::vector<std::vector<Link>> pieces;
+    LinkArrays arrays(t.num_nodes());
     std::vector<uint32_t> job_piece(plan.jobs.size()), job_pos(plan.jobs.size());
     std::vector<uint8_t> job_full(plan.jobs.size(), 0);
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
@@ -305,6 +334,12 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
                 job_full[j] = out.size() - before == 1 && out.back() == Link{job.a, job.b};
             }
         });
+        // Count this batch's link ends now, while the backend evaluates the next batch.
+        {
+            std::vector<std::span<const Link>> fresh;
+            for (size_t c = first_piece; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
+            arrays.count(fresh);
+        }
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
         progress.update(done_pairs);
@@ -332,9 +367,11 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     };
     auto drop = [&](auto&& self, int32_t e) -> void {
         const Entry& en = plan.entries[e];
-        if (en.job >= 0)
-            pieces[job_piece[en.job]][job_pos[en.job]] = kDropped;
-        else
+        if (en.job >= 0) {
+            Link& l = pieces[job_piece[en.job]][job_pos[en.job]];
+            arrays.uncount(l);
+            l = kDropped;
+        } else
             for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
     };
     std::vector<Link> merged;
@@ -349,10 +386,11 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         }
     };
     for (int32_t r : roots) settle(settle, r);
+    arrays.count({std::span<const Link>(merged)});
     std::vector<std::span<const Link>> spans;
     for (const auto& p : pieces) spans.emplace_back(p);
     spans.emplace_back(merged);
-    set_links_from(vm, spans);
+    arrays.finish(vm, spans);
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);

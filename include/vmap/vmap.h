@@ -48,7 +48,7 @@ class VisibilityMap {
     std::vector<uint32_t> order;    // octree position -> input index
     std::vector<uint32_t> inverse;  // input index -> octree position
     Octree octree;
-    std::vector<uint32_t> link_offsets;  // per node + 1: node n's links are
+    std::vector<uint64_t> link_offsets;  // per node + 1: node n's links are
     std::vector<int32_t> link_targets;   // link_targets[link_offsets[n] .. link_offsets[n+1]),
                                          // sorted; every link is stored at both ends
 

@@ -11,7 +11,7 @@
 //     ORDR: u32 order[n] (octree position -> input index)
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...)
-//     LINK: u32 offsets[nodes + 1] | i32 targets[offsets[nodes]]
+//     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
 
 #include <fmt/format.h>
@@ -29,7 +29,7 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 1;
+constexpr uint32_t kVersion = 2;  // 2: 64-bit link offsets
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -132,7 +132,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.buf.reserve(1024 + ps.size() * (sizeof(Vec3) * 4 + 8) +
                   size_t(t.num_nodes()) * (sizeof(Sphere) + sizeof(Box) + 40) +
                   size_t(t.num_leaves()) * (sizeof(LeafDisc) + 8) +
-                  (vm.link_offsets.size() + vm.link_targets.size()) * 4);
+                  vm.link_offsets.size() * 8 + vm.link_targets.size() * 4);
     size_t s = w.begin("PARM");
     w.put(int32_t(vm.octree_params.max_height));
     w.put(int32_t(vm.octree_params.leaf_points));

@@ -153,8 +153,8 @@ class LinkArrays {
                     bad = true;
                     return;
                 }
-                std::atomic_ref<uint32_t>(deg_[a + 1]).fetch_add(1, std::memory_order_relaxed);
-                std::atomic_ref<uint32_t>(deg_[b + 1]).fetch_add(1, std::memory_order_relaxed);
+                std::atomic_ref<uint64_t>(deg_[a + 1]).fetch_add(1, std::memory_order_relaxed);
+                std::atomic_ref<uint64_t>(deg_[b + 1]).fetch_add(1, std::memory_order_relaxed);
                 mine += 2;
             }
             ends_ += mine;
@@ -170,24 +170,19 @@ class LinkArrays {
     }
 
     void finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
-        if (ends_.load() > UINT32_MAX)
-            throw Error(
-                fmt::format("{} link ends exceed the format's 2^32 limit; use fewer leaves "
-                            "(a larger --leaf-points or a smaller --max-height)",
-                            ends_.load()));
-        std::vector<uint32_t>& deg = deg_;
+        std::vector<uint64_t>& deg = deg_;
         for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
         vm.link_offsets = deg;
         vm.link_targets.assign(deg.back(), 0);
-        std::vector<uint32_t> fill(deg.begin(), deg.end() - 1);
+        std::vector<uint64_t> fill(deg.begin(), deg.end() - 1);
         int32_t* out = vm.link_targets.data();
         const auto tasks = split(pieces);
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
             for (auto [a, b] : tasks[k]) {
                 if (a == kDropped.first) continue;
-                out[std::atomic_ref<uint32_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] =
+                out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] =
                     b;
-                out[std::atomic_ref<uint32_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] =
+                out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] =
                     a;
             }
         });
@@ -205,7 +200,7 @@ class LinkArrays {
         return tasks;
     }
     int32_t nn_;
-    std::vector<uint32_t> deg_;
+    std::vector<uint64_t> deg_;  // 64-bit: a million leaves can mean over 2^32 link ends
     std::atomic<uint64_t> ends_{0};
 };
 

@@ -35,7 +35,8 @@ bool ends_with_ci(std::string s, const std::string& suf) {
 
 void print_tree_summary(const VisibilityMap& vm) {
     const Octree& t = vm.octree;
-    const int h = t.height();
+    int h = 0;  // deepest node (not only leaf), so every level below indexes in range
+    for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level[n]));
     std::vector<uint64_t> nodes(h + 1), leaves(h + 1), links(h + 1);
     for (int32_t n = 0; n < t.num_nodes(); ++n) {
         nodes[t.level[n]]++;

@@ -285,6 +285,13 @@ void expect_error(PointSet ps, OctreeParams p, const std::string& needle) {
     }
 }
 
+TEST(Octree, CoordinatesSpanningMoreThanAFloatAreRejected) {
+    PointSet ps = random_cloud(6, 2);
+    ps.positions[0].x = -3e38f;
+    ps.positions[1].x = 3e38f;
+    expect_error(ps, {}, "span");
+}
+
 TEST(Octree, EmptyCloudIsRejected) { expect_error({}, {}, "empty"); }
 
 TEST(Octree, NanCoordinateIsRejectedWithItsIndex) {

@@ -362,6 +362,14 @@ TEST_F(VmapFile, AnInconsistentTreeIsRejected) {
         const std::string p = write_resealed(dir, "leaves.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "TREE");
     }
+    {
+        // A root deeper than its leaves once overran `vmap info`'s per-level table.
+        std::string bytes = whole;
+        const size_t level = skip + size_t(nn) * 8;  // after skip and parent
+        bytes[level] = char(200);
+        const std::string p = write_resealed(dir, "level.vmap", bytes);
+        EXPECT_LOAD_ERROR(p, "TREE", "level");
+    }
 }
 
 // ---- writing -------------------------------------------------------------------------------

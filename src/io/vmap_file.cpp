@@ -131,8 +131,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     const PointSet& ps = vm.points;
     w.buf.reserve(1024 + ps.size() * (sizeof(Vec3) * 4 + 8) +
                   size_t(t.num_nodes()) * (sizeof(Sphere) + sizeof(Box) + 40) +
-                  size_t(t.num_leaves()) * (sizeof(LeafDisc) + 8) +
-                  vm.link_offsets.size() * 8 + vm.link_targets.size() * 4);
+                  size_t(t.num_leaves()) * (sizeof(LeafDisc) + 8) + vm.link_offsets.size() * 8 +
+                  vm.link_targets.size() * 4);
     size_t s = w.begin("PARM");
     w.put(int32_t(vm.octree_params.max_height));
     w.put(int32_t(vm.octree_params.leaf_points));
@@ -296,6 +296,11 @@ VisibilityMap load_vmap(const std::string& path) {
     // Structure checks, so that even a well-checksummed but inconsistent file cannot make a
     // query index out of bounds.
     for (int32_t i = 0; i < nn; ++i) {
+        const int want_level =
+            i == 0 ? 0 : (t.parent[i] >= 0 && t.parent[i] < i ? t.level[t.parent[i]] + 1 : -1);
+        if (t.level[i] != want_level || t.level[i] > 21)
+            r.fail(fmt::format("node {} has level {} (its parent's level + 1 expected)", i,
+                               int(t.level[i])));
         if (t.skip[i] <= i || t.skip[i] > nn || t.parent[i] >= i || (i > 0 && t.parent[i] < 0) ||
             t.node_leaf[i] >= nl || t.point_begin[i] > t.point_end[i] || t.point_end[i] > n ||
             t.leaf_begin[i] < 0 || t.leaf_begin[i] > t.leaf_end[i] || t.leaf_end[i] > nl)

@@ -107,7 +107,14 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     Octree t;
     t.params = params;
     // The root is the bounding cube, padded by 0.1% so no point lies on its far faces.
-    float extent = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    // The extent in double: float coordinates near +-3e38 can span more than a float holds.
+    const double dext = std::max({double(hi.x) - lo.x, double(hi.y) - lo.y, double(hi.z) - lo.z});
+    if (!(dext * 1.001 < 3.0e38))
+        throw Error(
+            fmt::format("{}: the points span {:.3g} units, more than a float can hold; "
+                        "rescale the coordinates",
+                        source, dext));
+    float extent = float(dext);
     if (!(extent > 0)) extent = std::max(1e-3f, static_cast<float>(maxabs) * 1e-3f);
     const float size = extent * 1.001f;
     const Vec3 mid = (lo + hi) * 0.5f;

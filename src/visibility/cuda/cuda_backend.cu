@@ -135,6 +135,17 @@ struct PinnedBuffer {
 class CudaBackend final : public Backend {
   public:
     explicit CudaBackend(int device) : device_(device) {
+        try {
+            init();
+        } catch (...) {
+            release();
+            throw;
+        }
+    }
+    ~CudaBackend() override { release(); }
+
+  private:
+    void init() {
         if (const char* v = getenv("VMAP_CUDA_VARIANT")) variant_ = v;
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
@@ -145,16 +156,20 @@ class CudaBackend final : public Backend {
             VMAP_CUDA_CHECK(cudaEventCreate(&s.k1));
         }
     }
-    ~CudaBackend() override {
+    // Destroys whatever streams and events exist (also after a failed init).
+    void release() {
         for (auto& s : slots_) {
             if (s.stream) cudaStreamSynchronize(s.stream);
             if (s.done) cudaEventDestroy(s.done);
             if (s.k0) cudaEventDestroy(s.k0);
             if (s.k1) cudaEventDestroy(s.k1);
             if (s.stream) cudaStreamDestroy(s.stream);
+            s.stream = nullptr;
+            s.done = s.k0 = s.k1 = nullptr;
         }
     }
 
+  public:
     std::string name() const override {
         // (fmt's compile-time format strings do not build under nvcc: plain strings here.)
         return std::string("cuda (") + prop_.name + ", " +
@@ -281,7 +296,14 @@ std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
                        : std::string("no CUDA device found");
         return nullptr;
     }
-    return std::make_unique<CudaBackend>(0);
+    // A device that is present but unusable (busy in exclusive mode, out of memory) is reported
+    // like an absent one, so auto and cuda fall back to the CPU with the reason.
+    try {
+        return std::make_unique<CudaBackend>(0);
+    } catch (const Error& e) {
+        if (why) *why = e.what();
+        return nullptr;
+    }
 }
 
 }  // namespace vmap::detail

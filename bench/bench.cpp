@@ -57,10 +57,7 @@ struct Row {
 // consecutive columns at uniform random places above the diagonal, the access pattern of a real
 // run (one row against 32 neighbouring columns, neighbouring rows after each other), so the
 // caches behave as they would.
-double sampled_cpu_rate(const PointSet& pts, const BuildParams& bp, uint64_t samples) {
-    PointSet copy = pts;
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(copy, bp.octree, order, "bench");
+double sampled_cpu_rate(const Octree& t, const BuildParams& bp, uint64_t samples) {
     const int32_t L = t.num_leaves();
     if (L < 64) return 1e9;  // too small to sample; any full run is instant
     std::mt19937_64 rng(12345);
@@ -172,11 +169,11 @@ int run(const Options& o) {
             if (want_cpu) {
                 bp.backend = "cpu";
                 // Estimate first from a sample; run in full only when within the budget.
-                r.cpu_pair_rate =
-                    sampled_cpu_rate(pts, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
                 PointSet copy = pts;
                 std::vector<uint32_t> order;
                 const Octree t = Octree::build(copy, bp.octree, order, "bench");
+                r.cpu_pair_rate =
+                    sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
                 const uint64_t pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
                 const double est = pairs / r.cpu_pair_rate;
                 if (est * o.runs <= o.cpu_budget_s) {

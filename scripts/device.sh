@@ -8,6 +8,7 @@
 #        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
 #        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
 #        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
+#        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #      Logs and tables go to $OUT.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -74,7 +75,7 @@ if [[ "$cmd" == run ]]; then
                     rm -f /tmp/dragon.vmap
                 done ;;
             ab)
-                for v in ${VARIANTS:-default prefetch occ5 occ6}; do
+                for v in ${VARIANTS:-packet lane}; do
                     echo "variant $v"
                     VMAP_CUDA_VARIANT=$v "$bin/vmap" build scenes/cornell-dragon.json -o /tmp/ab.vmap \
                         --backend cuda --max-height 9 --leaf-points "${AB_LEAF_POINTS:-8}" 2>&1 |
@@ -85,6 +86,16 @@ if [[ "$cmd" == run ]]; then
                 for lp in ${BENCH_LEAF_POINTS:-4}; do
                     "$bin/vmap" bench ${BENCH_ARGS:-} --leaf-points "$lp" --out "$OUT/lp$lp" 2>&1 |
                         tee "$OUT/bench-lp$lp.log" | tail -12
+                done ;;
+            profile)
+                # Nsight Compute on one batch of the leaf-pair kernel (VARIANTS, default scene).
+                ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1 || true)
+                if [[ -z "$ncu" ]]; then echo "no ncu"; continue; fi
+                for v in ${VARIANTS:-packet}; do
+                    VMAP_CUDA_VARIANT=$v "$ncu" --kernel-name regex:leaf_pairs --launch-skip 1 \
+                        --launch-count 1 --set full "$bin/vmap" build ${PROFILE_SCENE:-scenes/cornell-bunny.json} \
+                        -o /tmp/prof.vmap --backend cuda > "$OUT/profile-$v.txt" 2>&1 || true
+                    grep -E "Duration|Throughput|Achieved Occupancy|Registers Per|Warp Cycles Per Issued|Avg. Active Threads|Hit Rate|Stall|Issued Ipc|No Eligible" "$OUT/profile-$v.txt" | head -40
                 done ;;
             *) echo "unknown step $step" >&2; rc=2 ;;
         esac

@@ -53,11 +53,8 @@ inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no
 
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {
-    const WalkNode* walk = nullptr;      // per node
-    const Sphere* spheres = nullptr;     // per node
-    const int32_t* skip = nullptr;       // per node: end of its subtree
-    const int32_t* node_leaf = nullptr;  // per node: leaf index, or -1 for internal nodes
-    const LeafDisc* leaves = nullptr;    // per leaf
+    const WalkNode* walk = nullptr;    // per node: box, end of subtree, leaf index (preorder)
+    const LeafDisc* leaves = nullptr;  // per leaf
     int32_t num_nodes = 0;
     int32_t num_leaves = 0;
 };

@@ -245,8 +245,7 @@ void Octree::pack_walk() {
 }
 
 OctreeView Octree::view() const {
-    return OctreeView{walk.data(),   spheres.data(), skip.data(), node_leaf.data(),
-                      leaves.data(), num_nodes(),    num_leaves()};
+    return OctreeView{walk.data(), leaves.data(), num_nodes(), num_leaves()};
 }
 
 int Octree::height() const {

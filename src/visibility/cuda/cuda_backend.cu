@@ -4,7 +4,7 @@
 // Work decomposition: an item is one 32-bit word of a job's table, i.e. one row leaf a against
 // 32 consecutive column leaves. One warp evaluates one item, a lane per column; a ballot packs
 // the 32 answers and lane 0 stores the word. Neighbouring lanes walk nearly the same segment, so
-// their traversals diverge little.
+// the warp walks the tree once for all 32 (leaf_pairs_packet_kernel, the default since v7).
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -89,6 +89,82 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     }
 }
 
+// The same predicate, walked by the warp as a packet (variant "packet"). The 32 lanes hold one
+// row leaf a against 32 neighbouring column leaves, so their segments form a thin fan. The warp
+// walks the preorder tree once, entering a node when any lane's own walk would enter it; node and
+// leaf records are then warp-uniform loads (one broadcast instead of 32 gathers). Each lane tests
+// only the nodes on its own path (n >= resume: it has not skipped past the node's subtree), so it
+// makes exactly the tests, counts and answer of leaf_pair_visible.
+template <int kMinBlocks>
+__global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
+    leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
+                             const uint64_t* __restrict__ first, int32_t num_jobs,
+                             uint64_t num_items, uint32_t* __restrict__ bits,
+                             DeviceCounters* counters) {
+    const int lane = threadIdx.x & 31;
+    const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
+    const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
+    SmallCounters wc;
+    for (uint64_t item = warp; item < num_items; item += warps) {
+        int32_t lo = 0, hi = num_jobs;
+        while (hi - lo > 1) {
+            const int32_t mid = (lo + hi) >> 1;
+            if (first[mid] <= item)
+                lo = mid;
+            else
+                hi = mid;
+        }
+        const PairJob job = jobs[lo];
+        const uint64_t rw = (uint64_t(job.cols) + 31) / 32;
+        const uint64_t local = item - first[lo];
+        const int32_t a = job.row0 + int32_t(local / rw);
+        const int32_t c = int32_t(local % rw) * 32 + lane;
+        const bool in = c < job.cols;
+        const int32_t b = in ? job.col0 + c : a;
+        const LeafDisc la = t.leaves[a], lb = t.leaves[b];
+        const Vec3 p = la.centroid;
+        const Vec3 d = lb.centroid - p;
+        const float len = sqrtf(length2(d));
+        bool vis = in && len > 0.f && leaves_face(la, lb, d, len, vp);
+        wc.pairs += in;
+        wc.facing_pairs += vis;
+        const SlabRay ray = slab_ray(p, d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
+        int occluders = 0;
+        int32_t resume = 0;  // this lane's own walk skipped everything below this index
+        int32_t n = 0;
+        while (n < t.num_nodes && __any_sync(0xffffffffu, vis)) {
+            const WalkNode w = load_walk(t.walk + n);
+            bool hit = false;
+            if (vis && n >= resume) {
+                wc.node_tests++;
+                hit = slab_meets_box(ray, Box{w.lo, w.hi}, 0.f);
+                if (!hit) resume = w.skip;
+            }
+            if (hit && w.leaf >= 0 && w.leaf != a && w.leaf != b) {
+                wc.occluder_tests++;
+                if (is_actual_occluder(p, d, len, t.leaves[w.leaf], vp) && ++occluders >= vp.K)
+                    vis = false;
+            }
+            n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
+        }
+        const uint32_t word = __ballot_sync(0xffffffffu, vis);
+        if (lane == 0) bits[job.word_offset + local] = word;
+        wc.visible_pairs += vis;
+    }
+    unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
+                               wc.occluder_tests};
+#pragma unroll
+    for (int k = 0; k < 5; ++k)
+        for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
+    if (lane == 0) {
+        atomicAdd(&counters->pairs, v[0]);
+        atomicAdd(&counters->facing_pairs, v[1]);
+        atomicAdd(&counters->visible_pairs, v[2]);
+        atomicAdd(&counters->node_tests, v[3]);
+        atomicAdd(&counters->occluder_tests, v[4]);
+    }
+}
+
 template <class T>
 struct DeviceBuffer {
     T* ptr = nullptr;
@@ -147,6 +223,10 @@ class CudaBackend final : public Backend {
   private:
     void init() {
         if (const char* v = getenv("VMAP_CUDA_VARIANT")) variant_ = v;
+        if (!variant_.empty() && variant_ != "packet" && variant_ != "lane" &&
+            variant_ != "prefetch" && variant_ != "occ5" && variant_ != "occ6")
+            throw Error("VMAP_CUDA_VARIANT: unknown kernel variant '" + variant_ +
+                        "' (packet, lane, prefetch, occ5, occ6)");
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
         for (auto& s : slots_) {
@@ -179,14 +259,10 @@ class CudaBackend final : public Backend {
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
         vp_ = vp;
         cudaStream_t s = slots_[0].stream;
-        spheres_.upload(tree.spheres.data(), tree.spheres.size(), s, held_, peak_);
         walk_.upload(tree.walk.data(), tree.walk.size(), s, held_, peak_);
-        skip_.upload(tree.skip.data(), tree.skip.size(), s, held_, peak_);
-        node_leaf_.upload(tree.node_leaf.data(), tree.node_leaf.size(), s, held_, peak_);
         leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
-        view_ = OctreeView{walk_.ptr,   spheres_.ptr,     skip_.ptr,        node_leaf_.ptr,
-                           leaves_.ptr, tree.num_nodes(), tree.num_leaves()};
+        view_ = OctreeView{walk_.ptr, leaves_.ptr, tree.num_nodes(), tree.num_leaves()};
     }
 
     void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
@@ -213,20 +289,23 @@ class CudaBackend final : public Backend {
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks =
                 int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
-            // VMAP_CUDA_VARIANT selects a kernel variant for A/B timing (same answers):
-            // "prefetch" (successor loads ahead), "occ5"/"occ6" (register caps for occupancy).
+            // VMAP_CUDA_VARIANT selects a kernel variant for A/B timing (same answers): the
+            // default "packet" (warp-uniform walk), "lane" (a walk per lane), "prefetch" (lane,
+            // successor loads ahead), "occ5"/"occ6" (lane, register caps for occupancy).
             auto launch = [&](auto kernel) {
                 kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr,
                                                           int32_t(nj), items, sl.d_bits.ptr,
                                                           sl.d_counters.ptr);
             };
-            if (variant_ == "prefetch")
+            if (variant_.empty() || variant_ == "packet")
+                launch(leaf_pairs_packet_kernel<1>);
+            else if (variant_ == "prefetch")
                 launch(leaf_pairs_kernel<true, 1>);
             else if (variant_ == "occ5")
                 launch(leaf_pairs_kernel<false, 5>);
             else if (variant_ == "occ6")
                 launch(leaf_pairs_kernel<false, 6>);
-            else
+            else  // "lane": each lane walks its own pair (v1-v6)
                 launch(leaf_pairs_kernel<false, 1>);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
@@ -275,9 +354,7 @@ class CudaBackend final : public Backend {
     cudaDeviceProp prop_{};
     VisibilityParams vp_;
     OctreeView view_;
-    DeviceBuffer<Sphere> spheres_;
     DeviceBuffer<WalkNode> walk_;
-    DeviceBuffer<int32_t> skip_, node_leaf_;
     DeviceBuffer<LeafDisc> leaves_;
     Slot slots_[2];
     uint64_t held_ = 0, peak_ = 0;

@@ -64,6 +64,7 @@ struct BuildOptions {
     std::string output;
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
+    bool count_links = false;
     BuildParams params;
 };
 
@@ -94,9 +95,10 @@ int run_build(BuildOptions& o) {
 
     BuildStats st;
     const size_t npts = pts.size();
+    bp.keep_links = !o.count_links;
     VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
     const auto ts = std::chrono::steady_clock::now();
-    save_vmap(o.output, vm);
+    if (!o.count_links) save_vmap(o.output, vm);
     const double save_s =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
 
@@ -114,8 +116,12 @@ int run_build(BuildOptions& o) {
         "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
         double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
         double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
-    fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
-               vm.link_targets.size() * 4);
+    if (o.count_links)
+        fmt::print("links:      {} counted, not kept (as link ends they would take {:.2f} GiB)\n",
+                   st.links, st.links * 8 / 1073741824.0);
+    else
+        fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
+                   vm.link_targets.size() * 4);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
     fmt::print(
         "time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
@@ -130,6 +136,7 @@ int run_build(BuildOptions& o) {
         pps, pps / cores, cores, w.pairs / std::max(1e-9, st.seconds_backend), st.seconds_backend);
     if (st.peak_device_bytes)
         fmt::print("device:     peak {:.1f} MiB\n", st.peak_device_bytes / 1048576.0);
+    if (o.count_links) return 0;
     print_tree_summary(vm);
     fmt::print("wrote:      {}\n", o.output);
     return 0;
@@ -231,6 +238,10 @@ int main(int argc, char** argv) {
                      "Leaf pairs evaluated per batch (bounds memory)")
         ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
         ->capture_default_str();
+
+    build->add_flag("--count-links", bo.count_links,
+                    "Count the links without keeping them and write no file: sizes a V-map "
+                    "too large for memory");
 
     std::string info_path;
     auto* info = app.add_subcommand("info", "Describe a .vmap file");

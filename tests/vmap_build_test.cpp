@@ -148,6 +148,22 @@ TEST(VmapBuild, TinyBatchesGiveTheSameLinks) {
     EXPECT_EQ(small.link_targets, ref.link_targets);
 }
 
+TEST(VmapBuild, CountingWithoutKeepingGivesTheSameNumberOfLinks) {
+    // Small batches, so links merge across jobs (the count must subtract the replaced ones).
+    const PointSet ps = test::sample(test::oracle_path("room-with-block.json"), 2500, 4);
+    BuildParams bp = test::cpu_params(7, 3);
+    bp.max_batch_pairs = 4096;
+    BuildStats kept, counted;
+    const VisibilityMap ref = build_vmap(ps, bp, &kept);
+    bp.keep_links = false;
+    const VisibilityMap none = build_vmap(ps, bp, &counted);
+    EXPECT_GT(ref.num_links(), 100u);
+    EXPECT_EQ(kept.links, ref.num_links());
+    EXPECT_EQ(counted.links, ref.num_links());
+    EXPECT_EQ(none.num_links(), 0u);
+    EXPECT_EQ(none.link_offsets.size(), size_t(none.octree.num_nodes()) + 1);
+}
+
 TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 3000, 8);
     VisibilityMap many = build_vmap(ps, test::cpu_params(7, 3));

@@ -19,6 +19,9 @@ struct BuildParams {
     std::string backend = "auto";           // auto | cpu | cuda
     uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
     bool progress = false;                  // progress bar on stderr (callers pass isatty(2))
+    // false: extract and count the links but keep none (BuildStats::links; the map then has no
+    // links). Sizes a V-map too large for host memory, and times the GPU on it.
+    bool keep_links = true;
 };
 
 struct BuildStats {
@@ -33,6 +36,7 @@ struct BuildStats {
     double seconds_backend = 0;  // the backend evaluating leaf pairs (GPU: kernel time)
     double seconds_extract = 0;  // link extraction from the tables
     double seconds_links = 0;    // merging links into the compact per-node arrays
+    uint64_t links = 0;  // links of the V-map (also when they were not kept)
     uint64_t batches = 0;
     uint64_t peak_device_bytes = 0;
 };

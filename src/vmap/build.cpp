@@ -84,6 +84,7 @@ struct Planner {
 // link when all leaf pairs under (A, B) are visible, else splits, down to leaf pairs.
 struct Extractor {
     const Octree& t;
+    const std::vector<uint8_t>& leafy;  // per node: a leaf, or every child is a leaf
     const PairJob& job;
     const uint32_t* bits;  // this job's table
     std::vector<Link>& out;
@@ -108,6 +109,26 @@ struct Extractor {
         return n;
     }
 
+    // Every set bit of rows [r0, r1) x cols [c0, c1) as a leaf-leaf link, row by row.
+    void emit_bits(int32_t r0, int32_t r1, int32_t c0, int32_t c1) {
+        const uint64_t rw = detail::row_words(job.cols);
+        const int32_t w0 = c0 / 32, w1 = (c1 - 1) / 32;
+        for (int32_t r = r0; r < r1; ++r) {
+            const uint32_t* row = bits + r * rw;
+            const int32_t la = t.leaf_node[job.row0 + r];
+            for (int32_t w = w0; w <= w1; ++w) {
+                uint32_t word = row[w];
+                if (w == w0) word &= ~0u << (c0 % 32);
+                if (w == w1) word &= ~0u >> (31 - (c1 - 1) % 32);
+                while (word) {
+                    const int32_t c = w * 32 + __builtin_ctz(word);
+                    out.emplace_back(la, t.leaf_node[job.col0 + c]);
+                    word &= word - 1;
+                }
+            }
+        }
+    }
+
     void resolve(int32_t a, int32_t b) {
         const int32_t r0 = t.leaf_begin[a] - job.row0, r1 = t.leaf_end[a] - job.row0;
         const int32_t c0 = t.leaf_begin[b] - job.col0, c1 = t.leaf_end[b] - job.col0;
@@ -115,6 +136,12 @@ struct Extractor {
         if (n == 0) return;  // nothing visible below either: no link anywhere under (a, b)
         if (n == uint64_t(r1 - r0) * uint64_t(c1 - c0)) {
             out.emplace_back(a, b);
+            return;
+        }
+        if (leafy[a] && leafy[b]) {
+            // The split reaches leaf pairs at once: each visible one is a link of its own. Read
+            // them off the table a word at a time (most links of a large V-map are made here).
+            emit_bits(r0, r1, c0, c1);
             return;
         }
         const bool la = t.is_leaf(a), lb = t.is_leaf(b);
@@ -284,6 +311,12 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         j = b.end;
     }
 
+    // Nodes whose split reaches leaves at once (a leaf, or all children leaves).
+    std::vector<uint8_t> leafy(t.num_nodes(), 1);
+    tbb::parallel_for(int32_t(0), t.num_nodes(), [&](int32_t n) {
+        if (!t.is_leaf(n)) t.for_each_child(n, [&](int32_t c) { leafy[n] &= t.is_leaf(c); });
+    });
+
     // Links stay in the pieces the extraction wrote them to (no copies); per job: where its
     // links start, how many, and whether its pair is fully visible (then its one link is itself).
     std::vector<std::vector<Link>> pieces;
@@ -293,6 +326,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
     detail::Progress progress("leaf pairs", total_pairs, params.progress);
     uint64_t done_pairs = 0;
+    uint64_t counted_links = 0;  // when the links are not kept
 
     auto submit = [&](size_t i) {
         const Batch& b = batches[i];
@@ -323,17 +357,22 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
                 const size_t j = b.begin + k;
                 const PairJob& job = plan.jobs[j];
                 const size_t before = out.size();
-                Extractor{t, job, bits + job.word_offset, out}.resolve(job.a, job.b);
+                Extractor{t, leafy, job, bits + job.word_offset, out}.resolve(job.a, job.b);
                 job_piece[j] = uint32_t(first_piece + c);
                 job_pos[j] = uint32_t(before);
                 job_full[j] = out.size() - before == 1 && out.back() == Link{job.a, job.b};
             }
         });
         // Count this batch's link ends now, while the backend evaluates the next batch.
-        {
+        if (params.keep_links) {
             std::vector<std::span<const Link>> fresh;
             for (size_t c = first_piece; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
             arrays.count(fresh);
+        } else {
+            for (size_t c = first_piece; c < pieces.size(); ++c) {
+                counted_links += pieces[c].size();
+                std::vector<Link>().swap(pieces[c]);
+            }
         }
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
@@ -362,7 +401,9 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     };
     auto drop = [&](auto&& self, int32_t e) -> void {
         const Entry& en = plan.entries[e];
-        if (en.job >= 0) {
+        if (en.job >= 0 && !params.keep_links) {
+            counted_links--;
+        } else if (en.job >= 0) {
             Link& l = pieces[job_piece[en.job]][job_pos[en.job]];
             arrays.uncount(l);
             l = kDropped;
@@ -381,11 +422,17 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         }
     };
     for (int32_t r : roots) settle(settle, r);
-    arrays.count({std::span<const Link>(merged)});
-    std::vector<std::span<const Link>> spans;
-    for (const auto& p : pieces) spans.emplace_back(p);
-    spans.emplace_back(merged);
-    arrays.finish(vm, spans);
+    if (params.keep_links) {
+        arrays.count({std::span<const Link>(merged)});
+        std::vector<std::span<const Link>> spans;
+        for (const auto& p : pieces) spans.emplace_back(p);
+        spans.emplace_back(merged);
+        arrays.finish(vm, spans);
+        st.links = vm.num_links();
+    } else {
+        vm.link_offsets.assign(size_t(t.num_nodes()) + 1, 0);
+        st.links = counted_links + merged.size();
+    }
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);

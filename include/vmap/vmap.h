@@ -36,7 +36,7 @@ struct BuildStats {
     double seconds_backend = 0;  // the backend evaluating leaf pairs (GPU: kernel time)
     double seconds_extract = 0;  // link extraction from the tables
     double seconds_links = 0;    // merging links into the compact per-node arrays
-    uint64_t links = 0;  // links of the V-map (also when they were not kept)
+    uint64_t links = 0;          // links of the V-map (also when they were not kept)
     uint64_t batches = 0;
     uint64_t peak_device_bytes = 0;
 };

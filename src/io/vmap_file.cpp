@@ -14,10 +14,16 @@
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
 
+#include <fcntl.h>
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
+#include <unistd.h>
 
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
 #include <cstring>
+#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <type_traits>
@@ -64,6 +70,36 @@ uint64_t detail::payload_hash(const uint8_t* p, size_t n) {
 
 namespace {
 
+// The same hash as payload_hash, over a payload given as pieces: blocks inside one piece are
+// hashed in place, the few that straddle pieces are gathered first.
+template <class Piece>
+uint64_t pieces_hash(const std::vector<Piece>& pieces, size_t n) {
+    constexpr size_t kBlock = size_t(1) << 20;
+    std::vector<size_t> at(pieces.size() + 1, 0);
+    for (size_t k = 0; k < pieces.size(); ++k) at[k + 1] = at[k] + pieces[k].n;
+    const size_t blocks = (n + kBlock - 1) / kBlock;
+    std::vector<uint64_t> hs(blocks);
+    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+        const size_t lo = b * kBlock, len = std::min(kBlock, n - lo);
+        size_t k = size_t(std::upper_bound(at.begin(), at.end(), lo) - at.begin()) - 1;
+        if (lo + len <= at[k + 1]) {
+            hs[b] = block_hash(pieces[k].p + (lo - at[k]), len, b);
+            return;
+        }
+        std::vector<uint8_t> tmp(len);
+        for (size_t got = 0; got < len; ++k) {
+            const size_t from = lo + got - at[k];
+            const size_t take = std::min(len - got, pieces[k].n - from);
+            std::memcpy(tmp.data() + got, pieces[k].p + from, take);
+            got += take;
+        }
+        hs[b] = block_hash(tmp.data(), len, b);
+    });
+    uint64_t h = 0x84222325cbf29ce4ULL ^ n;
+    for (uint64_t x : hs) h = (h ^ x) * 0x100000001b3ULL;
+    return h;
+}
+
 // memcpy of a large array, in parallel chunks.
 void copy_bytes(uint8_t* dst, const uint8_t* src, size_t n) {
     constexpr size_t kChunk = size_t(1) << 22;
@@ -72,31 +108,61 @@ void copy_bytes(uint8_t* dst, const uint8_t* src, size_t n) {
     });
 }
 
+// The payload as a list of pieces: small fields in buffers of its own, the large arrays in place
+// (no copy of gigabytes of links before writing them).
 struct Writer {
-    std::vector<uint8_t> buf;
+    struct Piece {
+        const uint8_t* p;
+        size_t n;
+    };
+    std::deque<std::vector<uint8_t>> owned;  // stable addresses
+    std::vector<Piece> pieces;
+    size_t size = 0;
+    bool open = false;  // owned.back() still takes small fields
+
+    std::vector<uint8_t>& small() {
+        if (!open) {
+            owned.emplace_back();
+            owned.back().reserve(4096);
+            open = true;
+        }
+        return owned.back();
+    }
+    void close_small() {
+        if (!open) return;
+        pieces.push_back({owned.back().data(), owned.back().size()});
+        open = false;
+    }
     template <class T>
     void put(const T& v) {
         static_assert(std::is_trivially_copyable_v<T>);
         const auto* p = reinterpret_cast<const uint8_t*>(&v);
-        buf.insert(buf.end(), p, p + sizeof(T));
+        small().insert(small().end(), p, p + sizeof(T));
+        size += sizeof(T);
     }
     template <class T>
     void vec(const std::vector<T>& v) {
         static_assert(std::is_trivially_copyable_v<T>);
-        const auto* p = reinterpret_cast<const uint8_t*>(v.data());
-        const size_t at = buf.size(), n = v.size() * sizeof(T);
-        buf.resize(at + n);
-        copy_bytes(buf.data() + at, p, n);
+        if (v.empty()) return;
+        close_small();
+        pieces.push_back({reinterpret_cast<const uint8_t*>(v.data()), v.size() * sizeof(T)});
+        size += v.size() * sizeof(T);
     }
-    size_t begin(const char (&tag)[5]) {
-        buf.insert(buf.end(), tag, tag + 4);
+    // A section: tag, then its length, patched by end().
+    struct Mark {
+        size_t buffer, offset;  // where the length field is (owned[buffer], offset)
+        size_t start;           // payload offset of the section's first byte
+    };
+    Mark begin(const char (&tag)[5]) {
+        for (int k = 0; k < 4; ++k) put(tag[k]);
         put(uint64_t(0));
-        return buf.size();
+        return {owned.size() - 1, owned.back().size() - 8, size};
     }
-    void end(size_t start) {
-        const uint64_t n = buf.size() - start;
-        std::memcpy(buf.data() + start - 8, &n, 8);
+    void end(Mark m) {
+        const uint64_t n = size - m.start;
+        std::memcpy(owned[m.buffer].data() + m.offset, &n, 8);
     }
+    void finish() { close_small(); }
 };
 
 struct Reader {
@@ -129,11 +195,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     Writer w;
     const Octree& t = vm.octree;
     const PointSet& ps = vm.points;
-    w.buf.reserve(1024 + ps.size() * (sizeof(Vec3) * 4 + 8) +
-                  size_t(t.num_nodes()) * (sizeof(Sphere) + sizeof(Box) + 40) +
-                  size_t(t.num_leaves()) * (sizeof(LeafDisc) + 8) + vm.link_offsets.size() * 8 +
-                  vm.link_targets.size() * 4);
-    size_t s = w.begin("PARM");
+    Writer::Mark s = w.begin("PARM");
     w.put(int32_t(vm.octree_params.max_height));
     w.put(int32_t(vm.octree_params.leaf_points));
     w.put(int32_t(vm.visibility_params.K));
@@ -171,6 +233,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.vec(vm.link_targets);
     w.end(s);
 
+    w.finish();
+
     std::vector<uint8_t> head;
     head.insert(head.end(), kMagic, kMagic + 8);
     auto put = [&](auto v) {
@@ -179,24 +243,50 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     };
     put(kVersion);
     put(uint32_t(0));
-    put(uint64_t(w.buf.size()));
-    put(detail::payload_hash(w.buf.data(), w.buf.size()));
+    put(uint64_t(w.size));
+    put(pieces_hash(w.pieces, w.size));
 
-    // Temporary name, then rename: a failure never leaves half a file under `path`.
+    // Temporary name, then rename: a failure never leaves half a file under `path`. The pieces
+    // are written in parallel chunks at their offsets (pwrite), which the page cache takes
+    // several times faster than one stream.
     const std::string tmp = path + ".tmp";
-    {
-        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (!out) throw Error(fmt::format("{}: cannot write", tmp));
-        out.write(reinterpret_cast<const char*>(head.data()), head.size());
-        out.write(reinterpret_cast<const char*>(w.buf.data()), w.buf.size());
-        out.flush();
-        if (!out) {
-            std::error_code ec;
-            std::filesystem::remove(tmp, ec);
-            throw Error(fmt::format("{}: write failed (disk full?)", tmp));
+    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+    if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", tmp, std::strerror(errno)));
+    struct Chunk {
+        const uint8_t* p;
+        size_t n;
+        off_t at;
+    };
+    std::vector<Chunk> chunks{{head.data(), head.size(), 0}};
+    off_t at = off_t(head.size());
+    constexpr size_t kChunk = size_t(8) << 20;
+    for (const auto& pc : w.pieces)
+        for (size_t o = 0; o < pc.n; o += kChunk) {
+            const size_t n = std::min(kChunk, pc.n - o);
+            chunks.push_back({pc.p + o, n, at});
+            at += off_t(n);
         }
-    }
+    std::atomic<int> err{0};
+    tbb::parallel_for(size_t(0), chunks.size(), [&](size_t k) {
+        const Chunk& c = chunks[k];
+        for (size_t done = 0; done < c.n && err.load() == 0;) {
+            const ssize_t got = ::pwrite(fd, c.p + done, c.n - done, c.at + off_t(done));
+            if (got < 0 && errno == EINTR) continue;
+            if (got <= 0) {
+                int zero = 0;
+                err.compare_exchange_strong(zero, got < 0 ? errno : EIO);
+                break;
+            }
+            done += size_t(got);
+        }
+    });
+    const int close_err = ::close(fd) == 0 ? 0 : errno;
     std::error_code ec;
+    if (err.load() != 0 || close_err != 0) {
+        std::filesystem::remove(tmp, ec);
+        throw Error(fmt::format("{}: write failed: {}", tmp,
+                                std::strerror(err.load() ? err.load() : close_err)));
+    }
     std::filesystem::rename(tmp, path, ec);
     if (ec) {
         std::filesystem::remove(tmp, ec);

@@ -65,8 +65,8 @@ size_t section_data(const std::string& bytes, const char* tag) {
 
 // ---- field-by-field comparison -------------------------------------------------------------
 
-template <class T>
-void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+template <class T, class A>
+void expect_same_bytes(const std::vector<T, A>& a, const std::vector<T, A>& b, const char* what) {
     ASSERT_EQ(a.size(), b.size()) << what;
     if (a.empty()) return;
     EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(T)), 0) << what << " differ";

@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "vmap/mesh.h"
@@ -12,6 +13,29 @@
 #include "vmap/visibility.h"
 
 namespace vmap {
+
+// std::allocator, except that resize() leaves new elements uninitialised: the link arrays run to
+// gigabytes and are filled in parallel right after they are sized (zeroing them first would be
+// a serial pass over all of that memory).
+template <class T>
+struct UninitAllocator : std::allocator<T> {
+    template <class U>
+    struct rebind {
+        using other = UninitAllocator<U>;
+    };
+    UninitAllocator() = default;
+    template <class U>
+    UninitAllocator(const UninitAllocator<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... A>
+    void construct(U* p, A&&... a) {
+        ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+    }
+};
+using LinkTargets = std::vector<int32_t, UninitAllocator<int32_t>>;
 
 struct BuildParams {
     OctreeParams octree;
@@ -53,7 +77,7 @@ class VisibilityMap {
     std::vector<uint32_t> inverse;  // input index -> octree position
     Octree octree;
     std::vector<uint64_t> link_offsets;  // per node + 1: node n's links are
-    std::vector<int32_t> link_targets;   // link_targets[link_offsets[n] .. link_offsets[n+1]),
+    LinkTargets link_targets;            // link_targets[link_offsets[n] .. link_offsets[n+1]),
                                          // sorted; every link is stored at both ends
 
     size_t num_links() const { return link_targets.size() / 2; }

@@ -140,8 +140,8 @@ struct Writer {
         small().insert(small().end(), p, p + sizeof(T));
         size += sizeof(T);
     }
-    template <class T>
-    void vec(const std::vector<T>& v) {
+    template <class T, class A>
+    void vec(const std::vector<T, A>& v) {
         static_assert(std::is_trivially_copyable_v<T>);
         if (v.empty()) return;
         close_small();
@@ -180,8 +180,8 @@ struct Reader {
         p += sizeof(T);
         return v;
     }
-    template <class T>
-    void vec(std::vector<T>& v, uint64_t n) {
+    template <class T, class A>
+    void vec(std::vector<T, A>& v, uint64_t n) {
         if (n > uint64_t(end - p) / sizeof(T)) fail(fmt::format("truncated: {} items expected", n));
         v.resize(n);
         copy_bytes(reinterpret_cast<uint8_t*>(v.data()), p, n * sizeof(T));

@@ -200,7 +200,7 @@ class LinkArrays {
         std::vector<uint64_t>& deg = deg_;
         for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
         vm.link_offsets = deg;
-        vm.link_targets.assign(deg.back(), 0);
+        vm.link_targets.resize(deg.back());  // uninitialised: every slot is written below
         std::vector<uint64_t> fill(deg.begin(), deg.end() - 1);
         int32_t* out = vm.link_targets.data();
         const auto tasks = split(pieces);
@@ -351,6 +351,16 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         pieces.resize(first_piece + nchunks);
         tbb::parallel_for(size_t(0), nchunks, [&](size_t c) {
             std::vector<Link>& out = pieces[first_piece + c];
+            // A chunk makes at most one link per visible leaf pair: reserve that, so the piece
+            // never grows by copying (pages past the links written are never touched).
+            uint64_t visible = 0;
+            for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
+                const PairJob& job = plan.jobs[b.begin + k];
+                const uint32_t* w = bits + job.word_offset;
+                for (uint64_t i = 0, n = detail::job_words(job); i < n; ++i)
+                    visible += __builtin_popcount(w[i]);
+            }
+            out.reserve(visible + 1);
             for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
                 const size_t j = b.begin + k;
                 const PairJob& job = plan.jobs[j];

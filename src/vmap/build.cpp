@@ -7,10 +7,12 @@
 // has a backend evaluate them in batches into bit-packed tables (the paper's LVS), and extracts
 // links from each table on the host while the backend works on the next batch.
 #include <fmt/format.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <numeric>
@@ -82,12 +84,30 @@ struct Planner {
 
 // Link extraction from one job's bit table (paper §3, Fig. 5 (b)-(d)): resolve(A, B) stores a
 // link when all leaf pairs under (A, B) are visible, else splits, down to leaf pairs.
+// Links as they are extracted, per thread, in blocks that never move once written (no copying
+// as they grow; the link arrays read them in place).
+struct LinkSink {
+    static constexpr size_t kBlock = size_t(1) << 20;
+    std::vector<std::vector<Link>> blocks;
+    void push(int32_t a, int32_t b) {
+        if (blocks.empty() || blocks.back().size() == kBlock) {
+            blocks.emplace_back();
+            blocks.back().reserve(kBlock);
+        }
+        blocks.back().emplace_back(a, b);
+    }
+};
+using Sinks = tbb::enumerable_thread_specific<LinkSink>;
+
 struct Extractor {
     const Octree& t;
     const std::vector<uint8_t>& leafy;  // per node: a leaf, or every child is a leaf
     const PairJob& job;
     const uint32_t* bits;  // this job's table
-    std::vector<Link>& out;
+    Sinks& sinks;
+    // A partial node pair with more leaf pairs than this splits into parallel tasks (one thread
+    // per job would leave cores idle on batches of a few large jobs).
+    static constexpr uint64_t kParallelArea = uint64_t(1) << 16;
 
     // Set bits in rows [r0, r1) x cols [c0, c1), job-relative.
     uint64_t count(int32_t r0, int32_t r1, int32_t c0, int32_t c1) const {
@@ -113,6 +133,7 @@ struct Extractor {
     void emit_bits(int32_t r0, int32_t r1, int32_t c0, int32_t c1) {
         const uint64_t rw = detail::row_words(job.cols);
         const int32_t w0 = c0 / 32, w1 = (c1 - 1) / 32;
+        LinkSink& out = sinks.local();
         for (int32_t r = r0; r < r1; ++r) {
             const uint32_t* row = bits + r * rw;
             const int32_t la = t.leaf_node[job.row0 + r];
@@ -122,11 +143,20 @@ struct Extractor {
                 if (w == w1) word &= ~0u >> (31 - (c1 - 1) % 32);
                 while (word) {
                     const int32_t c = w * 32 + __builtin_ctz(word);
-                    out.emplace_back(la, t.leaf_node[job.col0 + c]);
+                    out.push(la, t.leaf_node[job.col0 + c]);
                     word &= word - 1;
                 }
             }
         }
+    }
+
+    // The job's own pair: true when it is fully visible (its one link is then made by the
+    // caller, which may replace it by one at the parents' level), else its links go to sinks.
+    bool run() {
+        const uint64_t n = count(0, job.rows, 0, job.cols);
+        if (n == uint64_t(job.rows) * uint64_t(job.cols)) return true;
+        if (n > 0) split(job.a, job.b);
+        return false;
     }
 
     void resolve(int32_t a, int32_t b) {
@@ -135,23 +165,38 @@ struct Extractor {
         const uint64_t n = count(r0, r1, c0, c1);
         if (n == 0) return;  // nothing visible below either: no link anywhere under (a, b)
         if (n == uint64_t(r1 - r0) * uint64_t(c1 - c0)) {
-            out.emplace_back(a, b);
+            sinks.local().push(a, b);
             return;
         }
+        split(a, b);
+    }
+
+    // (a, b) is partly visible: resolve the pairs it splits into.
+    void split(int32_t a, int32_t b) {
+        const int32_t r0 = t.leaf_begin[a] - job.row0, r1 = t.leaf_end[a] - job.row0;
+        const int32_t c0 = t.leaf_begin[b] - job.col0, c1 = t.leaf_end[b] - job.col0;
         if (leafy[a] && leafy[b]) {
             // The split reaches leaf pairs at once: each visible one is a link of its own. Read
             // them off the table a word at a time (most links of a large V-map are made here).
             emit_bits(r0, r1, c0, c1);
             return;
         }
+        std::array<std::pair<int32_t, int32_t>, 64> kids;
+        int nk = 0;
         const bool la = t.is_leaf(a), lb = t.is_leaf(b);
         if (!la && !lb) {
-            t.for_each_child(
-                a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { resolve(ca, cb); }); });
+            t.for_each_child(a, [&](int32_t ca) {
+                t.for_each_child(b, [&](int32_t cb) { kids[nk++] = {ca, cb}; });
+            });
         } else if (la) {
-            t.for_each_child(b, [&](int32_t cb) { resolve(a, cb); });
+            t.for_each_child(b, [&](int32_t cb) { kids[nk++] = {a, cb}; });
         } else {
-            t.for_each_child(a, [&](int32_t ca) { resolve(ca, b); });
+            t.for_each_child(a, [&](int32_t ca) { kids[nk++] = {ca, b}; });
+        }
+        if (uint64_t(r1 - r0) * uint64_t(c1 - c0) > kParallelArea) {
+            tbb::parallel_for(0, nk, [&](int k) { resolve(kids[k].first, kids[k].second); });
+        } else {
+            for (int k = 0; k < nk; ++k) resolve(kids[k].first, kids[k].second);
         }
     }
 };
@@ -159,8 +204,6 @@ struct Extractor {
 }  // namespace
 
 namespace {
-
-constexpr Link kDropped{-1, -1};  // a link replaced by one at its parents' level
 
 // Both-direction compact arrays from pieces of links, in parallel: count ends per node
 // (relaxed atomics; the builder counts each batch's links while the backend works on the next),
@@ -175,7 +218,6 @@ class LinkArrays {
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
             uint64_t mine = 0;
             for (auto [a, b] : tasks[k]) {
-                if (a == kDropped.first) continue;
                 if (a < 0 || b < 0 || a >= nn_ || b >= nn_ || a == b) {
                     bad = true;
                     return;
@@ -190,12 +232,6 @@ class LinkArrays {
             throw Error(
                 fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn_));
     }
-    // A counted link that is being replaced (by one at its parents' level).
-    void uncount(Link l) {
-        deg_[l.first + 1]--, deg_[l.second + 1]--;
-        ends_ -= 2;
-    }
-
     void finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
         std::vector<uint64_t>& deg = deg_;
         for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
@@ -206,7 +242,6 @@ class LinkArrays {
         const auto tasks = split(pieces);
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
             for (auto [a, b] : tasks[k]) {
-                if (a == kDropped.first) continue;
                 out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
                 out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
             }
@@ -315,12 +350,13 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         if (!t.is_leaf(n)) t.for_each_child(n, [&](int32_t c) { leafy[n] &= t.is_leaf(c); });
     });
 
-    // Links stay in the pieces the extraction wrote them to (no copies); per job: where its
-    // links start, how many, and whether its pair is fully visible (then its one link is itself).
+    // Links stay in the blocks the extraction wrote them to (no copies). A fully visible job
+    // makes no link during extraction: whether its link stands or is replaced by one at its
+    // parents' level is settled after the last batch.
     std::vector<std::vector<Link>> pieces;
     LinkArrays arrays(t.num_nodes());
-    std::vector<uint32_t> job_piece(plan.jobs.size()), job_pos(plan.jobs.size());
     std::vector<uint8_t> job_full(plan.jobs.size(), 0);
+    Sinks sinks;
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
     detail::Progress progress("leaf pairs", total_pairs, params.progress);
     uint64_t done_pairs = 0;
@@ -343,44 +379,25 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         st.seconds_wait += seconds_since(tw);
         const auto te = Clock::now();
         const Batch& b = batches[i];
-        // Extract in chunks of jobs, in parallel, each into its own piece.
-        const size_t nj = b.end - b.begin;
-        const size_t chunk = std::max<size_t>(1, nj / 1024);
-        const size_t nchunks = (nj + chunk - 1) / chunk;
-        const size_t first_piece = pieces.size();
-        pieces.resize(first_piece + nchunks);
-        tbb::parallel_for(size_t(0), nchunks, [&](size_t c) {
-            std::vector<Link>& out = pieces[first_piece + c];
-            // A chunk makes at most one link per visible leaf pair: reserve that, so the piece
-            // never grows by copying (pages past the links written are never touched).
-            uint64_t visible = 0;
-            for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
-                const PairJob& job = plan.jobs[b.begin + k];
-                const uint32_t* w = bits + job.word_offset;
-                for (uint64_t i = 0, n = detail::job_words(job); i < n; ++i)
-                    visible += __builtin_popcount(w[i]);
-            }
-            out.reserve(visible + 1);
-            for (size_t k = c * chunk; k < std::min(nj, (c + 1) * chunk); ++k) {
-                const size_t j = b.begin + k;
-                const PairJob& job = plan.jobs[j];
-                const size_t before = out.size();
-                Extractor{t, leafy, job, bits + job.word_offset, out}.resolve(job.a, job.b);
-                job_piece[j] = uint32_t(first_piece + c);
-                job_pos[j] = uint32_t(before);
-                job_full[j] = out.size() - before == 1 && out.back() == Link{job.a, job.b};
-            }
+        // Extract the batch's jobs in parallel (large partial pairs split further into tasks),
+        // each thread into its own sink.
+        tbb::parallel_for(b.begin, b.end, [&](size_t j) {
+            const PairJob& job = plan.jobs[j];
+            job_full[j] = Extractor{t, leafy, job, bits + job.word_offset, sinks}.run();
         });
+        const size_t first_piece = pieces.size();
+        for (LinkSink& sk : sinks) {
+            for (auto& blk : sk.blocks) pieces.push_back(std::move(blk));
+            sk.blocks.clear();
+        }
         // Count this batch's link ends now, while the backend evaluates the next batch.
         if (params.keep_links) {
             std::vector<std::span<const Link>> fresh;
             for (size_t c = first_piece; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
             arrays.count(fresh);
         } else {
-            for (size_t c = first_piece; c < pieces.size(); ++c) {
-                counted_links += pieces[c].size();
-                std::vector<Link>().swap(pieces[c]);
-            }
+            for (size_t c = first_piece; c < pieces.size(); ++c) counted_links += pieces[c].size();
+            pieces.resize(first_piece);
         }
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
@@ -392,8 +409,8 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     st.seconds_backend = backend->busy_seconds();
     const auto tl = Clock::now();
 
-    // Split entries: one link at the entry's own level if every part was fully visible; the
-    // parts' links are then dropped.
+    // The fully visible pairs: an entry whose every part is fully visible makes one link at its
+    // own level, and its parts none.
     std::vector<int8_t> full(plan.entries.size(), -1);
     auto is_full = [&](auto&& self, int32_t e) -> bool {
         if (full[e] >= 0) return full[e];
@@ -407,25 +424,12 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         full[e] = f;
         return f;
     };
-    auto drop = [&](auto&& self, int32_t e) -> void {
-        const Entry& en = plan.entries[e];
-        if (en.job >= 0 && !params.keep_links) {
-            counted_links--;
-        } else if (en.job >= 0) {
-            Link& l = pieces[job_piece[en.job]][job_pos[en.job]];
-            arrays.uncount(l);
-            l = kDropped;
-        } else
-            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
-    };
     std::vector<Link> merged;
     auto settle = [&](auto&& self, int32_t e) -> void {
         const Entry& en = plan.entries[e];
-        if (en.job >= 0) return;
         if (is_full(is_full, e)) {
-            drop(drop, e);
             merged.emplace_back(en.a, en.b);
-        } else {
+        } else if (en.job < 0) {
             for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
         }
     };

@@ -15,8 +15,6 @@
 #include <array>
 #include <atomic>
 #include <chrono>
-#include <cstring>
-#include <memory>
 #include <numeric>
 
 #include "util/progress.h"
@@ -234,62 +232,22 @@ class LinkArrays {
             throw Error(
                 fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn_));
     }
-    // Places every link end: first into node blocks of about kBlockEnds ends (a task buffers a
-    // few ends per block and moves them on together), then each block, small enough for the
-    // cache, is placed node by node and each node's targets sorted. (A random scatter of every
-    // end straight into gigabytes of arrays is bound by cache misses.)
     void finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
         std::vector<uint64_t>& deg = deg_;
         for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
         vm.link_offsets = deg;
-        const uint64_t total = deg.back();
-        vm.link_targets.resize(total);  // uninitialised: every slot is written below
-        if (total == 0) return;
-
-        constexpr uint64_t kBlockEnds = uint64_t(1) << 18;
-        std::vector<int32_t> block_of(nn_);
-        std::vector<int32_t> first{0};  // per block: its first node; then nn_
-        for (int32_t n = 0; n < nn_; ++n) {
-            if (n > first.back() && deg[n] - deg[first.back()] >= kBlockEnds) first.push_back(n);
-            block_of[n] = int32_t(first.size()) - 1;
-        }
-        first.push_back(nn_);
-        const int32_t nb = int32_t(first.size()) - 1;
-        std::vector<uint64_t> fill(nb);
-        for (int32_t b = 0; b < nb; ++b) fill[b] = deg[first[b]];
-        std::unique_ptr<uint64_t[]> keys(new uint64_t[total]);  // uninitialised
-
-        constexpr int kBuf = 16;
+        vm.link_targets.resize(deg.back());  // uninitialised: every slot is written below
+        std::vector<uint64_t> fill(deg.begin(), deg.end() - 1);
+        int32_t* out = vm.link_targets.data();
         const auto tasks = split(pieces);
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
-            std::vector<uint64_t> buf(size_t(nb) * kBuf);
-            std::vector<uint8_t> cnt(nb, 0);
-            auto flush = [&](int32_t b) {
-                const uint64_t at =
-                    std::atomic_ref<uint64_t>(fill[b]).fetch_add(cnt[b], std::memory_order_relaxed);
-                std::memcpy(&keys[at], &buf[size_t(b) * kBuf], cnt[b] * sizeof(uint64_t));
-                cnt[b] = 0;
-            };
-            auto put = [&](int32_t n, int32_t m) {
-                const int32_t b = block_of[n];
-                buf[size_t(b) * kBuf + cnt[b]++] = (uint64_t(uint32_t(n)) << 32) | uint32_t(m);
-                if (cnt[b] == kBuf) flush(b);
-            };
             for (auto [a, b] : tasks[k]) {
-                put(a, b);
-                put(b, a);
+                out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
+                out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
             }
-            for (int32_t b = 0; b < nb; ++b)
-                if (cnt[b]) flush(b);
         });
-        int32_t* out = vm.link_targets.data();
-        tbb::parallel_for(int32_t(0), nb, [&](int32_t b) {
-            const int32_t n0 = first[b], n1 = first[b + 1];
-            std::vector<uint64_t> at(deg.begin() + n0, deg.begin() + n1);
-            for (uint64_t i = deg[n0]; i < deg[n1]; ++i)
-                out[at[int32_t(keys[i] >> 32) - n0]++] = int32_t(uint32_t(keys[i]));
-            for (int32_t n = n0; n < n1; ++n) std::sort(out + deg[n], out + deg[n + 1]);
-        });
+        tbb::parallel_for(int32_t(0), nn_,
+                          [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
     }
 
   private:

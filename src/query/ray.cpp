@@ -12,10 +12,13 @@ namespace vmap {
 namespace {
 
 struct Ray {
-    Vec3 o, d, inv;  // origin, unit direction, 1 / direction per axis
+    Vec3 o, d, inv;   // origin, unit direction, 1 / direction per axis
+    float scale = 1;  // disc radius = splat radius x scale
 };
 
-void check(const VisibilityMap& vm, uint32_t from, Vec3 dir) {
+void check(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
+    if (!(scale > 0 && scale <= 100))
+        throw Error(fmt::format("ray: splat scale {} out of range (0, 100]", scale));
     const size_t n = vm.points.size();
     if (from >= n)
         throw Error(
@@ -26,8 +29,9 @@ void check(const VisibilityMap& vm, uint32_t from, Vec3 dir) {
         throw Error("ray: the V-map's points have no normals or splat radii");
 }
 
-Ray make_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir) {
+Ray make_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
     Ray r;
+    r.scale = scale;
     r.o = vm.points.positions[vm.inverse[from]];
     r.d = dir / length(dir);
     r.inv = {1.f / r.d.x, 1.f / r.d.y, 1.f / r.d.z};  // +-inf for a zero component: slabs work
@@ -43,7 +47,7 @@ inline void hit_disc(const VisibilityMap& vm, const Ray& r, uint32_t k, float& b
     const float t = dot(c - r.o, n) / den;
     if (!(t > 0) || t >= best_t) return;
     const Vec3 off = r.o + r.d * t - c;
-    const float rad = vm.points.radii[k];
+    const float rad = vm.points.radii[k] * r.scale;
     if (length2(off) > rad * rad) return;
     best_t = t;
     best_k = k;
@@ -117,13 +121,15 @@ uint64_t visible_count(const VisibilityMap& vm, uint32_t i) {
     return count;
 }
 
-RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* stats) {
-    check(vm, from, dir);
-    const Ray r = make_ray(vm, from, dir);
+RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* stats,
+                 float splat_scale) {
+    check(vm, from, dir, splat_scale);
+    const Ray r = make_ray(vm, from, dir, splat_scale);
     const Octree& t = vm.octree;
     // Node boxes bound points and leaf discs, not every point's splat: grow them by the largest
     // splat radius so that no disc pokes out of its node's box.
-    const float grow = *std::max_element(vm.points.radii.begin(), vm.points.radii.end());
+    const float grow =
+        *std::max_element(vm.points.radii.begin(), vm.points.radii.end()) * splat_scale;
     float best_t = INFINITY;
     int64_t best_k = -1;
     RayStats st;
@@ -154,9 +160,10 @@ RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* sta
     return result(vm, best_t, best_k);
 }
 
-RayHit shoot_ray_brute(const VisibilityMap& vm, uint32_t from, Vec3 dir, bool visible_only) {
-    check(vm, from, dir);
-    const Ray r = make_ray(vm, from, dir);
+RayHit shoot_ray_brute(const VisibilityMap& vm, uint32_t from, Vec3 dir, bool visible_only,
+                       float splat_scale) {
+    check(vm, from, dir, splat_scale);
+    const Ray r = make_ray(vm, from, dir, splat_scale);
     float best_t = INFINITY;
     int64_t best_k = -1;
     if (visible_only) {

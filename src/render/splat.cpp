@@ -65,20 +65,22 @@ struct Disc {
     int x0 = 0, y0 = 0, x1 = -1, y1 = -1;
 };
 
-// Random sampling leaves small gaps between discs. An output pixel missing some samples whose 8
-// neighbours are mostly fully covered lies in such a gap, not on a silhouette: it takes the
-// mean of its covered samples, or of those neighbours when it has none. Elsewhere uncovered
-// samples show the background, which anti-aliases silhouettes.
-void resolve(Image& img, const std::vector<Vec3>& mean, const std::vector<uint8_t>& covered,
-             int full, Vec3 background) {
+// Random sampling leaves small gaps between discs. An output pixel missing samples with at least
+// 5 of its 8 neighbours solid (every sample covered) lies in such a gap, not on a silhouette: it
+// becomes solid, with the mean of its covered samples, or of those neighbours when it has none.
+// Two passes close gaps two pixels wide. Elsewhere, uncovered samples show the background, which
+// anti-aliases silhouettes.
+void resolve(Image& img, std::vector<Vec3> mean, std::vector<uint8_t> covered, int full,
+             Vec3 background) {
     const int W = img.width, H = img.height;
-    tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
-        for (int y = rows.begin(); y != rows.end(); ++y)
-            for (int x = 0; x < W; ++x) {
-                const size_t p = size_t(y) * W + x;
-                Vec3 c = mean[p];
-                const int cov = covered[p];
-                if (cov < full) {
+    for (int pass = 0; pass < 2; ++pass) {
+        std::vector<Vec3> mean2 = mean;
+        std::vector<uint8_t> covered2 = covered;
+        tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
+            for (int y = rows.begin(); y != rows.end(); ++y)
+                for (int x = 0; x < W; ++x) {
+                    const size_t p = size_t(y) * W + x;
+                    if (covered[p] == full) continue;
                     int n = 0;
                     Vec3 sum{};
                     for (int dy = -1; dy <= 1; ++dy)
@@ -90,13 +92,20 @@ void resolve(Image& img, const std::vector<Vec3>& mean, const std::vector<uint8_
                             sum += mean[q];
                             ++n;
                         }
-                    if (n >= 6) {
-                        if (cov == 0) c = sum / float(n);
-                    } else {
-                        const float f = float(cov) / float(full);
-                        c = c * f + background * (1 - f);
-                    }
+                    if (n < 5) continue;
+                    if (covered[p] == 0) mean2[p] = sum / float(n);
+                    covered2[p] = uint8_t(full);
                 }
+        });
+        mean.swap(mean2);
+        covered.swap(covered2);
+    }
+    tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
+        for (int y = rows.begin(); y != rows.end(); ++y)
+            for (int x = 0; x < W; ++x) {
+                const size_t p = size_t(y) * W + x;
+                const float f = float(covered[p]) / float(full);
+                const Vec3 c = mean[p] * f + background * (1 - f);
                 uint8_t* px = img.pixel(x, y);
                 px[0] = linear_to_srgb8(c.x);
                 px[1] = linear_to_srgb8(c.y);
@@ -290,7 +299,7 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
                 }
         }
     });
-    resolve(img, mean, covered, s * s, opt.background);
+    resolve(img, std::move(mean), std::move(covered), s * s, opt.background);
     return img;
 }
 

@@ -10,6 +10,7 @@
 // --ply writes the same colours (without the camera-dependent shading) as a coloured PLY.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <filesystem>
 #include <memory>
@@ -36,6 +37,7 @@ struct RenderArgs {
     std::optional<int> max_height, leaf_points;
     std::vector<int> heights{7, 9};
     std::string backend = "auto";
+    int time_runs = 0;
     RenderOptions opt;
 };
 
@@ -123,6 +125,30 @@ std::string with_suffix(const std::string& path, const std::string& suffix) {
     return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
 }
 
+// --time N: the render alone (the mode's colours, no V-map build, no PNG encoding) N times after
+// the run above served as warm-up; median and spread, with the work done.
+void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
+    std::vector<Vec3> colors = s.points.colors;
+    if (colors.empty()) colors.assign(s.points.size(), Vec3{0.8f, 0.8f, 0.8f});
+    std::vector<double> secs;
+    RenderStats st;
+    for (int r = 0; r < a.time_runs; ++r) {
+        RenderStats one;
+        const auto t0 = std::chrono::steady_clock::now();
+        render_points(s.points, colors, cam, a.opt, &one);
+        secs.push_back(
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+        st = one;
+    }
+    std::sort(secs.begin(), secs.end());
+    fmt::print(
+        "render:     {:.3f} s median [{:.3f}-{:.3f}] over {} runs; {}x{} at {}x{} supersampling, "
+        "{} points, {} discs on screen, {} tile refs, {} fragments ({:.3g} fragments/s)\n",
+        secs[secs.size() / 2], secs.front(), secs.back(), secs.size(), a.opt.width, a.opt.height,
+        a.opt.supersample, a.opt.supersample, s.points.size(), st.discs, st.tile_refs, st.fragments,
+        st.fragments / secs[secs.size() / 2]);
+}
+
 int run_render(RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
     if (needs_eye && !a.eye_id && a.eye_pos.empty()) {
@@ -183,6 +209,7 @@ int run_render(RenderArgs& a) {
             write_colored_ply(with_suffix(a.ply, fmt::format("-h{}", a.heights[k])), s.points,
                               colors[k]);
     }
+    if (a.time_runs > 0) time_render(a, s, cam);
     write_png(a.output, img);
     fmt::print("camera:     eye ({}, {}, {}) target ({}, {}, {}) fov {}\n", cam.eye.x, cam.eye.y,
                cam.eye.z, cam.target.x, cam.target.y, cam.target.z, cam.fov_y_deg);
@@ -239,6 +266,9 @@ Command add_render_command(CLI::App& app) {
     c->add_option("--supersample", a->opt.supersample, "s x s samples per pixel (1..4)")
         ->check(CLI::Range(1, 4))
         ->capture_default_str();
+    c->add_option("--time", a->time_runs,
+                  "Also time the render N more times (median, spread, work) for docs/results.md")
+        ->check(CLI::Range(1, 1000));
     return {c, [a] { return run_render(*a); }};
 }
 

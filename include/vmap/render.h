@@ -58,8 +58,13 @@ Projection project(const Camera& cam, int width, int height, Vec3 p);
 // points.positions). Throws vmap::Error when the sizes differ, the set is empty, the options are
 // out of range, or the camera is degenerate (non-finite, eye == target, up parallel to the view
 // direction, fov outside (0, 180)).
+struct RenderStats {
+    uint64_t discs = 0;      // discs in front of the camera and on screen
+    uint64_t tile_refs = 0;  // (disc, tile) pairs after binning
+    uint64_t fragments = 0;  // samples a disc covers (depth pass)
+};
 Image render_points(const PointSet& points, std::span<const Vec3> colors, const Camera& cam,
-                    const RenderOptions& opt);
+                    const RenderOptions& opt, RenderStats* stats = nullptr);
 
 // Images left to right with a thin gap (background colour); heights may differ (shorter ones are
 // centred vertically). Throws vmap::Error for an empty list.

@@ -5,6 +5,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 
@@ -144,7 +145,7 @@ Camera default_camera(const PointSet& points) {
 }
 
 Image render_points(const PointSet& points, std::span<const Vec3> colors, const Camera& cam,
-                    const RenderOptions& opt) {
+                    const RenderOptions& opt, RenderStats* stats) {
     check_options(opt);
     const size_t n = points.size();
     if (n == 0) throw Error("render: the point set is empty");
@@ -234,6 +235,7 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
     // Per output pixel: the mean colour of its covered samples and how many were covered.
     std::vector<Vec3> mean(size_t(img.width) * img.height);
     std::vector<uint8_t> covered(size_t(img.width) * img.height, 0);
+    std::atomic<uint64_t> fragments{0};
     tbb::parallel_for(tbb::blocked_range<int>(0, tw * th), [&](const tbb::blocked_range<int>& tr) {
         std::vector<float> zbuf(size_t(T) * T), wsum(size_t(T) * T);
         std::vector<Vec3> acc(size_t(T) * T);
@@ -300,6 +302,11 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
         }
     });
     resolve(img, std::move(mean), std::move(covered), s * s, opt.background);
+    if (stats) {
+        for (const Disc& d : discs) stats->discs += d.x1 >= d.x0;
+        stats->tile_refs += list.size();
+        stats->fragments += fragments.load();
+    }
     return img;
 }
 

@@ -58,6 +58,13 @@ void check_options(const RenderOptions& o) {
 
 // A disc ready to rasterise: centre, plane normal, world radius squared, the colour after
 // shading, and its screen bounds in supersampled pixels (inclusive).
+// A sample a disc covers: sample index in the tile, the disc's index in the tile's list, depth,
+// squared distance from the disc's centre.
+struct Fragment {
+    uint32_t p, k;
+    float t, q;
+};
+
 struct Disc {
     Vec3 c, n;
     float r2 = 0;
@@ -186,15 +193,24 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
             const float shade =
                 opt.shade ? opt.ambient + (1 - opt.ambient) * std::fabs(dot(nrm, view)) : 1.f;
             d.color = c * shade;
-            // Screen bounds: the disc lies in the sphere of radius R about c; its projection is
-            // within fpx R / (z - R) of the centre's, stretched by at most 1/cos^2 off axis.
-            const float sx = fr.cx + fr.fpx * dot(v, fr.r) / z;
-            const float sy = fr.cy - fr.fpx * dot(v, fr.u) / z;
-            const float cos_axis = z / dist;
-            const float rs = fr.fpx * R / (z - R) / (cos_axis * cos_axis) + 1.f;
-            if (!std::isfinite(sx) || !std::isfinite(sy) || !std::isfinite(rs)) continue;
-            const float fx0 = std::max(sx - rs, 0.f), fx1 = std::min(sx + rs, float(W - 1));
-            const float fy0 = std::max(sy - rs, 0.f), fy1 = std::min(sy + rs, float(H - 1));
+            // Screen bounds: the disc lies in the sphere of radius R about c, whose silhouette
+            // spans, per screen axis, the two planes through the eye tangent to it:
+            // (a z -+ R sqrt(a^2 + z^2 - R^2)) / (z^2 - R^2) for view coordinate a (z > R here).
+            // A sample centre (x + 0.5) inside [lo, hi] has x in [floor(lo), floor(hi)].
+            const float vx = dot(v, fr.r), vy = dot(v, fr.u);
+            const float den = z * z - d.r2;
+            const float ex = R * std::sqrt(vx * vx + z * z - d.r2);
+            const float ey = R * std::sqrt(vy * vy + z * z - d.r2);
+            const float lx = fr.cx + fr.fpx * (vx * z - ex) / den;
+            const float hx = fr.cx + fr.fpx * (vx * z + ex) / den;
+            const float ly = fr.cy - fr.fpx * (vy * z + ey) / den;
+            const float hy = fr.cy - fr.fpx * (vy * z - ey) / den;
+            if (!(std::isfinite(lx) && std::isfinite(hx) && std::isfinite(ly) && std::isfinite(hy)))
+                continue;
+            const float fx0 = std::max(std::floor(lx), 0.f),
+                        fx1 = std::min(std::floor(hx), float(W - 1));
+            const float fy0 = std::max(std::floor(ly), 0.f),
+                        fy1 = std::min(std::floor(hy), float(H - 1));
             if (fx0 > fx1 || fy0 > fy1) continue;
             d.x0 = int(fx0);
             d.x1 = int(fx1);
@@ -239,6 +255,7 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
     tbb::parallel_for(tbb::blocked_range<int>(0, tw * th), [&](const tbb::blocked_range<int>& tr) {
         std::vector<float> zbuf(size_t(T) * T), wsum(size_t(T) * T);
         std::vector<Vec3> acc(size_t(T) * T);
+        std::vector<Fragment> frags;
         for (int tile = tr.begin(); tile != tr.end(); ++tile) {
             const int tx0 = (tile % tw) * T, ty0 = (tile / tw) * T;
             const int tx1 = std::min(tx0 + T, W) - 1, ty1 = std::min(ty0 + T, H) - 1;
@@ -269,19 +286,26 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
                             const Vec3 off = dir * t - ce;
                             const float q = length2(off);
                             if (q >= d.r2) continue;
-                            emit(d, size_t(y - ty0) * T + (x - tx0), t, q);
+                            emit(k, size_t(y - ty0) * T + (x - tx0), t, q);
                         }
                     }
                 }
             };
-            for_fragments(
-                [&](const Disc&, size_t p, float t, float) { zbuf[p] = std::min(zbuf[p], t); });
-            for_fragments([&](const Disc& d, size_t p, float t, float q) {
-                if (t > zbuf[p] + d.band) return;
-                const float w = 1.f - q / d.r2 + 1e-4f;  // falls to ~0 at the rim
-                acc[p] += d.color * w;
-                wsum[p] += w;
+            // Pass 1 records every fragment (so pass 2 need not intersect again) and keeps the
+            // nearest depth per sample; pass 2 blends those within the band of it.
+            frags.clear();
+            for_fragments([&](uint32_t k, size_t p, float t, float q) {
+                zbuf[p] = std::min(zbuf[p], t);
+                frags.push_back({uint32_t(p), k, t, q});
             });
+            fragments += frags.size();
+            for (const Fragment& f : frags) {
+                const Disc& d = discs[ids[f.k]];
+                if (f.t > zbuf[f.p] + d.band) continue;
+                const float w = 1.f - f.q / d.r2 + 1e-4f;  // falls to ~0 at the rim
+                acc[f.p] += d.color * w;
+                wsum[f.p] += w;
+            }
             // Average s x s samples into each output pixel of the tile.
             for (int oy = ty0 / s; oy <= ty1 / s; ++oy)
                 for (int ox = tx0 / s; ox <= tx1 / s; ++ox) {

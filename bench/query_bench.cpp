@@ -64,6 +64,7 @@ struct Row {
     double build_s = 0;
     Spread pair, count, list, ray, brute;
     double set_size = 0, node_tests = 0, disc_tests = 0, hit_rate = 0;
+    double pair_probes = 0;  // per pair query: ancestors walked + binary-search steps
 };
 
 std::string fmt_spread(const Spread& s) {
@@ -145,6 +146,12 @@ int run_bench_query(QueryBenchArgs& a) {
             hits += shoot_ray(vm, qa[k], dirs[k], &rs).hit;
             set += visible_count(vm, qa[k]);
         }
+        uint64_t probes = 0;
+        for (size_t k = 0; k < Q; ++k)
+            for (int32_t A = vm.octree.leaf_node[vm.octree.leaf_of_point(vm.inverse[qa[k]])];
+                 A >= 0; A = vm.octree.parent[A])
+                probes += 1 + uint64_t(std::ceil(std::log2(double(vm.links(A).size()) + 1)));
+        r.pair_probes = double(probes) / Q;
         r.set_size = double(set) / Q;
         r.node_tests = double(rs.node_tests) / Q;
         r.disc_tests = double(rs.disc_tests) / Q;
@@ -161,17 +168,18 @@ int run_bench_query(QueryBenchArgs& a) {
         std::filesystem::path(a.scene).filename().string(), a.max_height, a.leaf_points, a.queries,
         std::max(1, a.queries / 20), a.runs);
     md +=
-        "| points | height | leaves | links | build s | pair us | visible count us | visible "
-        "list us | visible set size | ray us | ray node tests | ray disc tests | ray hits | "
-        "brute-force ray us |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+        "| points | height | leaves | links | build s | pair us | pair probes | visible count us | "
+        "visible list us | visible set size | ray us | ray node tests | ray disc tests | ray hits "
+        "| brute-force ray us |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     std::string csv =
         "points,height,leaves,links,build_s,pair_us,count_us,list_us,set_size,ray_us,"
         "ray_node_tests,ray_disc_tests,ray_hit_rate,brute_ray_us\n";
     for (const Row& r : rows) {
         md += fmt::format(
-            "| {} | {} | {} | {} | {:.2f} | {} | {} | {} | {:.0f} | {} | {:.0f} | {:.0f} | "
+            "| {} | {} | {} | {} | {:.2f} | {} | {:.0f} | {} | {} | {:.0f} | {} | {:.0f} | {:.0f} "
+            "| "
             "{:.0f}% | {} |\n",
-            r.points, r.height, r.leaves, r.links, r.build_s, fmt_spread(r.pair),
+            r.points, r.height, r.leaves, r.links, r.build_s, fmt_spread(r.pair), r.pair_probes,
             fmt_spread(r.count), fmt_spread(r.list), r.set_size, fmt_spread(r.ray), r.node_tests,
             r.disc_tests, 100 * r.hit_rate, fmt_spread(r.brute));
         csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points, r.height,

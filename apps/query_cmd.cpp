@@ -94,15 +94,7 @@ int run_query(const QueryArgs& a) {
         if (!a.ply.empty()) {
             // The whole cloud in Fig. 9's colours: visible purple, the eye's leaf cyan, the rest
             // dimmed albedo; sRGB bytes, as viewers expect.
-            const PointSet pts = points_in_input_order(vm);
-            const auto colors = visible_colors(vm, i);
-            PointSet out{pts.positions, pts.normals, {}, pts.radii, {}};
-            out.colors.resize(colors.size());
-            for (size_t k = 0; k < colors.size(); ++k)
-                out.colors[k] = {linear_to_srgb8(colors[k].x) / 255.f,
-                                 linear_to_srgb8(colors[k].y) / 255.f,
-                                 linear_to_srgb8(colors[k].z) / 255.f};
-            write_ply(a.ply, out);
+            write_colored_ply(a.ply, points_in_input_order(vm), visible_colors(vm, i));
             fmt::print("wrote:      {}\n", a.ply);
         }
     }

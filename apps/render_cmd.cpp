@@ -106,20 +106,6 @@ uint32_t pick_eye(const RenderArgs& a, const Source& s) {
     return nearest_point(s.points, p);
 }
 
-// Colours as the viewer should see them in a PLY: sRGB bytes (viewers do not linearise).
-void write_colored_ply(const std::string& path, const PointSet& pts,
-                       const std::vector<Vec3>& colors) {
-    PointSet out;
-    out.positions = pts.positions;
-    out.normals = pts.normals;
-    out.radii = pts.radii;
-    out.colors.resize(colors.size());
-    for (size_t i = 0; i < colors.size(); ++i)
-        out.colors[i] = {linear_to_srgb8(colors[i].x) / 255.f, linear_to_srgb8(colors[i].y) / 255.f,
-                         linear_to_srgb8(colors[i].z) / 255.f};
-    write_ply(path, out);
-}
-
 std::string with_suffix(const std::string& path, const std::string& suffix) {
     fs::path p(path);
     return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
@@ -151,6 +137,11 @@ void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
 
 int run_render(RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
+    if ((a.points || a.seed) && !a.input.empty() && !ends_with_ci(a.input, ".json")) {
+        fmt::print(stderr, "vmap render: --points/--seed apply to scene files (.json), not to {}\n",
+                   a.input);
+        return 2;
+    }
     if (needs_eye && !a.eye_id && a.eye_pos.empty()) {
         fmt::print(stderr, "vmap render: --mode {} needs --eye-id I or --eye-pos x,y,z\n", a.mode);
         return 2;

@@ -10,6 +10,7 @@
 
 #include "test_util.h"
 #include "vmap/error.h"
+#include "vmap/io.h"
 #include "vmap/query.h"
 
 namespace vmap {
@@ -117,6 +118,30 @@ TEST_F(RenderTest, TheEyeIsMarkedCyan) {
     const PointSet pts = points_in_input_order(*vm_);
     const Image plain = render_points(pts, pts.colors, cam, small());
     EXPECT_FALSE(is_cyan(plain.pixel(int(pr.x), int(pr.y))));
+}
+
+TEST_F(RenderTest, ColouredPlyReadsBackWithTheVisibleSetInPurple) {
+    const std::string path = ::testing::TempDir() + "/vmap_visible.ply";
+    const PointSet pts = points_in_input_order(*vm_);
+    const auto colors = visible_colors(*vm_, eye_);
+    write_colored_ply(path, pts, colors);
+    const ModelData back = read_ply(path);
+    ASSERT_EQ(back.points.size(), pts.size());
+    ASSERT_TRUE(back.points.has_normals());
+    ASSERT_TRUE(back.points.has_colors());
+    const Vec3 purple = VisibleStyle{}.visible;
+    const float pr = linear_to_srgb8(purple.x) / 255.f, pb = linear_to_srgb8(purple.z) / 255.f;
+    size_t n_purple = 0;
+    for (size_t i = 0; i < pts.size(); ++i) {
+        ASSERT_EQ(back.points.positions[i], pts.positions[i]);
+        const Vec3 c = back.points.colors[i];
+        n_purple += std::fabs(c.x - pr) < 1e-3f && std::fabs(c.z - pb) < 1e-3f;
+    }
+    EXPECT_EQ(n_purple, vm_->visible_set(eye_).size());
+    std::filesystem::remove(path);
+    std::vector<Vec3> short_colors(colors.begin(), colors.end() - 1);
+    EXPECT_THROW(write_colored_ply(path, pts, short_colors), Error);
+    EXPECT_FALSE(std::filesystem::exists(path));
 }
 
 TEST_F(RenderTest, VisibleColoursFollowTheVisibleSet) {

@@ -105,6 +105,13 @@ std::vector<Vec3> visible_colors(const VisibilityMap& vm, uint32_t eye,
 Image render_visible(const VisibilityMap& vm, uint32_t eye, const Camera& cam,
                      const RenderOptions& opt, const VisibleStyle& style = {});
 
+// Exports `points` with per-point `colors` (linear RGB, same size) as a binary PLY that MeshLab
+// and CloudCompare read: float x y z, nx ny nz (when present), uchar red green blue, float radius
+// (when present). The colour bytes are sRGB, as viewers display them. Temp file + rename; throws
+// vmap::Error naming the path.
+void write_colored_ply(const std::string& path, const PointSet& points,
+                       std::span<const Vec3> colors);
+
 // Linear [0,1] to 8-bit sRGB and back (the transfer curve of IEC 61966-2-1).
 uint8_t linear_to_srgb8(float c);
 float srgb8_to_linear(uint8_t c);

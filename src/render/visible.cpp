@@ -4,6 +4,7 @@
 #include <algorithm>
 
 #include "vmap/error.h"
+#include "vmap/io.h"
 #include "vmap/render.h"
 
 namespace vmap {
@@ -39,6 +40,22 @@ std::vector<Vec3> visible_colors(const VisibilityMap& vm, uint32_t eye, const Vi
     for (uint32_t k = vm.octree.point_begin[node]; k < vm.octree.point_end[node]; ++k)
         c[vm.order[k]] = style.eye;
     return c;
+}
+
+void write_colored_ply(const std::string& path, const PointSet& points,
+                       std::span<const Vec3> colors) {
+    if (colors.size() != points.size())
+        throw Error(
+            fmt::format("{}: {} colours for {} points", path, colors.size(), points.size()));
+    PointSet out;
+    out.positions = points.positions;
+    out.normals = points.normals;
+    out.radii = points.radii;
+    out.colors.resize(colors.size());
+    for (size_t i = 0; i < colors.size(); ++i)
+        out.colors[i] = {linear_to_srgb8(colors[i].x) / 255.f, linear_to_srgb8(colors[i].y) / 255.f,
+                         linear_to_srgb8(colors[i].z) / 255.f};
+    write_ply(path, out);
 }
 
 Image render_visible(const VisibilityMap& vm, uint32_t eye, const Camera& cam,

@@ -27,7 +27,8 @@ struct Frame {
         if (!is_finite(cam.eye) || !is_finite(cam.target) || !is_finite(cam.up))
             throw Error("camera: eye, target and up must be finite");
         if (!(cam.fov_y_deg > 0.01f && cam.fov_y_deg < 179.f))
-            throw Error(fmt::format("camera: fov {} out of range (0, 179] degrees", cam.fov_y_deg));
+            throw Error(
+                fmt::format("camera: fov {} out of range (0.01, 179) degrees", cam.fov_y_deg));
         const Vec3 d = cam.target - cam.eye;
         if (!(length(d) > 0)) throw Error("camera: eye and target coincide");
         f = normalized(d);

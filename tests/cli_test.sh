@@ -266,6 +266,73 @@ expect_input_error "info on a directory" a_directory.vmap info a_directory.vmap
 expect_input_error "query --pair id out of range" x.vmap query x.vmap --pair 0 3000
 expect_input_error "query --from id out of range" x.vmap query x.vmap --from 4000000000
 
+# ---- render, query by position and rays, bench-query (issue 4) -------------------------------
+
+# png_size FILE: "W H" from the PNG header (IHDR), or nothing when FILE is not a PNG.
+png_size() {
+    [ "$(head -c 8 "$1" | od -An -tx1 | tr -d ' \n')" = "89504e470d0a1a0a" ] || return
+    od -An -tu1 -j16 -N8 "$1" | awk '{print $1*16777216+$2*65536+$3*256+$4, $5*16777216+$6*65536+$7*256+$8}'
+}
+
+if expect_ok "render a scene, shaded" render "$SCENE" --points 3000 --mode shaded --size 64x48 \
+    -o shaded.png; then
+    if [ "$(png_size shaded.png)" = "64 48" ]; then ok "render writes a 64x48 PNG"; else
+        fail "shaded.png is not a 64x48 PNG ($(png_size shaded.png))"; fi
+fi
+if expect_ok "render a .vmap, visible from a point, with a PLY" \
+    render x.vmap --mode visible --eye-id 5 --size 80x80 -o vis.png --ply vis.ply; then
+    expect_stdout "render says how many points the eye sees" '^eye: +point 5 .*: [0-9]+ of 3000 points visible'
+    if [ "$(png_size vis.png)" = "80 80" ]; then ok "visible PNG is 80x80"; else
+        fail "vis.png is not an 80x80 PNG"; fi
+    if head -c 400 vis.ply | grep -aq 'property uchar red' && head -c 400 vis.ply | grep -aq 'property float nx'; then
+        ok "the PLY has uchar colours and normals"
+    else
+        fail "vis.ply lacks uchar red/green/blue or normals"
+    fi
+fi
+expect_ok "render --mode heights" render "$SCENE" --points 1500 --mode heights --heights 3,4 \
+    --eye-pos 0.27,0,0.2 --size 60x60 -o heights.png --backend cpu
+if [ "$(png_size heights.png | cut -d' ' -f1)" -gt 120 ] 2>/dev/null; then
+    ok "heights puts two panels side by side"
+else
+    fail "heights.png is not wider than two panels"
+fi
+expect_usage_error "render visible without an eye" render x.vmap --mode visible -o novis.png
+expect_no_file "no PNG after a usage error" novis.png
+expect_input_error "render --size 0x10" --size render x.vmap --size 0x10 -o bad.png
+expect_no_file "no PNG after a bad size" bad.png
+expect_input_error "render --eye-id out of range" x.vmap render x.vmap --mode visible \
+    --eye-id 3000 -o bad.png --ply bad.ply
+expect_no_file "no PNG after a bad eye id" bad.png
+expect_no_file "no PLY after a bad eye id" bad.ply
+expect_input_error "render --eye with a NaN" --eye render x.vmap --eye nan,0,0 -o bad.png
+expect_no_file "no PNG after a NaN eye" bad.png
+expect_input_error "render into a missing folder" no_such_dir/r.png render x.vmap --size 8x8 \
+    -o no_such_dir/r.png
+
+if expect_ok "query --pair-pos" query x.vmap --pair-pos 0.1,0,0.2 0.2,0.5488,0.3; then
+    expect_stdout "pair-pos names the nearest points" '^--pair-pos .*: nearest point [0-9]+'
+    expect_stdout "pair-pos answers" '^[0-9]+ [0-9]+ (visible|hidden|same-leaf)$'
+fi
+if expect_ok "query --from-pos with --ply" query x.vmap --from-pos 0.27,0,0.2 --ply from.ply; then
+    expect_stdout "from-pos counts" '^[0-9]+ points visible from [0-9]+ \(of 3000\)$'
+    if [ -s from.ply ]; then ok "from.ply written"; else fail "from.ply missing"; fi
+fi
+if expect_ok "query --ray" query x.vmap --ray-pos 0.27,0,0.2 --dir 0,1,0; then
+    expect_stdout "ray straight up from the floor hits the top" '^ray from [0-9]+: hits point [0-9]+ at distance 0\.5[0-9]*'
+fi
+expect_usage_error "query --ray without --dir" query x.vmap --ray 3
+expect_usage_error "query --ply without --from" query x.vmap --pair 0 1 --ply nofrom.ply
+expect_no_file "no PLY without --from" nofrom.ply
+expect_input_error "query --dir 0,0,0" --dir query x.vmap --ray 3 --dir 0,0,0
+expect_input_error "query --from-pos not a position" --from-pos query x.vmap --from-pos 1,2
+expect_input_error "query --ray id out of range" x.vmap query x.vmap --ray 3000 --dir 0,1,0
+
+if expect_ok "bench-query, tiny" bench-query --scene "$SCENE" --points 800,1600 --max-height 4 \
+    --queries 40 --runs 1 --backend cpu; then
+    expect_stdout "bench-query fits a growth exponent" '^Growth exponent k'
+fi
+
 # ---- done ------------------------------------------------------------------------------------
 
 leftovers=$(ls -- *.tmp 2>/dev/null)

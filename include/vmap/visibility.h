@@ -19,6 +19,7 @@ struct WorkCounters {
     uint64_t visible_pairs = 0;
     uint64_t node_tests = 0;      // segment-sphere tests
     uint64_t occluder_tests = 0;  // tangent-plane tests on potential occluders
+    uint64_t cells_stepped = 0;   // grid cells visited (the Bresenham kernel only)
 
     WorkCounters& operator+=(const WorkCounters& o) {
         pairs += o.pairs;
@@ -26,6 +27,7 @@ struct WorkCounters {
         visible_pairs += o.visible_pairs;
         node_tests += o.node_tests;
         occluder_tests += o.occluder_tests;
+        cells_stepped += o.cells_stepped;
         return *this;
     }
 };

@@ -181,8 +181,10 @@ class LinkArrays {
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
             for (auto [a, b] : tasks[k]) {
                 if (a == kDropped.first) continue;
-                out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
-                out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
+                out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] =
+                    b;
+                out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] =
+                    a;
             }
         });
         tbb::parallel_for(int32_t(0), nn_,

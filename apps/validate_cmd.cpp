@@ -94,6 +94,14 @@ CLI::App* add_validate_command(CLI::App& app) {
                   "sampled pairs' leaves only: same answers, much faster, for sweeps)")
         ->check(CLI::IsMember({"vmap", "direct"}))
         ->capture_default_str();
+    c->add_option("--delta-scale", opt.vp.delta_scale,
+                  "With --predict direct: Delta = scale * max(farthest point, floor * splat)")
+        ->check(CLI::Range(0.1f, 10.f))
+        ->capture_default_str();
+    c->add_option("--splat-floor", opt.vp.splat_floor,
+                  "With --predict direct: the splat radius multiple Delta never goes below")
+        ->check(CLI::Range(0.f, 10.f))
+        ->capture_default_str();
     c->add_option("--ray-offset", opt.vp.ray_offset,
                   "Truth rays skip this fraction of the room size at both ends")
         ->check(CLI::Range(1e-7, 0.01))

@@ -55,6 +55,11 @@ struct ValidateParams {
     // stores the leaf-pair table exactly; tests/validate_test.cpp checks it), far faster, for
     // parameter sweeps.
     std::string predict = "vmap";
+    // The Delta rule (the occluder disc radius of a leaf), direct mode only: Delta =
+    // delta_scale * max(farthest point from the centroid, splat_floor * splat radius). The
+    // octree's own rule (octree.cpp) is delta_scale 1, splat_floor 1.
+    float delta_scale = 1.f;
+    float splat_floor = 1.f;
     double ray_offset = 1e-4;  // truth rays skip this fraction of the room's largest extent at
                                // both ends (so a ray does not hit the surface it starts on)
     bool progress = false;

@@ -71,6 +71,60 @@ void check_params(const ValidateParams& p, const std::string& src) {
     if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
     check_visibility(p.visibility, src);
+    if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
+        throw Error(fmt::format("{}: --delta-scale {} out of range [0.1, 10]", src, p.delta_scale));
+    if (!(p.splat_floor >= 0.f && p.splat_floor <= 10.f))
+        throw Error(fmt::format("{}: --splat-floor {} out of range [0, 10]", src, p.splat_floor));
+    if ((p.delta_scale != 1.f || p.splat_floor != 1.f) && p.predict != "direct")
+        throw Error(fmt::format(
+            "{}: --delta-scale/--splat-floor change the octree's Delta rule and need --predict "
+            "direct (the V-map build uses the octree's own rule)",
+            src));
+}
+
+// Recomputes every leaf's Delta by the rule delta_scale * max(farthest, splat_floor * splat) and
+// the content boxes the walk prunes with (leaf: points and disc; internal: union of children),
+// as octree.cpp does, so the walk still bounds every occluder disc. `pts` in octree order.
+void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) {
+    double maxabs = 0;
+    for (const Vec3& q : pts.positions)
+        maxabs = std::max(
+            {maxabs, double(std::fabs(q.x)), double(std::fabs(q.y)), double(std::fabs(q.z))});
+    const float slack = static_cast<float>((maxabs + t.root_size) * 1e-6);
+    tbb::parallel_for(int32_t(0), t.num_leaves(), [&](int32_t l) {
+        const int32_t nd = t.leaf_node[l];
+        LeafDisc& d = t.leaves[l];
+        float far2 = 0;
+        Box bx{d.centroid, d.centroid};
+        for (uint32_t k = t.point_begin[nd]; k < t.point_end[nd]; ++k) {
+            const Vec3 q = pts.positions[k];
+            far2 = std::max(far2, length2(q - d.centroid));
+            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
+            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
+        }
+        d.delta = scale * std::max(std::sqrt(far2), floor * t.leaf_splat[l]);
+        auto reach = [&](float ni) {
+            return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
+        };
+        const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
+        const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
+        bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
+        bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
+    });
+    for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
+        if (t.is_leaf(nd)) continue;
+        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+        t.for_each_child(nd, [&](int32_t c) {
+            const Box& cb = t.boxes[c];
+            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y),
+                     std::min(bx.lo.z, cb.lo.z)};
+            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y),
+                     std::max(bx.hi.z, cb.hi.z)};
+        });
+        t.boxes[nd] = bx;
+    }
+    t.pack_walk();
 }
 
 struct Pair {
@@ -176,7 +230,9 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
         } else {
             PointSet copy = pts;
             std::vector<uint32_t> order;
-            const Octree t = Octree::build(copy, op, order, path);
+            Octree t = Octree::build(copy, op, order, path);
+            if (params.delta_scale != 1.f || params.splat_floor != 1.f)
+                apply_delta_rule(t, copy, params.delta_scale, params.splat_floor);
             std::vector<uint32_t> inverse(order.size());
             for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
             std::unique_ptr<detail::LeafGrid> grid;
@@ -245,9 +301,10 @@ std::string validation_markdown(const ValidationReport& r) {
         r.truth_seconds);
     s += fmt::format(
         "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}; "
-        "leaf_points {}.\n\n",
+        "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
-        p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points);
+        p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
+        p.splat_floor);
     s += "| max_height | height | leaves | links | same leaf (vis.) | pairs | agreement | "
          "false visible | false hidden | facing pairs | agreement | false visible | false hidden "
          "| build s | predict s |\n";
@@ -295,7 +352,9 @@ std::string validation_json(const ValidationReport& r) {
            {"K", p.visibility.K},
            {"eps", p.visibility.eps},
            {"facing_tol", p.visibility.facing_tol},
-           {"parallel_tol", p.visibility.parallel_tol}};
+           {"parallel_tol", p.visibility.parallel_tol},
+           {"delta_scale", p.delta_scale},
+           {"splat_floor", p.splat_floor}};
     json rows = json::array();
     for (const HeightResult& h : r.rows)
         rows.push_back(json{{"max_height", h.max_height},

@@ -68,6 +68,9 @@ void check_params(const ValidateParams& p, const std::string& src) {
         throw Error(
             fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)", src,
                         p.occluders));
+    if (!(p.bury_distance >= 0 && p.bury_distance <= 0.1))
+        throw Error(
+            fmt::format("{}: bury distance {} out of range [0, 0.1]", src, p.bury_distance));
     if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
     check_visibility(p.visibility, src);
@@ -194,6 +197,14 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     });
     for (size_t k = 0; k < pairs.size(); ++k)
         r.truth_facing += facing[k], r.truth_visible += truth[k];
+    r.bury_distance = params.bury_distance * room;
+    std::vector<uint8_t> buried(n);
+    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) {
+        const Vec3 q = pts.positions[i], nq = pts.normals[i];
+        buried[i] = exact.occluded(q, q + nq, float(r.offset), float(r.bury_distance));
+    });
+    for (uint8_t b : buried) r.buried_points += b;
+    for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
     detail::Progress progress("heights", params.heights.size(), params.progress);
@@ -273,6 +284,7 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
             }
             row.all.add(truth[k], pred[k]);
             if (facing[k]) row.facing.add(truth[k], pred[k]);
+            if (!buried[pairs[k].i] && !buried[pairs[k].j]) row.live.add(truth[k], pred[k]);
         }
         r.rows.push_back(row);
         progress.update(hi + 1);
@@ -301,23 +313,28 @@ std::string validation_markdown(const ValidationReport& r) {
         r.truth_seconds);
     s += fmt::format(
         "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}; "
-        "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).\n\n",
+        "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).  \n"
+        "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
+        "(\"live\"): {}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
         p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
-        p.splat_floor);
+        p.splat_floor, r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
+        r.live_pairs);
     s += "| max_height | height | leaves | links | same leaf (vis.) | pairs | agreement | "
          "false visible | false hidden | facing pairs | agreement | false visible | false hidden "
-         "| build s | predict s |\n";
-    s += "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+         "| live pairs | agreement | false visible | false hidden | build s | predict s |\n";
+    s += "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+         "---:|---:|\n";
     for (const HeightResult& h : r.rows)
         s += fmt::format(
-            "| {} | {} | {} | {} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {:.2f} | "
-            "{:.3f} |\n",
+            "| {} | {} | {} | {} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | "
+            "{} | {} | {:.2f} | {:.3f} |\n",
             h.max_height, h.height, h.leaves, h.links, h.same_leaf, h.same_leaf_visible,
             h.all.total(), pct(h.all.agreement()), pct(h.all.false_visible_rate()),
             pct(h.all.false_hidden_rate()), h.facing.total(), pct(h.facing.agreement()),
-            pct(h.facing.false_visible_rate()), pct(h.facing.false_hidden_rate()), h.build_seconds,
-            h.predict_seconds);
+            pct(h.facing.false_visible_rate()), pct(h.facing.false_hidden_rate()), h.live.total(),
+            pct(h.live.agreement()), pct(h.live.false_visible_rate()),
+            pct(h.live.false_hidden_rate()), h.build_seconds, h.predict_seconds);
     s += "\n";
     return s;
 }
@@ -342,6 +359,9 @@ std::string validation_json(const ValidationReport& r) {
            {"pair_seed", p.pair_seed},
            {"truth_facing", r.truth_facing},
            {"truth_visible", r.truth_visible},
+           {"buried_points", r.buried_points},
+           {"live_pairs", r.live_pairs},
+           {"bury_distance", r.bury_distance},
            {"triangles", r.triangles},
            {"ray_offset", r.offset},
            {"ray_offset_relative", p.ray_offset},
@@ -365,6 +385,7 @@ std::string validation_json(const ValidationReport& r) {
                             {"same_leaf_visible", h.same_leaf_visible},
                             {"all", conf(h.all)},
                             {"facing", conf(h.facing)},
+                            {"live", conf(h.live)},
                             {"build_seconds", h.build_seconds},
                             {"predict_seconds", h.predict_seconds},
                             {"backend", h.backend},

@@ -99,9 +99,9 @@ CLI::App* add_validate_command(CLI::App& app) {
         ->check(CLI::Range(0.1f, 10.f))
         ->capture_default_str();
     c->add_option("--splat-floor", opt.vp.splat_floor,
-                  "With --predict direct: the splat radius multiple Delta never goes below")
-        ->check(CLI::Range(0.f, 10.f))
-        ->capture_default_str();
+                  "With --predict direct: the splat radius multiple Delta never goes below "
+                  "(default: the octree's own, src/octree/delta_rule.h)")
+        ->check(CLI::Range(0.f, 10.f));
     c->add_option("--ray-offset", opt.vp.ray_offset,
                   "Truth rays skip this fraction of the room size at both ends")
         ->check(CLI::Range(1e-7, 0.01))

@@ -4,6 +4,7 @@
 # kept). Usage:  scripts/validate-sweep.sh [path/to/vmap]   (default build-cpu/vmap)
 # Environment: PAIRS (default 200000), SCENES (default: empty bunny two-models dragon),
 # VMAP_POINTS (points for the V-map-mode tables, default 10000).
+# The V-map-mode tables and the build timings use the compiled-in defaults.
 # Most of it uses --predict direct: the leaf-pair predicate on the sampled pairs' leaves, which
 # gives the V-map's answers exactly (tests/validate_test.cpp) without building the V-map; one
 # table builds and queries real V-maps.
@@ -24,29 +25,33 @@ run() {  # tag scene args...
         --json "$work/$tag.$scene.json" "$@"
 }
 
-# The candidate defaults that the single-knob sweeps vary around (docs/validation.md says why).
-cand=(-K 2 --splat-floor 2.5)
+# Explicit settings, so the tables do not depend on the compiled-in defaults: "old" is the
+# defaults before docs/validation.md, "cand" the ones chosen there; the single-knob sweeps vary
+# one setting of "cand" at a time.
+old=(-K 2 --eps 0.01 --facing-tol 0.01 --leaf-points 4 --splat-floor 1)
+cand=(-K 2 --eps 0.01 --facing-tol 0.005 --leaf-points 4 --splat-floor 2.5)
 for s in $scenes; do
     echo "== $s" >&2
-    run base "$s" --predict direct --heights 5,6,7,8,9,10
-    run bres "$s" --predict direct --heights 5,6,7,8,9,10 --occluders bresenham
+    run base "$s" --predict direct --heights 5,6,7,8,9,10 "${old[@]}"
     run cand "$s" --predict direct --heights 5,6,7,8,9,10 "${cand[@]}"
+    run bres "$s" --predict direct --heights 5,6,7,8,9,10 --occluders bresenham "${cand[@]}"
+    run bresold "$s" --predict direct --heights 8,9 --occluders bresenham "${old[@]}"
     for k in 1 2 3; do
         for f in 0 1 1.5 2 2.5 3; do
-            run "kf-$k-$f" "$s" --predict direct --heights 9 -K "$k" --splat-floor "$f"
+            run "kf-$k-$f" "$s" --predict direct --heights 9 "${cand[@]}" -K "$k" --splat-floor "$f"
         done
     done
     for lp in 1 2 4 8; do
-        run "lp-$lp" "$s" --predict direct --heights 7,8,9,10 --leaf-points "$lp" "${cand[@]}"
+        run "lp-$lp" "$s" --predict direct --heights 7,8,9,10 "${cand[@]}" --leaf-points "$lp"
     done
     for e in 0.001 0.005 0.01 0.02 0.03; do
-        run "eps-$e" "$s" --predict direct --heights 9 --eps "$e" "${cand[@]}"
+        run "eps-$e" "$s" --predict direct --heights 9 "${cand[@]}" --eps "$e"
     done
-    for ft in 0 0.01 0.03 0.05; do
-        run "ft-$ft" "$s" --predict direct --heights 9 --facing-tol "$ft" "${cand[@]}"
+    for ft in 0 0.002 0.005 0.01 0.03; do
+        run "ft-$ft" "$s" --predict direct --heights 9 "${cand[@]}" --facing-tol "$ft"
     done
     for ds in 1 1.25 1.5 2; do
-        run "ds-$ds" "$s" --predict direct --heights 9 --delta-scale "$ds" -K 2
+        run "ds-$ds" "$s" --predict direct --heights 9 "${cand[@]}" --splat-floor 1 --delta-scale "$ds"
     done
 done
 echo "== V-map mode (bunny, $vpoints points)" >&2
@@ -119,29 +124,33 @@ def table_by_scene(title, items):
             for h in r["heights"]:
                 out.append(row(r, h, label))
     out.append("")
-table("Today's defaults per height (K 2, eps 0.01, facing_tol 0.01, leaf_points 4, Delta = "
-      "max(farthest, splat))", [("base", "defaults")])
-table("Candidate defaults per height (K 2, splat floor 2.5: Delta = max(farthest, 2.5 splat))",
-      [("cand", "K 2, floor 2.5")])
-table_by_scene("K and the Delta rule's splat floor (Delta = max(farthest, f x splat)), height 9",
+table("Old defaults per height (K 2, eps 0.01, facing_tol 0.01, leaf_points 4, Delta = "
+      "max(farthest, splat))", [("base", "old defaults")])
+table("New defaults per height (K 2, eps 0.01, facing_tol 0.005, leaf_points 4, Delta = "
+      "max(farthest, 2.5 splat))", [("cand", "new defaults")])
+table_by_scene("K and the Delta rule's splat floor (Delta = max(farthest, f x splat)), height 9, "
+               "new defaults otherwise",
                [(f"kf-{k}-{f}", f"K {k}, floor {f}") for k in (1, 2, 3)
                 for f in ("0", "1", "1.5", "2", "2.5", "3")])
-table_by_scene("leaf_points (K 2, floor 2.5)",
+table_by_scene("leaf_points (new defaults otherwise)",
                [(f"lp-{lp}", f"leaf_points {lp}") for lp in (1, 2, 4, 8)])
-table_by_scene("eps (K 2, floor 2.5), height 9",
+table_by_scene("eps, height 9 (new defaults otherwise)",
                [(f"eps-{e}", f"eps {e}") for e in ("0.001", "0.005", "0.01", "0.02", "0.03")])
-table_by_scene("facing_tol (K 2, floor 2.5), height 9",
-               [(f"ft-{t}", f"facing_tol {t}") for t in ("0", "0.01", "0.03", "0.05")])
-table_by_scene("Delta scale (K 2, floor 1: Delta = s max(farthest, splat)), height 9",
+table_by_scene("facing_tol, height 9 (new defaults otherwise)",
+               [(f"ft-{t}", f"facing_tol {t}") for t in ("0", "0.002", "0.005", "0.01", "0.03")])
+table_by_scene("Delta scale instead of a floor (Delta = s max(farthest, splat)), height 9, new defaults "
+               "otherwise",
                [(f"ds-{d}", f"scale {d}") for d in ("1", "1.25", "1.5", "2")])
-table("Occluders: Bresenham grid walk of [7] (today's defaults otherwise)", [("bres", "bresenham")])
+table_by_scene("Occluders: the Bresenham grid walk of [7] against the sphere walk",
+               [("cand", "spheres, new defaults"), ("bres", "bresenham, new defaults"),
+                ("base", "spheres, old defaults"), ("bresold", "bresenham, old defaults")])
 # Work of the two kernels on the same pairs (direct mode counts).
-out.append("\n#### Work per facing leaf pair, spheres vs Bresenham (today's defaults, direct "
+out.append("\n#### Work per facing leaf pair, spheres vs Bresenham (new defaults, direct "
            "mode, the sampled pairs)\n")
 out.append("| scene | max_height | spheres: node tests | occluder tests | Bresenham: cells "
            "stepped | occluder tests | spheres s | Bresenham s |\n|---|---:|---:|---:|---:|---:|---:|---:|")
 for s in scenes:
-    b, r = load("base", s), load("bres", s)
+    b, r = load("cand", s), load("bres", s)
     if not b or not r: continue
     for hb, hr in zip(b["heights"], r["heights"]):
         fb, fr = max(1, hb["work"]["facing_pairs"]), max(1, hr["work"]["facing_pairs"])
@@ -154,7 +163,7 @@ for tag, label in (("vmap", "spheres"), ("vmapbres", "bresenham")):
     r = load(tag, "bunny")
     if not r: continue
     out.append(f"\n#### Real V-maps (build + query), cornell-bunny at {r['points']} points, "
-               f"{label}, today's defaults\n")
+               f"{label}, the compiled-in defaults\n")
     out.append("| max_height | height | leaves | links | agree | false vis. | false hid. | "
                "agree (facing) | false vis. (facing) | build s | leaf pairs | facing | node tests | "
                "cells stepped | occluder tests |\n|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|")

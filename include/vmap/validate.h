@@ -57,9 +57,10 @@ struct ValidateParams {
     std::string predict = "vmap";
     // The Delta rule (the occluder disc radius of a leaf), direct mode only: Delta =
     // delta_scale * max(farthest point from the centroid, splat_floor * splat radius). The
-    // octree's own rule (octree.cpp) is delta_scale 1, splat_floor 1.
+    // octree's own rule is delta_scale 1 and its floor (src/octree/delta_rule.h); splat_floor < 0
+    // means that floor.
     float delta_scale = 1.f;
-    float splat_floor = 1.f;
+    float splat_floor = -1.f;
     double bury_distance = 2e-3;  // of the room's largest extent (see buried_points)
     double ray_offset = 1e-4;     // truth rays skip this fraction of the room's largest extent at
                                   // both ends (so a ray does not hit the surface it starts on)

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <random>
 
+#include "octree/delta_rule.h"
 #include "util/progress.h"
 #include "visibility/bresenham.h"
 #include "visibility/leaf_pair.h"
@@ -76,9 +77,9 @@ void check_params(const ValidateParams& p, const std::string& src) {
     check_visibility(p.visibility, src);
     if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
         throw Error(fmt::format("{}: --delta-scale {} out of range [0.1, 10]", src, p.delta_scale));
-    if (!(p.splat_floor >= 0.f && p.splat_floor <= 10.f))
+    if (!(p.splat_floor <= 10.f))
         throw Error(fmt::format("{}: --splat-floor {} out of range [0, 10]", src, p.splat_floor));
-    if ((p.delta_scale != 1.f || p.splat_floor != 1.f) && p.predict != "direct")
+    if ((p.delta_scale != 1.f || p.splat_floor >= 0.f) && p.predict != "direct")
         throw Error(fmt::format(
             "{}: --delta-scale/--splat-floor change the octree's Delta rule and need --predict "
             "direct (the V-map build uses the octree's own rule)",
@@ -133,6 +134,10 @@ void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) 
 struct Pair {
     uint32_t i, j;
 };
+
+float floor_of(const ValidateParams& p) {
+    return p.splat_floor >= 0.f ? p.splat_floor : detail::kDeltaSplatFloor;
+}
 
 // Seeded uniform pairs i != j of n points; the same seed gives the same pairs everywhere.
 std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
@@ -242,8 +247,8 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
             PointSet copy = pts;
             std::vector<uint32_t> order;
             Octree t = Octree::build(copy, op, order, path);
-            if (params.delta_scale != 1.f || params.splat_floor != 1.f)
-                apply_delta_rule(t, copy, params.delta_scale, params.splat_floor);
+            if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
+                apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
             std::vector<uint32_t> inverse(order.size());
             for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
             std::unique_ptr<detail::LeafGrid> grid;
@@ -318,7 +323,7 @@ std::string validation_markdown(const ValidationReport& r) {
         "(\"live\"): {}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
         p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
-        p.splat_floor, r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
+        floor_of(p), r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
         r.live_pairs);
     s += "| max_height | height | leaves | links | same leaf (vis.) | pairs | agreement | "
          "false visible | false hidden | facing pairs | agreement | false visible | false hidden "
@@ -374,7 +379,7 @@ std::string validation_json(const ValidationReport& r) {
            {"facing_tol", p.visibility.facing_tol},
            {"parallel_tol", p.visibility.parallel_tol},
            {"delta_scale", p.delta_scale},
-           {"splat_floor", p.splat_floor}};
+           {"splat_floor", floor_of(p)}};
     json rows = json::array();
     for (const HeightResult& h : r.rows)
         rows.push_back(json{{"max_height", h.max_height},

@@ -128,7 +128,10 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
         found_total += found.size();
     }
     EXPECT_GT(brute_total, 100u);  // the scene has occluders to find
-    EXPECT_GT(found_total, brute_total / 2);
+    // It finds a good share, not all: with Delta = max(farthest, 2.5 splat) many discs reach
+    // outside their leaf's cell (about 40% found here).
+    EXPECT_GT(found_total, brute_total / 5);
+    EXPECT_LT(found_total, brute_total);
     // Every occluder it lacks is one whose disc reaches outside its cell.
     EXPECT_EQ(brute_total - found_total, missed_outside);
 }

@@ -170,6 +170,7 @@ TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {
     p.pairs = 20000;
     p.heights = {5};
     p.predict = "direct";
+    p.splat_floor = 1;
     const ValidationReport base = validate_scene(kBlock, p);
     p.splat_floor = 3;
     const ValidationReport big = validate_scene(kBlock, p);

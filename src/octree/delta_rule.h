@@ -5,6 +5,6 @@
 
 namespace vmap::detail {
 
-inline constexpr float kDeltaSplatFloor = 1.0f;
+inline constexpr float kDeltaSplatFloor = 2.5f;
 
 }  // namespace vmap::detail

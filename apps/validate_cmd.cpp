@@ -117,6 +117,13 @@ CLI::App* add_validate_command(CLI::App& app) {
     c->add_option("--embree-pairs", opt.embree_pairs, "With --time-embree: leaf pairs sampled")
         ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
         ->capture_default_str();
+    // A later value of a single-valued option replaces an earlier one, so a sweep can vary one
+    // setting of a fixed list (scripts/validate-sweep.sh).
+    for (const char* name :
+         {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
+          "--parallel-tol", "--occluders", "--backend", "--predict", "--delta-scale",
+          "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs"})
+        c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return c;
 }
 

@@ -218,6 +218,28 @@ TEST(Validate, BadInputIsRejectedNamingTheField) {
     fails(kBlock, q, "no pairs");
 }
 
+TEST(EmbreeTiming, RaysAndKernelResolveTheSameLeafPairsAndMostlyAgree) {
+    EmbreeTimingParams p;
+    p.max_height = 4;
+    p.sample_pairs = 5000;
+    p.runs = 1;
+    const EmbreeTiming r = time_embree(kBlock, p);
+    EXPECT_EQ(r.pairs, 5000u);
+    EXPECT_GT(r.facing, 0u);
+    EXPECT_LT(r.facing, r.pairs);
+    EXPECT_EQ(r.kernel_work.pairs, r.pairs);
+    EXPECT_EQ(r.kernel_work.facing_pairs, r.facing);  // the same facing test decides who rays
+    EXPECT_LE(r.ray_visible, r.facing);
+    EXPECT_LE(r.kernel_visible, r.facing);
+    // Rays along the centroid segments and the disc test answer the same question at leaf
+    // level: they must agree on most pairs (they do on 99% of the shipped scenes' pairs).
+    EXPECT_GT(double(r.agree) / r.pairs, 0.9);
+    EXPECT_GT(r.kernel_s.median, 0.0);
+    EXPECT_NE(embree_timing_markdown({r}).find("room-with-block"), std::string::npos);
+    p.runs = 0;
+    EXPECT_THROW(time_embree(kBlock, p), Error);
+}
+
 TEST(ExactVisibility, SceneWithoutTrianglesIsAnError) {
     EXPECT_THROW(ExactVisibility({}, "empty"), Error);
 }

@@ -106,6 +106,8 @@ CLI::App* add_validate_command(CLI::App& app) {
                   "Truth rays skip this fraction of the room size at both ends")
         ->check(CLI::Range(1e-7, 0.01))
         ->capture_default_str();
+    c->add_flag("--drop-buried", opt.vp.drop_buried,
+                "Leave out buried points (covered surface) before sampling pairs");
     c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
     c->add_option("--json", opt.json, "Also write the results as JSON here");
     c->add_flag("--time-embree", opt.time_embree,

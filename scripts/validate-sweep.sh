@@ -34,6 +34,7 @@ for s in $scenes; do
     echo "== $s" >&2
     run base "$s" --predict direct --heights 5,6,7,8,9,10 "${old[@]}"
     run cand "$s" --predict direct --heights 5,6,7,8,9,10 "${cand[@]}"
+    run drop "$s" --predict direct --heights 5,6,7,8,9,10 "${cand[@]}" --drop-buried
     run bres "$s" --predict direct --heights 5,6,7,8,9,10 --occluders bresenham "${cand[@]}"
     run bresold "$s" --predict direct --heights 8,9 --occluders bresenham "${old[@]}"
     for k in 1 2 3; do
@@ -128,6 +129,8 @@ table("Old defaults per height (K 2, eps 0.01, facing_tol 0.01, leaf_points 4, D
       "max(farthest, splat))", [("base", "old defaults")])
 table("New defaults per height (K 2, eps 0.01, facing_tol 0.005, leaf_points 4, Delta = "
       "max(farthest, 2.5 splat))", [("cand", "new defaults")])
+table("New defaults, buried points left out before sampling (--drop-buried: what not sampling "
+      "covered surface would give)", [("drop", "new defaults, no buried points")])
 table_by_scene("K and the Delta rule's splat floor (Delta = max(farthest, f x splat)), height 9, "
                "new defaults otherwise",
                [(f"kf-{k}-{f}", f"K {k}, floor {f}") for k in (1, 2, 3)

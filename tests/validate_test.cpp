@@ -179,6 +179,27 @@ TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {
     EXPECT_NE(big.rows[0].all.false_visible, base.rows[0].all.false_visible);
 }
 
+TEST(Validate, BuriedPointsAreTheFloorUnderTheBlockAndCanBeDropped) {
+    ValidateParams p;
+    p.pairs = 20000;
+    p.heights = {5};
+    p.predict = "direct";
+    const ValidationReport r = validate_scene(kBlock, p);
+    // The block stands on the floor and the light hangs under the ceiling: the floor under the
+    // block's base (0.04 of the ~1.7 m^2 sampled) and the ceiling under the light are covered.
+    EXPECT_GT(r.buried_points, 20u);
+    EXPECT_LT(r.buried_points, 200u);
+    EXPECT_LT(r.live_pairs, r.pairs);
+    EXPECT_LE(r.rows[0].live.total(), r.live_pairs);
+    EXPECT_LT(r.rows[0].live.total(), r.rows[0].all.total());
+    p.drop_buried = true;
+    const ValidationReport d = validate_scene(kBlock, p);
+    EXPECT_EQ(d.dropped_points, r.buried_points);
+    EXPECT_EQ(d.points, r.points - r.buried_points);
+    EXPECT_EQ(d.buried_points, 0u);
+    EXPECT_EQ(d.live_pairs, d.pairs);
+}
+
 TEST(Validate, BadInputIsRejectedNamingTheField) {
     auto fails = [](const std::string& path, ValidateParams p, const std::string& what) {
         try {

@@ -64,6 +64,9 @@ struct ValidateParams {
     double bury_distance = 2e-3;  // of the room's largest extent (see buried_points)
     double ray_offset = 1e-4;     // truth rays skip this fraction of the room's largest extent at
                                   // both ends (so a ray does not hit the surface it starts on)
+    // Leave the buried points out before sampling pairs: what not sampling covered surface
+    // (the ceiling under the light, floor under a model) would give.
+    bool drop_buried = false;
     bool progress = false;
 };
 
@@ -94,6 +97,7 @@ struct ValidationReport {
     // everything in truth, an artifact of sampling covered surface. Pairs with one are left
     // out of HeightResult::live.
     uint64_t buried_points = 0, live_pairs = 0;
+    uint64_t dropped_points = 0;  // with drop_buried: points left out before sampling
     double bury_distance = 0;
     uint64_t triangles = 0;
     double offset = 0;  // absolute ray offset, scene units

@@ -171,11 +171,39 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     check_params(params, path);
     Scene sc = load_scene(path);
     if (params.points) sc.points = params.points;
-    const PointSet pts = sample_scene(sc);
+    PointSet pts = sample_scene(sc);
+    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
+    const auto t0 = Clock::now();
+    ExactVisibility exact(sc.surfaces, path);
+    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
+    auto is_buried = [&](size_t i) {
+        const Vec3 q = pts.positions[i], nq = pts.normals[i];
+        return exact.occluded(q, q + nq, float(offset), float(bury));
+    };
+    uint64_t dropped = 0;
+    if (params.drop_buried) {
+        // What not sampling covered surface would give: the same points less the buried ones.
+        std::vector<uint8_t> b(pts.size());
+        tbb::parallel_for(size_t(0), pts.size(), [&](size_t i) { b[i] = is_buried(i); });
+        PointSet kept;
+        for (size_t i = 0; i < pts.size(); ++i) {
+            if (b[i]) {
+                ++dropped;
+                continue;
+            }
+            kept.positions.push_back(pts.positions[i]);
+            kept.normals.push_back(pts.normals[i]);
+            if (!pts.colors.empty()) kept.colors.push_back(pts.colors[i]);
+            if (!pts.radii.empty()) kept.radii.push_back(pts.radii[i]);
+            if (!pts.emission.empty()) kept.emission.push_back(pts.emission[i]);
+        }
+        pts = std::move(kept);
+    }
     const uint64_t n = pts.size();
     if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
 
     ValidationReport r;
+    r.dropped_points = dropped;
     r.scene = sc.name;
     r.path = path;
     r.points = n;
@@ -183,12 +211,9 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     r.params = params;
     if (!r.params.leaf_points)
         r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
-    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
-    r.offset = params.ray_offset * room;
+    r.offset = offset;
 
     // Truth, once for all heights.
-    const auto t0 = Clock::now();
-    ExactVisibility exact(sc.surfaces, path);
     r.triangles = exact.triangles();
     const std::vector<Pair> pairs = sample_pairs(n, params.pairs, params.pair_seed);
     std::vector<uint8_t> truth(pairs.size()), facing(pairs.size());
@@ -203,12 +228,9 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     });
     for (size_t k = 0; k < pairs.size(); ++k)
         r.truth_facing += facing[k], r.truth_visible += truth[k];
-    r.bury_distance = params.bury_distance * room;
+    r.bury_distance = bury;
     std::vector<uint8_t> buried(n);
-    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) {
-        const Vec3 q = pts.positions[i], nq = pts.normals[i];
-        buried[i] = exact.occluded(q, q + nq, float(r.offset), float(r.bury_distance));
-    });
+    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) { buried[i] = is_buried(i); });
     for (uint8_t b : buried) r.buried_points += b;
     for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
@@ -321,11 +343,14 @@ std::string validation_markdown(const ValidationReport& r) {
         "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}; "
         "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).  \n"
         "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
-        "(\"live\"): {}.\n\n",
+        "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
         p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
         floor_of(p), r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
-        r.live_pairs);
+        r.live_pairs,
+        r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
+                                       r.dropped_points)
+                         : std::string());
     s += "| max_height | height | leaves | links | same leaf (vis.) | pairs | agreement | "
          "false visible | false hidden | facing pairs | agreement | false visible | false hidden "
          "| live pairs | agreement | false visible | false hidden | build s | predict s |\n";
@@ -366,6 +391,7 @@ std::string validation_json(const ValidationReport& r) {
            {"truth_facing", r.truth_facing},
            {"truth_visible", r.truth_visible},
            {"buried_points", r.buried_points},
+           {"dropped_points", r.dropped_points},
            {"live_pairs", r.live_pairs},
            {"bury_distance", r.bury_distance},
            {"triangles", r.triangles},

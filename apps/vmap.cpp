@@ -21,6 +21,7 @@
 #include <optional>
 
 #include "apps/commands.h"
+#include "apps/validate_cmd.h"
 #include "bench/bench.h"
 #include "util/progress.h"
 #include "vmap/error.h"
@@ -210,6 +211,12 @@ int main(int argc, char** argv) {
         ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
         ->capture_default_str();
     build
+        ->add_option("--occluders", bo.params.occluders,
+                     "Potential occluders: spheres (hierarchical walk) or bresenham (grid walk "
+                     "of [7], CPU only)")
+        ->check(CLI::IsMember({"spheres", "bresenham"}))
+        ->capture_default_str();
+    build
         ->add_option("--batch-pairs", bo.params.max_batch_pairs,
                      "Leaf pairs evaluated per batch (bounds memory)")
         ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
@@ -253,6 +260,8 @@ int main(int argc, char** argv) {
     benchc->add_option("--points", bo2.points, "Override every scene's point count");
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
 
+    auto* validate = cli::add_validate_command(app);
+
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
@@ -279,6 +288,7 @@ int main(int argc, char** argv) {
         }
         for (const cli::Command* c : {&query, &render, &bench_query})
             if (c->app->parsed()) return c->run();
+        if (*validate) return cli::run_validate_command();
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());
         return 1;

@@ -333,6 +333,42 @@ if expect_ok "bench-query, tiny" bench-query --scene "$SCENE" --points 800,1600 
     expect_stdout "bench-query fits a growth exponent" '^Growth exponent k'
 fi
 
+# ---- validate (issue 5) ----------------------------------------------------------------------
+
+BLOCK="$SRC/tests/data/oracle/room-with-block.json"
+run validate "$BLOCK" --pairs 5000 --heights 4,5 --md v.md --json v.json
+if [ "$rc" -eq 0 ] && grep -q '| 5 | 5 |' v.md && grep -q '"false_visible_rate"' v.json; then
+    ok "validate writes the Markdown and JSON tables"
+else
+    fail "validate --md/--json"
+    show validate "$BLOCK" --pairs 5000 --heights 4,5 --md v.md --json v.json
+fi
+run validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders bresenham
+if [ "$rc" -eq 0 ] && grep -q 'bresenham occluders' out.txt; then
+    ok "validate --occluders bresenham prints its table"
+else
+    fail "validate --occluders bresenham"
+    show validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders bresenham
+fi
+run validate "$BLOCK" --time-embree --heights 4 --embree-pairs 20000 --runs 1
+if [ "$rc" -eq 0 ] && grep -q 'rtcOccluded1' out.txt; then
+    ok "validate --time-embree prints its table"
+else
+    fail "validate --time-embree"
+    show validate "$BLOCK" --time-embree --heights 4 --embree-pairs 20000 --runs 1
+fi
+expect_input_error "validate a missing scene" no_such_scene.json validate no_such_scene.json
+expect_input_error "validate --splat-floor without --predict direct" "$BLOCK" \
+    validate "$BLOCK" --heights 4 --splat-floor 2
+expect_usage_error "validate --pairs 0" validate "$BLOCK" --pairs 0
+expect_usage_error "validate --heights 0" validate "$BLOCK" --heights 0
+expect_usage_error "validate --heights 30" validate "$BLOCK" --heights 5,30
+expect_usage_error "validate without a scene" validate
+expect_usage_error "build --occluders cones" build "$SCENE" --occluders cones -o never.vmap
+expect_input_error "validate --json into a missing folder" no_such_dir/v.json \
+    validate "$BLOCK" --pairs 100 --heights 3 --json no_such_dir/v.json
+[ -e no_such_dir ] && fail "validate created no_such_dir" || ok "validate left no file behind"
+
 # ---- done ------------------------------------------------------------------------------------
 
 leftovers=$(ls -- *.tmp 2>/dev/null)

@@ -8,6 +8,7 @@
 #include <random>
 #include <set>
 
+#include "octree/delta_rule.h"
 #include "test_util.h"
 #include "vmap/error.h"
 
@@ -198,8 +199,9 @@ TEST(Octree, LeafStatisticsMatchTheirPoints) {
         EXPECT_NEAR(d.centroid.x, c.x, 1e-5f);
         EXPECT_NEAR(d.centroid.y, c.y, 1e-5f);
         EXPECT_NEAR(d.centroid.z, c.z, 1e-5f);
-        EXPECT_NEAR(d.delta, std::max(far, splat), 1e-5f);
-        EXPECT_GE(d.delta, splat) << "Delta never below the splat radius";
+        EXPECT_NEAR(d.delta, std::max(far, detail::kDeltaSplatFloor * splat), 1e-5f);
+        EXPECT_GE(d.delta, detail::kDeltaSplatFloor * splat)
+            << "Delta never below the splat radius times the floor";
         if (!(d.flags & kLeafNormalDegenerate)) {
             EXPECT_NEAR(length(d.normal), 1.f, 1e-5f);
             EXPECT_GT(dot(d.normal, nr), 0.f);
@@ -215,7 +217,7 @@ TEST(Octree, OnePointLeafStillOccludesThroughItsSplat) {
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {4, 1}, order);
     ASSERT_EQ(t.num_leaves(), 2);
-    for (const LeafDisc& d : t.leaves) EXPECT_FLOAT_EQ(d.delta, 0.05f);
+    for (const LeafDisc& d : t.leaves) EXPECT_FLOAT_EQ(d.delta, detail::kDeltaSplatFloor * 0.05f);
 }
 
 TEST(Octree, LeafWhoseNormalsCancelIsFlagged) {

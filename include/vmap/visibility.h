@@ -8,7 +8,7 @@ namespace vmap {
 struct VisibilityParams {
     int K = 2;                   // actual occluders that make a pair invisible (>= 1)
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
-    float facing_tol = 0.01f;    // facing: n_a . d > facing_tol |d| (cosine of the angle to 90°)
+    float facing_tol = 0.005f;   // facing: n_a . d > facing_tol |d| (cosine of the angle to 90°)
     float parallel_tol = 1e-3f;  // a plane with |n . d| <= parallel_tol |d| is parallel to pq
 };
 
@@ -19,6 +19,7 @@ struct WorkCounters {
     uint64_t visible_pairs = 0;
     uint64_t node_tests = 0;      // segment-sphere tests
     uint64_t occluder_tests = 0;  // tangent-plane tests on potential occluders
+    uint64_t cells_stepped = 0;   // grid cells visited (the Bresenham kernel only)
 
     WorkCounters& operator+=(const WorkCounters& o) {
         pairs += o.pairs;
@@ -26,6 +27,7 @@ struct WorkCounters {
         visible_pairs += o.visible_pairs;
         node_tests += o.node_tests;
         occluder_tests += o.occluder_tests;
+        cells_stepped += o.cells_stepped;
         return *this;
     }
 };

@@ -41,6 +41,8 @@ struct BuildParams {
     OctreeParams octree;
     VisibilityParams visibility;
     std::string backend = "auto";           // auto | cpu | cuda
+    std::string occluders = "spheres";      // spheres (paper §5.2) | bresenham (the grid walk
+                                            // of [7], CPU only: visibility/bresenham.h)
     uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
     bool progress = false;                  // progress bar on stderr (callers pass isatty(2))
     // false: extract and count the links but keep none (BuildStats::links; the map then has no

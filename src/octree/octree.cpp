@@ -10,6 +10,7 @@
 #include <numeric>
 
 #include "geom/morton.h"
+#include "octree/delta_rule.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -191,8 +192,9 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
             far2 = std::max(far2, length2(points.positions[k] - d.centroid));
             rad2 = std::max(rad2, length2(points.positions[k] - c));
         }
-        // Delta never below the splat radius, so a one-point leaf still occludes.
-        d.delta = std::max(std::sqrt(far2), splat);
+        // Delta never below the splat radius (times a floor, octree/delta_rule.h), so a
+        // one-point leaf still occludes.
+        d.delta = std::max(std::sqrt(far2), detail::kDeltaSplatFloor * splat);
         t.leaves[l] = d;
         t.leaf_splat[l] = splat;
         // The box encloses the points and the disc: along axis i a disc of radius Delta and

@@ -19,6 +19,7 @@
 
 #include "util/progress.h"
 #include "visibility/backend.h"
+#include "visibility/bresenham.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -287,6 +288,10 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
         throw Error(
             fmt::format("{}: parallel tolerance {} out of range [0, 1)", source, vp.parallel_tol));
+    if (params.occluders != "spheres" && params.occluders != "bresenham")
+        throw Error(
+            fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)",
+                        source, params.occluders));
     if (params.max_batch_pairs < 1024)
         throw Error(fmt::format("{}: batch of {} pairs is too small (>= 1024)", source,
                                 params.max_batch_pairs));
@@ -315,7 +320,16 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
 
     st.seconds_plan = seconds_since(t1);
     std::string note;
-    auto backend = detail::make_backend(params.backend, &note);
+    std::unique_ptr<detail::Backend> backend;
+    if (params.occluders == "bresenham") {
+        if (params.backend == "cuda")
+            note = "--occluders bresenham: the GPU backend does spheres only; using the CPU";
+        else if (params.backend != "auto" && params.backend != "cpu")
+            detail::make_backend(params.backend, &note);  // throws for an unknown name
+        backend = detail::make_bresenham_backend();
+    } else {
+        backend = detail::make_backend(params.backend, &note);
+    }
     st.backend = backend->name();
     st.note = note;
     // Words per batch: a batch's rows are padded to 32 bits, so allow for that.

@@ -1,0 +1,168 @@
+// `vmap validate SCENE...`: V-map answers against exact visibility (Embree rays on the scene's
+// triangles) per octree height, as Markdown (stdout or --md) and JSON (--json); with
+// --time-embree, Embree rays along leaf-centroid segments timed against the leaf-pair kernel.
+#include "apps/validate_cmd.h"
+
+#include <fmt/format.h>
+#include <tbb/task_arena.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "util/progress.h"
+#include "vmap/error.h"
+#include "vmap/validate.h"
+
+namespace vmap::cli {
+namespace {
+
+struct Options {
+    std::vector<std::string> scenes;
+    ValidateParams vp;
+    std::string md, json;
+    bool time_embree = false;
+    int runs = 5;
+    uint64_t embree_pairs = 2000000;
+};
+Options opt;
+
+// Writes to a temporary name and renames, so no half-written file is left behind.
+void write_file(const std::string& path, const std::string& text, const char* what) {
+    const std::string tmp = path + ".tmp";
+    {
+        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
+        if (!f) throw Error(fmt::format("{}: {}: cannot open for writing", what, path));
+        f << text;
+        f.flush();
+        if (!f) {
+            std::filesystem::remove(tmp);
+            throw Error(fmt::format("{}: {}: write failed", what, path));
+        }
+    }
+    std::error_code ec;
+    std::filesystem::rename(tmp, path, ec);
+    if (ec) {
+        std::filesystem::remove(tmp);
+        throw Error(fmt::format("{}: {}: {}", what, path, ec.message()));
+    }
+}
+
+}  // namespace
+
+CLI::App* add_validate_command(CLI::App& app) {
+    auto* c = app.add_subcommand(
+        "validate",
+        "Measure V-map answers against exact visibility from the scene's triangles (Embree "
+        "rays), per octree height");
+    c->add_option("scene", opt.scenes, "Scene files (.json)")->required();
+    c->add_option("--points", opt.vp.points, "Override the scene's number of sample points")
+        ->check(CLI::Range(uint64_t(2), uint64_t(50000000)));
+    c->add_option("--pairs", opt.vp.pairs, "Random point pairs")
+        ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
+        ->capture_default_str();
+    c->add_option("--seed", opt.vp.pair_seed, "Seed of the pair sample")->capture_default_str();
+    c->add_option("--heights", opt.vp.heights, "Octree max_height values (default 5..10)")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 21));
+    c->add_option("--leaf-points", opt.vp.leaf_points,
+                  "Split nodes with more points than this (default: the scene's)")
+        ->check(CLI::Range(1, 1000000));
+    auto& v = opt.vp.visibility;
+    c->add_option("-K", v.K, "Actual occluders that make a leaf pair invisible")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    c->add_option("--eps", v.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
+        ->check(CLI::Range(0.0f, 0.49f))
+        ->capture_default_str();
+    c->add_option("--facing-tol", v.facing_tol, "Facing test: n.d > tol |d|")
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
+    c->add_option("--parallel-tol", v.parallel_tol, "Occluder planes with |n.d| <= tol |d| ignored")
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
+    c->add_option("--occluders", opt.vp.occluders,
+                  "Potential occluders: spheres (hierarchical walk) or bresenham (grid walk of "
+                  "[7], CPU only)")
+        ->check(CLI::IsMember({"spheres", "bresenham"}))
+        ->capture_default_str();
+    c->add_option("--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    c->add_option("--predict", opt.vp.predict,
+                  "vmap (build and query the V-map) or direct (the leaf-pair predicate on the "
+                  "sampled pairs' leaves only: same answers, much faster, for sweeps)")
+        ->check(CLI::IsMember({"vmap", "direct"}))
+        ->capture_default_str();
+    c->add_option("--delta-scale", opt.vp.delta_scale,
+                  "With --predict direct: Delta = scale * max(farthest point, floor * splat)")
+        ->check(CLI::Range(0.1f, 10.f))
+        ->capture_default_str();
+    c->add_option("--splat-floor", opt.vp.splat_floor,
+                  "With --predict direct: the splat radius multiple Delta never goes below "
+                  "(default: the octree's own, src/octree/delta_rule.h)")
+        ->check(CLI::Range(0.f, 10.f));
+    c->add_option("--ray-offset", opt.vp.ray_offset,
+                  "Truth rays skip this fraction of the room size at both ends")
+        ->check(CLI::Range(1e-7, 0.01))
+        ->capture_default_str();
+    c->add_flag("--drop-buried", opt.vp.drop_buried,
+                "Leave out buried points (covered surface) before sampling pairs");
+    c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
+    c->add_option("--json", opt.json, "Also write the results as JSON here");
+    c->add_flag("--time-embree", opt.time_embree,
+                "Instead: time Embree occlusion rays along leaf-centroid segments against the "
+                "leaf-pair kernel, on the same sampled leaf pairs, per scene and height");
+    c->add_option("--runs", opt.runs, "With --time-embree: timed runs (median, spread)")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    c->add_option("--embree-pairs", opt.embree_pairs, "With --time-embree: leaf pairs sampled")
+        ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
+        ->capture_default_str();
+    // A later value of a single-valued option replaces an earlier one, so a sweep can vary one
+    // setting of a fixed list (scripts/validate-sweep.sh).
+    for (const char* name :
+         {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
+          "--parallel-tol", "--occluders", "--backend", "--predict", "--delta-scale",
+          "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs"})
+        c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
+    return c;
+}
+
+int run_validate_command() {
+    ValidateParams& vp = opt.vp;
+    vp.progress = detail::stderr_is_terminal();
+    std::string md, json;
+    if (opt.time_embree) {
+        std::vector<EmbreeTiming> rows;
+        for (const std::string& s : opt.scenes)
+            for (int h : vp.heights) {
+                EmbreeTimingParams p;
+                p.points = vp.points;
+                p.max_height = h;
+                p.leaf_points = vp.leaf_points;
+                p.visibility = vp.visibility;
+                p.sample_pairs = opt.embree_pairs;
+                p.runs = opt.runs;
+                rows.push_back(time_embree(s, p));
+            }
+        md = embree_timing_markdown(rows);
+        json = "[]\n";
+    } else {
+        json = "[\n";
+        for (size_t k = 0; k < opt.scenes.size(); ++k) {
+            const ValidationReport r = validate_scene(opt.scenes[k], vp);
+            md += validation_markdown(r);
+            json += validation_json(r) + (k + 1 < opt.scenes.size() ? ",\n" : "");
+        }
+        json += "]\n";
+    }
+    if (!opt.json.empty()) write_file(opt.json, json, "--json");
+    if (!opt.md.empty())
+        write_file(opt.md, md, "--md");
+    else
+        fmt::print("{}", md);
+    return 0;
+}
+
+}  // namespace vmap::cli

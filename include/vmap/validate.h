@@ -1,0 +1,185 @@
+// Ground truth for the V-map (`vmap validate`, docs/validation.md): for seeded random point pairs
+// of a scene, the exact answer from the scene's triangles (both points face each other and no
+// triangle blocks the segment: Embree occlusion rays) against the V-map's answer, per octree
+// height. Also the practitioner's alternative, Embree rays along the leaf-centroid segments,
+// timed next to the leaf-pair kernel.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "vmap/mesh.h"
+#include "vmap/scene.h"
+#include "vmap/visibility.h"
+
+namespace vmap {
+
+// Truth against prediction for a set of pairs. "Visible" is the positive class: a false
+// visible is a pair the V-map calls visible that is hidden (light leaks through walls).
+struct Confusion {
+    uint64_t true_visible = 0;   // truth visible, predicted visible
+    uint64_t true_hidden = 0;    // truth hidden, predicted hidden
+    uint64_t false_visible = 0;  // truth hidden, predicted visible
+    uint64_t false_hidden = 0;   // truth visible, predicted hidden
+
+    void add(bool truth, bool predicted) {
+        if (truth)
+            (predicted ? true_visible : false_hidden)++;
+        else
+            (predicted ? false_visible : true_hidden)++;
+    }
+    Confusion& operator+=(const Confusion& o) {
+        true_visible += o.true_visible, true_hidden += o.true_hidden;
+        false_visible += o.false_visible, false_hidden += o.false_hidden;
+        return *this;
+    }
+    uint64_t total() const { return true_visible + true_hidden + false_visible + false_hidden; }
+    // Fractions of total() (0 when empty).
+    double agreement() const;
+    double false_visible_rate() const;
+    double false_hidden_rate() const;
+};
+
+struct ValidateParams {
+    uint64_t points = 0;                          // 0: the scene's own count
+    uint64_t pairs = 200000;                      // random point pairs (i != j), 1..1e9
+    uint64_t pair_seed = 1;                       // seed of the pair sample
+    std::vector<int> heights{5, 6, 7, 8, 9, 10};  // octree max_height values, 1..21
+    int leaf_points = 0;                // 0: the scene's octree.leaf_points, else the default
+    VisibilityParams visibility;        // K, eps, tolerances of the predicate
+    std::string occluders = "spheres";  // spheres | bresenham
+    std::string backend = "cpu";        // for the V-map build: auto | cpu | cuda
+    // "vmap": build the V-map and query it (the real thing). "direct": evaluate the leaf-pair
+    // predicate on the sampled pairs' leaves only, with no V-map: the same answers (the V-map
+    // stores the leaf-pair table exactly; tests/validate_test.cpp checks it), far faster, for
+    // parameter sweeps.
+    std::string predict = "vmap";
+    // The Delta rule (the occluder disc radius of a leaf), direct mode only: Delta =
+    // delta_scale * max(farthest point from the centroid, splat_floor * splat radius). The
+    // octree's own rule is delta_scale 1 and its floor (src/octree/delta_rule.h); splat_floor < 0
+    // means that floor.
+    float delta_scale = 1.f;
+    float splat_floor = -1.f;
+    double bury_distance = 2e-3;  // of the room's largest extent (see buried_points)
+    double ray_offset = 1e-4;     // truth rays skip this fraction of the room's largest extent at
+                                  // both ends (so a ray does not hit the surface it starts on)
+    // Leave the buried points out before sampling pairs: what not sampling covered surface
+    // (the ceiling under the light, floor under a model) would give.
+    bool drop_buried = false;
+    bool progress = false;
+};
+
+// One octree height's outcome.
+struct HeightResult {
+    int max_height = 0;  // requested
+    int height = 0;      // deepest leaf level reached
+    int leaf_points = 0;
+    int32_t leaves = 0;
+    uint64_t links = 0;      // 0 in direct mode
+    Confusion all;           // every pair whose points lie in different leaves
+    Confusion facing;        // those of them whose points face each other (truth's facing test)
+    Confusion live;          // those of them where neither point is buried (ValidationReport)
+    uint64_t same_leaf = 0;  // pairs sharing a leaf (the V-map says nothing of them)
+    uint64_t same_leaf_visible = 0;  // ... of which truly visible
+    double build_seconds = 0;        // octree (+ V-map in vmap mode)
+    double predict_seconds = 0;      // queries (vmap) or leaf-pair evaluations (direct)
+    WorkCounters work;               // of the V-map build (vmap) or the evaluations (direct)
+    std::string backend;
+};
+
+struct ValidationReport {
+    std::string scene, path;
+    uint64_t points = 0, pairs = 0;
+    uint64_t truth_facing = 0, truth_visible = 0;
+    // Buried points: a triangle lies in front of the point within bury_distance along its
+    // normal (ceiling under the light, floor under a model's base): hidden from almost
+    // everything in truth, an artifact of sampling covered surface. Pairs with one are left
+    // out of HeightResult::live.
+    uint64_t buried_points = 0, live_pairs = 0;
+    uint64_t dropped_points = 0;  // with drop_buried: points left out before sampling
+    double bury_distance = 0;
+    uint64_t triangles = 0;
+    double offset = 0;  // absolute ray offset, scene units
+    double truth_seconds = 0;
+    ValidateParams params;
+    std::vector<HeightResult> rows;
+};
+
+// Runs the validation of one scene file. Throws vmap::Error naming the file or the field for a
+// bad scene or parameters out of range (pairs, heights, leaf_points, K, tolerances, names).
+ValidationReport validate_scene(const std::string& scene_path, const ValidateParams& params);
+
+// The report as a Markdown section (a header, the settings, one table row per height for all
+// pairs and for facing pairs), and as JSON text.
+std::string validation_markdown(const ValidationReport& r);
+std::string validation_json(const ValidationReport& r);
+
+// ---- exact visibility from the triangles (Embree 3) ------------------------------------------
+
+// An Embree scene of a scene's surfaces (every triangle, room and light included).
+class ExactVisibility {
+  public:
+    // Throws vmap::Error (naming `source`) when Embree fails or there are no triangles.
+    ExactVisibility(const std::vector<SceneSurface>& surfaces, const std::string& source);
+    ~ExactVisibility();
+    ExactVisibility(const ExactVisibility&) = delete;
+    ExactVisibility& operator=(const ExactVisibility&) = delete;
+
+    uint64_t triangles() const { return triangles_; }
+    // Does a triangle cross segment a + t (b - a), t in [t0, t1]?
+    bool occluded(Vec3 a, Vec3 b, float t0, float t1) const;
+    // Truth for a point pair with normals: facing (n_a . (b - a) > 1e-6 |b - a| and likewise
+    // at b: coplanar points on one wall do not face each other) and no triangle crossing the
+    // segment more than `offset` (scene units) from either end. Pairs closer than 2 offset
+    // that face each other are visible.
+    bool visible(Vec3 a, Vec3 na, Vec3 b, Vec3 nb, float offset) const;
+    // Occlusion of many segments, 16 rays a packet (rtcOccluded16), on all cores: out[k] for
+    // segment from[k] -> to[k] over t in [t0, t1].
+    void occluded_packets(const std::vector<Vec3>& from, const std::vector<Vec3>& to, float t0,
+                          float t1, std::vector<uint8_t>& out) const;
+
+    static bool facing(Vec3 a, Vec3 na, Vec3 b, Vec3 nb);
+
+  private:
+    void* device_ = nullptr;  // RTCDevice
+    void* scene_ = nullptr;   // RTCScene
+    uint64_t triangles_ = 0;
+};
+
+// ---- the practitioner's alternative: Embree rays for leaf-centroid segments -------------------
+
+struct EmbreeTimingParams {
+    uint64_t points = 0;  // 0: the scene's own
+    int max_height = 8, leaf_points = 0;
+    VisibilityParams visibility;
+    uint64_t sample_pairs = 2000000;  // leaf pairs (a < b), seeded blocks of 8 x 32 (validate.cpp)
+    int runs = 5;
+};
+
+struct Spread {
+    double median = 0, lo = 0, hi = 0;
+};
+
+struct EmbreeTiming {
+    std::string scene;
+    uint64_t points = 0, triangles = 0;
+    int height = 0, leaf_points = 0;
+    int32_t leaves = 0;
+    int threads = 0;
+    uint64_t pairs = 0;   // sampled leaf pairs
+    uint64_t facing = 0;  // of them facing (the ones that need a ray)
+    uint64_t kernel_visible = 0, ray_visible = 0, agree = 0;
+    WorkCounters kernel_work;  // one run of our kernel over the sample
+    Spread kernel_s;           // our sphere-walk kernel: all sampled pairs
+    Spread ray1_s;             // facing test + rtcOccluded1 per facing pair (TBB loop)
+    Spread ray16_s;            // facing test + rtcOccluded16 packets of facing pairs
+};
+
+// Times, on all cores, the leaf-pair kernel and Embree rays over the same sampled leaf pairs of
+// the scene's octree. Rays go from centroid a to centroid b over t in (eps, 1 - eps), the window
+// where the kernel counts occluders; only facing pairs get a ray.
+EmbreeTiming time_embree(const std::string& scene_path, const EmbreeTimingParams& p);
+std::string embree_timing_markdown(const std::vector<EmbreeTiming>& rows);
+
+}  // namespace vmap

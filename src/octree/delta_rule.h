@@ -1,0 +1,10 @@
+// The occluder disc radius Delta of a leaf (DESIGN.md "Leaf-pair visibility"): the distance from
+// the centroid to its farthest point, but never below kDeltaSplatFloor times the largest splat
+// radius of its points. The floor was chosen by measurement (docs/validation.md).
+#pragma once
+
+namespace vmap::detail {
+
+inline constexpr float kDeltaSplatFloor = 2.5f;
+
+}  // namespace vmap::detail

@@ -1,0 +1,607 @@
+// `vmap validate` (include/vmap/validate.h): V-map answers against exact visibility from the
+// scene's triangles, per octree height; and Embree rays timed against the leaf-pair kernel.
+#include "vmap/validate.h"
+
+#include <fmt/format.h>
+#include <tbb/combinable.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <chrono>
+#include <nlohmann/json.hpp>
+#include <random>
+
+#include "octree/delta_rule.h"
+#include "util/progress.h"
+#include "visibility/bresenham.h"
+#include "visibility/leaf_pair.h"
+#include "vmap/error.h"
+#include "vmap/octree.h"
+#include "vmap/vmap.h"
+
+namespace vmap {
+
+double Confusion::agreement() const {
+    return total() ? double(true_visible + true_hidden) / double(total()) : 0.0;
+}
+double Confusion::false_visible_rate() const {
+    return total() ? double(false_visible) / double(total()) : 0.0;
+}
+double Confusion::false_hidden_rate() const {
+    return total() ? double(false_hidden) / double(total()) : 0.0;
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+void check_visibility(const VisibilityParams& vp, const std::string& src) {
+    if (vp.K < 1 || vp.K > 1000)
+        throw Error(fmt::format("{}: K {} out of range (1..1000)", src, vp.K));
+    if (!(vp.eps >= 0 && vp.eps < 0.5f))
+        throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", src, vp.eps));
+    if (!(vp.facing_tol >= 0 && vp.facing_tol < 1))
+        throw Error(fmt::format("{}: facing_tol {} out of range [0, 1)", src, vp.facing_tol));
+    if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
+        throw Error(fmt::format("{}: parallel_tol {} out of range [0, 1)", src, vp.parallel_tol));
+}
+
+void check_params(const ValidateParams& p, const std::string& src) {
+    if (p.pairs < 1 || p.pairs > 1000000000ull)
+        throw Error(fmt::format("{}: --pairs {} out of range (1..1000000000)", src, p.pairs));
+    if (p.heights.empty()) throw Error(fmt::format("{}: --heights: no height given", src));
+    for (int h : p.heights)
+        if (h < 1 || h > 21)
+            throw Error(fmt::format("{}: --heights: height {} out of range (1..21)", src, h));
+    if (p.leaf_points < 0 || p.leaf_points > 1000000)
+        throw Error(
+            fmt::format("{}: --leaf-points {} out of range (1..1000000)", src, p.leaf_points));
+    if (p.points > 50000000)
+        throw Error(fmt::format("{}: --points {} out of range (1..50000000)", src, p.points));
+    if (p.predict != "vmap" && p.predict != "direct")
+        throw Error(fmt::format("{}: --predict: unknown mode '{}' (expected vmap or direct)", src,
+                                p.predict));
+    if (p.occluders != "spheres" && p.occluders != "bresenham")
+        throw Error(
+            fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)", src,
+                        p.occluders));
+    if (!(p.bury_distance >= 0 && p.bury_distance <= 0.1))
+        throw Error(
+            fmt::format("{}: bury distance {} out of range [0, 0.1]", src, p.bury_distance));
+    if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
+        throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
+    check_visibility(p.visibility, src);
+    if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
+        throw Error(fmt::format("{}: --delta-scale {} out of range [0.1, 10]", src, p.delta_scale));
+    if (!(p.splat_floor <= 10.f))
+        throw Error(fmt::format("{}: --splat-floor {} out of range [0, 10]", src, p.splat_floor));
+    if ((p.delta_scale != 1.f || p.splat_floor >= 0.f) && p.predict != "direct")
+        throw Error(fmt::format(
+            "{}: --delta-scale/--splat-floor change the octree's Delta rule and need --predict "
+            "direct (the V-map build uses the octree's own rule)",
+            src));
+}
+
+// Recomputes every leaf's Delta by the rule delta_scale * max(farthest, splat_floor * splat) and
+// the content boxes the walk prunes with (leaf: points and disc; internal: union of children),
+// as octree.cpp does, so the walk still bounds every occluder disc. `pts` in octree order.
+void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) {
+    double maxabs = 0;
+    for (const Vec3& q : pts.positions)
+        maxabs = std::max(
+            {maxabs, double(std::fabs(q.x)), double(std::fabs(q.y)), double(std::fabs(q.z))});
+    const float slack = static_cast<float>((maxabs + t.root_size) * 1e-6);
+    tbb::parallel_for(int32_t(0), t.num_leaves(), [&](int32_t l) {
+        const int32_t nd = t.leaf_node[l];
+        LeafDisc& d = t.leaves[l];
+        float far2 = 0;
+        Box bx{d.centroid, d.centroid};
+        for (uint32_t k = t.point_begin[nd]; k < t.point_end[nd]; ++k) {
+            const Vec3 q = pts.positions[k];
+            far2 = std::max(far2, length2(q - d.centroid));
+            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
+            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
+        }
+        d.delta = scale * std::max(std::sqrt(far2), floor * t.leaf_splat[l]);
+        auto reach = [&](float ni) {
+            return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
+        };
+        const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
+        const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
+        bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
+        bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
+    });
+    for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
+        if (t.is_leaf(nd)) continue;
+        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+        t.for_each_child(nd, [&](int32_t c) {
+            const Box& cb = t.boxes[c];
+            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y),
+                     std::min(bx.lo.z, cb.lo.z)};
+            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y),
+                     std::max(bx.hi.z, cb.hi.z)};
+        });
+        t.boxes[nd] = bx;
+    }
+    t.pack_walk();
+}
+
+struct Pair {
+    uint32_t i, j;
+};
+
+float floor_of(const ValidateParams& p) {
+    return p.splat_floor >= 0.f ? p.splat_floor : detail::kDeltaSplatFloor;
+}
+
+// Seeded uniform pairs i != j of n points; the same seed gives the same pairs everywhere.
+std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::vector<Pair> out(count);
+    for (Pair& p : out) {
+        const uint64_t i = rng() % n;
+        uint64_t j = rng() % (n - 1);
+        if (j >= i) ++j;
+        p = {uint32_t(i), uint32_t(j)};
+    }
+    return out;
+}
+
+// Leaf-pair evaluation as the V-map builder does it: the lower leaf index first.
+struct DirectPredictor {
+    const Octree& t;
+    const VisibilityParams& vp;
+    const detail::LeafGrid* grid;  // non-null: the Bresenham kernel
+    bool operator()(int32_t a, int32_t b, WorkCounters* wc) const {
+        if (a > b) std::swap(a, b);
+        if (grid) return detail::bresenham_leaf_pair_visible(t, *grid, a, b, vp, wc);
+        return detail::leaf_pair_visible<true>(t.view(), a, b, vp, wc);
+    }
+};
+
+}  // namespace
+
+ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+    check_params(params, path);
+    Scene sc = load_scene(path);
+    if (params.points) sc.points = params.points;
+    PointSet pts = sample_scene(sc);
+    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
+    const auto t0 = Clock::now();
+    ExactVisibility exact(sc.surfaces, path);
+    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
+    auto is_buried = [&](size_t i) {
+        const Vec3 q = pts.positions[i], nq = pts.normals[i];
+        return exact.occluded(q, q + nq, float(offset), float(bury));
+    };
+    uint64_t dropped = 0;
+    if (params.drop_buried) {
+        // What not sampling covered surface would give: the same points less the buried ones.
+        std::vector<uint8_t> b(pts.size());
+        tbb::parallel_for(size_t(0), pts.size(), [&](size_t i) { b[i] = is_buried(i); });
+        PointSet kept;
+        for (size_t i = 0; i < pts.size(); ++i) {
+            if (b[i]) {
+                ++dropped;
+                continue;
+            }
+            kept.positions.push_back(pts.positions[i]);
+            kept.normals.push_back(pts.normals[i]);
+            if (!pts.colors.empty()) kept.colors.push_back(pts.colors[i]);
+            if (!pts.radii.empty()) kept.radii.push_back(pts.radii[i]);
+            if (!pts.emission.empty()) kept.emission.push_back(pts.emission[i]);
+        }
+        pts = std::move(kept);
+    }
+    const uint64_t n = pts.size();
+    if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
+
+    ValidationReport r;
+    r.dropped_points = dropped;
+    r.scene = sc.name;
+    r.path = path;
+    r.points = n;
+    r.pairs = params.pairs;
+    r.params = params;
+    if (!r.params.leaf_points)
+        r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
+    r.offset = offset;
+
+    // Truth, once for all heights.
+    r.triangles = exact.triangles();
+    const std::vector<Pair> pairs = sample_pairs(n, params.pairs, params.pair_seed);
+    std::vector<uint8_t> truth(pairs.size()), facing(pairs.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 256), [&](const auto& rg) {
+        for (size_t k = rg.begin(); k < rg.end(); ++k) {
+            const auto [i, j] = pairs[k];
+            const Vec3 a = pts.positions[i], b = pts.positions[j];
+            const Vec3 na = pts.normals[i], nb = pts.normals[j];
+            facing[k] = ExactVisibility::facing(a, na, b, nb);
+            truth[k] = facing[k] && exact.visible(a, na, b, nb, float(r.offset));
+        }
+    });
+    for (size_t k = 0; k < pairs.size(); ++k)
+        r.truth_facing += facing[k], r.truth_visible += truth[k];
+    r.bury_distance = bury;
+    std::vector<uint8_t> buried(n);
+    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) { buried[i] = is_buried(i); });
+    for (uint8_t b : buried) r.buried_points += b;
+    for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
+    r.truth_seconds = seconds_since(t0);
+
+    detail::Progress progress("heights", params.heights.size(), params.progress);
+    // 0 = hidden, 1 = visible, 2 = same leaf
+    std::vector<uint8_t> pred(pairs.size());
+    for (size_t hi = 0; hi < params.heights.size(); ++hi) {
+        HeightResult row;
+        row.max_height = params.heights[hi];
+        row.leaf_points = r.params.leaf_points;
+        OctreeParams op;
+        op.max_height = row.max_height;
+        op.leaf_points = row.leaf_points;
+        const auto tb = Clock::now();
+        if (params.predict == "vmap") {
+            BuildParams bp;
+            bp.octree = op;
+            bp.visibility = params.visibility;
+            bp.backend = params.backend;
+            bp.occluders = params.occluders;
+            BuildStats st;
+            const VisibilityMap vm = build_vmap(pts, bp, &st, path);
+            row.build_seconds = seconds_since(tb);
+            row.height = vm.octree.height();
+            row.leaves = vm.octree.num_leaves();
+            row.links = vm.num_links();
+            row.work = st.work;
+            row.backend = st.backend;
+            const auto tq = Clock::now();
+            tbb::parallel_for(size_t(0), pairs.size(), [&](size_t k) {
+                const PairVisibility v = vm.query(pairs[k].i, pairs[k].j);
+                pred[k] = v == PairVisibility::kSameLeaf ? 2 : v == PairVisibility::kVisible;
+            });
+            row.predict_seconds = seconds_since(tq);
+        } else {
+            PointSet copy = pts;
+            std::vector<uint32_t> order;
+            Octree t = Octree::build(copy, op, order, path);
+            if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
+                apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
+            std::vector<uint32_t> inverse(order.size());
+            for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
+            std::unique_ptr<detail::LeafGrid> grid;
+            if (params.occluders == "bresenham") grid = std::make_unique<detail::LeafGrid>(t);
+            row.build_seconds = seconds_since(tb);
+            row.height = t.height();
+            row.leaves = t.num_leaves();
+            row.backend =
+                params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
+            const DirectPredictor predict{t, params.visibility, grid.get()};
+            const auto tq = Clock::now();
+            tbb::combinable<WorkCounters> counters;
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 64), [&](const auto& rg) {
+                WorkCounters& wc = counters.local();
+                for (size_t k = rg.begin(); k < rg.end(); ++k) {
+                    const int32_t a = t.leaf_of_point(inverse[pairs[k].i]);
+                    const int32_t b = t.leaf_of_point(inverse[pairs[k].j]);
+                    if (a == b) {
+                        pred[k] = 2;
+                        continue;
+                    }
+                    wc.pairs++;
+                    pred[k] = predict(a, b, &wc);
+                    wc.visible_pairs += pred[k];
+                }
+            });
+            row.work = counters.combine([](WorkCounters x, const WorkCounters& y) {
+                x += y;
+                return x;
+            });
+            row.predict_seconds = seconds_since(tq);
+        }
+        for (size_t k = 0; k < pairs.size(); ++k) {
+            if (pred[k] == 2) {
+                row.same_leaf++;
+                row.same_leaf_visible += truth[k];
+                continue;
+            }
+            row.all.add(truth[k], pred[k]);
+            if (facing[k]) row.facing.add(truth[k], pred[k]);
+            if (!buried[pairs[k].i] && !buried[pairs[k].j]) row.live.add(truth[k], pred[k]);
+        }
+        r.rows.push_back(row);
+        progress.update(hi + 1);
+    }
+    return r;
+}
+
+namespace {
+
+std::string pct(double f) { return fmt::format("{:.2f}%", 100.0 * f); }
+
+}  // namespace
+
+std::string validation_markdown(const ValidationReport& r) {
+    const auto& p = r.params;
+    const auto& vp = p.visibility;
+    std::string s;
+    s += fmt::format("### {} ({}): {} points, {} pairs (seed {})\n\n", r.scene, r.path, r.points,
+                     r.pairs, p.pair_seed);
+    s += fmt::format(
+        "Truth: {} pairs face each other ({}), {} visible ({}); {} triangles (Embree 3 "
+        "occlusion rays, ends trimmed by {:.3g} = {:g} of the room's largest extent); {:.2f} s.  "
+        "\n",
+        r.truth_facing, pct(double(r.truth_facing) / r.pairs), r.truth_visible,
+        pct(double(r.truth_visible) / r.pairs), r.triangles, r.offset, p.ray_offset,
+        r.truth_seconds);
+    s += fmt::format(
+        "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}; "
+        "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).  \n"
+        "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
+        "(\"live\"): {}{}.\n\n",
+        p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
+        p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
+        floor_of(p), r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
+        r.live_pairs,
+        r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
+                                       r.dropped_points)
+                         : std::string());
+    s += "| max_height | height | leaves | links | same leaf (vis.) | pairs | agreement | "
+         "false visible | false hidden | facing pairs | agreement | false visible | false hidden "
+         "| live pairs | agreement | false visible | false hidden | build s | predict s |\n";
+    s += "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"
+         "---:|---:|\n";
+    for (const HeightResult& h : r.rows)
+        s += fmt::format(
+            "| {} | {} | {} | {} | {} ({}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | "
+            "{} | {} | {:.2f} | {:.3f} |\n",
+            h.max_height, h.height, h.leaves, h.links, h.same_leaf, h.same_leaf_visible,
+            h.all.total(), pct(h.all.agreement()), pct(h.all.false_visible_rate()),
+            pct(h.all.false_hidden_rate()), h.facing.total(), pct(h.facing.agreement()),
+            pct(h.facing.false_visible_rate()), pct(h.facing.false_hidden_rate()), h.live.total(),
+            pct(h.live.agreement()), pct(h.live.false_visible_rate()),
+            pct(h.live.false_hidden_rate()), h.build_seconds, h.predict_seconds);
+    s += "\n";
+    return s;
+}
+
+std::string validation_json(const ValidationReport& r) {
+    using nlohmann::json;
+    auto conf = [](const Confusion& c) {
+        return json{{"true_visible", c.true_visible},
+                    {"true_hidden", c.true_hidden},
+                    {"false_visible", c.false_visible},
+                    {"false_hidden", c.false_hidden},
+                    {"total", c.total()},
+                    {"agreement", c.agreement()},
+                    {"false_visible_rate", c.false_visible_rate()},
+                    {"false_hidden_rate", c.false_hidden_rate()}};
+    };
+    const auto& p = r.params;
+    json j{{"scene", r.scene},
+           {"path", r.path},
+           {"points", r.points},
+           {"pairs", r.pairs},
+           {"pair_seed", p.pair_seed},
+           {"truth_facing", r.truth_facing},
+           {"truth_visible", r.truth_visible},
+           {"buried_points", r.buried_points},
+           {"dropped_points", r.dropped_points},
+           {"live_pairs", r.live_pairs},
+           {"bury_distance", r.bury_distance},
+           {"triangles", r.triangles},
+           {"ray_offset", r.offset},
+           {"ray_offset_relative", p.ray_offset},
+           {"truth_seconds", r.truth_seconds},
+           {"predict", p.predict},
+           {"occluders", p.occluders},
+           {"leaf_points", p.leaf_points},
+           {"K", p.visibility.K},
+           {"eps", p.visibility.eps},
+           {"facing_tol", p.visibility.facing_tol},
+           {"parallel_tol", p.visibility.parallel_tol},
+           {"delta_scale", p.delta_scale},
+           {"splat_floor", floor_of(p)}};
+    json rows = json::array();
+    for (const HeightResult& h : r.rows)
+        rows.push_back(json{{"max_height", h.max_height},
+                            {"height", h.height},
+                            {"leaves", h.leaves},
+                            {"links", h.links},
+                            {"same_leaf", h.same_leaf},
+                            {"same_leaf_visible", h.same_leaf_visible},
+                            {"all", conf(h.all)},
+                            {"facing", conf(h.facing)},
+                            {"live", conf(h.live)},
+                            {"build_seconds", h.build_seconds},
+                            {"predict_seconds", h.predict_seconds},
+                            {"backend", h.backend},
+                            {"work",
+                             {{"pairs", h.work.pairs},
+                              {"facing_pairs", h.work.facing_pairs},
+                              {"visible_pairs", h.work.visible_pairs},
+                              {"node_tests", h.work.node_tests},
+                              {"occluder_tests", h.work.occluder_tests},
+                              {"cells_stepped", h.work.cells_stepped}}}});
+    j["heights"] = rows;
+    return j.dump(1) + "\n";
+}
+
+// ---- Embree rays against the kernel ---------------------------------------------------------
+
+namespace {
+
+Spread spread(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return {n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v.front(), v.back()};
+}
+
+}  // namespace
+
+EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
+    check_visibility(p.visibility, path);
+    if (p.runs < 1 || p.runs > 100)
+        throw Error(fmt::format("{}: --runs {} out of range (1..100)", path, p.runs));
+    if (p.sample_pairs < 1 || p.sample_pairs > 1000000000ull)
+        throw Error(
+            fmt::format("{}: --pairs {} out of range (1..1000000000)", path, p.sample_pairs));
+    Scene sc = load_scene(path);
+    if (p.points) sc.points = p.points;
+    PointSet pts = sample_scene(sc);
+    OctreeParams op;
+    op.max_height = p.max_height;
+    op.leaf_points =
+        p.leaf_points ? p.leaf_points : (sc.octree ? sc.octree->leaf_points : op.leaf_points);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(pts, op, order, path);
+    ExactVisibility exact(sc.surfaces, path);
+
+    EmbreeTiming r;
+    r.scene = sc.name;
+    r.points = pts.size();
+    r.triangles = exact.triangles();
+    r.height = t.height();
+    r.leaf_points = op.leaf_points;
+    r.leaves = t.num_leaves();
+    r.threads = int(std::min<size_t>(
+        tbb::this_task_arena::max_concurrency(),
+        tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
+    const int32_t L = t.num_leaves();
+    if (L < 2) throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
+
+    // Leaf pairs a < b: all of them when they fit the sample, else seeded blocks of 8 rows by 32
+    // consecutive columns at uniform places above the diagonal: the access pattern of a V-map
+    // build (one leaf against 32 neighbouring leaves, neighbouring rows after each other; the
+    // same as `vmap bench` samples), so caches behave for both methods as in a real run.
+    std::vector<std::pair<int32_t, int32_t>> lp;
+    const uint64_t all = uint64_t(L) * (L - 1) / 2;
+    if (all <= p.sample_pairs || L < 80) {
+        for (int32_t a = 0; a < L; ++a)
+            for (int32_t b = a + 1; b < L; ++b) lp.emplace_back(a, b);
+    } else {
+        std::mt19937_64 rng(7);
+        while (lp.size() < p.sample_pairs) {
+            int32_t a = int32_t(rng() % uint64_t(L - 40)), b = int32_t(rng() % uint64_t(L - 40));
+            if (a > b) std::swap(a, b);
+            if (b - a < 8) continue;
+            for (int32_t r = 0; r < 8; ++r)
+                for (int32_t c = 0; c < 32 && b + c < L; ++c) lp.emplace_back(a + r, b + c);
+        }
+        lp.resize(p.sample_pairs);
+    }
+    r.pairs = lp.size();
+    const OctreeView v = t.view();
+    const VisibilityParams vp = p.visibility;
+    const float t0 = vp.eps, t1 = 1.f - vp.eps;
+    std::vector<uint8_t> kern(lp.size()), ray(lp.size());
+
+    // Work of one counted kernel pass (not timed).
+    {
+        tbb::combinable<WorkCounters> c;
+        tbb::parallel_for(size_t(0), lp.size(), [&](size_t k) {
+            kern[k] = detail::leaf_pair_visible<true>(v, lp[k].first, lp[k].second, vp, &c.local());
+        });
+        r.kernel_work = c.combine([](WorkCounters x, const WorkCounters& y) {
+            x += y;
+            return x;
+        });
+        r.kernel_work.pairs = lp.size();
+    }
+    auto kernel_pass = [&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k)
+                kern[k] = detail::leaf_pair_visible<false>(v, lp[k].first, lp[k].second, vp,
+                                                           static_cast<WorkCounters*>(nullptr));
+        });
+    };
+    auto ray1_pass = [&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k) {
+                const LeafDisc& a = v.leaves[lp[k].first];
+                const LeafDisc& b = v.leaves[lp[k].second];
+                const Vec3 d = b.centroid - a.centroid;
+                const float len = length(d);
+                ray[k] = len > 0 && detail::leaves_face(a, b, d, len, vp) &&
+                         !exact.occluded(a.centroid, b.centroid, t0, t1);
+            }
+        });
+    };
+    std::vector<Vec3> from, to;
+    std::vector<size_t> idx;
+    std::vector<uint8_t> occ;
+    auto ray16_pass = [&] {
+        from.clear(), to.clear(), idx.clear();
+        for (size_t k = 0; k < lp.size(); ++k) {
+            const LeafDisc& a = v.leaves[lp[k].first];
+            const LeafDisc& b = v.leaves[lp[k].second];
+            const Vec3 d = b.centroid - a.centroid;
+            const float len = length(d);
+            if (len > 0 && detail::leaves_face(a, b, d, len, vp)) {
+                from.push_back(a.centroid), to.push_back(b.centroid), idx.push_back(k);
+            }
+        }
+        exact.occluded_packets(from, to, t0, t1, occ);
+    };
+    // Warm-up, then the three passes in turn in every run, so a change in machine load during
+    // the measurement falls on all three alike.
+    kernel_pass(), ray1_pass(), ray16_pass();
+    std::vector<double> tk, t1s, t16;
+    auto time_of = [](auto&& f) {
+        const auto tb = Clock::now();
+        f();
+        return seconds_since(tb);
+    };
+    for (int k = 0; k < p.runs; ++k) {
+        tk.push_back(time_of(kernel_pass));
+        t1s.push_back(time_of(ray1_pass));
+        t16.push_back(time_of(ray16_pass));
+    }
+    r.kernel_s = spread(tk);
+    r.ray1_s = spread(t1s);
+    r.ray16_s = spread(t16);
+    r.facing = idx.size();
+    for (size_t k = 0; k < lp.size(); ++k) {
+        r.kernel_visible += kern[k];
+        r.ray_visible += ray[k];
+        r.agree += kern[k] == ray[k];
+    }
+    // The packet pass must give the single-ray answers.
+    for (size_t m = 0; m < idx.size(); ++m)
+        if (!occ[m] != bool(ray[idx[m]]))
+            throw Error(
+                fmt::format("{}: Embree rtcOccluded16 and rtcOccluded1 disagree on leaf "
+                            "pair {}",
+                            path, idx[m]));
+    return r;
+}
+
+std::string embree_timing_markdown(const std::vector<EmbreeTiming>& rows) {
+    std::string s =
+        "| scene | points | triangles | height | leaves | threads | leaf pairs | facing | "
+        "kernel s (min-max) | kernel pairs/s | rtcOccluded1 s (min-max) | rays/s | pairs/s | "
+        "rtcOccluded16 s (min-max) | rays/s | pairs/s | kernel = ray |\n"
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    for (const EmbreeTiming& r : rows) {
+        auto sp = [](const Spread& x) {
+            return fmt::format("{:.3f} ({:.3f}-{:.3f})", x.median, x.lo, x.hi);
+        };
+        auto rate = [](double n, double s) { return fmt::format("{:.3g}", n / std::max(1e-9, s)); };
+        s += fmt::format(
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | "
+            "{} | {} | {:.2f}% |\n",
+            r.scene, r.points, r.triangles, r.height, r.leaves, r.threads, r.pairs, r.facing,
+            sp(r.kernel_s), rate(r.pairs, r.kernel_s.median), sp(r.ray1_s),
+            rate(r.facing, r.ray1_s.median), rate(r.pairs, r.ray1_s.median), sp(r.ray16_s),
+            rate(r.facing, r.ray16_s.median), rate(r.pairs, r.ray16_s.median),
+            100.0 * r.agree / std::max<uint64_t>(1, r.pairs));
+    }
+    return s;
+}
+
+}  // namespace vmap

@@ -1,0 +1,269 @@
+// `vmap validate` (include/vmap/validate.h): the exact-visibility oracle, the confusion
+// arithmetic, the equivalence of the direct and V-map predictions, bad input.
+#include "vmap/validate.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "test_util.h"
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+const std::string kBlock = test::oracle_path("room-with-block.json");
+
+TEST(Confusion, RatesFollowFromAHandMadeTable) {
+    Confusion c;
+    for (int k = 0; k < 70; ++k) c.add(true, true);    // true visible
+    for (int k = 0; k < 20; ++k) c.add(false, false);  // true hidden
+    for (int k = 0; k < 6; ++k) c.add(false, true);    // false visible
+    for (int k = 0; k < 4; ++k) c.add(true, false);    // false hidden
+    EXPECT_EQ(c.true_visible, 70u);
+    EXPECT_EQ(c.true_hidden, 20u);
+    EXPECT_EQ(c.false_visible, 6u);
+    EXPECT_EQ(c.false_hidden, 4u);
+    EXPECT_EQ(c.total(), 100u);
+    EXPECT_DOUBLE_EQ(c.agreement(), 0.90);
+    EXPECT_DOUBLE_EQ(c.false_visible_rate(), 0.06);
+    EXPECT_DOUBLE_EQ(c.false_hidden_rate(), 0.04);
+    Confusion d;
+    d.add(false, true);
+    c += d;
+    EXPECT_EQ(c.false_visible, 7u);
+    EXPECT_EQ(c.total(), 101u);
+}
+
+TEST(Confusion, EmptyTableGivesZeroRatesNotNaN) {
+    const Confusion c;
+    EXPECT_EQ(c.agreement(), 0.0);
+    EXPECT_EQ(c.false_visible_rate(), 0.0);
+    EXPECT_EQ(c.false_hidden_rate(), 0.0);
+}
+
+// The block spans x 0.1764..0.3764, y 0..0.2, z 0.18..0.38; the right wall is x = 0 (normal +x),
+// the left wall x = 0.5528 (normal -x).
+TEST(ExactVisibility, BlockHidesAcrossItWallPairsAboveItSeeEachOther) {
+    const Scene sc = load_scene(kBlock);
+    ExactVisibility ex(sc.surfaces, kBlock);
+    EXPECT_GT(ex.triangles(), 12u);
+    const float off = 1e-4f * 0.5592f;
+    const Vec3 px{1, 0, 0}, nx{-1, 0, 0}, py{0, 1, 0};
+    // Through the block: hidden.
+    EXPECT_FALSE(ex.visible({0, 0.1f, 0.28f}, px, {0.5528f, 0.1f, 0.28f}, nx, off));
+    // Above the block: visible.
+    EXPECT_TRUE(ex.visible({0, 0.4f, 0.28f}, px, {0.5528f, 0.4f, 0.28f}, nx, off));
+    // Two points on the floor: coplanar, not facing, hidden.
+    EXPECT_FALSE(ExactVisibility::facing({0.05f, 0, 0.05f}, py, {0.5f, 0, 0.5f}, py));
+    EXPECT_FALSE(ex.visible({0.05f, 0, 0.05f}, py, {0.5f, 0, 0.5f}, py, off));
+    // Facing the wrong way (behind each other's surface): not facing.
+    EXPECT_FALSE(ex.visible({0, 0.4f, 0.28f}, nx, {0.5528f, 0.4f, 0.28f}, px, off));
+    // Floor in front of the block to the ceiling: visible; floor behind to floor in front, over
+    // the block top only if the segment clears it (here it passes through): hidden.
+    EXPECT_TRUE(ex.visible({0.28f, 0, 0.05f}, py, {0.28f, 0.5488f, 0.1f}, {0, -1, 0}, off));
+    EXPECT_FALSE(ex.visible({0.05f, 0.1f, 0.28f}, px, {0.5f, 0.15f, 0.28f}, nx, off));
+}
+
+// Independent oracle: segment-triangle tests in double on every triangle.
+bool brute_occluded(const Scene& sc, Vec3 a, Vec3 b, double t0, double t1) {
+    const double D[3] = {double(b.x) - a.x, double(b.y) - a.y, double(b.z) - a.z};
+    for (const SceneSurface& s : sc.surfaces)
+        for (const auto& tri : s.mesh.triangles) {
+            const Vec3 v0 = s.mesh.vertices[tri[0]], v1 = s.mesh.vertices[tri[1]],
+                       v2 = s.mesh.vertices[tri[2]];
+            const double e1[3] = {double(v1.x) - v0.x, double(v1.y) - v0.y, double(v1.z) - v0.z};
+            const double e2[3] = {double(v2.x) - v0.x, double(v2.y) - v0.y, double(v2.z) - v0.z};
+            const double p[3] = {D[1] * e2[2] - D[2] * e2[1], D[2] * e2[0] - D[0] * e2[2],
+                                 D[0] * e2[1] - D[1] * e2[0]};
+            const double det = e1[0] * p[0] + e1[1] * p[1] + e1[2] * p[2];
+            if (std::fabs(det) < 1e-18) continue;
+            const double s0[3] = {double(a.x) - v0.x, double(a.y) - v0.y, double(a.z) - v0.z};
+            const double u = (s0[0] * p[0] + s0[1] * p[1] + s0[2] * p[2]) / det;
+            if (u < 0 || u > 1) continue;
+            const double q[3] = {s0[1] * e1[2] - s0[2] * e1[1], s0[2] * e1[0] - s0[0] * e1[2],
+                                 s0[0] * e1[1] - s0[1] * e1[0]};
+            const double v = (D[0] * q[0] + D[1] * q[1] + D[2] * q[2]) / det;
+            if (v < 0 || u + v > 1) continue;
+            const double t = (e2[0] * q[0] + e2[1] * q[1] + e2[2] * q[2]) / det;
+            if (t >= t0 && t <= t1) return true;
+        }
+    return false;
+}
+
+TEST(ExactVisibility, EmbreeRaysAgreeWithBruteForceTrianglesOnSampledPairs) {
+    Scene sc = load_scene(kBlock);
+    const PointSet pts = sample_scene(sc);
+    ExactVisibility ex(sc.surfaces, kBlock);
+    std::mt19937_64 rng(5);
+    int checked = 0, occluded = 0;
+    for (int it = 0; it < 3000; ++it) {
+        const size_t i = rng() % pts.size(), j = rng() % pts.size();
+        if (i == j) continue;
+        const Vec3 a = pts.positions[i], b = pts.positions[j];
+        const float len = length(b - a);
+        const float f = 1e-3f / len;  // 1 mm off both ends
+        if (!(f < 0.45f)) continue;
+        const bool brute = brute_occluded(sc, a, b, f, 1 - f);
+        // Skip segments that graze a triangle within rounding of an end of the window.
+        const bool brute_wide = brute_occluded(sc, a, b, f * 0.99, 1 - f * 0.99);
+        const bool brute_narrow = brute_occluded(sc, a, b, f * 1.01, 1 - f * 1.01);
+        if (brute_wide != brute_narrow) continue;
+        EXPECT_EQ(ex.occluded(a, b, f, 1 - f), brute) << i << " " << j;
+        ++checked;
+        occluded += brute;
+    }
+    EXPECT_GT(checked, 2500);
+    EXPECT_GT(occluded, 100);            // the walls and the block do block
+    EXPECT_LT(occluded, checked - 100);  // and not everything
+}
+
+TEST(Validate, DirectPredictionEqualsTheVmapQueryAtEveryHeight) {
+    ValidateParams p;
+    p.pairs = 20000;
+    p.heights = {3, 5, 7};
+    const ValidationReport v = validate_scene(kBlock, p);
+    p.predict = "direct";
+    const ValidationReport d = validate_scene(kBlock, p);
+    ASSERT_EQ(v.rows.size(), 3u);
+    ASSERT_EQ(d.rows.size(), 3u);
+    EXPECT_EQ(v.truth_visible, d.truth_visible);
+    for (size_t k = 0; k < 3; ++k) {
+        EXPECT_EQ(v.rows[k].same_leaf, d.rows[k].same_leaf);
+        EXPECT_EQ(v.rows[k].all.true_visible, d.rows[k].all.true_visible);
+        EXPECT_EQ(v.rows[k].all.false_visible, d.rows[k].all.false_visible);
+        EXPECT_EQ(v.rows[k].all.false_hidden, d.rows[k].all.false_hidden);
+        EXPECT_EQ(v.rows[k].facing.total(), d.rows[k].facing.total());
+        EXPECT_GT(v.rows[k].links, 0u);
+    }
+}
+
+TEST(Validate, CountsAddUpAndTheBlockScenePredictsMostPairs) {
+    ValidateParams p;
+    p.pairs = 30000;
+    p.heights = {5};
+    p.predict = "direct";
+    const ValidationReport r = validate_scene(kBlock, p);
+    ASSERT_EQ(r.rows.size(), 1u);
+    const HeightResult& h = r.rows[0];
+    EXPECT_EQ(h.all.total() + h.same_leaf, r.pairs);
+    EXPECT_LE(r.truth_visible, r.truth_facing);
+    EXPECT_LE(h.facing.total(), r.truth_facing);
+    EXPECT_LE(h.same_leaf_visible, h.same_leaf);
+    // Hidden pairs exist (walls facing away, the block) and visible ones too.
+    EXPECT_GT(r.truth_visible, r.pairs / 5);
+    EXPECT_LT(r.truth_visible, r.pairs * 4 / 5);
+    // Non-facing pairs are hidden for both, so agreement over all pairs is at least the
+    // share of non-facing pairs; the facing subset excludes that padding.
+    EXPECT_GT(h.all.agreement(), 0.8);
+    EXPECT_LT(h.facing.agreement(), h.all.agreement() + 0.05);
+    // Markdown and JSON carry the rows.
+    const std::string md = validation_markdown(r);
+    EXPECT_NE(md.find("| 5 | 5 |"), std::string::npos);
+    const std::string js = validation_json(r);
+    EXPECT_NE(js.find("\"false_visible_rate\""), std::string::npos);
+}
+
+TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {
+    ValidateParams p;
+    p.pairs = 20000;
+    p.heights = {5};
+    p.predict = "direct";
+    p.splat_floor = 1;
+    const ValidationReport base = validate_scene(kBlock, p);
+    p.splat_floor = 3;
+    const ValidationReport big = validate_scene(kBlock, p);
+    EXPECT_LE(big.rows[0].all.false_visible, base.rows[0].all.false_visible);
+    EXPECT_GE(big.rows[0].all.false_hidden, base.rows[0].all.false_hidden);
+    EXPECT_NE(big.rows[0].all.false_visible, base.rows[0].all.false_visible);
+}
+
+TEST(Validate, BuriedPointsAreTheFloorUnderTheBlockAndCanBeDropped) {
+    ValidateParams p;
+    p.pairs = 20000;
+    p.heights = {5};
+    p.predict = "direct";
+    const ValidationReport r = validate_scene(kBlock, p);
+    // The block stands on the floor and the light hangs under the ceiling: the floor under the
+    // block's base (0.04 of the ~1.7 m^2 sampled) and the ceiling under the light are covered.
+    EXPECT_GT(r.buried_points, 20u);
+    EXPECT_LT(r.buried_points, 200u);
+    EXPECT_LT(r.live_pairs, r.pairs);
+    EXPECT_LE(r.rows[0].live.total(), r.live_pairs);
+    EXPECT_LT(r.rows[0].live.total(), r.rows[0].all.total());
+    p.drop_buried = true;
+    const ValidationReport d = validate_scene(kBlock, p);
+    EXPECT_EQ(d.dropped_points, r.buried_points);
+    EXPECT_EQ(d.points, r.points - r.buried_points);
+    EXPECT_EQ(d.buried_points, 0u);
+    EXPECT_EQ(d.live_pairs, d.pairs);
+}
+
+TEST(Validate, BadInputIsRejectedNamingTheField) {
+    auto fails = [](const std::string& path, ValidateParams p, const std::string& what) {
+        try {
+            validate_scene(path, p);
+            ADD_FAILURE() << "no error for " << what;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
+        }
+    };
+    ValidateParams p;
+    p.heights = {5};
+    fails(std::string(VMAP_TEST_DATA) + "/nope.json", p, "nope.json");
+    ValidateParams q = p;
+    q.pairs = 0;
+    fails(kBlock, q, "--pairs");
+    q = p;
+    q.pairs = 2000000000ull;
+    fails(kBlock, q, "--pairs");
+    q = p;
+    q.heights = {0};
+    fails(kBlock, q, "--heights");
+    q.heights = {22};
+    fails(kBlock, q, "--heights");
+    q.heights = {};
+    fails(kBlock, q, "--heights");
+    q = p;
+    q.occluders = "cones";
+    fails(kBlock, q, "--occluders");
+    q = p;
+    q.splat_floor = 2;  // needs --predict direct
+    fails(kBlock, q, "--predict direct");
+    q = p;
+    q.visibility.K = 0;
+    fails(kBlock, q, "K");
+    q = p;
+    q.points = 1;
+    fails(kBlock, q, "no pairs");
+}
+
+TEST(EmbreeTiming, RaysAndKernelResolveTheSameLeafPairsAndMostlyAgree) {
+    EmbreeTimingParams p;
+    p.max_height = 4;
+    p.sample_pairs = 5000;
+    p.runs = 1;
+    const EmbreeTiming r = time_embree(kBlock, p);
+    EXPECT_EQ(r.pairs, 5000u);
+    EXPECT_GT(r.facing, 0u);
+    EXPECT_LT(r.facing, r.pairs);
+    EXPECT_EQ(r.kernel_work.pairs, r.pairs);
+    EXPECT_EQ(r.kernel_work.facing_pairs, r.facing);  // the same facing test decides who rays
+    EXPECT_LE(r.ray_visible, r.facing);
+    EXPECT_LE(r.kernel_visible, r.facing);
+    // Rays along the centroid segments and the disc test answer the same question at leaf
+    // level: they must agree on most pairs (they do on 99% of the shipped scenes' pairs).
+    EXPECT_GT(double(r.agree) / r.pairs, 0.9);
+    EXPECT_GT(r.kernel_s.median, 0.0);
+    EXPECT_NE(embree_timing_markdown({r}).find("room-with-block"), std::string::npos);
+    p.runs = 0;
+    EXPECT_THROW(time_embree(kBlock, p), Error);
+}
+
+TEST(ExactVisibility, SceneWithoutTrianglesIsAnError) {
+    EXPECT_THROW(ExactVisibility({}, "empty"), Error);
+}
+
+}  // namespace
+}  // namespace vmap

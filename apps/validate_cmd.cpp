@@ -90,8 +90,9 @@ CLI::App* add_validate_command(CLI::App& app) {
         ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
         ->capture_default_str();
     c->add_option("--predict", opt.vp.predict,
-                  "vmap (build and query the V-map) or direct (the leaf-pair predicate on the "
-                  "sampled pairs' leaves only: same answers, much faster, for sweeps)")
+                  "vmap (build and query the V-map per height: all leaf pairs, minutes per "
+                  "height beyond ~50k points on a few CPU cores) or direct (the leaf-pair "
+                  "predicate on the sampled pairs' leaves only: the same answers, in seconds)")
         ->check(CLI::IsMember({"vmap", "direct"}))
         ->capture_default_str();
     c->add_option("--delta-scale", opt.vp.delta_scale,

@@ -358,6 +358,7 @@ else
     show validate "$BLOCK" --time-embree --heights 4 --embree-pairs 20000 --runs 1
 fi
 expect_input_error "validate a missing scene" no_such_scene.json validate no_such_scene.json
+expect_input_error "validate a point cloud" "$DATA/nan.ply" validate "$DATA/nan.ply"
 expect_input_error "validate --splat-floor without --predict direct" "$BLOCK" \
     validate "$BLOCK" --heights 4 --splat-floor 2
 expect_usage_error "validate --pairs 0" validate "$BLOCK" --pairs 0

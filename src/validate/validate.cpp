@@ -10,6 +10,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <filesystem>
 #include <nlohmann/json.hpp>
 #include <random>
 
@@ -169,6 +170,12 @@ struct DirectPredictor {
 
 ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
     check_params(params, path);
+    const std::string ext = std::filesystem::path(path).extension().string();
+    if (ext != ".json" && ext != ".JSON")
+        throw Error(
+            fmt::format("{}: validate needs a scene file (.json): a point cloud has no "
+                        "triangles to take the truth from",
+                        path));
     Scene sc = load_scene(path);
     if (params.points) sc.points = params.points;
     PointSet pts = sample_scene(sc);

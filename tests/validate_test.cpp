@@ -179,21 +179,31 @@ TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {
     EXPECT_NE(big.rows[0].all.false_visible, base.rows[0].all.false_visible);
 }
 
+TEST(Validate, NoBuriedPointsWhereNothingCoversTheSurface) {
+    // The ceiling is not sampled under the light (scene.cpp), and the block stands on the floor
+    // (its base coincides with the floor, which the end offset of the probe ray skips).
+    ValidateParams p;
+    p.pairs = 2000;
+    p.heights = {5};
+    p.predict = "direct";
+    EXPECT_EQ(validate_scene(kBlock, p).buried_points, 0u);
+}
+
 TEST(Validate, BuriedPointsAreTheFloorUnderTheBlockAndCanBeDropped) {
     ValidateParams p;
     p.pairs = 20000;
     p.heights = {5};
     p.predict = "direct";
-    const ValidationReport r = validate_scene(kBlock, p);
-    // The block stands on the floor and the light hangs under the ceiling: the floor under the
-    // block's base (0.04 of the ~1.7 m^2 sampled) and the ceiling under the light are covered.
+    const ValidationReport r = validate_scene(test::oracle_path("room-with-raised-block.json"), p);
+    // The block hangs 0.5 mm over the floor: the floor under its base (0.04 of the ~1.7 m^2
+    // sampled) is covered.
     EXPECT_GT(r.buried_points, 20u);
     EXPECT_LT(r.buried_points, 200u);
     EXPECT_LT(r.live_pairs, r.pairs);
     EXPECT_LE(r.rows[0].live.total(), r.live_pairs);
     EXPECT_LT(r.rows[0].live.total(), r.rows[0].all.total());
     p.drop_buried = true;
-    const ValidationReport d = validate_scene(kBlock, p);
+    const ValidationReport d = validate_scene(test::oracle_path("room-with-raised-block.json"), p);
     EXPECT_EQ(d.dropped_points, r.buried_points);
     EXPECT_EQ(d.points, r.points - r.buried_points);
     EXPECT_EQ(d.buried_points, 0u);

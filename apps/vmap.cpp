@@ -18,6 +18,7 @@
 #include <memory>
 #include <optional>
 
+#include "apps/gi_cmd.h"
 #include "bench/bench.h"
 #include "util/progress.h"
 #include "vmap/error.h"
@@ -246,6 +247,8 @@ int main(int argc, char** argv) {
     query->add_option("--from", from, "Points visible from input point I (count)");
     query->add_flag("--ids", ids, "With --from: list the ids too");
 
+    const cli::GiCommands gi = cli::add_gi_commands(app);
+
     bench::Options bo2;
     auto* benchc = app.add_subcommand(
         "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
@@ -301,6 +304,7 @@ int main(int argc, char** argv) {
             return bench::run(bo2);
         }
         if (*query) return run_query(query_path, pair, from, ids);
+        if (gi.selected()) return gi.run();
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());
         return 1;

@@ -110,9 +110,9 @@ int run_gi(GiOptions& o) {
     if (!st0.note.empty()) fmt::print("note:       {}\n", st0.note);
     fmt::print("backend:    {}\n", st0.backend);
     fmt::print(
-        "refinement: theta {}: {} interactions ({} node level, {} point to point), "
+        "refinement: {}, theta {}: {} interactions ({} node level, {} point to point), "
         "setup {:.3f} s\n",
-        o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
+        o.gi.refine, o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
         st0.seconds_setup);
     std::vector<std::vector<Vec3>> ref;
     std::vector<double> brute_s;
@@ -187,6 +187,11 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("--backend", o->gi.backend,
                    "auto (GPU when present), cpu or cuda; for the V-map build and the bounces")
         ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    gi->add_option("--refine", o->gi.refine,
+                   "blocks: links summed into well-separated node pairs (fast); links: every "
+                   "V-map link moves energy itself (exact visibility, slower)")
+        ->check(CLI::IsMember({"blocks", "links"}))
         ->capture_default_str();
     gi->add_option("--exposure", o->exposure,
                    "Display colour = clamp(exposure x radiosity)^(1/gamma); 0: automatic")

@@ -43,6 +43,7 @@ struct BenchOptions {
     std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
     int max_height = 12, leaf_points = 4;
     float theta = 1.0f;
+    std::string refine = "blocks";
     int bounces = 3, runs = 3;
     uint64_t brute_max = 20000;
     std::vector<std::string> backends;  // cpu, cuda (default: cpu, plus cuda with a device)
@@ -98,6 +99,7 @@ int run_bench(BenchOptions& o) {
             GiParams gp;
             gp.theta = o.theta;
             gp.backend = be;
+            gp.refine = o.refine;
             std::vector<double> setup, per;
             for (int run = 0; run < o.runs; ++run) {
                 RadiositySolver s(vm, gp);
@@ -143,10 +145,11 @@ int run_bench(BenchOptions& o) {
     std::strftime(date, sizeof(date), "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
     std::string md;
     md += fmt::format(
-        "Scene {}, theta {}, octree max_height {} leaf_points {}; {} bounces x {} runs per "
+        "Scene {}, refine {}, theta {}, octree max_height {} leaf_points {}; {} bounces x {} runs "
+        "per "
         "backend; host {} ({} threads){}; {}.\n\n",
-        std::filesystem::path(o.scene).filename().string(), o.theta, o.max_height, o.leaf_points,
-        o.bounces, o.runs, host, tbb::this_task_arena::max_concurrency(),
+        std::filesystem::path(o.scene).filename().string(), o.refine, o.theta, o.max_height,
+        o.leaf_points, o.bounces, o.runs, host, tbb::this_task_arena::max_concurrency(),
         gpu_used ? ", GPU " + gpu_name : "", date);
     md +=
         "| points | leaves | links | interactions (node level) | setup CPU s | bounce CPU s | "
@@ -204,6 +207,9 @@ std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
         ->capture_default_str();
     b->add_option("--theta", o->theta, "Separation parameter")
         ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    b->add_option("--refine", o->refine, "blocks or links (see vmap gi --help)")
+        ->check(CLI::IsMember({"blocks", "links"}))
         ->capture_default_str();
     b->add_option("--bounces", o->bounces, "Bounces per run")
         ->check(CLI::Range(1, 1000))

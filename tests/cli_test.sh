@@ -270,7 +270,7 @@ expect_input_error "query --from id out of range" x.vmap query x.vmap --from 400
 
 if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu; then
     expect_stdout "gi reports each bounce" '^bounce +2: '
-    expect_stdout "gi reports the refinement" '^refinement: theta 1: [0-9]+ interactions'
+    expect_stdout "gi reports the refinement" '^refinement: blocks, theta 1: [0-9]+ interactions'
     if [ "$(head -c 3 lit.ply)" = "ply" ] && grep -aq 'property uchar red' lit.ply; then
         ok "lit.ply is a coloured PLY"
     else
@@ -285,6 +285,7 @@ expect_usage_error "gi --theta 0" gi x.vmap --theta 0
 expect_usage_error "gi --theta -1" gi x.vmap --theta -1
 expect_usage_error "gi --bounces -1" gi x.vmap --bounces -1
 expect_usage_error "gi --backend gpu" gi x.vmap --backend gpu
+expect_usage_error "gi --refine nope" gi x.vmap --refine nope
 expect_input_error "gi on a missing file" no_such.vmap gi no_such.vmap
 expect_input_error "gi --points on a .vmap" x.vmap gi x.vmap --points 10
 if [ -s sphere.vmap ]; then

@@ -13,14 +13,28 @@
 //
 // The solver is hierarchical radiosity of order 0: nodes carry their points' total area, the
 // area-weighted mean position and mean normal (not renormalised, so A_n * dot(mean normal, w)
-// is the exact sum of the points' A_k dot(n_k, w)) and the area-weighted mean radiosity. Each
-// V-map link (A, B) is refined once: when |c_A - c_B| > theta * (s_A + s_B) (s = half the
-// diagonal of the node's content box) energy moves at node level; otherwise the larger node is
-// opened (children pairs are visible too, since all of A sees all of B), down to leaf pairs,
-// which exchange point to point. A bounce gathers over that interaction list, pushes the
-// nodes' gathered irradiance down to their points, and pulls radiosity back up (area-weighted
-// mean). The larger theta, the finer the transfer; as theta -> infinity every transfer is point
-// to point and the answer is the brute-force one (brute_force_radiosity).
+// is the exact sum of the points' A_k dot(n_k, w)) and the area-weighted mean radiosity. A
+// node pair (A, B) of disjoint subtrees is well separated when |c_A - c_B| > theta * (s_A + s_B)
+// (s = half the diagonal of the node's content box); theta is the separation parameter.
+//
+// refine = "blocks" (default): the pairs that top-down refinement from (root, root) leaves
+// (well separated node pairs, and point pairs of two leaves that are not) partition the
+// leaf-pair matrix into blocks. Every V-map link is split along that partition, and each block
+// sums T = A_x A_y K(x, y) over the link parts (x, y) it holds (the finer node of each side);
+// receiver A then gathers T / A_A * B_B from B. Only pairs that see each other contribute, and
+// the number of blocks grows like classic hierarchical radiosity's (about linearly), not like
+// the number of links. Within a block, the visible parts' energy is spread over the receiver
+// node (order 0): shadow edges blur at the scale of nodes that theta keeps small against their
+// distance.
+// refine = "links": every link (A, B) itself moves energy at node level when well separated
+// (F = A_B K(A, B), from the node sums); otherwise the larger end is opened (children pairs are
+// visible too, since all of A sees all of B) down to leaf pairs, which exchange point to point.
+// Exact visibility, but as many interactions as links (which grow faster than the points).
+//
+// A bounce gathers over the interaction list, pushes the nodes' gathered irradiance down to
+// their points, and pulls radiosity back up (area-weighted mean). The larger theta, the finer
+// the transfer; as theta -> infinity every transfer is point to point and both modes give the
+// brute-force answer (brute_force_radiosity).
 #pragma once
 
 #include <cstdint>
@@ -37,6 +51,7 @@ struct GiParams {
     int bounces = 3;                         // gather steps after B = E; 1 = direct light only
     float theta = 1.0f;                      // separation parameter (> 0): larger is finer, slower
     std::string backend = "auto";            // auto | cpu | cuda
+    std::string refine = "blocks";           // blocks | links (see above)
     uint64_t max_interactions = 1ull << 31;  // refuse a refinement larger than this
     bool progress = false;                   // progress line on stderr (callers pass isatty(2))
 };
@@ -68,6 +83,11 @@ class RadiositySolver {
     // Radiosity per point (W/m^2 per channel), octree order (vm.points' order).
     std::vector<Vec3> radiosity() const;
     const GiStats& stats() const;
+    // The interaction list (for tests and tools): elements are the octree nodes, then the points
+    // at num_nodes + k; receiver e gathers coef[k] * B[src[k]] for k in [row[e], row[e+1]);
+    // area[e] is the element's area.
+    void interaction_list(std::vector<uint64_t>& row, std::vector<uint32_t>& src,
+                          std::vector<float>& coef, std::vector<double>& area) const;
 
   private:
     struct Impl;

@@ -6,6 +6,7 @@
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -151,6 +152,128 @@ struct Refiner {
     }
 };
 
+// Refinement by blocks (the default): every V-map link (x, y) is split along the partition of
+// the leaf-pair matrix that top-down refinement from (root, root) gives: a node pair (A, B)
+// (disjoint subtrees) is a block when well separated; otherwise the larger node is opened; two
+// leaves that are not well separated exchange point to point. A link reaches its blocks by
+// descending from (root, root) towards x and y (and over all children once inside them). Each
+// block accumulates W = the area products of the leaf pairs the links make visible in it, so a
+// block moves energy only between parts that see each other: receiver A gathers
+// K(A, B) W / A_A * B_B from B (fully visible blocks: K A_B B_B, as before). The blocks do not
+// grow with the number of links: the per-bounce work is that of classic hierarchical
+// radiosity, the visibility of a block is averaged over its parts (shadow edges blur at the
+// scale of the nodes, which theta keeps small against their distance).
+struct BlockRefiner {
+    const VisibilityMap& vm;
+    const std::vector<NodeGeom>& g;
+    float theta;
+
+    struct Entry {
+        uint64_t key;  // (element e1 << 32) | element e2, e1 < e2
+        double w;
+    };
+
+    bool within(int32_t a, int32_t x) const { return x <= a && a < vm.octree.skip[x]; }
+    bool separated(int32_t a, int32_t b) const {
+        if (within(a, b) || within(b, a)) return false;
+        return length(g[b].center - g[a].center) > theta * (g[a].size + g[b].size);
+    }
+    int32_t child_toward(int32_t a, int32_t x) const {
+        int32_t hit = -1;
+        vm.octree.for_each_child(a, [&](int32_t c) {
+            if (within(x, c)) hit = c;
+        });
+        return hit;
+    }
+    static uint64_t key(uint32_t e1, uint32_t e2) {
+        if (e1 > e2) std::swap(e1, e2);
+        return (uint64_t(e1) << 32) | e2;
+    }
+
+    void descend(int32_t a, int32_t b, int32_t x, int32_t y, std::vector<Entry>& out) const {
+        const Octree& t = vm.octree;
+        const bool ax = within(a, x), by = within(b, y);
+        if (separated(a, b)) {
+            // The part of the link inside the block: the finer of the two nodes on each side.
+            const NodeGeom& pa = g[ax ? a : x];
+            const NodeGeom& pb = g[by ? b : y];
+            const float k =
+                gi_kernel(pa.center, pa.normal, pa.point_area, pb.center, pb.normal, pb.point_area);
+            if (k > 0)
+                out.push_back({key(uint32_t(a), uint32_t(b)), double(pa.area) * pb.area * k});
+            return;
+        }
+        const bool la = t.is_leaf(a), lb = t.is_leaf(b);
+        if (la && lb) {  // both are inside their link ends: every point pair is visible
+            const PointSet& ps = vm.points;
+            const uint32_t base = uint32_t(t.num_nodes());
+            for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
+                for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
+                    const float ai = area_of(ps, i), aj = area_of(ps, j);
+                    const float k = gi_kernel(ps.positions[i], ps.normals[i], ai, ps.positions[j],
+                                              ps.normals[j], aj);
+                    if (k > 0) out.push_back({key(base + i, base + j), double(ai) * aj * k});
+                }
+            return;
+        }
+        if (lb || (!la && g[a].size >= g[b].size)) {
+            if (ax)
+                t.for_each_child(a, [&](int32_t c) { descend(c, b, x, y, out); });
+            else
+                descend(child_toward(a, x), b, x, y, out);
+        } else {
+            if (by)
+                t.for_each_child(b, [&](int32_t c) { descend(a, c, x, y, out); });
+            else
+                descend(a, child_toward(b, y), x, y, out);
+        }
+    }
+
+    // The blocks with their visible area products, sorted by key. Deterministic: each link
+    // end's entries are reduced in link order, then all are sorted by (key, node) and summed
+    // in that order.
+    std::vector<Entry> run() const {
+        const int32_t N = vm.octree.num_nodes();
+        std::vector<std::vector<Entry>> per(N);
+        tbb::parallel_for(0, N, [&](int32_t x) {
+            std::vector<Entry> out;
+            for (int32_t y : vm.links(x))
+                if (y > x) descend(0, 0, x, y, out);
+            std::stable_sort(out.begin(), out.end(),
+                             [](const Entry& p, const Entry& q) { return p.key < q.key; });
+            std::vector<Entry>& r = per[x];
+            for (const Entry& e : out)
+                if (!r.empty() && r.back().key == e.key)
+                    r.back().w += e.w;
+                else
+                    r.push_back(e);
+        });
+        struct Tagged {
+            uint64_t key;
+            int32_t node;
+            double w;
+        };
+        std::vector<uint64_t> first(size_t(N) + 1, 0);
+        for (int32_t x = 0; x < N; ++x) first[x + 1] = first[x] + per[x].size();
+        std::vector<Tagged> all(first[N]);
+        tbb::parallel_for(0, N, [&](int32_t x) {
+            for (size_t k = 0; k < per[x].size(); ++k)
+                all[first[x] + k] = {per[x][k].key, x, per[x][k].w};
+            std::vector<Entry>().swap(per[x]);
+        });
+        tbb::parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
+            return p.key != q.key ? p.key < q.key : p.node < q.node;
+        });
+        std::vector<Entry> blocks;
+        for (const Tagged& e : all)
+            if (!blocks.empty() && blocks.back().key == e.key)
+                blocks.back().w += e.w;
+            else
+                blocks.push_back({e.key, e.w});
+        return blocks;
+    }
+};
+
 std::string cpu_name() {
     return fmt::format("cpu ({} threads)", tbb::this_task_arena::max_concurrency());
 }
@@ -180,6 +303,7 @@ struct RadiositySolver::Impl {
     std::vector<float> coef;
     std::vector<Vec3> emission, albedo;
     std::vector<float> area, inv_area;
+    std::vector<double> node_area;  // for interaction_list()
     std::vector<int32_t> point_leaf;
     std::vector<Vec3> B, G;
     detail::GiView view;
@@ -212,15 +336,40 @@ void RadiositySolver::Impl::setup() {
         for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k) point_leaf[k] = n;
     }
     inv_area.resize(N);
-    for (int32_t n = 0; n < N; ++n) inv_area[n] = geom[n].area > 0 ? 1.0f / geom[n].area : 0.0f;
+    node_area.resize(N);
+    for (int32_t n = 0; n < N; ++n) {
+        inv_area[n] = geom[n].area > 0 ? 1.0f / geom[n].area : 0.0f;
+        node_area[n] = geom[n].area;
+    }
 
     // Refinement in two passes: count per receiver, then fill at atomic cursors; rows are then
     // sorted by source so the sums run in an order that does not depend on thread timing.
     const Refiner ref{vm, geom, params.theta};
+    std::vector<BlockRefiner::Entry> blocks;
+    const bool by_links = params.refine == "links";
+    if (!by_links) blocks = BlockRefiner{vm, geom, params.theta}.run();
+    auto element_area = [&](uint32_t e) {
+        return e < uint32_t(N) ? double(geom[e].area) : double(area_of(ps, e - uint32_t(N)));
+    };
+    auto run_refinement = [&](auto&& make_emit) {
+        if (by_links) return ref.run(make_emit);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 4096), [&](auto r) {
+            auto emit = make_emit();
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                const uint32_t e1 = uint32_t(blocks[k].key >> 32), e2 = uint32_t(blocks[k].key);
+                const double a1 = element_area(e1), a2 = element_area(e2);
+                if (!(a1 > 0) || !(a2 > 0)) continue;
+                const double kw = blocks[k].w;  // sum of A_x A_y K(x, y) over the visible parts
+                const bool pt = e1 >= uint32_t(N);
+                emit(e1, e2, float(std::min(1.0, kw / a1)), pt);
+                emit(e2, e1, float(std::min(1.0, kw / a2)), pt);
+            }
+        });
+    };
     std::unique_ptr<std::atomic<uint64_t>[]> count(new std::atomic<uint64_t>[num_el + 1]);
     for (uint64_t e = 0; e <= num_el; ++e) count[e].store(0, std::memory_order_relaxed);
     std::atomic<uint64_t> n_node{0}, n_point{0};
-    ref.run([&] {
+    run_refinement([&] {
         return [&](uint32_t r, uint32_t, float, bool pt) {
             count[r].fetch_add(1, std::memory_order_relaxed);
             (pt ? n_point : n_node).fetch_add(1, std::memory_order_relaxed);
@@ -238,7 +387,7 @@ void RadiositySolver::Impl::setup() {
     for (uint64_t e = 0; e < num_el; ++e) row[e + 1] = row[e] + count[e].load();
     for (uint64_t e = 0; e < num_el; ++e) count[e].store(row[e], std::memory_order_relaxed);
     src.resize(total), coef.resize(total);
-    ref.run([&] {
+    run_refinement([&] {
         return [&](uint32_t r, uint32_t s, float f, bool) {
             const uint64_t at = count[r].fetch_add(1, std::memory_order_relaxed);
             src[at] = s;
@@ -246,6 +395,7 @@ void RadiositySolver::Impl::setup() {
         };
     });
     count.reset();
+    std::vector<BlockRefiner::Entry>().swap(blocks);
     tbb::parallel_for(uint64_t(0), num_el, [&](uint64_t e) {
         const uint64_t b = row[e], n = row[e + 1] - b;
         if (n < 2) return;
@@ -314,6 +464,9 @@ RadiositySolver::RadiositySolver(const VisibilityMap& vm, const GiParams& params
             fmt::format("gi: theta: {} (the separation parameter must be > 0)", params.theta));
     if (params.bounces < 0)
         throw Error(fmt::format("gi: bounces: {} (must be >= 0)", params.bounces));
+    if (params.refine != "blocks" && params.refine != "links")
+        throw Error(
+            fmt::format("gi: refine: unknown mode '{}' (expected blocks or links)", params.refine));
     if (params.backend != "auto" && params.backend != "cpu" && params.backend != "cuda")
         throw Error(fmt::format("gi: --backend: unknown backend '{}' (expected auto, cpu or cuda)",
                                 params.backend));
@@ -351,6 +504,15 @@ std::vector<Vec3> RadiositySolver::radiosity() const {
 }
 
 const GiStats& RadiositySolver::stats() const { return impl_->stats; }
+
+void RadiositySolver::interaction_list(std::vector<uint64_t>& row, std::vector<uint32_t>& src,
+                                       std::vector<float>& coef, std::vector<double>& area) const {
+    row = impl_->row, src = impl_->src, coef = impl_->coef;
+    const int32_t N = impl_->view.num_nodes;
+    area.resize(impl_->row.size() - 1);
+    for (int32_t n = 0; n < N; ++n) area[n] = impl_->node_area[n];
+    for (uint32_t k = 0; k < impl_->view.num_points; ++k) area[N + k] = impl_->area[k];
+}
 
 std::vector<Vec3> solve_radiosity(const VisibilityMap& vm, const GiParams& params, GiStats* stats) {
     RadiositySolver s(vm, params);

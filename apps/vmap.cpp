@@ -1,7 +1,9 @@
 // vmap: view-independent mutual visibility for point models.
 //   vmap build [SCENE.json | CLOUD.ply] -o out.vmap   octree + V-map, with a summary
 //   vmap info out.vmap                                what a .vmap holds
-//   vmap query out.vmap --pair I J | --from I         visibility from the V-map
+//   vmap query out.vmap --pair I J | --from I | --ray I --dir D   (apps/query_cmd.cpp)
+//   vmap render [SCENE | CLOUD | out.vmap] --mode M   pictures (apps/render_cmd.cpp)
+//   vmap bench-query                                  query latency vs scene size
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
 #include "vmap/vmap.h"
 
@@ -18,6 +20,7 @@
 #include <memory>
 #include <optional>
 
+#include "apps/commands.h"
 #include "apps/gi_cmd.h"
 #include "bench/bench.h"
 #include "util/progress.h"
@@ -146,33 +149,6 @@ int run_info(const std::string& path) {
     return 0;
 }
 
-int run_query(const std::string& path, const std::vector<uint32_t>& pair,
-              std::optional<uint32_t> from, bool ids) {
-    VisibilityMap vm = load_vmap(path);
-    for (uint32_t id : pair)
-        if (id >= vm.points.size())
-            throw Error(
-                fmt::format("{}: --pair: point id {} out of range (the V-map has {} points)", path,
-                            id, vm.points.size()));
-    if (from && *from >= vm.points.size())
-        throw Error(fmt::format("{}: --from: point id {} out of range (the V-map has {} points)",
-                                path, *from, vm.points.size()));
-    if (!pair.empty()) {
-        const PairVisibility v = vm.query(pair[0], pair[1]);
-        fmt::print("{} {} {}\n", pair[0], pair[1],
-                   v == PairVisibility::kVisible  ? "visible"
-                   : v == PairVisibility::kHidden ? "hidden"
-                                                  : "same-leaf");
-    }
-    if (from) {
-        const auto set = vm.visible_set(*from);
-        fmt::print("{} points visible from {} (of {})\n", set.size(), *from, vm.points.size());
-        if (ids)
-            for (uint32_t i : set) fmt::print("{}\n", i);
-    }
-    return 0;
-}
-
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -237,15 +213,9 @@ int main(int argc, char** argv) {
     auto* info = app.add_subcommand("info", "Describe a .vmap file");
     info->add_option("file", info_path, "The .vmap file")->required();
 
-    std::string query_path;
-    std::vector<uint32_t> pair;
-    std::optional<uint32_t> from;
-    bool ids = false;
-    auto* query = app.add_subcommand("query", "Answer visibility queries from a .vmap file");
-    query->add_option("file", query_path, "The .vmap file")->required();
-    query->add_option("--pair", pair, "Are input points I and J mutually visible?")->expected(2);
-    query->add_option("--from", from, "Points visible from input point I (count)");
-    query->add_flag("--ids", ids, "With --from: list the ids too");
+    const cli::Command query = cli::add_query_command(app);
+    const cli::Command render = cli::add_render_command(app);
+    const cli::Command bench_query = cli::add_bench_query_command(app);
 
     const cli::GiCommands gi = cli::add_gi_commands(app);
 
@@ -286,10 +256,6 @@ int main(int argc, char** argv) {
                    bo.input);
         return 2;
     }
-    if (*query && pair.empty() && !from) {
-        fmt::print(stderr, "vmap query: give --pair I J or --from I\n");
-        return 2;
-    }
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
@@ -303,7 +269,8 @@ int main(int argc, char** argv) {
                     bo2.scenes.push_back(std::string(VMAP_SOURCE_DIR) + "/scenes/" + n + ".json");
             return bench::run(bo2);
         }
-        if (*query) return run_query(query_path, pair, from, ids);
+        for (const cli::Command* c : {&query, &render, &bench_query})
+            if (c->app->parsed()) return c->run();
         if (gi.selected()) return gi.run();
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());

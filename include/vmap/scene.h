@@ -15,6 +15,7 @@
 //                 "albedo": [r, g, b], "flip_normals": false } ],
 //   "sampling": { "points": 60000, "seed": 1 }      // or "density": points per square metre
 //   "octree": { "max_height": 9, "leaf_points": 4 } // defaults for `vmap build`
+//   "camera": { "eye": [x,y,z], "target": [x,y,z], "fov": 40, "up": [0,1,0] }  // `vmap render`
 // }
 // The room is open at z = 0, the side a camera looks in from.
 #pragma once
@@ -24,6 +25,7 @@
 #include <string>
 #include <vector>
 
+#include "vmap/camera.h"
 #include "vmap/mesh.h"
 #include "vmap/octree.h"
 
@@ -45,6 +47,7 @@ struct Scene {
     uint64_t seed = 1;
     std::optional<OctreeParams> octree;  // the file's defaults, if it gave any
     Vec3 room_size{0.5528f, 0.5488f, 0.5592f};
+    std::optional<Camera> camera;  // the file's view for `vmap render`, if it gave one
 };
 
 // Reads a scene file and the meshes it names. Throws vmap::Error naming the file and the field

@@ -261,6 +261,22 @@ Scene load_scene(const std::string& path) {
             op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
         sc.octree = op;
     }
+
+    if (j.contains("camera")) {
+        const json& c = j["camera"];
+        cx.known(c, "camera", {"eye", "target", "fov", "up"});
+        if (!c.contains("eye")) cx.fail("camera.eye", "missing");
+        if (!c.contains("target")) cx.fail("camera.target", "missing");
+        Camera cam;
+        cam.eye = cx.vec3(c["eye"], "camera.eye", -1e6, 1e6);
+        cam.target = cx.vec3(c["target"], "camera.target", -1e6, 1e6);
+        if (c.contains("up")) cam.up = cx.vec3(c["up"], "camera.up", -1e6, 1e6);
+        if (c.contains("fov")) cam.fov_y_deg = float(cx.number(c["fov"], "camera.fov", 0.1, 179));
+        if (!(length(cam.target - cam.eye) > 0)) cx.fail("camera.target", "equals camera.eye");
+        if (!(length(cross(cam.target - cam.eye, cam.up)) > 0))
+            cx.fail("camera.up", "zero or parallel to the view direction");
+        sc.camera = cam;
+    }
     return sc;
 }
 

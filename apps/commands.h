@@ -1,0 +1,31 @@
+// Subcommands defined outside apps/vmap.cpp. Each add_* function declares its options on `app`
+// and returns the subcommand with the function that runs it after parsing; main() calls run()
+// inside its error handling (vmap::Error -> exit 1), and a run() returning 2 is a usage error.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "vmap/vec.h"
+
+namespace vmap::cli {
+
+struct Command {
+    CLI::App* app = nullptr;
+    std::function<int()> run;
+};
+
+Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
+Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
+Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+
+// "x,y,z" -> Vec3; throws vmap::Error naming `option` for anything else (or non-finite values).
+Vec3 parse_vec3(const std::string& text, const std::string& option);
+// "WxH" -> (W, H), each 1..16384; throws vmap::Error naming `option`.
+std::pair<int, int> parse_size(const std::string& text, const std::string& option);
+
+bool ends_with_ci(std::string s, const std::string& suffix);
+
+}  // namespace vmap::cli

@@ -1,0 +1,245 @@
+// `vmap render`: pictures of a scene, a point cloud or a .vmap file (issue 4).
+//
+// Input: a scene (.json: sampled; --points/--seed override), a point cloud (.ply/.off) or a
+// .vmap file (its points; the camera from --scene, else the default). Modes:
+//   albedo    the points' colours, unshaded
+//   shaded    colours x (ambient + |n.v|)
+//   visible   paper Fig. 9: points visible from an eye point purple, the eye cyan, the rest
+//             dimmed; the V-map is the .vmap given, or built on the fly (scene/cloud)
+//   heights   paper Fig. 11: `visible` for the V-maps built at each of --heights, side by side
+// --ply writes the same colours (without the camera-dependent shading) as a coloured PLY.
+#include <fmt/format.h>
+
+#include <chrono>
+#include <filesystem>
+#include <memory>
+
+#include "apps/commands.h"
+#include "util/progress.h"
+#include "vmap/error.h"
+#include "vmap/io.h"
+#include "vmap/query.h"
+#include "vmap/render.h"
+#include "vmap/scene.h"
+
+namespace vmap::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct RenderArgs {
+    std::string input, output, ply, scene, mode = "shaded";
+    std::string eye, target, up, size = "800x800", eye_pos;
+    std::optional<float> fov;
+    std::optional<uint32_t> eye_id;
+    std::optional<uint64_t> points, seed;
+    std::optional<int> max_height, leaf_points;
+    std::vector<int> heights{7, 9};
+    std::string backend = "auto";
+    RenderOptions opt;
+};
+
+// What was loaded: points in input order, and the V-map when the input was one.
+struct Source {
+    PointSet points;
+    std::optional<VisibilityMap> vm;
+    std::optional<Camera> camera;
+    std::optional<OctreeParams> octree;
+};
+
+Source load_source(RenderArgs& a) {
+    Source s;
+    if (a.input.empty()) a.input = default_scene_path();
+    if (ends_with_ci(a.input, ".json")) {
+        Scene sc = load_scene(a.input);
+        if (a.points) sc.points = *a.points;
+        if (a.seed) sc.seed = *a.seed;
+        s.points = sample_scene(sc);
+        s.camera = sc.camera;
+        s.octree = sc.octree;
+    } else if (ends_with_ci(a.input, ".vmap")) {
+        s.vm = load_vmap(a.input);
+        s.points = points_in_input_order(*s.vm);
+        s.octree = s.vm->octree_params;
+    } else {
+        s.points = load_point_cloud(a.input);
+    }
+    if (!a.scene.empty()) s.camera = load_scene(a.scene).camera;
+    return s;
+}
+
+Camera make_camera(const RenderArgs& a, const Source& s) {
+    Camera cam = s.camera ? *s.camera : default_camera(s.points);
+    if (!a.eye.empty()) cam.eye = parse_vec3(a.eye, "--eye");
+    if (!a.target.empty()) cam.target = parse_vec3(a.target, "--target");
+    if (!a.up.empty()) cam.up = parse_vec3(a.up, "--up");
+    if (a.fov) cam.fov_y_deg = *a.fov;
+    return cam;
+}
+
+VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> height) {
+    BuildParams bp;
+    if (s.octree) bp.octree = *s.octree;
+    if (a.max_height) bp.octree.max_height = *a.max_height;
+    if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
+    if (height) bp.octree.max_height = *height;
+    bp.backend = a.backend;
+    bp.progress = detail::stderr_is_terminal();
+    BuildStats st;
+    VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
+    fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",
+               bp.octree.max_height, vm.octree.height(), vm.num_links(), st.seconds_total,
+               st.backend);
+    return vm;
+}
+
+uint32_t pick_eye(const RenderArgs& a, const Source& s) {
+    if (a.eye_id) {
+        if (*a.eye_id >= s.points.size())
+            throw Error(fmt::format("{}: --eye-id: point id {} out of range ({} points)", a.input,
+                                    *a.eye_id, s.points.size()));
+        return *a.eye_id;
+    }
+    const Vec3 p = parse_vec3(a.eye_pos, "--eye-pos");
+    return nearest_point(s.points, p);
+}
+
+// Colours as the viewer should see them in a PLY: sRGB bytes (viewers do not linearise).
+void write_colored_ply(const std::string& path, const PointSet& pts,
+                       const std::vector<Vec3>& colors) {
+    PointSet out;
+    out.positions = pts.positions;
+    out.normals = pts.normals;
+    out.radii = pts.radii;
+    out.colors.resize(colors.size());
+    for (size_t i = 0; i < colors.size(); ++i)
+        out.colors[i] = {linear_to_srgb8(colors[i].x) / 255.f, linear_to_srgb8(colors[i].y) / 255.f,
+                         linear_to_srgb8(colors[i].z) / 255.f};
+    write_ply(path, out);
+}
+
+std::string with_suffix(const std::string& path, const std::string& suffix) {
+    fs::path p(path);
+    return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
+}
+
+int run_render(RenderArgs& a) {
+    const bool needs_eye = a.mode == "visible" || a.mode == "heights";
+    if (needs_eye && !a.eye_id && a.eye_pos.empty()) {
+        fmt::print(stderr, "vmap render: --mode {} needs --eye-id I or --eye-pos x,y,z\n", a.mode);
+        return 2;
+    }
+    if (!needs_eye && (a.eye_id || !a.eye_pos.empty())) {
+        fmt::print(stderr, "vmap render: --eye-id/--eye-pos apply to --mode visible|heights\n");
+        return 2;
+    }
+    // Check every option before any work, so a typo costs nothing.
+    const auto [w, h] = parse_size(a.size, "--size");
+    a.opt.width = w;
+    a.opt.height = h;
+    if (!a.eye_pos.empty()) parse_vec3(a.eye_pos, "--eye-pos");
+    if (a.mode == "heights" && a.heights.empty()) throw Error("--heights: give at least one");
+    Source s = load_source(a);
+    const Camera cam = make_camera(a, s);
+    if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
+    a.opt.shade = a.mode != "albedo";
+
+    const auto t0 = std::chrono::steady_clock::now();
+    auto elapsed = [&] {
+        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    };
+    Image img;
+    if (a.mode == "albedo" || a.mode == "shaded") {
+        std::vector<Vec3> colors = s.points.colors;
+        if (colors.empty()) colors.assign(s.points.size(), Vec3{0.8f, 0.8f, 0.8f});
+        img = render_points(s.points, colors, cam, a.opt);
+        if (!a.ply.empty()) write_colored_ply(a.ply, s.points, colors);
+    } else if (a.mode == "visible") {
+        const uint32_t eye = pick_eye(a, s);
+        if (!s.vm) s.vm = build_at(a, s, std::nullopt);
+        img = render_visible(*s.vm, eye, cam, a.opt);
+        const auto set = s.vm->visible_set(eye);
+        fmt::print("eye:        point {} at ({:.4f}, {:.4f}, {:.4f}): {} of {} points visible\n",
+                   eye, s.points.positions[eye].x, s.points.positions[eye].y,
+                   s.points.positions[eye].z, set.size(), s.points.size());
+        if (!a.ply.empty()) write_colored_ply(a.ply, s.points, visible_colors(*s.vm, eye));
+    } else {  // heights
+        const uint32_t eye = pick_eye(a, s);
+        std::vector<Image> panels;
+        std::vector<std::vector<Vec3>> colors;
+        for (int ht : a.heights) {
+            const VisibilityMap vm = build_at(a, s, ht);
+            panels.push_back(render_visible(vm, eye, cam, a.opt));
+            const uint8_t white[3] = {255, 255, 255};
+            const int scale = std::max(1, panels.back().height / 250);
+            draw_text(panels.back(), 6 * scale, 6 * scale, fmt::format("height {}", ht), scale,
+                      white);
+            if (!a.ply.empty()) colors.push_back(visible_colors(vm, eye));
+            fmt::print("height {}:   {} of {} points visible from {}\n", ht,
+                       vm.visible_set(eye).size(), s.points.size(), eye);
+        }
+        img = side_by_side(panels);
+        for (size_t k = 0; k < colors.size(); ++k)
+            write_colored_ply(with_suffix(a.ply, fmt::format("-h{}", a.heights[k])), s.points,
+                              colors[k]);
+    }
+    write_png(a.output, img);
+    fmt::print("camera:     eye ({}, {}, {}) target ({}, {}, {}) fov {}\n", cam.eye.x, cam.eye.y,
+               cam.eye.z, cam.target.x, cam.target.y, cam.target.z, cam.fov_y_deg);
+    fmt::print("wrote:      {} ({}x{}, {} points, {:.2f} s)\n", a.output, img.width, img.height,
+               s.points.size(), elapsed());
+    if (!a.ply.empty() && a.mode != "heights") fmt::print("wrote:      {}\n", a.ply);
+    return 0;
+}
+
+}  // namespace
+
+Command add_render_command(CLI::App& app) {
+    auto a = std::make_shared<RenderArgs>();
+    auto* c = app.add_subcommand("render", "Render a scene, point cloud or V-map to PNG");
+    c->add_option("input", a->input,
+                  "Scene (.json), point cloud (.ply/.off) or .vmap file. Default: "
+                  "scenes/cornell-bunny.json");
+    c->add_option("-o,--output", a->output, "PNG file (default: <input name>-<mode>.png)");
+    c->add_option("--mode", a->mode,
+                  "albedo | shaded | visible (Fig. 9) | heights (Fig. 11: visible at each of "
+                  "--heights, side by side)")
+        ->check(CLI::IsMember({"albedo", "shaded", "visible", "heights"}))
+        ->capture_default_str();
+    c->add_option("--ply", a->ply,
+                  "Also write the points with the mode's colours as a PLY (heights: one file per "
+                  "height, -h<H> before the extension)");
+    c->add_option("--scene", a->scene, "Take the camera from this scene file (for .vmap input)");
+    c->add_option("--eye", a->eye, "Camera position x,y,z");
+    c->add_option("--target", a->target, "Camera target x,y,z");
+    c->add_option("--up", a->up, "Camera up vector x,y,z (default 0,1,0)");
+    c->add_option("--fov", a->fov, "Vertical field of view, degrees")
+        ->check(CLI::Range(1.f, 179.f));
+    c->add_option("--size", a->size, "Image size WxH")->capture_default_str();
+    c->add_option("--eye-id", a->eye_id, "visible/heights: the eye is input point I");
+    c->add_option("--eye-pos", a->eye_pos,
+                  "visible/heights: the eye is the surface point nearest x,y,z");
+    c->add_option("--heights", a->heights, "heights: octree max heights, e.g. 7,9")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 21));
+    c->add_option("--max-height", a->max_height,
+                  "visible: octree height when building the V-map (default: the scene's)")
+        ->check(CLI::Range(1, 21));
+    c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
+        ->check(CLI::Range(1, 1000000));
+    c->add_option("--points", a->points, "Scene input: number of sample points")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    c->add_option("--seed", a->seed, "Scene input: sampling seed");
+    c->add_option("--backend", a->backend, "Backend when building: auto, cpu or cuda")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    c->add_option("--splat-scale", a->opt.splat_scale, "Disc radius = splat radius x this")
+        ->check(CLI::Range(0.01f, 100.f))
+        ->capture_default_str();
+    c->add_option("--supersample", a->opt.supersample, "s x s samples per pixel (1..4)")
+        ->check(CLI::Range(1, 4))
+        ->capture_default_str();
+    return {c, [a] { return run_render(*a); }};
+}
+
+}  // namespace vmap::cli

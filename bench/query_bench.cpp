@@ -1,0 +1,229 @@
+// `vmap bench-query`: query latency against scene size (issue 4; the paper claims queries grow
+// sub-linearly with the scene). For each point count the scene is sampled and its V-map built
+// (same octree policy for every size), then batches of seeded random queries are timed: point
+// pairs, visible-set counts, visible-set listings, rays pruned by the V-map, and (fewer) rays by
+// testing every point, for contrast. Each batch runs once untimed, then `runs` times; the table
+// gives the median latency per query and the min-max spread over runs, with the work done (set
+// sizes, node and disc tests per ray). The last line fits latency ~ N^k between the smallest and
+// largest size: k < 1 is sub-linear.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <memory>
+#include <random>
+
+#include "apps/commands.h"
+#include "util/progress.h"
+#include "vmap/error.h"
+#include "vmap/query.h"
+#include "vmap/scene.h"
+
+namespace vmap::cli {
+namespace {
+
+struct QueryBenchArgs {
+    std::string scene;
+    std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
+    int max_height = 10, leaf_points = 4, queries = 2000, runs = 5;
+    std::string backend = "auto", out_dir;
+};
+
+struct Spread {
+    double median = 0, lo = 0, hi = 0;
+};
+Spread spread(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    return {v[v.size() / 2], v.front(), v.back()};
+}
+
+// Times `batch` (which runs `count` queries) once untimed and then `runs` times; microseconds
+// per query.
+template <class F>
+Spread time_batch(int runs, size_t count, F&& batch) {
+    batch();
+    std::vector<double> us;
+    for (int r = 0; r < runs; ++r) {
+        const auto t0 = std::chrono::steady_clock::now();
+        batch();
+        const double s =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+        us.push_back(1e6 * s / double(std::max<size_t>(count, 1)));
+    }
+    return spread(us);
+}
+
+struct Row {
+    uint64_t points = 0;
+    int height = 0;
+    int32_t leaves = 0;
+    size_t links = 0;
+    double build_s = 0;
+    Spread pair, count, list, ray, brute;
+    double set_size = 0, node_tests = 0, disc_tests = 0, hit_rate = 0;
+};
+
+std::string fmt_spread(const Spread& s) {
+    return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);
+}
+
+volatile uint64_t g_sink;  // keeps the timed loops from being optimised away
+
+int run_bench_query(QueryBenchArgs& a) {
+    if (a.scene.empty()) a.scene = default_scene_path();
+    if (a.points.size() < 2) throw Error("--points: give at least two sizes");
+    std::vector<Row> rows;
+    for (uint64_t n : a.points) {
+        Scene sc = load_scene(a.scene);
+        sc.points = n;
+        PointSet pts = sample_scene(sc);
+        BuildParams bp;
+        bp.octree.max_height = a.max_height;
+        bp.octree.leaf_points = a.leaf_points;
+        bp.backend = a.backend;
+        bp.progress = detail::stderr_is_terminal();
+        BuildStats st;
+        const VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.scene);
+        Row r;
+        r.points = n;
+        r.height = vm.octree.height();
+        r.leaves = vm.octree.num_leaves();
+        r.links = vm.num_links();
+        r.build_s = st.seconds_total;
+
+        // Seeded queries: ids uniform over the points; ray directions in the hemisphere of
+        // the point's normal (normal + a random unit vector).
+        std::mt19937_64 rng(12345 + n);
+        std::uniform_int_distribution<uint32_t> pick(0, uint32_t(n - 1));
+        std::normal_distribution<float> gauss;
+        const size_t Q = size_t(a.queries);
+        std::vector<uint32_t> qa(Q), qb(Q);
+        std::vector<Vec3> dirs(Q);
+        for (size_t k = 0; k < Q; ++k) {
+            qa[k] = pick(rng);
+            qb[k] = pick(rng);
+            Vec3 g{gauss(rng), gauss(rng), gauss(rng)};
+            g = g / std::max(length(g), 1e-6f);
+            const Vec3 nrm = vm.points.normals[vm.inverse[qa[k]]];
+            dirs[k] = nrm + g;
+            if (!(length(dirs[k]) > 1e-3f)) dirs[k] = nrm;
+        }
+        const size_t Ql = std::max<size_t>(1, Q / 20), Qb = std::max<size_t>(1, Q / 20);
+
+        r.pair = time_batch(a.runs, Q, [&] {
+            uint64_t s = 0;
+            for (size_t k = 0; k < Q; ++k) s += uint64_t(vm.query(qa[k], qb[k]));
+            g_sink = s;
+        });
+        r.count = time_batch(a.runs, Q, [&] {
+            uint64_t s = 0;
+            for (size_t k = 0; k < Q; ++k) s += visible_count(vm, qa[k]);
+            g_sink = s;
+        });
+        r.list = time_batch(a.runs, Ql, [&] {
+            uint64_t s = 0;
+            for (size_t k = 0; k < Ql; ++k) s += vm.visible_set(qa[k]).size();
+            g_sink = s;
+        });
+        r.ray = time_batch(a.runs, Q, [&] {
+            uint64_t s = 0;
+            for (size_t k = 0; k < Q; ++k) s += shoot_ray(vm, qa[k], dirs[k]).id;
+            g_sink = s;
+        });
+        r.brute = time_batch(a.runs, Qb, [&] {
+            uint64_t s = 0;
+            for (size_t k = 0; k < Qb; ++k) s += shoot_ray_brute(vm, qa[k], dirs[k], false).id;
+            g_sink = s;
+        });
+        // Work, counted once outside the timing.
+        RayStats rs;
+        uint64_t hits = 0, set = 0;
+        for (size_t k = 0; k < Q; ++k) {
+            hits += shoot_ray(vm, qa[k], dirs[k], &rs).hit;
+            set += visible_count(vm, qa[k]);
+        }
+        r.set_size = double(set) / Q;
+        r.node_tests = double(rs.node_tests) / Q;
+        r.disc_tests = double(rs.disc_tests) / Q;
+        r.hit_rate = double(hits) / Q;
+        fmt::print(stderr, "bench-query: {} points done ({} leaves, build {:.1f} s)\n", n, r.leaves,
+                   r.build_s);
+        rows.push_back(r);
+    }
+
+    std::string md = fmt::format(
+        "Scene {}, max_height {}, leaf_points {}; {} queries per batch ({} for listings and "
+        "brute-force rays), {} timed runs after a warm-up; microseconds per query, median "
+        "[min-max] over runs.\n\n",
+        std::filesystem::path(a.scene).filename().string(), a.max_height, a.leaf_points, a.queries,
+        std::max(1, a.queries / 20), a.runs);
+    md +=
+        "| points | height | leaves | links | build s | pair us | visible count us | visible "
+        "list us | visible set size | ray us | ray node tests | ray disc tests | ray hits | "
+        "brute-force ray us |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    std::string csv =
+        "points,height,leaves,links,build_s,pair_us,count_us,list_us,set_size,ray_us,"
+        "ray_node_tests,ray_disc_tests,ray_hit_rate,brute_ray_us\n";
+    for (const Row& r : rows) {
+        md += fmt::format(
+            "| {} | {} | {} | {} | {:.2f} | {} | {} | {} | {:.0f} | {} | {:.0f} | {:.0f} | "
+            "{:.0f}% | {} |\n",
+            r.points, r.height, r.leaves, r.links, r.build_s, fmt_spread(r.pair),
+            fmt_spread(r.count), fmt_spread(r.list), r.set_size, fmt_spread(r.ray), r.node_tests,
+            r.disc_tests, 100 * r.hit_rate, fmt_spread(r.brute));
+        csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points, r.height,
+                           r.leaves, r.links, r.build_s, r.pair.median, r.count.median,
+                           r.list.median, r.set_size, r.ray.median, r.node_tests, r.disc_tests,
+                           r.hit_rate, r.brute.median);
+    }
+    const Row &f = rows.front(), &l = rows.back();
+    const double span = std::log(double(l.points) / double(f.points));
+    auto slope = [&](double a0, double a1) { return std::log(a1 / a0) / span; };
+    md += fmt::format(
+        "\nGrowth exponent k (latency ~ N^k, {} to {} points): pair {:.2f}, visible count {:.2f}, "
+        "visible list {:.2f}, ray {:.2f}, brute-force ray {:.2f}.\n",
+        f.points, l.points, slope(f.pair.median, l.pair.median),
+        slope(f.count.median, l.count.median), slope(f.list.median, l.list.median),
+        slope(f.ray.median, l.ray.median), slope(f.brute.median, l.brute.median));
+    fmt::print("{}", md);
+    if (!a.out_dir.empty()) {
+        std::filesystem::create_directories(a.out_dir);
+        std::ofstream(a.out_dir + "/bench-query.md") << md;
+        std::ofstream(a.out_dir + "/bench-query.csv") << csv;
+    }
+    return 0;
+}
+
+}  // namespace
+
+Command add_bench_query_command(CLI::App& app) {
+    auto a = std::make_shared<QueryBenchArgs>();
+    auto* c = app.add_subcommand("bench-query",
+                                 "Time pair, visible-set and ray queries against scene size");
+    c->add_option("--scene", a->scene, "Scene file (default: scenes/cornell-bunny.json)");
+    c->add_option("--points", a->points, "Point counts, e.g. 5000,20000,80000")
+        ->delimiter(',')
+        ->check(CLI::Range(uint64_t(100), uint64_t(50000000)));
+    c->add_option("--max-height", a->max_height, "Octree max height for every size")
+        ->check(CLI::Range(1, 21))
+        ->capture_default_str();
+    c->add_option("--leaf-points", a->leaf_points, "Octree leaf_points for every size")
+        ->check(CLI::Range(1, 1000000))
+        ->capture_default_str();
+    c->add_option("--queries", a->queries, "Queries per batch")
+        ->check(CLI::Range(20, 10000000))
+        ->capture_default_str();
+    c->add_option("--runs", a->runs, "Timed runs per batch")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    c->add_option("--backend", a->backend, "Backend for the builds: auto, cpu or cuda")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    c->add_option("--out", a->out_dir, "Write bench-query.md and bench-query.csv here");
+    return {c, [a] { return run_bench_query(*a); }};
+}
+
+}  // namespace vmap::cli

@@ -1,0 +1,51 @@
+// Queries beyond point pairs and visible sets (issue 4): points by position and ray shooting.
+//
+// Ray shooting (paper §6) from a surface point i: the first point splat (a disc: centre =
+// position, normal, radius = splat radius) hit by the ray i + t dir, t > 0. The V-map prunes it:
+// only points in the subtrees linked to i's leaf or one of its ancestors (the visible set) can
+// be hit, so just those subtrees are walked, with a ray-box test on each node's tight box grown
+// by the largest splat radius. Points in i's own leaf are never reported (the V-map says nothing
+// about them), and discs are two-sided.
+//
+// Relation to an exhaustive search: shoot_ray returns exactly the nearest hit among the visible
+// set (shoot_ray_brute with visible_only = true). An exhaustive search over all points (but i's
+// leaf) can only find a nearer hit on a point the V-map calls hidden from i; so when the
+// exhaustive hit is in the visible set, both agree.
+#pragma once
+
+#include <cstdint>
+
+#include "vmap/vmap.h"
+
+namespace vmap {
+
+// The input id of the point nearest `pos` (linear scan; ties to the lowest id). Throws
+// vmap::Error for an empty set or a non-finite position.
+uint32_t nearest_point(const PointSet& points, Vec3 pos);
+uint32_t nearest_point(const VisibilityMap& vm, Vec3 pos);
+
+// How many points vm.visible_set(i) holds, without listing them: O(links of i's leaf and its
+// ancestors). Throws vmap::Error for an id out of range.
+uint64_t visible_count(const VisibilityMap& vm, uint32_t i);
+
+struct RayHit {
+    bool hit = false;
+    uint32_t id = 0;     // input id of the point hit
+    float distance = 0;  // along the (normalised) ray, scene units
+};
+
+struct RayStats {
+    uint64_t node_tests = 0;  // ray-box tests
+    uint64_t disc_tests = 0;  // ray-disc tests
+};
+
+// The first splat hit from input point `from` along `dir` (any non-zero length), pruned by the
+// V-map. Throws vmap::Error for an id out of range, a zero or non-finite direction, or a V-map
+// whose points carry no normals or radii.
+RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* stats = nullptr);
+
+// The same by testing every point: all points outside `from`'s leaf, or only those of
+// vm.visible_set(from) when visible_only. For tests and benchmarks.
+RayHit shoot_ray_brute(const VisibilityMap& vm, uint32_t from, Vec3 dir, bool visible_only);
+
+}  // namespace vmap

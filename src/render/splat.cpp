@@ -1,0 +1,297 @@
+// Point splatting on the CPU (include/vmap/render.h): tiles of the supersampled image are
+// rendered in parallel, each from the list of discs whose screen bounds touch it.
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "vmap/error.h"
+#include "vmap/render.h"
+
+namespace vmap {
+namespace {
+
+Vec3 normalized(Vec3 v) { return v / length(v); }
+
+// The camera's orthonormal frame and focal length for an image of width x height.
+struct Frame {
+    Vec3 eye, f, r, u;  // forward, right, up
+    float fpx = 1;      // focal length in pixels
+    float cx = 0, cy = 0;
+
+    Frame(const Camera& cam, int width, int height) {
+        if (!is_finite(cam.eye) || !is_finite(cam.target) || !is_finite(cam.up))
+            throw Error("camera: eye, target and up must be finite");
+        if (!(cam.fov_y_deg > 0.01f && cam.fov_y_deg < 179.f))
+            throw Error(fmt::format("camera: fov {} out of range (0, 179] degrees", cam.fov_y_deg));
+        const Vec3 d = cam.target - cam.eye;
+        if (!(length(d) > 0)) throw Error("camera: eye and target coincide");
+        f = normalized(d);
+        const Vec3 side = cross(f, cam.up);
+        if (!(length(side) > 1e-6f * length(cam.up)))
+            throw Error("camera: up is zero or parallel to the view direction");
+        r = normalized(side);
+        u = cross(r, f);
+        eye = cam.eye;
+        fpx = 0.5f * float(height) / std::tan(float(cam.fov_y_deg * M_PI / 360.0));
+        cx = 0.5f * float(width);
+        cy = 0.5f * float(height);
+    }
+};
+
+void check_options(const RenderOptions& o) {
+    if (o.width < 1 || o.width > 16384 || o.height < 1 || o.height > 16384)
+        throw Error(fmt::format("render: image size {}x{} out of range (1..16384 each)", o.width,
+                                o.height));
+    if (o.supersample < 1 || o.supersample > 4)
+        throw Error(fmt::format("render: supersample {} out of range (1..4)", o.supersample));
+    if (!(o.splat_scale > 0 && o.splat_scale <= 100))
+        throw Error(fmt::format("render: splat scale {} out of range (0, 100]", o.splat_scale));
+    if (!(o.ambient >= 0 && o.ambient <= 1))
+        throw Error(fmt::format("render: ambient {} out of range [0, 1]", o.ambient));
+    if (!is_finite(o.background)) throw Error("render: background colour must be finite");
+}
+
+// A disc ready to rasterise: centre, plane normal, world radius squared, the colour after
+// shading, and its screen bounds in supersampled pixels (inclusive).
+struct Disc {
+    Vec3 c, n;
+    float r2 = 0;
+    float band = 0;  // fragments this far behind the nearest one still blend in
+    Vec3 color;
+    int x0 = 0, y0 = 0, x1 = -1, y1 = -1;
+};
+
+// Random sampling leaves small gaps between discs. An output pixel missing some samples whose 8
+// neighbours are mostly fully covered lies in such a gap, not on a silhouette: it takes the
+// mean of its covered samples, or of those neighbours when it has none. Elsewhere uncovered
+// samples show the background, which anti-aliases silhouettes.
+void resolve(Image& img, const std::vector<Vec3>& mean, const std::vector<uint8_t>& covered,
+             int full, Vec3 background) {
+    const int W = img.width, H = img.height;
+    tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
+        for (int y = rows.begin(); y != rows.end(); ++y)
+            for (int x = 0; x < W; ++x) {
+                const size_t p = size_t(y) * W + x;
+                Vec3 c = mean[p];
+                const int cov = covered[p];
+                if (cov < full) {
+                    int n = 0;
+                    Vec3 sum{};
+                    for (int dy = -1; dy <= 1; ++dy)
+                        for (int dx = -1; dx <= 1; ++dx) {
+                            const int qx = x + dx, qy = y + dy;
+                            if ((dx | dy) == 0 || qx < 0 || qy < 0 || qx >= W || qy >= H) continue;
+                            const size_t q = size_t(qy) * W + qx;
+                            if (covered[q] != full) continue;
+                            sum += mean[q];
+                            ++n;
+                        }
+                    if (n >= 6) {
+                        if (cov == 0) c = sum / float(n);
+                    } else {
+                        const float f = float(cov) / float(full);
+                        c = c * f + background * (1 - f);
+                    }
+                }
+                uint8_t* px = img.pixel(x, y);
+                px[0] = linear_to_srgb8(c.x);
+                px[1] = linear_to_srgb8(c.y);
+                px[2] = linear_to_srgb8(c.z);
+            }
+    });
+}
+
+}  // namespace
+
+Projection project(const Camera& cam, int width, int height, Vec3 p) {
+    const Frame fr(cam, width, height);
+    const Vec3 v = p - fr.eye;
+    const float z = dot(v, fr.f);
+    if (!(z > 0)) return {0, 0, z};
+    return {fr.cx + fr.fpx * dot(v, fr.r) / z, fr.cy - fr.fpx * dot(v, fr.u) / z, z};
+}
+
+Camera default_camera(const PointSet& points) {
+    if (points.size() == 0) throw Error("default camera: the point set is empty");
+    Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    for (Vec3 p : points.positions) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    Camera cam;
+    float half = 0.5f * std::max(hi.x - lo.x, hi.y - lo.y);
+    if (!(half > 0)) half = std::max(0.5f * (hi.z - lo.z), 1e-3f);
+    // The near face (z = lo.z) is the largest cross-section seen from -z, so fitting it fits the
+    // box; 6% margin. For the Cornell room this puts the eye near the classic (278, 273, -800) mm.
+    const float dist = 1.06f * half / std::tan(float(cam.fov_y_deg * M_PI / 360.0));
+    const Vec3 mid = (lo + hi) * 0.5f;
+    cam.eye = {mid.x, mid.y, lo.z - dist};
+    cam.target = {mid.x, mid.y, std::max(hi.z, lo.z + 1e-3f)};
+    return cam;
+}
+
+Image render_points(const PointSet& points, std::span<const Vec3> colors, const Camera& cam,
+                    const RenderOptions& opt) {
+    check_options(opt);
+    const size_t n = points.size();
+    if (n == 0) throw Error("render: the point set is empty");
+    if (colors.size() != n)
+        throw Error(fmt::format("render: {} colours for {} points", colors.size(), n));
+    if (points.has_normals() && points.normals.size() != n)
+        throw Error(fmt::format("render: {} normals for {} points", points.normals.size(), n));
+    if (points.has_radii() && points.radii.size() != n)
+        throw Error(fmt::format("render: {} radii for {} points", points.radii.size(), n));
+
+    const int s = opt.supersample;
+    const int W = opt.width * s, H = opt.height * s;
+    const Frame fr(cam, W, H);
+    const float near = 1e-6f;
+
+    // 1. Per point: shade, project, bound on screen.
+    std::vector<Disc> discs(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& range) {
+        for (size_t i = range.begin(); i != range.end(); ++i) {
+            Disc& d = discs[i];
+            d.c = points.positions[i];
+            const Vec3 v = d.c - fr.eye;
+            const float z = dot(v, fr.f);
+            const float dist = length(v);
+            if (!(z > near) || !is_finite(d.c)) continue;  // behind the eye: x1 < x0 skips it
+            const Vec3 view = v / dist;
+            Vec3 nrm = points.has_normals() ? points.normals[i] : -view;
+            if (!(length2(nrm) > 0) || !is_finite(nrm)) nrm = -view;
+            d.n = nrm;
+            // Radius in world units; without radii, one (output) pixel at this depth.
+            float R = points.has_radii() ? points.radii[i] * opt.splat_scale
+                                         : opt.splat_scale * float(s) * z / fr.fpx;
+            if (!(R > 0) || !std::isfinite(R)) R = float(s) * z / fr.fpx;
+            if (z - R <= near) continue;  // straddles the eye plane
+            d.r2 = R * R;
+            d.band = 2 * R;
+            const Vec3 c = colors[i];
+            const float shade =
+                opt.shade ? opt.ambient + (1 - opt.ambient) * std::fabs(dot(nrm, view)) : 1.f;
+            d.color = c * shade;
+            // Screen bounds: the disc lies in the sphere of radius R about c; its projection is
+            // within fpx R / (z - R) of the centre's, stretched by at most 1/cos^2 off axis.
+            const float sx = fr.cx + fr.fpx * dot(v, fr.r) / z;
+            const float sy = fr.cy - fr.fpx * dot(v, fr.u) / z;
+            const float cos_axis = z / dist;
+            const float rs = fr.fpx * R / (z - R) / (cos_axis * cos_axis) + 1.f;
+            if (!std::isfinite(sx) || !std::isfinite(sy) || !std::isfinite(rs)) continue;
+            const float fx0 = std::max(sx - rs, 0.f), fx1 = std::min(sx + rs, float(W - 1));
+            const float fy0 = std::max(sy - rs, 0.f), fy1 = std::min(sy + rs, float(H - 1));
+            if (fx0 > fx1 || fy0 > fy1) continue;
+            d.x0 = int(fx0);
+            d.x1 = int(fx1);
+            d.y0 = int(fy0);
+            d.y1 = int(fy1);
+        }
+    });
+
+    // 2. Bin discs into tiles of kTile x kTile output pixels (counting sort, serial: cheap).
+    constexpr int kTile = 24;
+    const int T = kTile * s;  // tile edge in supersampled pixels
+    const int tw = (W + T - 1) / T, th = (H + T - 1) / T;
+    std::vector<uint32_t> start(size_t(tw) * th + 1, 0);
+    for (const Disc& d : discs)
+        if (d.x1 >= d.x0)
+            for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
+                for (int tx = d.x0 / T; tx <= d.x1 / T; ++tx) start[size_t(ty) * tw + tx + 1]++;
+    for (size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
+    std::vector<uint32_t> list(start.back());
+    {
+        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+        for (uint32_t i = 0; i < n; ++i) {
+            const Disc& d = discs[i];
+            if (d.x1 < d.x0) continue;
+            for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
+                for (int tx = d.x0 / T; tx <= d.x1 / T; ++tx)
+                    list[fill[size_t(ty) * tw + tx]++] = i;
+        }
+    }
+
+    // 3. Tiles in parallel: nearest depth, then blend the fragments near it, then average the
+    //    supersamples into output pixels.
+    Image img;
+    img.width = opt.width;
+    img.height = opt.height;
+    img.rgb.assign(size_t(img.width) * img.height * 3, 0);
+    const float inv_f = 1.f / fr.fpx;
+    // Per output pixel: the mean colour of its covered samples and how many were covered.
+    std::vector<Vec3> mean(size_t(img.width) * img.height);
+    std::vector<uint8_t> covered(size_t(img.width) * img.height, 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, tw * th), [&](const tbb::blocked_range<int>& tr) {
+        std::vector<float> zbuf(size_t(T) * T), wsum(size_t(T) * T);
+        std::vector<Vec3> acc(size_t(T) * T);
+        for (int tile = tr.begin(); tile != tr.end(); ++tile) {
+            const int tx0 = (tile % tw) * T, ty0 = (tile / tw) * T;
+            const int tx1 = std::min(tx0 + T, W) - 1, ty1 = std::min(ty0 + T, H) - 1;
+            std::fill(zbuf.begin(), zbuf.end(), std::numeric_limits<float>::infinity());
+            std::fill(wsum.begin(), wsum.end(), 0.f);
+            std::fill(acc.begin(), acc.end(), Vec3{});
+            const uint32_t* ids = list.data() + start[tile];
+            const uint32_t count = start[tile + 1] - start[tile];
+            // The ray of pixel (x, y) is eye + t dir(x, y), t = depth along the view axis;
+            // a disc is hit where t = (c - eye).n / dir.n lands within its radius of c.
+            auto for_fragments = [&](auto&& emit) {
+                for (uint32_t k = 0; k < count; ++k) {
+                    const Disc& d = discs[ids[k]];
+                    const int x0 = std::max(d.x0, tx0), x1 = std::min(d.x1, tx1);
+                    const int y0 = std::max(d.y0, ty0), y1 = std::min(d.y1, ty1);
+                    const Vec3 ce = d.c - fr.eye;
+                    const float num = dot(ce, d.n);
+                    const float fn = dot(fr.f, d.n), rn = dot(fr.r, d.n), un = dot(fr.u, d.n);
+                    for (int y = y0; y <= y1; ++y) {
+                        const float py = (fr.cy - (float(y) + 0.5f)) * inv_f;
+                        for (int x = x0; x <= x1; ++x) {
+                            const float px = ((float(x) + 0.5f) - fr.cx) * inv_f;
+                            const float den = fn + px * rn + py * un;
+                            if (std::fabs(den) < 1e-7f) continue;  // edge-on
+                            const float t = num / den;
+                            if (!(t > near)) continue;
+                            const Vec3 dir = fr.f + fr.r * px + fr.u * py;
+                            const Vec3 off = dir * t - ce;
+                            const float q = length2(off);
+                            if (q >= d.r2) continue;
+                            emit(d, size_t(y - ty0) * T + (x - tx0), t, q);
+                        }
+                    }
+                }
+            };
+            for_fragments(
+                [&](const Disc&, size_t p, float t, float) { zbuf[p] = std::min(zbuf[p], t); });
+            for_fragments([&](const Disc& d, size_t p, float t, float q) {
+                if (t > zbuf[p] + d.band) return;
+                const float w = 1.f - q / d.r2 + 1e-4f;  // falls to ~0 at the rim
+                acc[p] += d.color * w;
+                wsum[p] += w;
+            });
+            // Average s x s samples into each output pixel of the tile.
+            for (int oy = ty0 / s; oy <= ty1 / s; ++oy)
+                for (int ox = tx0 / s; ox <= tx1 / s; ++ox) {
+                    Vec3 sum{};
+                    int hit = 0;
+                    for (int sy = 0; sy < s; ++sy)
+                        for (int sx = 0; sx < s; ++sx) {
+                            const size_t p = size_t(oy * s + sy - ty0) * T + (ox * s + sx - tx0);
+                            if (wsum[p] > 0) {
+                                sum += acc[p] / wsum[p];
+                                ++hit;
+                            }
+                        }
+                    const size_t o = size_t(oy) * img.width + ox;
+                    covered[o] = uint8_t(hit);
+                    mean[o] = hit > 0 ? sum / float(hit) : opt.background;
+                }
+        }
+    });
+    resolve(img, mean, covered, s * s, opt.background);
+    return img;
+}
+
+}  // namespace vmap

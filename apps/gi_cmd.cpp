@@ -12,10 +12,12 @@
 #include <memory>
 #include <optional>
 
+#include "apps/commands.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
 #include "vmap/io.h"
+#include "vmap/render.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
 
@@ -39,16 +41,20 @@ struct GiOptions {
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
     GiParams gi;
-    float exposure = 0, gamma = 2.2f;
-    int width = 800, height = 800;
+    float exposure = 0;
+    std::string scene, eye, target, up, size = "800x800";
+    std::optional<float> fov;
+    RenderOptions render;
     bool compare = false;
 };
 
 // The V-map of the input: loaded, or built from a scene with its octree defaults.
-VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s) {
+VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
+                         std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
     if (has_suffix_ci(o.input, ".json")) {
         Scene sc = load_scene(o.input);
+        camera = sc.camera;
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
         BuildParams bp;
@@ -69,6 +75,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s) {
             "{}: --points/--seed/--max-height/--leaf-points apply to scene files (.json)",
             o.input));
     VisibilityMap vm = load_vmap(o.input);
+    if (!o.scene.empty()) camera = load_scene(o.scene).camera;
     build_s = seconds_since(t0);
     what = fmt::format("V-map {} (loaded in {:.2f} s)", o.input, build_s);
     return vm;
@@ -87,9 +94,16 @@ int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
     check_output(o.ply, "--ply");
     check_output(o.image, "-o");
+    const auto [width, height] = parse_size(o.size, "--size");
+    o.render.width = width, o.render.height = height;
+    o.render.shade = false;                          // the light is in the radiosity
+    if (!o.eye.empty()) parse_vec3(o.eye, "--eye");  // bad camera options fail before the work
+    if (!o.target.empty()) parse_vec3(o.target, "--target");
+    if (!o.up.empty()) parse_vec3(o.up, "--up");
     std::string what;
     double build_s = 0;
-    const VisibilityMap vm = input_vmap(o, what, build_s);
+    std::optional<Camera> scene_camera;
+    const VisibilityMap vm = input_vmap(o, what, build_s, scene_camera);
     const PointSet& ps = vm.points;
     size_t emitters = 0;
     for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
@@ -136,29 +150,36 @@ int run_gi(GiOptions& o) {
     }
     const std::vector<Vec3> B = solver.radiosity();
     std::vector<Vec3> colors;
-    const float exposure = tone_map(vm, B, o.exposure, o.gamma, colors);
-    fmt::print("tone map:   exposure {:.4g}, gamma {}\n", exposure, o.gamma);
+    const float exposure = tone_map(vm, B, o.exposure, colors);
+    fmt::print("tone map:   exposure {:.4g} (display = clamp(exposure x radiosity), sRGB)\n",
+               exposure);
 
     // Back to input order for the outputs.
-    PointSet out;
-    const size_t n = ps.size();
-    out.positions.resize(n), out.normals.resize(n), out.colors.resize(n), out.radii.resize(n);
-    for (size_t k = 0; k < n; ++k) {
-        const uint32_t i = vm.order[k];
-        out.positions[i] = ps.positions[k];
-        out.normals[i] = ps.normals[k];
-        out.colors[i] = colors[k];
-        out.radii[i] = ps.radii[k];
+    PointSet out = points_in_input_order(vm);
+    std::vector<Vec3> lit(colors.size());
+    for (size_t k = 0; k < colors.size(); ++k) lit[vm.order[k]] = colors[k];
+    if (!o.image.empty()) {
+        Camera cam = scene_camera ? *scene_camera : default_camera(out);
+        if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
+        if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
+        if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
+        if (o.fov) cam.fov_y_deg = *o.fov;
+        const auto t0 = Clock::now();
+        const Image img = render_points(out, lit, cam, o.render);
+        write_png(o.image, img);
+        fmt::print("wrote:      {} ({}x{}, rendered in {:.2f} s)\n", o.image, img.width, img.height,
+                   seconds_since(t0));
     }
     if (!o.ply.empty()) {
+        // PLY colours are bytes as they are displayed: sRGB-encode the linear colours.
+        out.colors.resize(lit.size());
+        for (size_t i = 0; i < lit.size(); ++i)
+            out.colors[i] =
+                Vec3{linear_to_srgb8(lit[i].x) / 255.0f, linear_to_srgb8(lit[i].y) / 255.0f,
+                     linear_to_srgb8(lit[i].z) / 255.0f};
+        out.emission.clear();
         write_ply(o.ply, out);
-        fmt::print("wrote:      {} (display colours)\n", o.ply);
-    }
-    if (!o.image.empty()) {
-        throw Error(
-            fmt::format("{}: -o: images need the point renderer, not built in yet; use "
-                        "--ply",
-                        o.image));
+        fmt::print("wrote:      {} (lit display colours)\n", o.ply);
     }
     return 0;
 }
@@ -194,14 +215,23 @@ GiCommands add_gi_commands(CLI::App& app) {
         ->check(CLI::IsMember({"blocks", "links"}))
         ->capture_default_str();
     gi->add_option("--exposure", o->exposure,
-                   "Display colour = clamp(exposure x radiosity)^(1/gamma); 0: automatic")
+                   "Display colour = clamp(exposure x radiosity) (linear, then sRGB); 0: "
+                   "automatic (95th percentile of the lit points -> 0.8)")
         ->check(CLI::Range(0.0f, 1e9f))
         ->capture_default_str();
-    gi->add_option("--gamma", o->gamma, "Display gamma")
-        ->check(CLI::Range(0.1f, 10.0f))
+    gi->add_option("--scene", o->scene, "Take the camera from this scene file (for .vmap input)");
+    gi->add_option("--eye", o->eye, "Camera position x,y,z");
+    gi->add_option("--target", o->target, "Camera target x,y,z");
+    gi->add_option("--up", o->up, "Camera up vector x,y,z (default 0,1,0)");
+    gi->add_option("--fov", o->fov, "Vertical field of view, degrees")
+        ->check(CLI::Range(1.f, 179.f));
+    gi->add_option("--size", o->size, "Image size WxH")->capture_default_str();
+    gi->add_option("--splat-scale", o->render.splat_scale, "Disc radius = splat radius x this")
+        ->check(CLI::Range(0.01f, 100.f))
         ->capture_default_str();
-    gi->add_option("--width", o->width, "Image width")->check(CLI::Range(1, 16384));
-    gi->add_option("--height", o->height, "Image height")->check(CLI::Range(1, 16384));
+    gi->add_option("--supersample", o->render.supersample, "s x s samples per pixel (1..4)")
+        ->check(CLI::Range(1, 4))
+        ->capture_default_str();
     gi->add_option("--points", o->points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     gi->add_option("--seed", o->seed, "Override the scene's sampling seed");

@@ -204,7 +204,7 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     brute_force_radiosity(vm, 3, &ref);
     std::vector<std::vector<double>> err;  // [theta][bounce]
     std::vector<uint64_t> node_links;
-    const std::vector<float> thetas{0.5f, 1.0f, 2.0f, 4.0f};
+    const std::vector<float> thetas{0.5f, 1.0f, 4.0f, 16.0f};
     for (float theta : thetas) {
         RadiositySolver s(vm, cpu_gi(theta, 3, GetParam()));
         node_links.push_back(s.stats().node_interactions);
@@ -222,10 +222,10 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     }
     EXPECT_GT(node_links[0], 0u);  // the coarse setting did transfer at node level
     for (int b = 0; b < 3; ++b) {
-        for (size_t t = 1; t < thetas.size(); ++t)
-            EXPECT_LT(err[t][b], err[t - 1][b]) << "theta " << thetas[t] << " bounce " << b + 1;
-        EXPECT_LT(err[1][b], 0.05) << "the default theta 1, bounce " << b + 1;
-        EXPECT_LT(err[3][b], 0.02) << "theta 4, bounce " << b + 1;
+        for (size_t t = 1; t < thetas.size(); ++t)  // links: equal where no link changes level
+            EXPECT_LE(err[t][b], err[t - 1][b]) << "theta " << thetas[t] << " bounce " << b + 1;
+        EXPECT_LT(err[1][b], 0.03) << "the default theta 1, bounce " << b + 1;
+        EXPECT_LT(err[3][b], 0.5 * err[1][b]) << "theta 16 against 1, bounce " << b + 1;
     }
 }
 
@@ -255,15 +255,19 @@ TEST(Gi, ClosedBoxKeepsEnergyWithAlbedoOne) {
     }
     EXPECT_LT(gap_prev, 0.02);
 
-    // Power: each bounce's increment is (nearly) all of the previous one.
+    // Power: with albedo 1 and reciprocity, a bounce's increment over the previous one is an
+    // average of the row sums weighted by where the energy is: between their min and max.
+    const double mn = *std::min_element(rs.begin(), rs.end());
     std::vector<std::vector<Vec3>> per;
     brute_force_radiosity(vm, 4, &per);
-    const float e0 = total_power(vm, std::vector<Vec3>(vm.points.emission)).x;
-    float prev = e0, prev_inc = e0;
+    const double e0 = total_power(vm, std::vector<Vec3>(vm.points.emission)).x;
+    double prev = e0, prev_inc = e0;
     for (int b = 0; b < 4; ++b) {
-        const float p = total_power(vm, per[b]).x;
-        const float inc = p - prev;
-        EXPECT_NEAR(inc / prev_inc, mean, 0.05) << "bounce " << b + 1;
+        const double p = total_power(vm, per[b]).x;
+        const double inc = p - prev;
+        std::cout << "bounce " << b + 1 << ": increment ratio " << inc / prev_inc << "\n";
+        EXPECT_LE(inc / prev_inc, mx + 1e-3) << "bounce " << b + 1;
+        EXPECT_GE(inc / prev_inc, std::max(mn, 0.85)) << "bounce " << b + 1;
         prev = p, prev_inc = inc;
     }
 }
@@ -324,15 +328,39 @@ TEST_P(GiMode, CpuResultDoesNotDependOnThreadCount) {
     for (size_t i = 0; i < a.size(); ++i) ASSERT_TRUE(a[i] == b[i]) << i;
 }
 
-TEST(Gi, BlocksNeedFarFewerInteractionsThanLinks) {
-    const VisibilityMap vm = room_vmap("cornell-bunny", 6000, 9);
-    RadiositySolver blocks(vm, cpu_gi(1.0f, 1, "blocks"));
-    RadiositySolver links(vm, cpu_gi(1.0f, 1, "links"));
-    std::cout << "links " << vm.num_links() << ", interactions: blocks "
-              << blocks.stats().interactions() << ", links " << links.stats().interactions()
-              << "\n";
-    EXPECT_GE(links.stats().interactions(), vm.num_links());
-    EXPECT_LT(blocks.stats().interactions() * 10, links.stats().interactions());
+TEST(Gi, BlockInteractionsGrowSlowerThanLinks) {
+    // Links grow faster than the points; blocks about linearly. Four times the points:
+    uint64_t blocks[2], links[2];
+    const uint64_t sizes[2] = {2000, 8000};
+    for (int k = 0; k < 2; ++k) {
+        const VisibilityMap vm = room_vmap("cornell-bunny", sizes[k], 10);
+        blocks[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, "blocks")).stats().interactions();
+        links[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, "links")).stats().interactions();
+        EXPECT_GE(links[k], vm.num_links());
+    }
+    const double gb = double(blocks[1]) / blocks[0], gl = double(links[1]) / links[0];
+    std::cout << "4x points: blocks x" << gb << ", links x" << gl << "\n";
+    EXPECT_LT(gb, 6.0);
+    EXPECT_LT(gb, 0.7 * gl);
+    EXPECT_LT(blocks[1], links[1]);
+}
+
+TEST(Gi, EmissionStaysWithItsPointInOctreeOrder) {
+    // The light is on the ceiling facing down: after the octree reorders the points, every
+    // emitting point must still be there (the octree once left emission in input order).
+    const PointSet in = test::sample(test::scene_path("cornell-bunny"), 4000, 1);
+    const VisibilityMap vm = build_vmap(in, test::cpu_params(7, 4));
+    size_t emitting = 0;
+    for (size_t k = 0; k < vm.points.size(); ++k) {
+        const uint32_t i = vm.order[k];
+        ASSERT_TRUE(vm.points.emission[k] == in.emission[i]) << k;
+        if (vm.points.emission[k].x > 0) {
+            ++emitting;
+            EXPECT_LT(vm.points.normals[k].y, -0.99f) << k;
+            EXPECT_GT(vm.points.positions[k].y, 0.54f) << k;
+        }
+    }
+    EXPECT_GT(emitting, 0u);
 }
 
 TEST(Gi, ZeroBouncesGiveTheEmission) {

@@ -117,10 +117,12 @@ Vec3 total_power(const VisibilityMap& vm, const std::vector<Vec3>& radiosity);
 // Relative RMS difference over points: sqrt(sum |a_i - b_i|^2 / sum |b_i|^2) (all channels).
 double relative_rms(const std::vector<Vec3>& a, const std::vector<Vec3>& b);
 
-// Display colours from radiosity: c = clamp(exposure * B, 0, 1)^(1/gamma) per channel. With
-// exposure <= 0 it is chosen so that the 95th percentile of the brightest channel among points
-// without emission maps to 0.85 (lights saturate to white). Returns the exposure used.
+// Display colours from radiosity, linear RGB in [0, 1]: c = clamp(exposure * B, 0, 1) per
+// channel (the renderer and the PLY writer apply the sRGB curve). B is already albedo-weighted
+// (B = E + rho H). With exposure <= 0 it is chosen so that the 95th percentile of the
+// brightest channel among points without emission maps to 0.8 (lights saturate to white).
+// Returns the exposure used. Throws vmap::Error for a non-finite exposure.
 float tone_map(const VisibilityMap& vm, const std::vector<Vec3>& radiosity, float exposure,
-               float gamma, std::vector<Vec3>& colors);
+               std::vector<Vec3>& colors);
 
 }  // namespace vmap

@@ -176,8 +176,18 @@ struct BlockRefiner {
     bool within(int32_t a, int32_t x) const { return x <= a && a < vm.octree.skip[x]; }
     bool separated(int32_t a, int32_t b) const {
         if (within(a, b) || within(b, a)) return false;
+        if (!flat(a) || !flat(b)) return false;
         return length(g[b].center - g[a].center) > theta * (g[a].size + g[b].size);
     }
+    // A block spreads what its receiver gathers evenly over the receiver's area, which is right
+    // only for nearly flat content: a curved node (the bunny's ear) would give its points facing
+    // away the light of those facing the source. Internal nodes whose mean normal is shorter
+    // than 1 - kFlatness / theta (normals spread) are opened instead (leaves are taken as they
+    // are: opening them would pair single points with everything they see).
+    bool flat(int32_t a) const {
+        return vm.octree.is_leaf(a) || length(g[a].normal) >= 1.0f - kFlatness / theta;
+    }
+    static constexpr float kFlatness = 0.05f;
     int32_t child_toward(int32_t a, int32_t x) const {
         int32_t hit = -1;
         vm.octree.for_each_child(a, [&](int32_t c) {
@@ -216,7 +226,10 @@ struct BlockRefiner {
                 }
             return;
         }
-        if (lb || (!la && g[a].size >= g[b].size)) {
+        // Open the node that is not flat enough if only one is, else the larger one.
+        const bool fa = flat(a), fb = flat(b);
+        const bool open_a = lb || (!la && (fa == fb ? g[a].size >= g[b].size : !fa));
+        if (open_a) {
             if (ax)
                 t.for_each_child(a, [&](int32_t c) { descend(c, b, x, y, out); });
             else
@@ -590,9 +603,7 @@ double relative_rms(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 }
 
 float tone_map(const VisibilityMap& vm, const std::vector<Vec3>& radiosity, float exposure,
-               float gamma, std::vector<Vec3>& colors) {
-    if (!(gamma > 0) || !std::isfinite(gamma))
-        throw Error(fmt::format("gi: gamma: {} (must be > 0)", gamma));
+               std::vector<Vec3>& colors) {
     if (!std::isfinite(exposure)) throw Error(fmt::format("gi: exposure: {}", exposure));
     const PointSet& ps = vm.points;
     if (!(exposure > 0)) {
@@ -609,11 +620,10 @@ float tone_map(const VisibilityMap& vm, const std::vector<Vec3>& radiosity, floa
             std::nth_element(lum.begin(), lum.begin() + k, lum.end());
             ref = lum[k];
         }
-        exposure = ref > 0 ? 0.85f / ref : 1.0f;
+        exposure = ref > 0 ? 0.8f / ref : 1.0f;
     }
     colors.resize(radiosity.size());
-    const float inv_g = 1.0f / gamma;
-    auto ch = [&](float v) { return std::pow(std::clamp(v * exposure, 0.0f, 1.0f), inv_g); };
+    auto ch = [&](float v) { return std::clamp(v * exposure, 0.0f, 1.0f); };
     for (size_t i = 0; i < radiosity.size(); ++i)
         colors[i] = Vec3{ch(radiosity[i].x), ch(radiosity[i].y), ch(radiosity[i].z)};
     return exposure;

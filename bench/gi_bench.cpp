@@ -42,7 +42,7 @@ struct BenchOptions {
     std::string scene;
     std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
     int max_height = 12, leaf_points = 4;
-    float theta = 1.0f;
+    float theta = 4.0f;
     std::string refine = "blocks";
     int bounces = 3, runs = 3;
     uint64_t brute_max = 20000;

@@ -270,7 +270,7 @@ expect_input_error "query --from id out of range" x.vmap query x.vmap --from 400
 
 if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu; then
     expect_stdout "gi reports each bounce" '^bounce +2: '
-    expect_stdout "gi reports the refinement" '^refinement: blocks, theta 1: [0-9]+ interactions'
+    expect_stdout "gi reports the refinement" '^refinement: blocks, theta 4: [0-9]+ interactions'
     if [ "$(head -c 3 lit.ply)" = "ply" ] && grep -aq 'property uchar red' lit.ply; then
         ok "lit.ply is a coloured PLY"
     else

@@ -4,6 +4,8 @@
 //   vmap query out.vmap --pair I J | --from I | --ray I --dir D   (apps/query_cmd.cpp)
 //   vmap render [SCENE | CLOUD | out.vmap] --mode M   pictures (apps/render_cmd.cpp)
 //   vmap bench-query                                  query latency vs scene size
+//   vmap gi [SCENE | out.vmap] -o lit.png             global illumination (apps/gi_cmd.cpp)
+//   vmap bench-gi                                     GI time per bounce vs points
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
 #include "vmap/vmap.h"
 

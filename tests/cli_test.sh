@@ -277,6 +277,11 @@ if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --back
         fail "lit.ply is not a coloured PLY"
     fi
 fi
+if expect_ok "gi renders a PNG" gi x.vmap --bounces 1 --backend cpu -o lit.png --size 64x48; then
+    if [ "$(head -c 4 lit.png | tail -c 3)" = "PNG" ]; then ok "lit.png is a PNG"; else fail "lit.png is not a PNG"; fi
+fi
+expect_input_error "gi --size nonsense" nonsense gi x.vmap --size nonsense -o y.png
+if [ -e y.png ]; then fail "gi --size nonsense wrote y.png"; else ok "no y.png"; fi
 if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 --max-height 5 \
     --bounces 1 --backend cpu --compare-brute; then
     expect_stdout "gi --compare-brute prints the difference" 'relative RMS vs brute force 0\.0'

@@ -12,4 +12,4 @@ cmake --build build -j"$(nproc)" --target vmap
 mkdir -p out
 build/vmap build scenes/cornell-bunny.json -o out/cornell-bunny.vmap "$@"
 build/vmap gi out/cornell-bunny.vmap --scene scenes/cornell-bunny.json \
-    -o out/cornell-bunny-gi.png --ply out/cornell-bunny-gi.ply
+    --theta 8 -o out/cornell-bunny-gi.png --ply out/cornell-bunny-gi.ply

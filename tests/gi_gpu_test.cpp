@@ -61,9 +61,11 @@ INSTANTIATE_TEST_SUITE_P(Scenes, GiGpuMatchesCpu,
                                            GiCase{"cornell-two-models", 8000, 9, 0.5f},
                                            GiCase{"cornell-two-models", 4000, 8, 1e9f}),
                          [](const ::testing::TestParamInfo<GiCase>& i) {
-                             std::string s = std::string(i.param.scene) + "_" +
-                                             std::to_string(i.param.points) + "_t" +
-                                             std::to_string(int(i.param.theta * 10) % 1000);
+                             std::string s =
+                                 std::string(i.param.scene) + "_" + std::to_string(i.param.points) +
+                                 "_theta" +
+                                 (i.param.theta > 1000 ? std::string("huge")
+                                                       : std::to_string(int(i.param.theta * 10)));
                              for (char& ch : s)
                                  if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
                              return s;

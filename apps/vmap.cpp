@@ -4,6 +4,8 @@
 //   vmap query out.vmap --pair I J | --from I | --ray I --dir D   (apps/query_cmd.cpp)
 //   vmap render [SCENE | CLOUD | out.vmap] --mode M   pictures (apps/render_cmd.cpp)
 //   vmap bench-query                                  query latency vs scene size
+//   vmap gi [SCENE | out.vmap] -o lit.png             global illumination (apps/gi_cmd.cpp)
+//   vmap bench-gi                                     GI time per bounce vs points
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
 #include "vmap/vmap.h"
 
@@ -22,6 +24,7 @@
 
 #include "apps/commands.h"
 #include "apps/validate_cmd.h"
+#include "apps/gi_cmd.h"
 #include "bench/bench.h"
 #include "util/progress.h"
 #include "vmap/error.h"
@@ -234,6 +237,8 @@ int main(int argc, char** argv) {
     const cli::Command render = cli::add_render_command(app);
     const cli::Command bench_query = cli::add_bench_query_command(app);
 
+    const cli::GiCommands gi = cli::add_gi_commands(app);
+
     bench::Options bo2;
     auto* benchc = app.add_subcommand(
         "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
@@ -289,6 +294,7 @@ int main(int argc, char** argv) {
         for (const cli::Command* c : {&query, &render, &bench_query})
             if (c->app->parsed()) return c->run();
         if (*validate) return cli::run_validate_command();
+        if (gi.selected()) return gi.run();
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());
         return 1;

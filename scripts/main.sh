@@ -2,8 +2,9 @@
 # The main job: set up (Debian packages, models), build, and compute the V-map of the default
 # scene (scenes/cornell-bunny.json) into out/cornell-bunny.vmap, printing its summary, then
 # draws the paper's Fig. 9 from it: the points visible from a point on the floor in front of the
-# bunny in purple (the eye cyan), the bunny's shadow on the back wall not (out/fig9.png).
-# Extra arguments go to `vmap build` (e.g. --backend cpu, --points 20000).
+# bunny in purple (the eye cyan), the bunny's shadow on the back wall not (out/fig9.png). Then
+# global illumination over that V-map (vmap gi): out/cornell-bunny-gi.png and the lit points as a
+# PLY. Extra arguments go to `vmap build` (e.g. --backend cpu, --points 20000).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -14,3 +15,5 @@ mkdir -p out
 build/vmap build scenes/cornell-bunny.json -o out/cornell-bunny.vmap "$@"
 build/vmap render out/cornell-bunny.vmap --scene scenes/cornell-bunny.json --mode visible \
     --eye-pos 0.2764,0,0.1 -o out/fig9.png
+build/vmap gi out/cornell-bunny.vmap --scene scenes/cornell-bunny.json \
+    --theta 8 -o out/cornell-bunny-gi.png --ply out/cornell-bunny-gi.ply

@@ -370,6 +370,41 @@ expect_input_error "validate --json into a missing folder" no_such_dir/v.json \
     validate "$BLOCK" --pairs 100 --heights 3 --json no_such_dir/v.json
 [ -e no_such_dir ] && fail "validate created no_such_dir" || ok "validate left no file behind"
 
+# ---- vmap gi (global illumination) ----------------------------------------------------------
+
+if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu; then
+    expect_stdout "gi reports each bounce" '^bounce +2: '
+    expect_stdout "gi reports the refinement" '^refinement: blocks, theta 4: [0-9]+ interactions'
+    if [ "$(head -c 3 lit.ply)" = "ply" ] && grep -aq 'property uchar red' lit.ply; then
+        ok "lit.ply is a coloured PLY"
+    else
+        fail "lit.ply is not a coloured PLY"
+    fi
+fi
+if expect_ok "gi renders a PNG" gi x.vmap --bounces 1 --backend cpu -o lit.png --size 64x48; then
+    if [ "$(head -c 4 lit.png | tail -c 3)" = "PNG" ]; then ok "lit.png is a PNG"; else fail "lit.png is not a PNG"; fi
+fi
+expect_input_error "gi --size nonsense" nonsense gi x.vmap --size nonsense -o y.png
+if [ -e y.png ]; then fail "gi --size nonsense wrote y.png"; else ok "no y.png"; fi
+if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 --max-height 5 \
+    --bounces 1 --backend cpu --compare-brute; then
+    expect_stdout "gi --compare-brute prints the difference" 'relative RMS vs brute force 0\.0'
+fi
+expect_usage_error "gi --theta 0" gi x.vmap --theta 0
+expect_usage_error "gi --theta -1" gi x.vmap --theta -1
+expect_usage_error "gi --bounces -1" gi x.vmap --bounces -1
+expect_usage_error "gi --backend gpu" gi x.vmap --backend gpu
+expect_usage_error "gi --refine nope" gi x.vmap --refine nope
+expect_input_error "gi on a missing file" no_such.vmap gi no_such.vmap
+expect_input_error "gi --points on a .vmap" x.vmap gi x.vmap --points 10
+if [ -s sphere.vmap ]; then
+    expect_input_error "gi on a V-map without emitters" sphere.vmap gi sphere.vmap
+fi
+expect_input_error "gi --ply into a missing folder" no_dir/lit.ply gi x.vmap --bounces 1 \
+    --backend cpu --ply no_dir/lit.ply
+bad=$(ls no_dir 2>/dev/null)
+if [ -n "$bad" ]; then fail "gi left files in no_dir: $bad"; else ok "gi wrote nothing half"; fi
+
 # ---- done ------------------------------------------------------------------------------------
 
 leftovers=$(ls -- *.tmp 2>/dev/null)

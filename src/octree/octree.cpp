@@ -82,6 +82,9 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         throw Error(fmt::format("{}: {} radii for {} points", source, points.radii.size(), n));
     if (!points.colors.empty() && points.colors.size() != n)
         throw Error(fmt::format("{}: {} colours for {} points", source, points.colors.size(), n));
+    if (!points.emission.empty() && points.emission.size() != n)
+        throw Error(
+            fmt::format("{}: {} emission values for {} points", source, points.emission.size(), n));
 
     double maxabs = 0;
     Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
@@ -150,6 +153,7 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     permute(points.normals);
     permute(points.colors);
     permute(points.radii);
+    permute(points.emission);  // emission belongs to its point like the colour (was left behind)
     permute(code);
 
     Builder{points, code, params, t}.build(0, 0, static_cast<uint32_t>(n), t.root_min, size, -1);

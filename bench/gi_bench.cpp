@@ -1,0 +1,229 @@
+// `vmap bench-gi`: time per radiosity bounce against the number of points, hierarchical solver
+// (CPU, and CUDA when a device is present) and the brute-force gather over every visible point
+// pair (up to --brute-max points), with medians, spread, the work per bounce and the fitted
+// log-log slopes (time ~ points^slope). The one-off setup (node sums, refinement, upload) is
+// reported apart from the bounces; the V-map build is not timed here (`vmap bench` does that).
+#include <fmt/format.h>
+#include <tbb/task_arena.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <filesystem>
+#include <fstream>
+
+#include "apps/gi_cmd.h"
+#include "vmap/error.h"
+#include "vmap/gi.h"
+#include "vmap/scene.h"
+#include "vmap/vmap.h"
+
+namespace vmap::cli {
+namespace {
+
+struct Stat {
+    double median = 0, lo = 0, hi = 0;
+    bool done = false;
+};
+Stat stat(std::vector<double> v) {
+    if (v.empty()) return {};
+    std::sort(v.begin(), v.end());
+    const size_t n = v.size();
+    return {n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v.front(), v.back(), true};
+}
+std::string fmt_stat(const Stat& s) {
+    if (!s.done) return "-";
+    return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);
+}
+
+struct BenchOptions {
+    std::string scene;
+    std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
+    int max_height = 12, leaf_points = 4;
+    float theta = 4.0f;
+    std::string refine = "blocks";
+    int bounces = 3, runs = 3;
+    uint64_t brute_max = 20000;
+    std::vector<std::string> backends;  // cpu, cuda (default: cpu, plus cuda with a device)
+    std::string out_dir;
+};
+
+struct Row {
+    uint64_t points = 0;
+    int32_t leaves = 0;
+    uint64_t links = 0, interactions = 0, node_interactions = 0, brute_pairs = 0;
+    Stat setup_cpu, cpu, setup_gpu, gpu, brute;
+    double rms = -1;  // hierarchical vs brute force after `bounces`
+};
+
+// Least-squares slope of log(y) on log(x) over the rows that have y.
+double slope(const std::vector<Row>& rows, Stat Row::*m) {
+    double sx = 0, sy = 0, sxx = 0, sxy = 0;
+    int n = 0;
+    for (const Row& r : rows) {
+        const Stat& s = r.*m;
+        if (!s.done || s.median <= 0) continue;
+        const double x = std::log(double(r.points)), y = std::log(s.median);
+        sx += x, sy += y, sxx += x * x, sxy += x * y, ++n;
+    }
+    if (n < 2) return NAN;
+    return (n * sxy - sx * sy) / (n * sxx - sx * sx);
+}
+
+int run_bench(BenchOptions& o) {
+    if (o.scene.empty()) o.scene = default_scene_path();
+    // Default: cpu and cuda; cuda is dropped (with a note) when no device answers.
+    const bool explicit_backends = !o.backends.empty();
+    if (!explicit_backends) o.backends = {"cpu", "cuda"};
+    const Scene base = load_scene(o.scene);
+    std::vector<Row> rows;
+    bool gpu_used = false;
+    std::string gpu_name;
+    for (uint64_t n : o.points) {
+        Scene sc = base;
+        sc.points = n;
+        BuildParams bp;
+        bp.octree.max_height = o.max_height;
+        bp.octree.leaf_points = o.leaf_points;
+        bp.backend = "auto";
+        const VisibilityMap vm = build_vmap(sample_scene(sc), bp, nullptr, o.scene);
+        Row r;
+        r.points = vm.points.size();
+        r.leaves = vm.octree.num_leaves();
+        r.links = vm.num_links();
+        std::vector<Vec3> hier;
+        for (const std::string& be : {std::string("cpu"), std::string("cuda")}) {
+            if (std::find(o.backends.begin(), o.backends.end(), be) == o.backends.end()) continue;
+            GiParams gp;
+            gp.theta = o.theta;
+            gp.backend = be;
+            gp.refine = o.refine;
+            std::vector<double> setup, per;
+            for (int run = 0; run < o.runs; ++run) {
+                RadiositySolver s(vm, gp);
+                if (be == "cuda" && s.stats().backend.rfind("cuda", 0) != 0) {
+                    fmt::print(stderr, "bench-gi: {}\n", s.stats().note);
+                    if (explicit_backends) throw Error("bench-gi: --backends cuda: no device");
+                    o.backends.pop_back();  // no device: no GPU column
+                    break;
+                }
+                if (be == "cuda") gpu_used = true, gpu_name = s.stats().backend;
+                setup.push_back(s.stats().seconds_setup);
+                r.interactions = s.stats().interactions();
+                r.node_interactions = s.stats().node_interactions;
+                for (int b = 0; b < o.bounces; ++b) s.bounce();
+                const auto& sb = s.stats().seconds_bounce;
+                per.insert(per.end(), sb.begin(), sb.end());
+                if (run == 0 && be == "cpu") hier = s.radiosity();
+            }
+            (be == "cpu" ? r.setup_cpu : r.setup_gpu) = stat(setup);
+            (be == "cpu" ? r.cpu : r.gpu) = stat(per);
+        }
+        if (r.points <= o.brute_max) {
+            std::vector<double> per;
+            std::vector<Vec3> B;
+            for (int run = 0; run < std::max(1, o.runs / 2); ++run)
+                B = brute_force_radiosity(vm, std::min(o.bounces, 2), nullptr, &per,
+                                          &r.brute_pairs);
+            r.brute = stat(per);
+            if (!hier.empty() && o.bounces <= 2) r.rms = relative_rms(hier, B);
+            if (!hier.empty() && o.bounces > 2) {
+                // The error after `bounces`: one more brute-force solve of full length.
+                r.rms = relative_rms(hier, brute_force_radiosity(vm, o.bounces));
+            }
+        }
+        fmt::print(stderr, "bench-gi: {} points done\n", r.points);
+        rows.push_back(r);
+    }
+
+    char host[256] = {0};
+    gethostname(host, sizeof(host) - 1);
+    const std::time_t now = std::time(nullptr);
+    char date[64];
+    std::strftime(date, sizeof(date), "%Y-%m-%d %H:%M UTC", std::gmtime(&now));
+    std::string md;
+    md += fmt::format(
+        "Scene {}, refine {}, theta {}, octree max_height {} leaf_points {}; {} bounces x {} runs "
+        "per "
+        "backend; host {} ({} threads){}; {}.\n\n",
+        std::filesystem::path(o.scene).filename().string(), o.refine, o.theta, o.max_height,
+        o.leaf_points, o.bounces, o.runs, host, tbb::this_task_arena::max_concurrency(),
+        gpu_used ? ", GPU " + gpu_name : "", date);
+    md +=
+        "| points | leaves | links | interactions (node level) | setup CPU s | bounce CPU s | "
+        "setup GPU s | bounce GPU s | brute pairs | bounce brute s | rel. RMS vs brute |\n";
+    md += "|---|---|---|---|---|---|---|---|---|---|---|\n";
+    for (const Row& r : rows)
+        md += fmt::format("| {} | {} | {} | {} ({}) | {} | {} | {} | {} | {} | {} | {} |\n",
+                          r.points, r.leaves, r.links, r.interactions, r.node_interactions,
+                          fmt_stat(r.setup_cpu), fmt_stat(r.cpu), fmt_stat(r.setup_gpu),
+                          fmt_stat(r.gpu), r.brute.done ? fmt::format("{}", r.brute_pairs) : "-",
+                          fmt_stat(r.brute), r.rms >= 0 ? fmt::format("{:.4f}", r.rms) : "-");
+    auto sl = [&](Stat Row::*m) {
+        const double s = slope(rows, m);
+        return std::isnan(s) ? std::string("-") : fmt::format("{:.2f}", s);
+    };
+    md += fmt::format(
+        "\nLog-log slopes of the median time per bounce against points: hierarchical CPU {}, "
+        "hierarchical GPU {}, brute force {}. Times are median [min-max] over every bounce of "
+        "every run (brute force: 2 bounces x max(1, runs/2)).\n",
+        sl(&Row::cpu), sl(&Row::gpu), sl(&Row::brute));
+    fmt::print("{}", md);
+    if (!o.out_dir.empty()) {
+        std::filesystem::create_directories(o.out_dir);
+        std::ofstream(std::filesystem::path(o.out_dir) / "bench-gi.md") << md;
+        std::ofstream csv(std::filesystem::path(o.out_dir) / "bench-gi.csv");
+        csv << "points,leaves,links,interactions,node_interactions,setup_cpu,bounce_cpu,"
+               "bounce_cpu_lo,bounce_cpu_hi,setup_gpu,bounce_gpu,bounce_gpu_lo,bounce_gpu_hi,"
+               "brute_pairs,bounce_brute,bounce_brute_lo,bounce_brute_hi,rms\n";
+        for (const Row& r : rows)
+            csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points,
+                               r.leaves, r.links, r.interactions, r.node_interactions,
+                               r.setup_cpu.median, r.cpu.median, r.cpu.lo, r.cpu.hi,
+                               r.setup_gpu.median, r.gpu.median, r.gpu.lo, r.gpu.hi, r.brute_pairs,
+                               r.brute.median, r.brute.lo, r.brute.hi, r.rms);
+    }
+    return 0;
+}
+
+}  // namespace
+
+std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
+    auto o = std::make_shared<BenchOptions>();
+    auto* b = app.add_subcommand(
+        "bench-gi", "Time per GI bounce against points: hierarchical (CPU, GPU) vs brute force");
+    b->add_option("--scene", o->scene, "Scene file (default: scenes/cornell-bunny.json)");
+    b->add_option("--points", o->points, "Point counts")
+        ->delimiter(',')
+        ->check(CLI::Range(uint64_t(100), uint64_t(50000000)))
+        ->capture_default_str();
+    b->add_option("--max-height", o->max_height, "Octree max_height for every size")
+        ->check(CLI::Range(1, 21))
+        ->capture_default_str();
+    b->add_option("--leaf-points", o->leaf_points, "Octree leaf_points for every size")
+        ->check(CLI::Range(1, 1000000))
+        ->capture_default_str();
+    b->add_option("--theta", o->theta, "Separation parameter")
+        ->check(CLI::PositiveNumber)
+        ->capture_default_str();
+    b->add_option("--refine", o->refine, "blocks or links (see vmap gi --help)")
+        ->check(CLI::IsMember({"blocks", "links"}))
+        ->capture_default_str();
+    b->add_option("--bounces", o->bounces, "Bounces per run")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    b->add_option("--runs", o->runs, "Runs per size and backend")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    b->add_option("--brute-max", o->brute_max, "Brute force only up to this many points")
+        ->capture_default_str();
+    b->add_option("--backends", o->backends, "cpu and/or cuda (default: cpu, and cuda if present)")
+        ->delimiter(',')
+        ->check(CLI::IsMember({"cpu", "cuda"}));
+    b->add_option("--out", o->out_dir, "Write bench-gi.md and bench-gi.csv into this folder");
+    return {b, [o] { return run_bench(*o); }};
+}
+
+}  // namespace vmap::cli

@@ -1,0 +1,47 @@
+#!/usr/bin/env bash
+# GI runs on the lent GPU machine. Here: `scripts/device.sh bundle` (builds build-device for
+# sm_90 and gathers binaries, libraries and models into .device/). There (carry .device):
+#   scripts/gi-device.sh STEP...
+#       gpu     tests/gi_gpu_test (CPU vs CUDA radiosity, bit for bit)
+#       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
+#       bunny   vmap gi on the default scene, PNG + log
+#       bench   vmap bench-gi (POINTS, default 5000..80000; BRUTE_MAX, default 40000)
+#   Outputs go to $OUT.
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+cd "$root"
+: "${OUT:=$root/out/device}"
+mkdir -p "$OUT"
+# The binaries carry this checkout's absolute path for scenes and models: recreate it.
+if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
+export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+mkdir -p models
+for f in .device/models/*.gz; do
+    n="models/$(basename "$f" .gz)"
+    [[ -s "$n" ]] || gunzip -c "$f" >"$n"
+done
+nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >"$OUT/gpu.txt" 2>&1 || true
+cat "$OUT/gpu.txt"
+bin=.device/bin
+rc=0
+for step in "$@"; do
+    echo "=== $step" >&2
+    case "$step" in
+        gpu)
+            "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
+            tail -4 "$OUT/gi_gpu_test.log" ;;
+        two)
+            "$bin/vmap" gi scenes/cornell-two-models.json -o "$OUT/gi-cornell-two-models.png" \
+                --size 640x640 --backend cuda 2>&1 | tee "$OUT/two-models.log" || rc=1 ;;
+        bunny)
+            "$bin/vmap" gi scenes/cornell-bunny.json -o "$OUT/gi-cornell-bunny.png" \
+                --size 640x640 --backend cuda 2>&1 | tee "$OUT/bunny.log" || rc=1 ;;
+        bench)
+            "$bin/vmap" bench-gi --points "${POINTS:-5000,10000,20000,40000,80000}" \
+                --brute-max "${BRUTE_MAX:-40000}" --runs 3 --out "$OUT" 2>&1 | tail -15 || rc=1 ;;
+        *)
+            echo "unknown step $step (gpu, two, bunny, bench)" >&2
+            rc=2 ;;
+    esac
+done
+exit $rc

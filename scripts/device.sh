@@ -8,6 +8,7 @@
 #        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
 #        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
 #        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
+#        embree    vmap validate --time-embree (Embree rays vs the leaf-pair kernel, all cores)
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #      Logs and tables go to $OUT.
 set -euo pipefail
@@ -25,7 +26,7 @@ if [[ "$cmd" == bundle ]]; then
     cp build-device/tests/*_test .device/bin/
     find build-device/bench -maxdepth 1 -type f -executable -exec cp {} .device/bin/ \;
     for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
-        grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree)' |
+        grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann)' |
         while read -r so; do cp -L "$so" .device/lib/; done
     for f in models/*; do gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"; done
     git rev-parse --short HEAD > .device/commit
@@ -54,7 +55,12 @@ if [[ "$cmd" == run ]]; then
     for step in "${@:-gpu}"; do
         echo "=== $step" >&2
         case "$step" in
-            gpu) "$bin/gpu_test" 2>&1 | tee "$OUT/gpu_test.log" | tail -25 || rc=1 ;;
+            gpu)
+                for t in gpu_test gi_gpu_test; do
+                    [[ -x "$bin/$t" ]] || continue
+                    "$bin/$t" > "$OUT/$t.log" 2>&1 || { rc=1; echo "FAILED $t"; }
+                    grep -E "PASSED|FAILED|SKIPPED \]" "$OUT/$t.log" | tail -6
+                done ;;
             sanitize)
                 "$san" --tool memcheck --error-exitcode 9 "$bin/gpu_test" \
                     --gtest_filter='GpuBackend.*:*cornell_bunny_h7*:*room_with_block*' \
@@ -62,7 +68,21 @@ if [[ "$cmd" == run ]]; then
                 tail -5 "$OUT/memcheck.log"
                 "$san" --tool racecheck --error-exitcode 9 "$bin/gpu_test" \
                     --gtest_filter='GpuBackend.Rect*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
-                tail -5 "$OUT/racecheck.log" ;;
+                tail -5 "$OUT/racecheck.log"
+                if [[ -x "$bin/gi_gpu_test" ]]; then
+                    "$san" --tool memcheck --error-exitcode 9 "$bin/gi_gpu_test" \
+                        --gtest_filter='*cornell_empty*' > "$OUT/gi-memcheck.log" 2>&1 || rc=1
+                    tail -3 "$OUT/gi-memcheck.log"
+                    "$san" --tool racecheck --error-exitcode 9 "$bin/gi_gpu_test" \
+                        --gtest_filter='*cornell_empty*' > "$OUT/gi-racecheck.log" 2>&1 || rc=1
+                    tail -3 "$OUT/gi-racecheck.log"
+                fi ;;
+            embree)
+                # Embree occlusion rays against the leaf-pair kernel on this machine's cores.
+                "$bin/vmap" validate scenes/cornell-bunny.json scenes/cornell-two-models.json \
+                    scenes/cornell-dragon.json --time-embree --heights 8 --runs 5 \
+                    --embree-pairs 2000000 > "$OUT/embree.md" 2> "$OUT/embree.err" || rc=1
+                tail -20 "$OUT/embree.md" ;;
             cpu)
                 for t in "$bin"/*_test; do
                     [[ "$(basename "$t")" == gpu_test ]] && continue

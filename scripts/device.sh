@@ -28,7 +28,12 @@ if [[ "$cmd" == bundle ]]; then
     for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
         grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann)' |
         while read -r so; do cp -L "$so" .device/lib/; done
-    for f in models/*; do gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"; done
+    # Large libraries (Embree is 43 MB) travel compressed; `run` unpacks them.
+    find .device/lib -type f -size +8M -exec xz -T0 -6 {} \;
+    strip --strip-unneeded .device/bin/* 2>/dev/null || true
+    for f in models/dragon.ply models/bunny.off models/armadillo.off; do
+        gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
+    done
     git rev-parse --short HEAD > .device/commit
     du -sh .device
     exit 0
@@ -40,6 +45,7 @@ if [[ "$cmd" == run ]]; then
     # The binaries carry this checkout's absolute path for scenes and models: recreate it.
     if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
     export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+    for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
     mkdir -p models
     for f in .device/models/*.gz; do
         n="models/$(basename "$f" .gz)"

@@ -1,12 +1,12 @@
 // The grid-walk occluder kernel of reference [7] (see bresenham.h) and its CPU backend.
 #include "visibility/bresenham.h"
 
-#include <tbb/combinable.h>
-#include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
-#include <chrono>
+#include <memory>
+#include <string>
 
+#include "visibility/host_backend.h"
 #include "visibility/leaf_pair.h"
 
 namespace vmap::detail {
@@ -65,9 +65,8 @@ bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, 
 
 namespace {
 
-// The same batching as the sphere-walk CPU backend (cpu_backend.cpp): work items are words of
-// 32 consecutive columns of one row, across jobs by a prefix sum.
-class BresenhamBackend final : public Backend {
+// The same batching as the sphere-walk CPU backend (host_backend.h).
+class BresenhamBackend final : public HostBackend<BresenhamBackend> {
   public:
     std::string name() const override {
         return "cpu bresenham (" + std::to_string(tbb::this_task_arena::max_concurrency()) +
@@ -80,58 +79,14 @@ class BresenhamBackend final : public Backend {
         vp_ = vp;
     }
 
-    void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
-        const auto t0 = std::chrono::steady_clock::now();
-        std::vector<uint32_t>& bits = buf_[slot];
-        bits.assign(words, 0u);
-        std::vector<uint64_t> first(jobs.size() + 1, 0);
-        for (size_t i = 0; i < jobs.size(); ++i) first[i + 1] = first[i] + job_words(jobs[i]);
-        tbb::combinable<WorkCounters> counters;
-        tbb::parallel_for(
-            tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
-                WorkCounters& wc = counters.local();
-                size_t j =
-                    std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
-                for (uint64_t item = range.begin(); item < range.end(); ++item) {
-                    while (item >= first[j + 1]) ++j;
-                    const PairJob& job = jobs[j];
-                    const uint64_t rw = row_words(job.cols);
-                    const uint64_t local = item - first[j];
-                    const int32_t r = static_cast<int32_t>(local / rw);
-                    const int32_t c0 = static_cast<int32_t>(local % rw) * 32;
-                    const int32_t c1 = std::min(job.cols, c0 + 32);
-                    const int32_t a = job.row0 + r;
-                    uint32_t word = 0;
-                    for (int32_t c = c0; c < c1; ++c)
-                        if (bresenham_leaf_pair_visible(*tree_, *grid_, a, job.col0 + c, vp_, &wc))
-                            word |= 1u << (c - c0);
-                    wc.pairs += c1 - c0;
-                    wc.visible_pairs += __builtin_popcount(word);
-                    bits[job.word_offset + local] = word;
-                }
-            });
-        pending_[slot] = counters.combine([](WorkCounters x, const WorkCounters& y) {
-            x += y;
-            return x;
-        });
-        busy_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    bool visible(int32_t a, int32_t b, WorkCounters* wc) const {
+        return bresenham_leaf_pair_visible(*tree_, *grid_, a, b, vp_, wc);
     }
-
-    const uint32_t* wait(int slot, WorkCounters& wc) override {
-        wc += pending_[slot];
-        pending_[slot] = {};
-        return buf_[slot].data();
-    }
-
-    double busy_seconds() const override { return busy_; }
 
   private:
-    double busy_ = 0;
     const Octree* tree_ = nullptr;
     std::unique_ptr<LeafGrid> grid_;
     VisibilityParams vp_;
-    std::vector<uint32_t> buf_[2];
-    WorkCounters pending_[2];
 };
 
 }  // namespace

@@ -5,16 +5,8 @@
 #include <string>
 
 #include "gi/gi_device.h"
+#include "util/cuda_check.h"
 #include "vmap/error.h"
-
-#define VMAP_GI_CUDA_CHECK(call)                                                                 \
-    do {                                                                                         \
-        cudaError_t err_ = (call);                                                               \
-        if (err_ != cudaSuccess)                                                                 \
-            throw ::vmap::Error(std::string("CUDA error: ") + #call +                            \
-                                " failed: " + cudaGetErrorString(err_) + " (" + __FILE__ + ":" + \
-                                std::to_string(__LINE__) + ")");                                 \
-    } while (0)
 
 namespace vmap::detail {
 namespace {
@@ -39,9 +31,9 @@ unsigned blocks(uint64_t n) { return unsigned((n + kThreads - 1) / kThreads); }
 template <class T>
 T* upload_array(const T* h, uint64_t n, std::vector<void*>& owned) {
     T* d = nullptr;
-    VMAP_GI_CUDA_CHECK(cudaMalloc(&d, sizeof(T) * (n ? n : 1)));
+    VMAP_CUDA_CHECK(cudaMalloc(&d, sizeof(T) * (n ? n : 1)));
     owned.push_back(d);
-    if (n) VMAP_GI_CUDA_CHECK(cudaMemcpy(d, h, sizeof(T) * n, cudaMemcpyHostToDevice));
+    if (n) VMAP_CUDA_CHECK(cudaMemcpy(d, h, sizeof(T) * n, cudaMemcpyHostToDevice));
     return d;
 }
 
@@ -72,19 +64,19 @@ class CudaGi final : public GiDevice {
         elements_ = E;
     }
     void set_radiosity(const Vec3* B) override {
-        VMAP_GI_CUDA_CHECK(cudaMemcpy(d_.B, B, sizeof(Vec3) * elements_, cudaMemcpyHostToDevice));
+        VMAP_CUDA_CHECK(cudaMemcpy(d_.B, B, sizeof(Vec3) * elements_, cudaMemcpyHostToDevice));
     }
     void bounce() override {
         gather_kernel<<<blocks(elements_), kThreads>>>(d_, elements_);
-        VMAP_GI_CUDA_CHECK(cudaGetLastError());
+        VMAP_CUDA_CHECK(cudaGetLastError());
         point_kernel<<<blocks(d_.num_points), kThreads>>>(d_);
-        VMAP_GI_CUDA_CHECK(cudaGetLastError());
+        VMAP_CUDA_CHECK(cudaGetLastError());
         pull_kernel<<<blocks(uint64_t(d_.num_nodes)), kThreads>>>(d_);
-        VMAP_GI_CUDA_CHECK(cudaGetLastError());
-        VMAP_GI_CUDA_CHECK(cudaDeviceSynchronize());
+        VMAP_CUDA_CHECK(cudaGetLastError());
+        VMAP_CUDA_CHECK(cudaDeviceSynchronize());
     }
     void download_radiosity(Vec3* B) const override {
-        VMAP_GI_CUDA_CHECK(cudaMemcpy(B, d_.B, sizeof(Vec3) * elements_, cudaMemcpyDeviceToHost));
+        VMAP_CUDA_CHECK(cudaMemcpy(B, d_.B, sizeof(Vec3) * elements_, cudaMemcpyDeviceToHost));
     }
 
   private:

@@ -12,18 +12,10 @@
 #include <string>
 #include <vector>
 
+#include "util/cuda_check.h"
 #include "visibility/backend.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
-
-#define VMAP_CUDA_CHECK(call)                                                                    \
-    do {                                                                                         \
-        cudaError_t err_ = (call);                                                               \
-        if (err_ != cudaSuccess)                                                                 \
-            throw ::vmap::Error(std::string("CUDA error: ") + #call +                            \
-                                " failed: " + cudaGetErrorString(err_) + " (" + __FILE__ + ":" + \
-                                std::to_string(__LINE__) + ")");                                 \
-    } while (0)
 
 namespace vmap::detail {
 namespace {
@@ -39,6 +31,48 @@ struct SmallCounters {
     uint32_t pairs = 0, facing_pairs = 0, visible_pairs = 0, node_tests = 0, occluder_tests = 0;
 };
 
+// Where a work item lies: its job (the last j with first[j] <= item), the item's word within
+// the job, and the row leaf and first column of that word.
+struct ItemPos {
+    PairJob job;
+    uint64_t local;
+    int32_t row, col0;
+};
+__device__ inline ItemPos locate_item(const PairJob* jobs, const uint64_t* first, int32_t num_jobs,
+                                      uint64_t item) {
+    int32_t lo = 0, hi = num_jobs;
+    while (hi - lo > 1) {
+        const int32_t mid = (lo + hi) >> 1;
+        if (first[mid] <= item)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    ItemPos at;
+    at.job = jobs[lo];
+    const uint64_t rw = (uint64_t(at.job.cols) + 31) / 32;
+    at.local = item - first[lo];
+    at.row = at.job.row0 + int32_t(at.local / rw);
+    at.col0 = int32_t(at.local % rw) * 32;
+    return at;
+}
+
+// Warp-reduces the counters; one atomic per warp and counter.
+__device__ inline void flush_counters(const SmallCounters& wc, int lane, DeviceCounters* out) {
+    unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
+                               wc.occluder_tests};
+#pragma unroll
+    for (int k = 0; k < 5; ++k)
+        for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
+    if (lane == 0) {
+        atomicAdd(&out->pairs, v[0]);
+        atomicAdd(&out->facing_pairs, v[1]);
+        atomicAdd(&out->visible_pairs, v[2]);
+        atomicAdd(&out->node_tests, v[3]);
+        atomicAdd(&out->occluder_tests, v[4]);
+    }
+}
+
 template <bool kPrefetch, int kMinBlocks>
 __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
@@ -49,44 +83,20 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
     SmallCounters wc;
     for (uint64_t item = warp; item < num_items; item += warps) {
-        // The job holding this item: last j with first[j] <= item.
-        int32_t lo = 0, hi = num_jobs;
-        while (hi - lo > 1) {
-            const int32_t mid = (lo + hi) >> 1;
-            if (first[mid] <= item)
-                lo = mid;
-            else
-                hi = mid;
-        }
-        const PairJob job = jobs[lo];
-        const uint64_t rw = (uint64_t(job.cols) + 31) / 32;
-        const uint64_t local = item - first[lo];
-        const int32_t r = int32_t(local / rw);
-        const int32_t c = int32_t(local % rw) * 32 + lane;
+        const ItemPos at = locate_item(jobs, first, num_jobs, item);
+        const int32_t c = at.col0 + lane;
         bool vis = false;
-        if (c < job.cols) {
-            vis = leaf_pair_visible<true, kPrefetch>(t, job.row0 + r, job.col0 + c, vp, &wc);
+        if (c < at.job.cols) {
+            vis = leaf_pair_visible<true, kPrefetch>(t, at.row, at.job.col0 + c, vp, &wc);
             wc.pairs++;
         }
         const uint32_t word = __ballot_sync(0xffffffffu, vis);
-        if (lane == 0) bits[job.word_offset + local] = word;
+        if (lane == 0) bits[at.job.word_offset + at.local] = word;
         wc.visible_pairs += vis;
     }
-    // Warp-reduce the counters, one atomic per warp.
-    unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
-                               wc.occluder_tests};
     // (A thread sees at most a few thousand items of 32 pairs and ~100 node tests a pair:
     // far below 2^32.)
-#pragma unroll
-    for (int k = 0; k < 5; ++k)
-        for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
-    if (lane == 0) {
-        atomicAdd(&counters->pairs, v[0]);
-        atomicAdd(&counters->facing_pairs, v[1]);
-        atomicAdd(&counters->visible_pairs, v[2]);
-        atomicAdd(&counters->node_tests, v[3]);
-        atomicAdd(&counters->occluder_tests, v[4]);
-    }
+    flush_counters(wc, lane, counters);
 }
 
 // The same predicate, walked by the warp as a packet (variant "packet"). The 32 lanes hold one
@@ -106,21 +116,11 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
     SmallCounters wc;
     for (uint64_t item = warp; item < num_items; item += warps) {
-        int32_t lo = 0, hi = num_jobs;
-        while (hi - lo > 1) {
-            const int32_t mid = (lo + hi) >> 1;
-            if (first[mid] <= item)
-                lo = mid;
-            else
-                hi = mid;
-        }
-        const PairJob job = jobs[lo];
-        const uint64_t rw = (uint64_t(job.cols) + 31) / 32;
-        const uint64_t local = item - first[lo];
-        const int32_t a = job.row0 + int32_t(local / rw);
-        const int32_t c = int32_t(local % rw) * 32 + lane;
-        const bool in = c < job.cols;
-        const int32_t b = in ? job.col0 + c : a;
+        const ItemPos at = locate_item(jobs, first, num_jobs, item);
+        const int32_t a = at.row;
+        const int32_t c = at.col0 + lane;
+        const bool in = c < at.job.cols;
+        const int32_t b = in ? at.job.col0 + c : a;
         const LeafDisc la = t.leaves[a], lb = t.leaves[b];
         const Vec3 p = la.centroid;
         const Vec3 d = lb.centroid - p;
@@ -148,21 +148,10 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
             n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
         }
         const uint32_t word = __ballot_sync(0xffffffffu, vis);
-        if (lane == 0) bits[job.word_offset + local] = word;
+        if (lane == 0) bits[at.job.word_offset + at.local] = word;
         wc.visible_pairs += vis;
     }
-    unsigned long long v[5] = {wc.pairs, wc.facing_pairs, wc.visible_pairs, wc.node_tests,
-                               wc.occluder_tests};
-#pragma unroll
-    for (int k = 0; k < 5; ++k)
-        for (int o = 16; o > 0; o >>= 1) v[k] += __shfl_down_sync(0xffffffffu, v[k], o);
-    if (lane == 0) {
-        atomicAdd(&counters->pairs, v[0]);
-        atomicAdd(&counters->facing_pairs, v[1]);
-        atomicAdd(&counters->visible_pairs, v[2]);
-        atomicAdd(&counters->node_tests, v[3]);
-        atomicAdd(&counters->occluder_tests, v[4]);
-    }
+    flush_counters(wc, lane, counters);
 }
 
 template <class T>

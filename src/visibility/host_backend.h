@@ -1,0 +1,74 @@
+// The batching both CPU backends share (the sphere walk of leaf_pair.h and the grid walk of
+// bresenham.h): a batch is evaluated on all cores when it is submitted. Work items are words:
+// 32 consecutive columns of one row (neighbouring segments, so the walks share cache lines),
+// indexed across jobs by a prefix sum. Derived supplies
+//   bool visible(int32_t a, int32_t b, WorkCounters* wc) const;
+#pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <vector>
+
+#include "visibility/backend.h"
+
+namespace vmap::detail {
+
+template <class Derived>
+class HostBackend : public Backend {
+  public:
+    void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
+        const auto t0 = std::chrono::steady_clock::now();
+        const Derived& self = static_cast<const Derived&>(*this);
+        std::vector<uint32_t>& bits = buf_[slot];
+        bits.assign(words, 0u);
+        std::vector<uint64_t> first(jobs.size() + 1, 0);
+        for (size_t i = 0; i < jobs.size(); ++i) first[i + 1] = first[i] + job_words(jobs[i]);
+        tbb::combinable<WorkCounters> counters;
+        tbb::parallel_for(
+            tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
+                WorkCounters& wc = counters.local();
+                size_t j =
+                    std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
+                for (uint64_t item = range.begin(); item < range.end(); ++item) {
+                    while (item >= first[j + 1]) ++j;
+                    const PairJob& job = jobs[j];
+                    const uint64_t rw = row_words(job.cols);
+                    const uint64_t local = item - first[j];
+                    const int32_t r = static_cast<int32_t>(local / rw);
+                    const int32_t c0 = static_cast<int32_t>(local % rw) * 32;
+                    const int32_t c1 = std::min(job.cols, c0 + 32);
+                    const int32_t a = job.row0 + r;
+                    uint32_t word = 0;
+                    for (int32_t c = c0; c < c1; ++c)
+                        if (self.visible(a, job.col0 + c, &wc)) word |= 1u << (c - c0);
+                    wc.pairs += c1 - c0;
+                    wc.visible_pairs += __builtin_popcount(word);
+                    bits[job.word_offset + local] = word;
+                }
+            });
+        pending_[slot] = counters.combine([](WorkCounters x, const WorkCounters& y) {
+            x += y;
+            return x;
+        });
+        busy_ += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    }
+
+    const uint32_t* wait(int slot, WorkCounters& wc) override {
+        wc += pending_[slot];
+        pending_[slot] = {};
+        return buf_[slot].data();
+    }
+
+    double busy_seconds() const override { return busy_; }
+
+  private:
+    double busy_ = 0;
+    std::vector<uint32_t> buf_[2];
+    WorkCounters pending_[2];
+};
+
+}  // namespace vmap::detail

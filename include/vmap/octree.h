@@ -51,6 +51,11 @@ struct alignas(16) LeafDisc {
 };
 inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no usable plane
 
+// `points_box` grown to hold the occluder disc of `d` (centroid, normal, Delta): a disc with
+// unit normal n reaches Delta sqrt(1 - n_i^2) from its centre along axis i (the full Delta when
+// the normal is flagged, i.e. zero).
+Box grow_by_disc(Box points_box, const LeafDisc& d);
+
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {
     const WalkNode* walk = nullptr;    // per node: box, end of subtree, leaf index (preorder)

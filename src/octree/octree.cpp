@@ -209,13 +209,7 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
             bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
             bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
         }
-        auto reach = [&](float ni) {
-            return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
-        };
-        const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
-        const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
-        bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
-        bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+        bx = grow_by_disc(bx, d);
         t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
         // The sphere encloses the points and the occluder disc (centroid, normal, Delta).
         t.spheres[nd].radius =
@@ -248,6 +242,17 @@ void Octree::pack_walk() {
     walk.resize(skip.size());
     for (size_t n = 0; n < skip.size(); ++n)
         walk[n] = WalkNode{boxes[n].lo, skip[n], boxes[n].hi, node_leaf[n]};
+}
+
+Box grow_by_disc(Box bx, const LeafDisc& d) {
+    auto reach = [&](float ni) {
+        return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
+    };
+    const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
+    const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
+    bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
+    bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+    return bx;
 }
 
 OctreeView Octree::view() const {

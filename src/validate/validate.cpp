@@ -109,13 +109,7 @@ void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) 
             bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
         }
         d.delta = scale * std::max(std::sqrt(far2), floor * t.leaf_splat[l]);
-        auto reach = [&](float ni) {
-            return d.delta * std::sqrt(std::max(0.f, 1.f - ni * ni)) * 1.00001f;
-        };
-        const Vec3 ext{reach(d.normal.x), reach(d.normal.y), reach(d.normal.z)};
-        const Vec3 dlo = d.centroid - ext, dhi = d.centroid + ext;
-        bx.lo = {std::min(bx.lo.x, dlo.x), std::min(bx.lo.y, dlo.y), std::min(bx.lo.z, dlo.z)};
-        bx.hi = {std::max(bx.hi.x, dhi.x), std::max(bx.hi.y, dhi.y), std::max(bx.hi.z, dhi.z)};
+        bx = grow_by_disc(bx, d);
         t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
     });
     for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {

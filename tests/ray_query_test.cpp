@@ -107,6 +107,21 @@ TEST_F(RayQueryTest, RayStraightUpFromTheFloorHitsTheCeilingOrTheLight) {
     EXPECT_GE(hits, 45);
 }
 
+TEST_F(RayQueryTest, DirectionLengthDoesNotMatter) {
+    // Only the direction counts: a length whose square over- or underflows a float is fine.
+    int compared = 0;
+    for (uint32_t i = 0; i < vm_->points.size() && compared < 20; i += 97) {
+        const RayHit unit = shoot_ray(*vm_, i, {0.3f, 0.8f, 0.1f});
+        for (const float s : {1e20f, 1e-23f}) {
+            const RayHit h = shoot_ray(*vm_, i, {0.3f * s, 0.8f * s, 0.1f * s});
+            ASSERT_EQ(h.hit, unit.hit) << i << " x" << s;
+            if (h.hit) EXPECT_EQ(h.id, unit.id) << i << " x" << s;
+        }
+        compared += unit.hit;
+    }
+    EXPECT_GE(compared, 10);
+}
+
 TEST_F(RayQueryTest, NearestPointMatchesALinearScan) {
     std::mt19937 rng(13);
     std::uniform_real_distribution<float> u(-0.1f, 0.7f);

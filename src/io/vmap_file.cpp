@@ -35,7 +35,8 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 2;  // 2: 64-bit link offsets
+constexpr uint32_t kVersion = 3;  // 2: 64-bit link offsets; 3: emission in octree order and
+                                  // the measured Delta rule (a version-2 file is built wrong)
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -315,8 +316,10 @@ VisibilityMap load_vmap(const std::string& path) {
     std::memcpy(&payload, data.data() + 16, 8);
     std::memcpy(&sum, data.data() + 24, 8);
     if (version != kVersion)
-        throw Error(fmt::format("{}: header: version {} not supported (this vmap reads version {})",
-                                path, version, kVersion));
+        throw Error(fmt::format(
+            "{}: header: version {} not supported (this vmap reads version {}); rebuild it with "
+            "`vmap build`",
+            path, version, kVersion));
     if (payload != size - kHeader)
         throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}",
                                 path, payload, size - kHeader));

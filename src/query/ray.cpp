@@ -23,7 +23,7 @@ void check(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
     if (from >= n)
         throw Error(
             fmt::format("ray: point id {} out of range (the V-map has {} points)", from, n));
-    if (!is_finite(dir) || !(length(dir) > 0))
+    if (!is_finite(dir) || (dir.x == 0 && dir.y == 0 && dir.z == 0))
         throw Error("ray: the direction must be finite and non-zero");
     if (!vm.points.has_normals() || !vm.points.has_radii())
         throw Error("ray: the V-map's points have no normals or splat radii");
@@ -33,7 +33,10 @@ Ray make_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
     Ray r;
     r.scale = scale;
     r.o = vm.points.positions[vm.inverse[from]];
-    r.d = dir / length(dir);
+    // Normalised in double: the length of a very long or very short float vector over- or
+    // underflows in float.
+    const double dx = dir.x, dy = dir.y, dz = dir.z, l = std::sqrt(dx * dx + dy * dy + dz * dz);
+    r.d = {float(dx / l), float(dy / l), float(dz / l)};
     r.inv = {1.f / r.d.x, 1.f / r.d.y, 1.f / r.d.z};  // +-inf for a zero component: slabs work
     return r;
 }

@@ -105,6 +105,15 @@ int run_gi(GiOptions& o) {
     std::optional<Camera> scene_camera;
     const VisibilityMap vm = input_vmap(o, what, build_s, scene_camera);
     const PointSet& ps = vm.points;
+    // The camera (the default one frames the points' box, which the order does not change),
+    // checked before the solve.
+    Camera cam = scene_camera ? *scene_camera : default_camera(ps);
+    if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
+    if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
+    if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
+    if (o.fov) cam.fov_y_deg = *o.fov;
+    if (!o.image.empty())
+        check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
     size_t emitters = 0;
     for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
     if (emitters == 0)
@@ -159,11 +168,6 @@ int run_gi(GiOptions& o) {
     std::vector<Vec3> lit(colors.size());
     for (size_t k = 0; k < colors.size(); ++k) lit[vm.order[k]] = colors[k];
     if (!o.image.empty()) {
-        Camera cam = scene_camera ? *scene_camera : default_camera(out);
-        if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
-        if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
-        if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
-        if (o.fov) cam.fov_y_deg = *o.fov;
         const auto t0 = Clock::now();
         const Image img = render_points(out, lit, cam, o.render);
         write_png(o.image, img);

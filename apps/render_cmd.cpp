@@ -158,6 +158,7 @@ int run_render(RenderArgs& a) {
     if (a.mode == "heights" && a.heights.empty()) throw Error("--heights: give at least one");
     Source s = load_source(a);
     const Camera cam = make_camera(a, s);
+    check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
     if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
     a.opt.shade = a.mode != "albedo";
 

@@ -297,6 +297,13 @@ if [ "$(png_size heights.png | cut -d' ' -f1)" -gt 120 ] 2>/dev/null; then
 else
     fail "heights.png is not wider than two panels"
 fi
+# A degenerate camera fails before any V-map is built (stdout stays empty: no "built:" line).
+expect_input_error "render heights with eye == target" "eye and target coincide" render "$SCENE" \
+    --points 1500 --mode heights --heights 3,4 --eye-pos 0.27,0,0.2 --eye 1,1,1 --target 1,1,1 \
+    --size 60x60 -o never.png --backend cpu
+expect_no_file "render with a degenerate camera" never.png
+expect_ok "render --fov 179 (the end of the documented range)" render x.vmap --fov 179 \
+    --size 40x40 -o fov179.png
 expect_usage_error "render visible without an eye" render x.vmap --mode visible -o novis.png
 expect_no_file "no PNG after a usage error" novis.png
 expect_input_error "render --size 0x10" --size render x.vmap --size 0x10 -o bad.png

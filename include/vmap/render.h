@@ -26,6 +26,11 @@ namespace vmap {
 // at a square aspect. Throws vmap::Error for an empty set.
 Camera default_camera(const PointSet& points);
 
+// Throws vmap::Error naming `source` for a camera that cannot render: non-finite eye, target or
+// up, fov outside [0.1, 179] degrees, eye == target, up zero or parallel to the view. Callers
+// check before expensive work; render_points checks again.
+void check_camera(const Camera& cam, const std::string& source);
+
 struct RenderOptions {
     int width = 800;  // pixels, 1..16384
     int height = 800;

@@ -17,6 +17,23 @@ namespace {
 
 Vec3 normalized(Vec3 v) { return v / length(v); }
 
+}  // namespace
+
+void check_camera(const Camera& cam, const std::string& source) {
+    if (!is_finite(cam.eye) || !is_finite(cam.target) || !is_finite(cam.up))
+        throw Error(fmt::format("{}: eye, target and up must be finite", source));
+    if (!(cam.fov_y_deg >= 0.1f && cam.fov_y_deg <= 179.f))
+        throw Error(
+            fmt::format("{}: fov {} out of range [0.1, 179] degrees", source, cam.fov_y_deg));
+    const Vec3 d = cam.target - cam.eye;
+    if (!(length(d) > 0)) throw Error(fmt::format("{}: eye and target coincide", source));
+    const Vec3 side = cross(normalized(d), cam.up);
+    if (!(length(side) > 1e-6f * length(cam.up)))
+        throw Error(fmt::format("{}: up is zero or parallel to the view direction", source));
+}
+
+namespace {
+
 // The camera's orthonormal frame and focal length for an image of width x height.
 struct Frame {
     Vec3 eye, f, r, u;  // forward, right, up
@@ -24,18 +41,9 @@ struct Frame {
     float cx = 0, cy = 0;
 
     Frame(const Camera& cam, int width, int height) {
-        if (!is_finite(cam.eye) || !is_finite(cam.target) || !is_finite(cam.up))
-            throw Error("camera: eye, target and up must be finite");
-        if (!(cam.fov_y_deg > 0.01f && cam.fov_y_deg < 179.f))
-            throw Error(
-                fmt::format("camera: fov {} out of range (0.01, 179) degrees", cam.fov_y_deg));
-        const Vec3 d = cam.target - cam.eye;
-        if (!(length(d) > 0)) throw Error("camera: eye and target coincide");
-        f = normalized(d);
-        const Vec3 side = cross(f, cam.up);
-        if (!(length(side) > 1e-6f * length(cam.up)))
-            throw Error("camera: up is zero or parallel to the view direction");
-        r = normalized(side);
+        check_camera(cam, "camera");
+        f = normalized(cam.target - cam.eye);
+        r = normalized(cross(f, cam.up));
         u = cross(r, f);
         eye = cam.eye;
         fpx = 0.5f * float(height) / std::tan(float(cam.fov_y_deg * M_PI / 360.0));
@@ -224,15 +232,23 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
     constexpr int kTile = 24;
     const int T = kTile * s;  // tile edge in supersampled pixels
     const int tw = (W + T - 1) / T, th = (H + T - 1) / T;
-    std::vector<uint32_t> start(size_t(tw) * th + 1, 0);
+    std::vector<uint64_t> start(size_t(tw) * th + 1, 0);
     for (const Disc& d : discs)
         if (d.x1 >= d.x0)
             for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
                 for (int tx = d.x0 / T; tx <= d.x1 / T; ++tx) start[size_t(ty) * tw + tx + 1]++;
     for (size_t k = 1; k < start.size(); ++k) start[k] += start[k - 1];
+    // Each disc is listed in every tile it touches: a close camera with large splats can make
+    // that far more than the discs. Refuse beyond 1e9 references (4 GB) instead of failing to
+    // allocate or wrapping a count.
+    if (start.back() > uint64_t(1e9))
+        throw Error(
+            fmt::format("render: the splats cover {} tile cells (more than 1e9): the "
+                        "camera is too close or the splats too large for this size",
+                        start.back()));
     std::vector<uint32_t> list(start.back());
     {
-        std::vector<uint32_t> fill(start.begin(), start.end() - 1);
+        std::vector<uint64_t> fill(start.begin(), start.end() - 1);
         for (uint32_t i = 0; i < n; ++i) {
             const Disc& d = discs[i];
             if (d.x1 < d.x0) continue;
@@ -264,7 +280,7 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
             std::fill(wsum.begin(), wsum.end(), 0.f);
             std::fill(acc.begin(), acc.end(), Vec3{});
             const uint32_t* ids = list.data() + start[tile];
-            const uint32_t count = start[tile + 1] - start[tile];
+            const uint64_t count = start[tile + 1] - start[tile];
             // The ray of pixel (x, y) is eye + t dir(x, y), t = depth along the view axis;
             // a disc is hit where t = (c - eye).n / dir.n lands within its radius of c.
             auto for_fragments = [&](auto&& emit) {

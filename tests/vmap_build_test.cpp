@@ -161,7 +161,14 @@ TEST(VmapBuild, CountingWithoutKeepingGivesTheSameNumberOfLinks) {
     EXPECT_EQ(kept.links, ref.num_links());
     EXPECT_EQ(counted.links, ref.num_links());
     EXPECT_EQ(none.num_links(), 0u);
-    EXPECT_EQ(none.link_offsets.size(), size_t(none.octree.num_nodes()) + 1);
+    // A map without its links refuses to answer or to be saved, rather than say "hidden".
+    EXPECT_TRUE(ref.has_links());
+    EXPECT_FALSE(none.has_links());
+    EXPECT_THROW(none.query(0, 1), Error);
+    EXPECT_THROW(none.visible_set(0), Error);
+    test::ScratchDir dir;
+    EXPECT_THROW(save_vmap(dir.path("none.vmap"), none), Error);
+    EXPECT_FALSE(std::filesystem::exists(dir.path("none.vmap")));
 }
 
 TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {

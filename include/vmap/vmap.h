@@ -83,6 +83,10 @@ class VisibilityMap {
                                          // sorted; every link is stored at both ends
 
     size_t num_links() const { return link_targets.size() / 2; }
+    // False for a map built with BuildParams::keep_links = false (links counted, not kept):
+    // queries, saving and GI then throw instead of answering "hidden" for everything.
+    bool has_links() const { return link_offsets.size() == size_t(octree.num_nodes()) + 1; }
+    void require_links(const char* what) const;
     std::span<const int32_t> links(int32_t node) const {
         return {link_targets.data() + link_offsets[node],
                 link_targets.data() + link_offsets[node + 1]};

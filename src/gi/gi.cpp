@@ -472,6 +472,7 @@ void RadiositySolver::Impl::cpu_bounce() {
 
 RadiositySolver::RadiositySolver(const VisibilityMap& vm, const GiParams& params, GiStats* stats)
     : impl_(std::make_unique<Impl>(vm)) {
+    vm.require_links("gi");
     if (!(params.theta > 0) || !std::isfinite(params.theta))
         throw Error(
             fmt::format("gi: theta: {} (the separation parameter must be > 0)", params.theta));

@@ -193,6 +193,7 @@ struct Reader {
 }  // namespace
 
 void save_vmap(const std::string& path, const VisibilityMap& vm) {
+    vm.require_links(path.c_str());
     Writer w;
     const Octree& t = vm.octree;
     const PointSet& ps = vm.points;

@@ -20,7 +20,14 @@ bool VisibilityMap::leaves_visible(int32_t leaf_a, int32_t leaf_b) const {
     return false;
 }
 
+void VisibilityMap::require_links(const char* what) const {
+    if (!has_links())
+        throw Error(fmt::format("{}: this V-map kept no links (it was built only to count them)",
+                                what));
+}
+
 PairVisibility VisibilityMap::query(uint32_t i, uint32_t j) const {
+    require_links("query");
     const size_t n = order.size();
     if (i >= n || j >= n)
         throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)",
@@ -32,6 +39,7 @@ PairVisibility VisibilityMap::query(uint32_t i, uint32_t j) const {
 }
 
 std::vector<uint32_t> VisibilityMap::visible_set(uint32_t i) const {
+    require_links("query");
     if (i >= order.size())
         throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)", i,
                                 order.size()));

@@ -17,6 +17,7 @@ struct Ray {
 };
 
 void check(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
+    vm.require_links("ray");
     if (!(scale > 0 && scale <= 100))
         throw Error(fmt::format("ray: splat scale {} out of range (0, 100]", scale));
     const size_t n = vm.points.size();

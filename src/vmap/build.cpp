@@ -456,7 +456,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         arrays.finish(vm, spans);
         st.links = vm.num_links();
     } else {
-        vm.link_offsets.assign(size_t(t.num_nodes()) + 1, 0);
+        vm.link_offsets.clear();  // has_links() is false: queries and save refuse the map
         st.links = counted_links + merged.size();
     }
     st.seconds_links = seconds_since(tl);

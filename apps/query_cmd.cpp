@@ -120,17 +120,21 @@ Command add_query_command(CLI::App& app) {
     auto a = std::make_shared<QueryArgs>();
     auto* q = app.add_subcommand("query", "Answer visibility queries from a .vmap file");
     q->add_option("file", a->path, "The .vmap file")->required();
-    q->add_option("--pair", a->pair, "Are input points I and J mutually visible?")->expected(2);
+    auto* pair =
+        q->add_option("--pair", a->pair, "Are input points I and J mutually visible?")->expected(2);
     q->add_option("--pair-pos", a->pair_pos,
                   "Are the surface points nearest x,y,z and x,y,z mutually visible?")
-        ->expected(2);
-    q->add_option("--from", a->from, "Points visible from input point I (count)");
-    q->add_option("--from-pos", a->from_pos, "Points visible from the point nearest x,y,z");
+        ->expected(2)
+        ->excludes(pair);
+    auto* from = q->add_option("--from", a->from, "Points visible from input point I (count)");
+    q->add_option("--from-pos", a->from_pos, "Points visible from the point nearest x,y,z")
+        ->excludes(from);
     q->add_flag("--ids", a->ids, "With --from: list the ids too");
     q->add_option("--ply", a->ply,
                   "With --from: write the cloud coloured as Fig. 9 (visible purple, eye cyan)");
-    q->add_option("--ray", a->ray, "Shoot a ray from input point I (with --dir)");
-    q->add_option("--ray-pos", a->ray_pos, "Shoot a ray from the point nearest x,y,z");
+    auto* ray = q->add_option("--ray", a->ray, "Shoot a ray from input point I (with --dir)");
+    q->add_option("--ray-pos", a->ray_pos, "Shoot a ray from the point nearest x,y,z")
+        ->excludes(ray);
     q->add_option("--dir", a->dir, "Ray direction dx,dy,dz");
     return {q, [a] { return run_query(*a); }};
 }

@@ -333,6 +333,8 @@ expect_usage_error "query --ply without --from" query x.vmap --pair 0 1 --ply no
 expect_no_file "no PLY without --from" nofrom.ply
 expect_input_error "query --dir 0,0,0" --dir query x.vmap --ray 3 --dir 0,0,0
 expect_input_error "query --from-pos not a position" --from-pos query x.vmap --from-pos 1,2
+expect_usage_error "query --pair with --pair-pos" query x.vmap --pair 0 1 --pair-pos 0,0,0 1,1,1
+expect_usage_error "query --from with --from-pos" query x.vmap --from 0 --from-pos 0,0,0
 expect_input_error "query --ray id out of range" x.vmap query x.vmap --ray 3000 --dir 0,1,0
 
 if expect_ok "bench-query, tiny" bench-query --scene "$SCENE" --points 800,1600 --max-height 4 \

@@ -252,8 +252,6 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     // are written in parallel chunks at their offsets (pwrite), which the page cache takes
     // several times faster than one stream.
     const std::string tmp = path + ".tmp";
-    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-    if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", tmp, std::strerror(errno)));
     struct Chunk {
         const uint8_t* p;
         size_t n;
@@ -268,6 +266,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
             chunks.push_back({pc.p + o, n, at});
             at += off_t(n);
         }
+    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
+    if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", tmp, std::strerror(errno)));
     std::atomic<int> err{0};
     tbb::parallel_for(size_t(0), chunks.size(), [&](size_t k) {
         const Chunk& c = chunks[k];

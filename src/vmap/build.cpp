@@ -217,7 +217,6 @@ class LinkArrays {
         const auto tasks = split(pieces);
         std::atomic<bool> bad{false};
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
-            uint64_t mine = 0;
             for (auto [a, b] : tasks[k]) {
                 if (a < 0 || b < 0 || a >= nn_ || b >= nn_ || a == b) {
                     bad = true;
@@ -225,9 +224,7 @@ class LinkArrays {
                 }
                 std::atomic_ref<uint64_t>(deg_[a + 1]).fetch_add(1, std::memory_order_relaxed);
                 std::atomic_ref<uint64_t>(deg_[b + 1]).fetch_add(1, std::memory_order_relaxed);
-                mine += 2;
             }
-            ends_ += mine;
         });
         if (bad)
             throw Error(
@@ -262,7 +259,6 @@ class LinkArrays {
     }
     int32_t nn_;
     std::vector<uint64_t> deg_;  // 64-bit: a million leaves can mean over 2^32 link ends
-    std::atomic<uint64_t> ends_{0};
 };
 
 }  // namespace

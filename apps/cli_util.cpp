@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <filesystem>
 #include <sstream>
 
 #include "apps/commands.h"
@@ -46,6 +47,14 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
     if (w < 1 || h < 1 || w > 16384 || h > 16384)
         throw Error(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
     return {w, h};
+}
+
+void check_output(const std::string& path, const char* option) {
+    if (path.empty()) return;
+    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
+    if (!dir.empty() && !std::filesystem::is_directory(dir))
+        throw Error(
+            fmt::format("{}: {}: the folder {} does not exist", path, option, dir.string()));
 }
 
 }  // namespace vmap::cli

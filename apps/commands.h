@@ -28,4 +28,8 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
 
 bool ends_with_ci(std::string s, const std::string& suffix);
 
+// Fails early (before any work or output) when an output's folder does not exist; throws
+// vmap::Error naming the file and `option`. An empty path is no output.
+void check_output(const std::string& path, const char* option);
+
 }  // namespace vmap::cli

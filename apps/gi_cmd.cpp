@@ -81,15 +81,6 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
     return vm;
 }
 
-// Fails early (before any work or output) when an output's folder does not exist.
-void check_output(const std::string& path, const char* option) {
-    if (path.empty()) return;
-    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-    if (!dir.empty() && !std::filesystem::is_directory(dir))
-        throw Error(
-            fmt::format("{}: {}: the folder {} does not exist", path, option, dir.string()));
-}
-
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
     check_output(o.ply, "--ply");

@@ -160,6 +160,8 @@ int run_render(RenderArgs& a) {
     const Camera cam = make_camera(a, s);
     check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
     if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
+    check_output(a.output, "-o");
+    check_output(a.ply, "--ply");
     a.opt.shade = a.mode != "albedo";
 
     const auto t0 = std::chrono::steady_clock::now();

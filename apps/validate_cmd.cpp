@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "apps/commands.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/validate.h"
@@ -36,14 +37,16 @@ void write_file(const std::string& path, const std::string& text, const char* wh
         f << text;
         f.flush();
         if (!f) {
-            std::filesystem::remove(tmp);
+            std::error_code ec;
+            std::filesystem::remove(tmp, ec);
             throw Error(fmt::format("{}: {}: write failed", what, path));
         }
     }
     std::error_code ec;
     std::filesystem::rename(tmp, path, ec);
     if (ec) {
-        std::filesystem::remove(tmp);
+        std::error_code ignored;
+        std::filesystem::remove(tmp, ignored);
         throw Error(fmt::format("{}: {}: {}", what, path, ec.message()));
     }
 }
@@ -133,6 +136,11 @@ CLI::App* add_validate_command(CLI::App& app) {
 int run_validate_command() {
     ValidateParams& vp = opt.vp;
     vp.progress = detail::stderr_is_terminal();
+    check_output(opt.json, "--json");
+    check_output(opt.md, "--md");
+    if (opt.time_embree && !opt.json.empty())
+        throw Error(
+            fmt::format("{}: --json: --time-embree writes its table as Markdown only", opt.json));
     std::string md, json;
     if (opt.time_embree) {
         std::vector<EmbreeTiming> rows;
@@ -148,7 +156,6 @@ int run_validate_command() {
                 rows.push_back(time_embree(s, p));
             }
         md = embree_timing_markdown(rows);
-        json = "[]\n";
     } else {
         json = "[\n";
         for (size_t k = 0; k < opt.scenes.size(); ++k) {

@@ -23,8 +23,8 @@
 #include <optional>
 
 #include "apps/commands.h"
-#include "apps/validate_cmd.h"
 #include "apps/gi_cmd.h"
+#include "apps/validate_cmd.h"
 #include "bench/bench.h"
 #include "util/progress.h"
 #include "vmap/error.h"

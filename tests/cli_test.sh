@@ -302,6 +302,10 @@ expect_input_error "render heights with eye == target" "eye and target coincide"
     --points 1500 --mode heights --heights 3,4 --eye-pos 0.27,0,0.2 --eye 1,1,1 --target 1,1,1 \
     --size 60x60 -o never.png --backend cpu
 expect_no_file "render with a degenerate camera" never.png
+# Output folders are checked before any work: no PLY is left without its PNG.
+expect_input_error "render -o into a missing folder" no_such_dir/r.png render x.vmap \
+    --size 40x40 -o no_such_dir/r.png --ply lone.ply
+expect_no_file "render with a bad -o" lone.ply
 expect_ok "render --fov 179 (the end of the documented range)" render x.vmap --fov 179 \
     --size 40x40 -o fov179.png
 expect_usage_error "render visible without an eye" render x.vmap --mode visible -o novis.png

@@ -8,6 +8,7 @@
 //              "floor": [r,g,b], "ceiling": [..], "back": [..],
 //              "left": [..] (red, x = width), "right": [..] (green, x = 0) },   // albedo
 //   "light": { "center": [x, z], "size": [sx, sz], "emission": [r,g,b] },       // on the ceiling
+//            (clipped to the room; the ceiling is not sampled under it)
 //   "meshes": [ { "file": "../models/bunny.off",   // relative to the scene file
 //                 "size": 0.25,                    // largest extent after scaling (or "scale")
 //                 "rotate": [rx, ry, rz],           // degrees, applied x then y then z

@@ -224,6 +224,7 @@ class CudaBackend final : public Backend {
             VMAP_CUDA_CHECK(cudaEventCreate(&s.k0));
             VMAP_CUDA_CHECK(cudaEventCreate(&s.k1));
         }
+        VMAP_CUDA_CHECK(cudaEventCreate(&origin_));
     }
     // Destroys whatever streams and events exist (also after a failed init).
     void release() {
@@ -236,6 +237,8 @@ class CudaBackend final : public Backend {
             s.stream = nullptr;
             s.done = s.k0 = s.k1 = nullptr;
         }
+        if (origin_) cudaEventDestroy(origin_);
+        origin_ = nullptr;
     }
 
   public:
@@ -250,6 +253,8 @@ class CudaBackend final : public Backend {
         cudaStream_t s = slots_[0].stream;
         walk_.upload(tree.walk.data(), tree.walk.size(), s, held_, peak_);
         leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
+        VMAP_CUDA_CHECK(cudaEventRecord(origin_, s));
+        last_end_ = 0;
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
         view_ = OctreeView{walk_.ptr, leaves_.ptr, tree.num_nodes(), tree.num_leaves()};
     }
@@ -309,9 +314,13 @@ class CudaBackend final : public Backend {
     const uint32_t* wait(int slot, WorkCounters& wc) override {
         Slot& sl = slots_[slot];
         VMAP_CUDA_CHECK(cudaEventSynchronize(sl.done));
-        float ms = 0;
-        VMAP_CUDA_CHECK(cudaEventElapsedTime(&ms, sl.k0, sl.k1));
-        busy_ += ms * 1e-3;
+        // Busy time is the union of the kernels' intervals: the two slots' kernels can run at
+        // the same time (two streams), and summing their lengths would count that twice.
+        float start = 0, end = 0;
+        VMAP_CUDA_CHECK(cudaEventElapsedTime(&start, origin_, sl.k0));
+        VMAP_CUDA_CHECK(cudaEventElapsedTime(&end, origin_, sl.k1));
+        busy_ += std::max(0.0, double(end) - std::max(double(start), last_end_)) * 1e-3;
+        last_end_ = std::max(last_end_, double(end));
         const DeviceCounters& c = *sl.h_counters.ptr;
         wc.pairs += c.pairs;
         wc.facing_pairs += c.facing_pairs;
@@ -348,6 +357,8 @@ class CudaBackend final : public Backend {
     Slot slots_[2];
     uint64_t held_ = 0, peak_ = 0;
     double busy_ = 0;
+    cudaEvent_t origin_ = nullptr;  // recorded in prepare(): kernel times are measured from it
+    double last_end_ = 0;           // ms after origin_ when the last kernel waited for ended
 };
 
 }  // namespace

@@ -111,8 +111,9 @@ std::string with_suffix(const std::string& path, const std::string& suffix) {
     return (p.parent_path() / (p.stem().string() + suffix + p.extension().string())).string();
 }
 
-// --time N: the render alone (the mode's colours, no V-map build, no PNG encoding) N times after
-// the run above served as warm-up; median and spread, with the work done.
+// --time N: the splatting alone (albedo colours in every mode: the mode only changes colours,
+// not the work; no V-map build, no PNG encoding) N times after the run above served as warm-up;
+// median and spread, with the work done.
 void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
     std::vector<Vec3> colors = s.points.colors;
     if (colors.empty()) colors.assign(s.points.size(), Vec3{0.8f, 0.8f, 0.8f});

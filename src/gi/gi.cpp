@@ -444,7 +444,18 @@ void RadiositySolver::Impl::setup() {
             stats.note = fmt::format("--backend cuda: {}; using the CPU", why);
     }
     if (device) {
-        device->upload(view, total);
+        try {
+            device->upload(view, total);
+        } catch (const Error& e) {
+            // Too large for the device (or the device failed): the CPU gives the same answers.
+            device.reset();
+            stats.note = fmt::format(
+                "--backend {}: the GPU could not take the problem ({}); "
+                "using the CPU",
+                params.backend, e.what());
+        }
+    }
+    if (device) {
         stats.backend = device->name();
     } else {
         stats.backend = cpu_name();

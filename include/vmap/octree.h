@@ -55,6 +55,13 @@ inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no
 // unit normal n reaches Delta sqrt(1 - n_i^2) from its centre along axis i (the full Delta when
 // the normal is flagged, i.e. zero).
 Box grow_by_disc(Box points_box, const LeafDisc& d);
+// The smallest box holding both.
+inline Box merge(const Box& a, const Box& b) {
+    return {{a.lo.x < b.lo.x ? a.lo.x : b.lo.x, a.lo.y < b.lo.y ? a.lo.y : b.lo.y,
+             a.lo.z < b.lo.z ? a.lo.z : b.lo.z},
+            {a.hi.x > b.hi.x ? a.hi.x : b.hi.x, a.hi.y > b.hi.y ? a.hi.y : b.hi.y,
+             a.hi.z > b.hi.z ? a.hi.z : b.hi.z}};
+}
 
 // A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
 struct OctreeView {

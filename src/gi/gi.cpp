@@ -57,6 +57,21 @@ Vec3 emission_of(const PointSet& ps, size_t i) {
 }
 float area_of(const PointSet& ps, size_t i) { return kPi * ps.radii[i] * ps.radii[i]; }
 
+// Every point pair (i, j) of leaves a x b (octree positions) whose kernel is positive:
+// f(i, j, area_i, area_j, kernel).
+template <class F>
+void for_point_pairs(const VisibilityMap& vm, int32_t a, int32_t b, F&& f) {
+    const Octree& t = vm.octree;
+    const PointSet& ps = vm.points;
+    for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
+        for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
+            const float ai = area_of(ps, i), aj = area_of(ps, j);
+            const float k =
+                gi_kernel(ps.positions[i], ps.normals[i], ai, ps.positions[j], ps.normals[j], aj);
+            if (k > 0) f(i, j, ai, aj, k);
+        }
+}
+
 // What refinement needs of a node: total area, area-weighted mean position and normal, and the
 // half-diagonal of its content box.
 struct NodeGeom {
@@ -119,18 +134,11 @@ struct Refiner {
         }
         const bool la = t.is_leaf(a), lb = t.is_leaf(b);
         if (la && lb) {
-            const PointSet& ps = vm.points;
             const uint32_t base = uint32_t(t.num_nodes());
-            for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
-                for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
-                    const float ai = area_of(ps, i), aj = area_of(ps, j);
-                    const float k = gi_kernel(ps.positions[i], ps.normals[i], ai, ps.positions[j],
-                                              ps.normals[j], aj);
-                    if (k > 0) {
-                        emit(base + i, base + j, k * aj, true);
-                        emit(base + j, base + i, k * ai, true);
-                    }
-                }
+            for_point_pairs(vm, a, b, [&](uint32_t i, uint32_t j, float ai, float aj, float k) {
+                emit(base + i, base + j, k * aj, true);
+                emit(base + j, base + i, k * ai, true);
+            });
             return;
         }
         // Open the larger node (a leaf cannot be opened): its children all see the other node.
@@ -215,15 +223,10 @@ struct BlockRefiner {
         }
         const bool la = t.is_leaf(a), lb = t.is_leaf(b);
         if (la && lb) {  // both are inside their link ends: every point pair is visible
-            const PointSet& ps = vm.points;
             const uint32_t base = uint32_t(t.num_nodes());
-            for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
-                for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
-                    const float ai = area_of(ps, i), aj = area_of(ps, j);
-                    const float k = gi_kernel(ps.positions[i], ps.normals[i], ai, ps.positions[j],
-                                              ps.normals[j], aj);
-                    if (k > 0) out.push_back({key(base + i, base + j), double(ai) * aj * k});
-                }
+            for_point_pairs(vm, a, b, [&](uint32_t i, uint32_t j, float ai, float aj, float k) {
+                out.push_back({key(base + i, base + j), double(ai) * aj * k});
+            });
             return;
         }
         // Open the node that is not flat enough if only one is, else the larger one.

@@ -223,11 +223,7 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         float r = 0;
         Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
         t.for_each_child(nd, [&](int32_t c) {
-            const Box& cb = t.boxes[c];
-            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y),
-                     std::min(bx.lo.z, cb.lo.z)};
-            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y),
-                     std::max(bx.hi.z, cb.hi.z)};
+            bx = merge(bx, t.boxes[c]);
             r = std::max(r,
                          length(t.spheres[c].center - t.spheres[nd].center) + t.spheres[c].radius);
         });

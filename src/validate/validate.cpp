@@ -115,13 +115,7 @@ void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) 
     for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
         if (t.is_leaf(nd)) continue;
         Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
-        t.for_each_child(nd, [&](int32_t c) {
-            const Box& cb = t.boxes[c];
-            bx.lo = {std::min(bx.lo.x, cb.lo.x), std::min(bx.lo.y, cb.lo.y),
-                     std::min(bx.lo.z, cb.lo.z)};
-            bx.hi = {std::max(bx.hi.x, cb.hi.x), std::max(bx.hi.y, cb.hi.y),
-                     std::max(bx.hi.z, cb.hi.z)};
-        });
+        t.for_each_child(nd, [&](int32_t c) { bx = merge(bx, t.boxes[c]); });
         t.boxes[nd] = bx;
     }
     t.pack_walk();

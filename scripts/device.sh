@@ -24,7 +24,10 @@ if [[ "$cmd" == bundle ]]; then
     mkdir -p .device/bin .device/lib .device/models
     cp build-device/vmap .device/bin/
     cp build-device/tests/*_test .device/bin/
-    find build-device/bench -maxdepth 1 -type f -executable -exec cp {} .device/bin/ \;
+    # Benchmark drivers built as programs of their own, where the build has any.
+    if [[ -d build-device/bench ]]; then
+        find build-device/bench -maxdepth 1 -type f -executable -exec cp {} .device/bin/ \;
+    fi
     for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
         grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann)' |
         while read -r so; do cp -L "$so" .device/lib/; done

@@ -41,6 +41,7 @@ struct Layout {
     int color[3] = {-1, -1, -1};
     int emission[3] = {-1, -1, -1};
     std::vector<std::string> ignored;  // names of the columns skipped
+    size_t guessed_at = 0;             // line whose values chose colours or normals, if guessed
 };
 
 bool is_integer_token(std::string_view t) {
@@ -116,19 +117,20 @@ Layout layout_from_header(const InputFile& in, std::string_view line) {
     return layout;
 }
 
-// Six columns in a file whose extension does not say: integers are colours, a unit vector a
-// normal.
+double norm3(const Vec3& n) { return std::sqrt(double(dot(n, n))); }
+
+// Six columns in a file whose extension does not say: a unit vector is a normal, other integers
+// are colours. Reader::add checks every later line against the guess.
 bool six_columns_are_colours(const InputFile& in, const std::vector<std::string_view>& w) {
-    if (is_integer_token(w[3]) && is_integer_token(w[4]) && is_integer_token(w[5])) return true;
-    double n[3];
+    float n[3];
     for (int k = 0; k < 3; ++k) {
         if (!parse_real(w[3 + k], n[k])) {
             fail(in.path(), "line ", in.line(), ": column ", 4 + k, ": invalid number ",
                  quoted(w[3 + k]));
         }
     }
-    const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-    if (std::fabs(len - 1) < 0.01) return false;
+    if (std::fabs(norm3({n[0], n[1], n[2]}) - 1) < 0.01) return false;
+    if (is_integer_token(w[3]) && is_integer_token(w[4]) && is_integer_token(w[5])) return true;
     fail(in.path(), "line ", in.line(),
          ": columns 4-6 are neither colours (integers 0..255) nor a unit normal; name the columns "
          "with a first line such as //X,Y,Z,Nx,Ny,Nz");
@@ -146,8 +148,9 @@ Layout layout_from_count(const InputFile& in, const std::string& ext,
             layout.ignored.push_back("column 4 (intensity)");
             break;
         case 6: {
-            const bool colours = ext == ".xyzrgb" || ext == ".pts" ||
-                                 (ext != ".xyzn" && six_columns_are_colours(in, w));
+            const bool told = ext == ".xyzrgb" || ext == ".pts" || ext == ".xyzn";
+            const bool colours = told ? ext != ".xyzn" : six_columns_are_colours(in, w);
+            if (!told) layout.guessed_at = in.line();
             set_triple(colours ? layout.color : layout.normal, 3);
             break;
         }
@@ -198,14 +201,27 @@ struct Reader {
         }
         PointSet& p = out.points;
         p.positions.push_back(triple(w, layout.xyz, "coordinate"));
-        if (layout.normal[0] >= 0) p.normals.push_back(triple(w, layout.normal, "normal"));
+        if (layout.normal[0] >= 0) {
+            p.normals.push_back(triple(w, layout.normal, "normal"));
+            if (layout.guessed_at != 0 && std::fabs(norm3(p.normals.back()) - 1) >= 0.01) {
+                fail(in.path(), "line ", in.line(), ": columns 4-6 are not a unit normal as on line ",
+                     layout.guessed_at, "; name the columns with a first line such as "
+                     "//X,Y,Z,R,G,B");
+            }
+        }
         if (layout.color[0] >= 0) {
             const Vec3 c = triple(w, layout.color, "colour");
             if (c.x < 0 || c.y < 0 || c.z < 0) {
                 fail(in.path(), "line ", in.line(), ": colour: negative value");
             }
             for (int k = 0; k < 3; ++k) {
-                colours_all_integers &= is_integer_token(w[layout.color[k]]);
+                const bool integer = is_integer_token(w[layout.color[k]]);
+                if (layout.guessed_at != 0 && !integer) {
+                    fail(in.path(), "line ", in.line(), ": columns 4-6 are not integer colours "
+                         "as on line ", layout.guessed_at, "; name the columns with a first "
+                         "line such as //X,Y,Z,Nx,Ny,Nz");
+                }
+                colours_all_integers &= integer;
             }
             max_colour = std::max({max_colour, c.x, c.y, c.z});
             p.colors.push_back(c);

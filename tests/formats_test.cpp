@@ -15,6 +15,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <filesystem>
 #include <random>
 #include <string>
 #include <vector>
@@ -335,8 +336,8 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
                                 "DATA ascii\n1 2 3 nan 0 0\n")),
         "nn.pcd", "point 0", "non-finite normal");
     EXPECT_READ_ERROR(
-        read_pcd(file("g.pcd", "FIELDS x y z\nPOINTS 1\nDATA ascii\n1 2 zz\n")), "g.pcd",
-        "field z", "invalid number 'zz'");
+        read_pcd(file("g.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1 2 3\n1 2 zz\n")), "g.pcd",
+        "point 1 (line 5): field z", "invalid number 'zz'");
     const size_t sizes = zip.find("DATA binary_compressed\n") + 23;
     std::string lie = zip;
     lie[sizes + 3] = '\x7f';  // a compressed size larger than the file
@@ -702,6 +703,37 @@ TEST(MeshScene, ScenesWithoutTheRoomAreCheckedByField) {
     const Scene with_room = load_scene(dir.write("r.json", R"({"meshes": [{"file": "t.stl"}]})"));
     EXPECT_TRUE(with_room.has_room);
     EXPECT_EQ(with_room.surfaces.size(), 7u);
+}
+
+}  // namespace
+}  // namespace vmap
+
+namespace vmap {
+namespace {
+
+// The fuzz seeds (fuzz/corpus/<reader>/) read, or fail with a vmap::Error when their name says
+// they are broken; nothing else ever escapes a reader.
+TEST(Formats, FuzzSeedsReadOrFailCleanly) {
+    namespace fs = std::filesystem;
+    const fs::path root = fs::path(VMAP_SOURCE_DIR) / "fuzz" / "corpus";
+    size_t seen = 0;
+    for (const char* reader : {"xyz", "pcd", "obj", "stl"}) {
+        for (const auto& entry : fs::directory_iterator(root / reader)) {
+            const std::string name = entry.path().filename().string();
+            SCOPED_TRACE(name);
+            const bool broken = name.find("bad") != std::string::npos ||
+                                name.find("nan") != std::string::npos ||
+                                name.find("truncated") != std::string::npos ||
+                                name.find("huge") != std::string::npos;
+            ++seen;
+            if (broken) {
+                EXPECT_THROW((void)read_model(entry.path().string()), Error);
+            } else {
+                EXPECT_GT(read_model(entry.path().string()).points.size(), 0u);
+            }
+        }
+    }
+    EXPECT_GE(seen, 16u);
 }
 
 }  // namespace

@@ -349,7 +349,8 @@ void read_ascii(InputFile& in, const Header& h, Sink& sink) {
             if (h.fields[f].type == 'F') return std::bit_cast<uint32_t>(float(value(f)));
             return static_cast<uint32_t>(static_cast<int64_t>(value(f)));
         };
-        sink.add(in, index++, value, bits);
+        sink.add(in, index, value, bits);
+        ++index;
     }
     while (in.next_line(line)) {
         w.clear();

@@ -89,8 +89,7 @@ int run_build(BuildOptions& o) {
         file_octree = sc.octree;
         pts = sample_scene(sc);
         what = ends_with_ci(o.input, ".json")
-                   ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input,
-                                 sc.surfaces.size())
+                   ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size())
                    : fmt::format("mesh {} ({} triangles, area-sampled)", o.input,
                                  sc.surfaces[0].mesh.triangles.size());
     } else {

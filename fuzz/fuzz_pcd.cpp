@@ -17,8 +17,7 @@
 #include "vmap/io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-    static const std::string path =
-        "/tmp/vmap_fuzz_pcd_" + std::to_string(::getpid()) + ".pcd";
+    static const std::string path = "/tmp/vmap_fuzz_pcd_" + std::to_string(::getpid()) + ".pcd";
     std::FILE* f = std::fopen(path.c_str(), "wb");
     if (f == nullptr) return 0;
     std::fwrite(data, 1, size, f);

@@ -17,8 +17,7 @@
 #include "vmap/io.h"
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
-    static const std::string path =
-        "/tmp/vmap_fuzz_xyz_" + std::to_string(::getpid()) + ".xyz";
+    static const std::string path = "/tmp/vmap_fuzz_xyz_" + std::to_string(::getpid()) + ".xyz";
     std::FILE* f = std::fopen(path.c_str(), "wb");
     if (f == nullptr) return 0;
     std::fwrite(data, 1, size, f);

@@ -102,9 +102,9 @@ TEST(Xyz, Open3DDialectsReadExactly) {
 TEST(Xyz, CloudCompareDialectsReadExactly) {
     ScratchDir dir;
     // Header line, commas, colours as integers, normals last.
-    expect_points(read_model(dir.write(
-                      "h.asc", "//X,Y,Z,R,G,B,Nx,Ny,Nz\n" + rows(",", true, true))),
-                  true, true);
+    expect_points(
+        read_model(dir.write("h.asc", "//X,Y,Z,R,G,B,Nx,Ny,Nz\n" + rows(",", true, true))), true,
+        true);
     // No header: nine columns are x y z r g b nx ny nz; semicolons and blanks around them.
     expect_points(read_model(dir.write("s.txt.csv", rows(" ; ", true, true))), true, true);
     // Six columns: integers are colours, a unit vector a normal.
@@ -113,8 +113,8 @@ TEST(Xyz, CloudCompareDialectsReadExactly) {
     // Named columns in any order, with CRLF line ends and comments; unknown names noted.
     std::string named = "# scanned\r\nnx ny nz x y z intensity\r\n";
     for (size_t i = 0; i < kP.size(); ++i) {
-        named += num(kN[i].x) + " " + num(kN[i].y) + " " + num(kN[i].z) + " " + num(kP[i].x) +
-                 " " + num(kP[i].y) + " " + num(kP[i].z) + " 7\r\n";
+        named += num(kN[i].x) + " " + num(kN[i].y) + " " + num(kN[i].z) + " " + num(kP[i].x) + " " +
+                 num(kP[i].y) + " " + num(kP[i].z) + " 7\r\n";
     }
     const ModelData m = read_model(dir.write("named.xyz", named));
     expect_points(m, true, false);
@@ -134,8 +134,8 @@ TEST(Xyz, PtsWithCountIntensityAndColoursReads) {
     expect_points(m, false, true);
     ASSERT_EQ(m.notes.size(), 1u);
     EXPECT_NE(m.notes[0].find("intensity"), std::string::npos);
-    EXPECT_READ_ERROR(read_model(dir.write("short.pts", "5" + s.substr(1))), "short.pts",
-                      "line 1", "says 5 points", "has 4");
+    EXPECT_READ_ERROR(read_model(dir.write("short.pts", "5" + s.substr(1))), "short.pts", "line 1",
+                      "says 5 points", "has 4");
 }
 
 TEST(Xyz, BadInputIsRejectedNamingTheLine) {
@@ -155,8 +155,8 @@ TEST(Xyz, BadInputIsRejectedNamingTheLine) {
     // A guess from the first line that a later line contradicts is an error, not a misreading.
     EXPECT_READ_ERROR(read_xyz(dir.write("g1.xyz", "1 2 3 0 0 1\n1 2 3 255 0 51\n")), "g1.xyz",
                       "line 2", "not a unit normal as on line 1");
-    EXPECT_READ_ERROR(read_xyz(dir.write("g2.xyz", "1 2 3 255 0 51\n1 2 3 0.6 0.8 0\n")),
-                      "g2.xyz", "line 2", "not integer colours as on line 1");
+    EXPECT_READ_ERROR(read_xyz(dir.write("g2.xyz", "1 2 3 255 0 51\n1 2 3 0.6 0.8 0\n")), "g2.xyz",
+                      "line 2", "not integer colours as on line 1");
     EXPECT_READ_ERROR(read_xyz(dir.write("huge.pts", "99999999999\n1 2 3\n")), "huge.pts",
                       "cannot fit");
     EXPECT_READ_ERROR(read_xyz(dir.write("neg.xyzrgb", "1 2 3 -1 0 0\n")), "neg.xyzrgb",
@@ -172,7 +172,8 @@ TEST(Xyz, BadInputIsRejectedNamingTheLine) {
                       "line 1", "longer than");
 }
 
-// ---- PCD ------------------------------------------------------------------------------------------
+// ---- PCD
+// ------------------------------------------------------------------------------------------
 
 // A test-side LZF compressor (greedy, naive search): enough to make files PCL would write.
 std::string lzf_compress(const std::string& in) {
@@ -249,8 +250,8 @@ std::string pcd(const std::string& data, const std::string& points_line = "POINT
     if (data == "ascii") {
         for (size_t i = 0; i < kP.size(); ++i) {
             h += num(kN[i].x) + " " + num(kN[i].y) + " " + num(kN[i].z) + " " +
-                 num(std::bit_cast<float>(rgb(i))) + " 0 0 0 " + num(kP[i].x) + " " +
-                 num(kP[i].y) + " " + num(kP[i].z) + " 0.5\n";
+                 num(std::bit_cast<float>(rgb(i))) + " 0 0 0 " + num(kP[i].x) + " " + num(kP[i].y) +
+                 " " + num(kP[i].z) + " 0.5\n";
         }
         return h;
     }
@@ -308,13 +309,14 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
     ScratchDir dir;
     const std::string bin = pcd("binary"), zip = pcd("binary_compressed");
     auto file = [&](const char* name, const std::string& s) { return dir.write(name, s); };
-    EXPECT_READ_ERROR(read_pcd(file("t.pcd", bin.substr(0, bin.size() - 5))), "t.pcd",
-                      "truncated", "byte");
+    EXPECT_READ_ERROR(read_pcd(file("t.pcd", bin.substr(0, bin.size() - 5))), "t.pcd", "truncated",
+                      "byte");
     EXPECT_READ_ERROR(read_pcd(file("x.pcd", bin + "x")), "x.pcd", "after the last point");
     EXPECT_READ_ERROR(read_pcd(file("w.pcd", pcd("ascii", "POINTS 5"))), "w.pcd",
                       "WIDTH 4 x HEIGHT 1 is not POINTS 5");
-    EXPECT_READ_ERROR(read_pcd(file("h.pcd", "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"
-                                             "POINTS 4000000000\nDATA binary\n")),
+    EXPECT_READ_ERROR(read_pcd(file("h.pcd",
+                                    "FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\n"
+                                    "POINTS 4000000000\nDATA binary\n")),
                       "h.pcd", "cannot fit");
     EXPECT_READ_ERROR(read_pcd(file("d.pcd", "FIELDS x y z\nDATA lzma\n")), "d.pcd",
                       "header line 2", "unknown DATA 'lzma'");
@@ -322,19 +324,19 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
                       "no 'x' field");
     EXPECT_READ_ERROR(read_pcd(file("sz.pcd", "FIELDS x y z\nSIZE 4 4\nDATA ascii\n")), "sz.pcd",
                       "SIZE has 2 entries for 3 fields");
-    EXPECT_READ_ERROR(read_pcd(file("ty.pcd", "FIELDS x y z\nTYPE F F Q\nDATA ascii\n")),
-                      "ty.pcd", "field z", "unknown TYPE 'Q'");
+    EXPECT_READ_ERROR(read_pcd(file("ty.pcd", "FIELDS x y z\nTYPE F F Q\nDATA ascii\n")), "ty.pcd",
+                      "field z", "unknown TYPE 'Q'");
     EXPECT_READ_ERROR(read_pcd(file("nd.pcd", "FIELDS x y z\nPOINTS 1\n")), "nd.pcd",
                       "missing DATA");
     EXPECT_READ_ERROR(read_pcd(file("kw.pcd", "FIELDS x y z\nBOGUS 1\nDATA ascii\n")), "kw.pcd",
                       "unknown keyword 'BOGUS'");
     EXPECT_READ_ERROR(
-        read_pcd(file("a.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1.0 2.0 3.0\n1.0 2.0\n")), "a.pcd",
-        "point 1 (line 5)", "expected 3 values, found 2");
-    EXPECT_READ_ERROR(
-        read_pcd(file("nn.pcd", "FIELDS x y z normal_x normal_y normal_z\nPOINTS 1\n"
-                                "DATA ascii\n1 2 3 nan 0 0\n")),
-        "nn.pcd", "point 0", "non-finite normal");
+        read_pcd(file("a.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1.0 2.0 3.0\n1.0 2.0\n")),
+        "a.pcd", "point 1 (line 5)", "expected 3 values, found 2");
+    EXPECT_READ_ERROR(read_pcd(file("nn.pcd",
+                                    "FIELDS x y z normal_x normal_y normal_z\nPOINTS 1\n"
+                                    "DATA ascii\n1 2 3 nan 0 0\n")),
+                      "nn.pcd", "point 0", "non-finite normal");
     EXPECT_READ_ERROR(
         read_pcd(file("g.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1 2 3\n1 2 zz\n")), "g.pcd",
         "point 1 (line 5): field z", "invalid number 'zz'");
@@ -350,7 +352,8 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
     EXPECT_READ_ERROR(read_pcd(file("z3.pcd", corrupt)), "z3.pcd", "corrupt LZF");
 }
 
-// ---- OBJ ------------------------------------------------------------------------------------------
+// ---- OBJ
+// ------------------------------------------------------------------------------------------
 
 TEST(Obj, PolygonsNegativeIndicesAndEveryCornerFormRead) {
     ScratchDir dir;
@@ -358,9 +361,9 @@ TEST(Obj, PolygonsNegativeIndicesAndEveryCornerFormRead) {
         "# exported\nmtllib m.mtl\no square\n"
         "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nvn 0 0 1\n"
         "usemtl red\ns off\n"
-        "f 1/1/1 2//1 3/1/1 4//1\n"      // a quad: two triangles
+        "f 1/1/1 2//1 3/1/1 4//1\n"  // a quad: two triangles
         "g top\nv 0.5 0.5 1\n"
-        "f -2 -3 -1\n"                  // relative: vertices 3, 2, 5
+        "f -2 -3 -1\n"                   // relative: vertices 3, 2, 5
         "f 5/1 4/1 -4/1\nl 1 2\np 1\n";  // v/vt; lines and points are skipped
     const ModelData m = read_model(dir.write("m.obj", s));
     ASSERT_EQ(m.points.size(), 5u);
@@ -407,7 +410,8 @@ TEST(Obj, BadInputIsRejectedNamingTheLine) {
     EXPECT_READ_ERROR(read_obj(file("e.obj", "")), "e.obj", "empty file");
 }
 
-// ---- STL ------------------------------------------------------------------------------------------
+// ---- STL
+// ------------------------------------------------------------------------------------------
 
 // A unit tetrahedron, outward wound, as triangles of corners.
 const std::vector<std::array<Vec3, 3>> kTetra = {
@@ -484,8 +488,7 @@ TEST(Stl, BadInputIsRejectedNamingTheLineOrByte) {
     std::string nan = bin;
     const float q = std::nanf("");
     std::memcpy(&nan[84 + 12], &q, 4);
-    EXPECT_READ_ERROR(read_stl(file("n.stl", nan)), "n.stl", "byte 84", "facet 0",
-                      "non-finite");
+    EXPECT_READ_ERROR(read_stl(file("n.stl", nan)), "n.stl", "byte 84", "facet 0", "non-finite");
     const std::string a = ascii_stl(kTetra);
     EXPECT_READ_ERROR(read_stl(file("at.stl", a.substr(0, a.find("endloop")))), "at.stl",
                       "truncated");
@@ -592,8 +595,8 @@ TEST(Formats, TheSameMeshGivesTheSameVmapAsOffPlyObjOrStl) {
         ply += num(p.x) + " " + num(p.y) + " " + num(p.z) + "\n";
     }
     for (const Tri& t : off.triangles) {
-        obj += "f " + std::to_string(int(t[0]) - int(v.size())) + " " +
-               std::to_string(t[1] + 1) + " " + std::to_string(t[2] + 1) + "\n";
+        obj += "f " + std::to_string(int(t[0]) - int(v.size())) + " " + std::to_string(t[1] + 1) +
+               " " + std::to_string(t[2] + 1) + "\n";
         ply += "3 " + std::to_string(t[0]) + " " + std::to_string(t[1]) + " " +
                std::to_string(t[2]) + "\n";
         tris.push_back({v[t[0]], v[t[1]], v[t[2]]});
@@ -625,11 +628,12 @@ TEST(Formats, TheSameMeshGivesTheSameVmapAsOffPlyObjOrStl) {
 TEST(MeshScene, AMeshFileIsOneOutwardSurfaceWithItsVertexColours) {
     ScratchDir dir;
     // Inside-out tetrahedron with per-vertex colours: re-wound outward, colours interpolated.
-    std::string s = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
-                    "property float z\nproperty uchar red\nproperty uchar green\n"
-                    "property uchar blue\nelement face 4\nproperty list uchar int vertex_indices\n"
-                    "end_header\n0 0 0 255 0 0\n1 0 0 255 0 0\n0 1 0 255 0 0\n0 0 1 255 0 0\n"
-                    "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
+    std::string s =
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nproperty uchar red\nproperty uchar green\n"
+        "property uchar blue\nelement face 4\nproperty list uchar int vertex_indices\n"
+        "end_header\n0 0 0 255 0 0\n1 0 0 255 0 0\n0 1 0 255 0 0\n0 0 1 255 0 0\n"
+        "3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n";
     s.replace(s.find("3 0 2 1"), 7, "3 0 1 2");  // now every face winds inward
     s.replace(s.find("3 0 1 3"), 7, "3 0 3 1");
     s.replace(s.find("3 0 3 2"), 7, "3 0 2 3");
@@ -653,9 +657,9 @@ TEST(MeshScene, ANullRoomKeepsMeshesWhereTheFileHasThemWithTheirEmission) {
     ScratchDir dir;
     dir.write("t.stl", ascii_stl(kTetra));
     dir.write("c.xyzn", rows(" ", true, false));
-    const std::string path = dir.write(
-        "s.json",
-        R"({"room": null, "meshes": [{"file": "t.stl", "emission": [1, 2, 3]},
+    const std::string path =
+        dir.write("s.json",
+                  R"({"room": null, "meshes": [{"file": "t.stl", "emission": [1, 2, 3]},
             {"file": "t.stl", "position": [5, 0, 0], "size": 2, "albedo": [0.1, 0.2, 0.3]}],
             "clouds": [{"file": "c.xyzn", "emission": [4, 4, 4], "albedo": [0.5, 0.5, 0.5]}],
             "sampling": {"points": 400, "seed": 3}})");

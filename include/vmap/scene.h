@@ -16,8 +16,8 @@
 //                 "size": 0.25,                    // largest extent after scaling (or "scale")
 //                 "rotate": [rx, ry, rz],           // degrees, applied x then y then z
 //                 "position": [x, y, z],            // where the bottom centre of its box goes
-//                 "albedo": [r, g, b],              // default: the file's vertex colours, else 0.75
-//                 "emission": [r, g, b],            // W/m^2; default: the file's, else none
+//                 "albedo": [r, g, b],              // default: the file's vertex colours, else
+//                 0.75 "emission": [r, g, b],            // W/m^2; default: the file's, else none
 //                 "flip_normals": false } ],
 //   "clouds": [ { "file": "scan.ply", ... } ]       // point clouds, placed like meshes (same keys
 //                                                   // but flip_normals); normals estimated and

@@ -23,7 +23,8 @@ using detail::InputFile;
 
 enum class Kind { kPly, kOff, kXyz, kPcd, kObj, kStl };
 
-constexpr const char* kKnown = ".ply, .off, .xyz, .xyzn, .xyzrgb, .pts, .asc, .csv, .pcd, .obj or .stl";
+constexpr const char* kKnown =
+    ".ply, .off, .xyz, .xyzn, .xyzrgb, .pts, .asc, .csv, .pcd, .obj or .stl";
 
 Kind kind_of(const std::string& path) {
     const std::string ext = detail::lower(std::filesystem::path(path).extension().string());

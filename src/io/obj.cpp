@@ -25,11 +25,11 @@ namespace {
 
 bool skipped_statement(std::string_view k) {
     static constexpr std::string_view kSkipped[] = {
-        "vt",    "vp",    "l",    "p",       "o",      "g",       "s",         "usemtl",
-        "mtllib", "cstype", "deg", "bmat",   "step",   "curv",    "curv2",     "surf",
-        "parm",  "trim",  "hole", "scrv",    "sp",     "end",     "con",       "mg",
-        "call",  "csh",   "shadow_obj", "trace_obj", "ctech", "stech", "lod",  "maplib",
-        "usemap", "bevel", "c_interp", "d_interp",
+        "vt",     "vp",     "l",          "p",         "o",     "g",     "s",     "usemtl",
+        "mtllib", "cstype", "deg",        "bmat",      "step",  "curv",  "curv2", "surf",
+        "parm",   "trim",   "hole",       "scrv",      "sp",    "end",   "con",   "mg",
+        "call",   "csh",    "shadow_obj", "trace_obj", "ctech", "stech", "lod",   "maplib",
+        "usemap", "bevel",  "c_interp",   "d_interp",
     };
     for (std::string_view s : kSkipped)
         if (s == k) return true;
@@ -41,17 +41,17 @@ struct ObjReader {
     InputFile& in;
     ModelData out;
     std::vector<Vec3> vn;
-    std::vector<Vec3> vertex_normal;   // per vertex, from the face corners that name one
+    std::vector<Vec3> vertex_normal;  // per vertex, from the face corners that name one
     std::vector<uint8_t> has_normal;
-    size_t coloured = 0;                // vertices with "v x y z r g b"
+    size_t coloured = 0;  // vertices with "v x y z r g b"
     std::vector<uint32_t> corners;
 
     float number(std::string_view t, const char* what) {
         float v = 0;
-        if (!parse_real(t, v)) fail(in.path(), "line ", in.line(), ": ", what, ": invalid number ",
-                                    quoted(t));
-        if (!std::isfinite(v)) fail(in.path(), "line ", in.line(), ": ", what, ": non-finite ",
-                                    quoted(t));
+        if (!parse_real(t, v))
+            fail(in.path(), "line ", in.line(), ": ", what, ": invalid number ", quoted(t));
+        if (!std::isfinite(v))
+            fail(in.path(), "line ", in.line(), ": ", what, ": non-finite ", quoted(t));
         return v;
     }
 
@@ -61,8 +61,7 @@ struct ObjReader {
             fail(in.path(), "line ", in.line(), ": v: expected 3, 4 or 6 numbers, found ",
                  w.size() - 1);
         }
-        out.points.positions.push_back(
-            {number(w[1], "v"), number(w[2], "v"), number(w[3], "v")});
+        out.points.positions.push_back({number(w[1], "v"), number(w[2], "v"), number(w[3], "v")});
         if (w.size() == 5) number(w[4], "v (w)");
         if (w.size() == 7) {
             const Vec3 c{number(w[4], "v colour"), number(w[5], "v colour"),
@@ -140,9 +139,8 @@ struct ObjReader {
             p.normals = std::move(vertex_normal);
             p.normals.resize(n);
         } else if (!vn.empty()) {
-            out.notes.push_back(in.path() + ": ignored vn normals (" +
-                                std::to_string(with_normal) + " of " + std::to_string(n) +
-                                " vertices have one)");
+            out.notes.push_back(in.path() + ": ignored vn normals (" + std::to_string(with_normal) +
+                                " of " + std::to_string(n) + " vertices have one)");
         }
     }
 };

@@ -10,9 +10,9 @@
 #include <cstring>
 #include <new>
 #include <optional>
-#include <utility>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "io/line_reader.h"
@@ -85,9 +85,9 @@ struct Header {
 
 Role role_of(std::string_view name) {
     static constexpr std::pair<std::string_view, Role> kNames[] = {
-        {"x", kX},          {"y", kY},          {"z", kZ},          {"normal_x", kNx},
-        {"normal_y", kNy},  {"normal_z", kNz},  {"nx", kNx},        {"ny", kNy},
-        {"nz", kNz},        {"rgb", kRgb},      {"rgba", kRgb},     {"emission_r", kEr},
+        {"x", kX},           {"y", kY},           {"z", kZ},      {"normal_x", kNx},
+        {"normal_y", kNy},   {"normal_z", kNz},   {"nx", kNx},    {"ny", kNy},
+        {"nz", kNz},         {"rgb", kRgb},       {"rgba", kRgb}, {"emission_r", kEr},
         {"emission_g", kEg}, {"emission_b", kEb},
     };
     for (const auto& [n, r] : kNames)
@@ -115,8 +115,8 @@ void per_field(const InputFile& in, Header& h, const std::vector<std::string_vie
         const std::string_view v = w[i + 1];
         if (w[0] == "TYPE") {
             if (v != "F" && v != "I" && v != "U") {
-                fail(in.path(), "header line ", in.line(), ": field ", f.name,
-                     ": unknown TYPE ", quoted(v), " (expected F, I or U)");
+                fail(in.path(), "header line ", in.line(), ": field ", f.name, ": unknown TYPE ",
+                     quoted(v), " (expected F, I or U)");
             }
             f.type = v[0];
         } else if (w[0] == "SIZE") {
@@ -152,8 +152,10 @@ void header_line(InputFile& in, Header& h, const std::vector<std::string_view>& 
         h.have_points |= key == "POINTS";
     } else if (key == "VIEWPOINT") {
         if (w.size() != 8) {
-            fail(in.path(), "header line ", in.line(), ": VIEWPOINT needs 7 numbers (tx ty tz qw "
-                 "qx qy qz), found ", w.size() - 1);
+            fail(in.path(), "header line ", in.line(),
+                 ": VIEWPOINT needs 7 numbers (tx ty tz qw "
+                 "qx qy qz), found ",
+                 w.size() - 1);
         }
         float v[7];
         for (int k = 0; k < 7; ++k) {
@@ -192,16 +194,18 @@ void check_fields(const InputFile& in, Header& h) {
     for (Role r : {kX, kY, kZ}) {
         if (h.role_field[r] < 0) fail(in.path(), "header: no '", "xyz"[r - kX], "' field");
     }
-    const int normals = (h.role_field[kNx] >= 0) + (h.role_field[kNy] >= 0) +
-                        (h.role_field[kNz] >= 0);
+    const int normals =
+        (h.role_field[kNx] >= 0) + (h.role_field[kNy] >= 0) + (h.role_field[kNz] >= 0);
     if (normals != 0 && normals != 3) {
-        fail(in.path(), "header: only ", normals, " of the 3 normal fields (normal_x, normal_y, "
+        fail(in.path(), "header: only ", normals,
+             " of the 3 normal fields (normal_x, normal_y, "
              "normal_z)");
     }
-    const int emission = (h.role_field[kEr] >= 0) + (h.role_field[kEg] >= 0) +
-                         (h.role_field[kEb] >= 0);
+    const int emission =
+        (h.role_field[kEr] >= 0) + (h.role_field[kEg] >= 0) + (h.role_field[kEb] >= 0);
     if (emission != 0 && emission != 3) {
-        fail(in.path(), "header: only ", emission, " of the 3 emission fields (emission_r, "
+        fail(in.path(), "header: only ", emission,
+             " of the 3 emission fields (emission_r, "
              "emission_g, emission_b)");
     }
 }
@@ -234,8 +238,8 @@ Header parse_header(InputFile& in) {
     }
     check_fields(in, h);
     if (!h.have_points) h.points = h.width * h.height;
-    if (h.width != 0 && (h.height == 0 || h.points / h.height != h.width ||
-                         h.points % h.height != 0)) {
+    if (h.width != 0 &&
+        (h.height == 0 || h.points / h.height != h.width || h.points % h.height != 0)) {
         fail(in.path(), "header: WIDTH ", h.width, " x HEIGHT ", h.height, " is not POINTS ",
              h.points);
     }
@@ -277,9 +281,8 @@ struct Sink {
         }
         if (h.role_field[kRgb] >= 0) {
             const uint32_t c = bits(h.role_field[kRgb]);
-            ps.colors.push_back(Vec3{float((c >> 16) & 255), float((c >> 8) & 255),
-                                     float(c & 255)} /
-                                255.0f);
+            ps.colors.push_back(
+                Vec3{float((c >> 16) & 255), float((c >> 8) & 255), float(c & 255)} / 255.0f);
         }
         if (h.role_field[kEr] >= 0) {
             const Vec3 e{float(get(kEr)), float(get(kEg)), float(get(kEb))};
@@ -299,17 +302,25 @@ double load_scalar(const uint8_t* p, char type, int size) {
     if (type == 'F') return size == 4 ? get(float()) : get(double());
     if (type == 'U') {
         switch (size) {
-            case 1: return get(uint8_t());
-            case 2: return get(uint16_t());
-            case 4: return get(uint32_t());
-            default: return get(uint64_t());
+            case 1:
+                return get(uint8_t());
+            case 2:
+                return get(uint16_t());
+            case 4:
+                return get(uint32_t());
+            default:
+                return get(uint64_t());
         }
     }
     switch (size) {
-        case 1: return get(int8_t());
-        case 2: return get(int16_t());
-        case 4: return get(int32_t());
-        default: return get(int64_t());
+        case 1:
+            return get(int8_t());
+        case 2:
+            return get(int16_t());
+        case 4:
+            return get(int32_t());
+        default:
+            return get(int64_t());
     }
 }
 
@@ -368,8 +379,8 @@ void read_binary(InputFile& in, const Header& h, Sink& sink) {
         const uint64_t n = std::min(kChunk, h.points - done);
         const uint64_t at = in.offset();
         if (in.read_bytes(reinterpret_cast<char*>(buf.data()), n * h.record) != n * h.record) {
-            fail(in.path(), "truncated: byte ", at, ": the header says ", h.points,
-                 " points of ", h.record, " bytes");
+            fail(in.path(), "truncated: byte ", at, ": the header says ", h.points, " points of ",
+                 h.record, " bytes");
         }
         for (uint64_t i = 0; i < n; ++i) {
             const uint8_t* rec = buf.data() + i * h.record;

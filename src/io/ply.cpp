@@ -860,8 +860,9 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
     }
     if (points.has_radii()) header += "property float radius\n";
     if (emits) {
-        header += "property float emission_r\nproperty float emission_g\n"
-                  "property float emission_b\n";
+        header +=
+            "property float emission_r\nproperty float emission_g\n"
+            "property float emission_b\n";
     }
     header += "end_header\n";
 

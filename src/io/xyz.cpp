@@ -67,15 +67,24 @@ bool assign_named(std::string name, int column, Layout& layout) {
         int k;
     };
     static const Name kNames[] = {
-        {"x", &Layout::xyz, 0},           {"y", &Layout::xyz, 1},
-        {"z", &Layout::xyz, 2},           {"nx", &Layout::normal, 0},
-        {"ny", &Layout::normal, 1},       {"nz", &Layout::normal, 2},
-        {"normal_x", &Layout::normal, 0}, {"normal_y", &Layout::normal, 1},
-        {"normal_z", &Layout::normal, 2}, {"r", &Layout::color, 0},
-        {"g", &Layout::color, 1},         {"b", &Layout::color, 2},
-        {"red", &Layout::color, 0},       {"green", &Layout::color, 1},
-        {"blue", &Layout::color, 2},      {"emission_r", &Layout::emission, 0},
-        {"emission_g", &Layout::emission, 1}, {"emission_b", &Layout::emission, 2},
+        {"x", &Layout::xyz, 0},
+        {"y", &Layout::xyz, 1},
+        {"z", &Layout::xyz, 2},
+        {"nx", &Layout::normal, 0},
+        {"ny", &Layout::normal, 1},
+        {"nz", &Layout::normal, 2},
+        {"normal_x", &Layout::normal, 0},
+        {"normal_y", &Layout::normal, 1},
+        {"normal_z", &Layout::normal, 2},
+        {"r", &Layout::color, 0},
+        {"g", &Layout::color, 1},
+        {"b", &Layout::color, 2},
+        {"red", &Layout::color, 0},
+        {"green", &Layout::color, 1},
+        {"blue", &Layout::color, 2},
+        {"emission_r", &Layout::emission, 0},
+        {"emission_g", &Layout::emission, 1},
+        {"emission_b", &Layout::emission, 2},
     };
     for (const Name& n : kNames) {
         if (n.name != name) continue;
@@ -204,8 +213,9 @@ struct Reader {
         if (layout.normal[0] >= 0) {
             p.normals.push_back(triple(w, layout.normal, "normal"));
             if (layout.guessed_at != 0 && std::fabs(norm3(p.normals.back()) - 1) >= 0.01) {
-                fail(in.path(), "line ", in.line(), ": columns 4-6 are not a unit normal as on line ",
-                     layout.guessed_at, "; name the columns with a first line such as "
+                fail(in.path(), "line ", in.line(),
+                     ": columns 4-6 are not a unit normal as on line ", layout.guessed_at,
+                     "; name the columns with a first line such as "
                      "//X,Y,Z,R,G,B");
             }
         }
@@ -217,8 +227,11 @@ struct Reader {
             for (int k = 0; k < 3; ++k) {
                 const bool integer = is_integer_token(w[layout.color[k]]);
                 if (layout.guessed_at != 0 && !integer) {
-                    fail(in.path(), "line ", in.line(), ": columns 4-6 are not integer colours "
-                         "as on line ", layout.guessed_at, "; name the columns with a first "
+                    fail(in.path(), "line ", in.line(),
+                         ": columns 4-6 are not integer colours "
+                         "as on line ",
+                         layout.guessed_at,
+                         "; name the columns with a first "
                          "line such as //X,Y,Z,Nx,Ny,Nz");
                 }
                 colours_all_integers &= integer;

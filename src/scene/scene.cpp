@@ -195,8 +195,8 @@ Placement placement(const Ctx& cx, const json& m, const std::string& f, const st
     if (m.contains("size")) pl.scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
     if (m.contains("scale")) pl.scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
     pl.rot = m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
-    const bool moved = m.contains("size") || m.contains("scale") || m.contains("rotate") ||
-                       m.contains("position");
+    const bool moved =
+        m.contains("size") || m.contains("scale") || m.contains("rotate") || m.contains("position");
     if (!sc.has_room && !moved) return pl;  // the file's own coordinates, exactly
     pl.identity = false;
     const Vec3 own_base{pl.mid.x, lo.y, pl.mid.z};
@@ -233,8 +233,7 @@ void orient_outward(Mesh& mesh, bool flip_requested) {
         for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
 }
 
-void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path& dir,
-              Scene& sc) {
+void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path& dir, Scene& sc) {
     cx.known(m, f,
              {"file", "name", "size", "scale", "rotate", "position", "albedo", "emission",
               "flip_normals"});
@@ -267,8 +266,7 @@ void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path
     sc.surfaces.push_back(std::move(s));
 }
 
-void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::path& dir,
-               Scene& sc) {
+void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::path& dir, Scene& sc) {
     cx.known(c, f, {"file", "name", "size", "scale", "rotate", "position", "albedo", "emission"});
     const fs::path file = entry_file(cx, c, f, dir);
     PointSet ps;
@@ -281,7 +279,8 @@ void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::pat
     for (Vec3& p : ps.positions) p = pl.point(p);
     for (Vec3& n : ps.normals) n = pl.direction(n);
     for (float& r : ps.radii) r *= pl.scale;
-    if (c.contains("albedo")) ps.colors.assign(ps.size(), cx.vec3(c["albedo"], f + ".albedo", 0, 1));
+    if (c.contains("albedo"))
+        ps.colors.assign(ps.size(), cx.vec3(c["albedo"], f + ".albedo", 0, 1));
     if (c.contains("emission")) {
         ps.emission.assign(ps.size(), cx.vec3(c["emission"], f + ".emission", 0, 1e6));
     } else if (ps.emission.empty()) {
@@ -421,8 +420,9 @@ Scene load_scene(const std::string& path) {
         add_walls(cx, j.value("room", json::object()), sc);
         add_light(cx, j.value("light", json::object()), sc);
     } else if (j.contains("light")) {
-        cx.fail("light", "a light needs the room (\"room\": null); give a mesh or cloud "
-                         "\"emission\" instead");
+        cx.fail("light",
+                "a light needs the room (\"room\": null); give a mesh or cloud "
+                "\"emission\" instead");
     }
     const fs::path dir = fs::path(path).parent_path();
     for (const char* key : {"meshes", "clouds"}) {

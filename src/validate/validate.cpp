@@ -165,9 +165,10 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                         path));
     Scene sc = load_scene(path);
     if (!sc.clouds.empty())
-        throw Error(fmt::format("{}: clouds: validate takes the truth from triangles, which a "
-                                "point cloud does not have",
-                                path));
+        throw Error(
+            fmt::format("{}: clouds: validate takes the truth from triangles, which a "
+                        "point cloud does not have",
+                        path));
     if (params.points) sc.points = params.points;
     PointSet pts = sample_scene(sc);
     const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});

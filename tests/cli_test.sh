@@ -465,6 +465,19 @@ if expect_ok "gi on meshes without the room" gi lit.json --bounces 1 --backend c
     --max-height 5 -o lit.png --size 64x64; then
     expect_stdout "every point of an emitting mesh emits" '^points: +2000 \(2000 emitting\)'
 fi
+# A PLY cloud whose emission is per point: a lit plate facing a plate.
+awk 'BEGIN {
+    printf "ply\nformat ascii 1.0\nelement vertex 800\nproperty float x\nproperty float y\n";
+    printf "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n";
+    printf "property float emission_r\nproperty float emission_g\nproperty float emission_b\n";
+    printf "end_header\n";
+    for (i = 0; i < 400; i++) printf "%.4f 0 %.4f 0 1 0 0 0 0\n", (i % 20) / 20, int(i / 20) / 20;
+    for (i = 0; i < 400; i++) printf "%.4f 0.5 %.4f 0 -1 0 3 3 3\n", (i % 20) / 20, int(i / 20) / 20;
+}' >plates.ply
+if expect_ok "gi on a PLY cloud with per-point emission" gi plates.ply --bounces 1 \
+    --backend cpu --max-height 4 --ply plates-lit.ply; then
+    expect_stdout "the cloud's emission is used" '^points: +800 \(400 emitting\)'
+fi
 run validate boxes.obj --points 2000 --pairs 2000 --heights 4
 if [ "$rc" -eq 0 ] && grep -q 'boxes' out.txt; then ok "validate takes a mesh as its own truth"
 else fail "validate on a mesh file"; show validate boxes.obj --points 2000 --pairs 2000 --heights 4; fi

@@ -690,6 +690,29 @@ TEST(MeshScene, ANullRoomKeepsMeshesWhereTheFileHasThemWithTheirEmission) {
     EXPECT_EQ(sc.room_size.x, 6.0f);  // the box of both meshes and the cloud
 }
 
+TEST(MeshScene, CloudsArePlacedWithTheirNormalsAndRadii) {
+    ScratchDir dir;
+    dir.write("c.xyzn", rows(" ", true, false));
+    const Scene sc =
+        load_scene(dir.write("s.json", R"({"room": null, "clouds": [{"file": "c.xyzn", "scale": 2,
+                      "rotate": [0, 0, 90], "position": [10, 0, 0]}]})"));
+    ASSERT_EQ(sc.clouds.size(), 1u);
+    const PointSet& c = sc.clouds[0];
+    const PointSet raw = load_point_cloud(dir.path("c.xyzn"));
+    ASSERT_EQ(c.size(), kP.size());
+    float ylo = INFINITY;
+    for (size_t i = 0; i < c.size(); ++i) {
+        // Rotated 90 degrees about z: (x, y, z) -> (-y, x, z), for normals as for positions.
+        EXPECT_NEAR(c.normals[i].x, -kN[i].y, 1e-6f) << i;
+        EXPECT_NEAR(c.normals[i].y, kN[i].x, 1e-6f) << i;
+        EXPECT_FLOAT_EQ(c.radii[i], 2 * raw.radii[i]) << i;
+        ylo = std::min(ylo, c.positions[i].y);
+    }
+    EXPECT_NEAR(ylo, 0.0f, 1e-5f);  // stood on its position
+    const Vec3 d = c.positions[1] - c.positions[0], d0 = kP[1] - kP[0];
+    EXPECT_NEAR(length(d), 2 * length(d0), 1e-5f);
+}
+
 TEST(MeshScene, ScenesWithoutTheRoomAreCheckedByField) {
     ScratchDir dir;
     dir.write("t.stl", ascii_stl(kTetra));

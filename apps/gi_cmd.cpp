@@ -50,6 +50,19 @@ struct GiOptions {
     bool as_points = false;
 };
 
+// The points that emit; none is an error naming what to add, raised before any V-map is built.
+size_t count_emitters(const PointSet& ps, const std::string& input) {
+    size_t emitters = 0;
+    for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
+    if (emitters == 0)
+        throw Error(fmt::format(
+            "{}: no emitters: no point has emission > 0; add \"emission\": [r, g, b] to a mesh "
+            "or cloud entry of a scene file (or a \"light\" with the room), or the properties "
+            "emission_r, emission_g, emission_b to a PLY cloud (a .vmap keeps its input's)",
+            input));
+    return emitters;
+}
+
 BuildParams build_params(const GiOptions& o, const std::optional<OctreeParams>& file_octree) {
     BuildParams bp;
     if (file_octree) bp.octree = *file_octree;
@@ -73,7 +86,9 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
         BuildStats st;
-        VisibilityMap vm = build_vmap(sample_scene(sc), build_params(o, sc.octree), &st, o.input);
+        PointSet points = sample_scene(sc);
+        count_emitters(points, o.input);
+        VisibilityMap vm = build_vmap(std::move(points), build_params(o, sc.octree), &st, o.input);
         build_s = seconds_since(t0);
         what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
                            has_suffix_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
@@ -84,8 +99,10 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         throw Error(fmt::format("{}: --points/--seed apply to scene and mesh files", o.input));
     if (!is_vmap) {
         BuildStats st;
+        PointSet points = load_point_cloud(o.input);
+        count_emitters(points, o.input);
         VisibilityMap vm =
-            build_vmap(load_point_cloud(o.input), build_params(o, std::nullopt), &st, o.input);
+            build_vmap(std::move(points), build_params(o, std::nullopt), &st, o.input);
         if (!o.scene.empty()) camera = load_scene(o.scene).camera;
         build_s = seconds_since(t0);
         what = fmt::format("point cloud {}, V-map built on {} in {:.2f} s", o.input, st.backend,
@@ -127,14 +144,7 @@ int run_gi(GiOptions& o) {
     if (o.fov) cam.fov_y_deg = *o.fov;
     if (!o.image.empty())
         check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    size_t emitters = 0;
-    for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
-    if (emitters == 0)
-        throw Error(fmt::format(
-            "{}: no emitters: no point has emission > 0; add \"emission\": [r, g, b] to a mesh "
-            "or cloud entry of a scene file (or a \"light\" with the room), or the properties "
-            "emission_r, emission_g, emission_b to a PLY cloud (a .vmap keeps its input's)",
-            o.input));
+    const size_t emitters = count_emitters(ps, o.input);
     if (!ps.has_radii())
         throw Error(
             fmt::format("{}: points have no splat radii (needed for their areas)", o.input));

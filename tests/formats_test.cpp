@@ -336,7 +336,12 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
     EXPECT_READ_ERROR(read_pcd(file("nn.pcd",
                                     "FIELDS x y z normal_x normal_y normal_z\nPOINTS 1\n"
                                     "DATA ascii\n1 2 3 nan 0 0\n")),
-                      "nn.pcd", "point 0", "non-finite normal");
+                      "nn.pcd", "point 0 (line 4)", "non-finite normal");
+    std::string inf = bin;  // the first point's normal_x, in the binary records
+    const float infinity = INFINITY;
+    std::memcpy(&inf[bin.find("DATA binary\n") + 12], &infinity, 4);
+    EXPECT_READ_ERROR(read_pcd(file("inf.pcd", inf)), "inf.pcd", "point 0 (byte",
+                      "non-finite normal");
     EXPECT_READ_ERROR(
         read_pcd(file("g.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1 2 3\n1 2 zz\n")), "g.pcd",
         "point 1 (line 5): field z", "invalid number 'zz'");

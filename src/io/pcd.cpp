@@ -261,10 +261,17 @@ struct Sink {
     uint64_t nan_points = 0;
 
     // value(field, element): the value as a double; bits(field): a packed colour's 32 bits.
+    // `at`: the point's line (ascii), its byte offset in the file (binary) or in the
+    // decompressed data (binary_compressed), for messages.
     template <class Value, class Bits>
-    void add(const InputFile& in, uint64_t index, Value value, Bits bits) {
+    void add(const InputFile& in, uint64_t index, uint64_t at, Value value, Bits bits) {
         auto get = [&](Role r) { return value(h.role_field[r]); };
-        auto where = [&] { return "point " + std::to_string(index); };
+        auto where = [&] {
+            const char* unit = h.data == Data::kAscii    ? " (line "
+                               : h.data == Data::kBinary ? " (byte "
+                                                         : " (decompressed byte ";
+            return "point " + std::to_string(index) + unit + std::to_string(at) + ")";
+        };
         const double x = get(kX), y = get(kY), z = get(kZ);
         if (std::isnan(x) || std::isnan(y) || std::isnan(z)) {
             ++nan_points;
@@ -360,7 +367,7 @@ void read_ascii(InputFile& in, const Header& h, Sink& sink) {
             if (h.fields[f].type == 'F') return std::bit_cast<uint32_t>(float(value(f)));
             return static_cast<uint32_t>(static_cast<int64_t>(value(f)));
         };
-        sink.add(in, index, value, bits);
+        sink.add(in, index, in.line(), value, bits);
         ++index;
     }
     while (in.next_line(line)) {
@@ -389,7 +396,7 @@ void read_binary(InputFile& in, const Header& h, Sink& sink) {
                 return load_scalar(rec + fd.offset, fd.type, fd.size);
             };
             auto bits = [&](int f) { return load_bits(rec + h.fields[f].offset); };
-            sink.add(in, done + i, value, bits);
+            sink.add(in, done + i, at + i * h.record, value, bits);
         }
         done += n;
     }
@@ -436,7 +443,8 @@ void read_compressed(InputFile& in, const Header& h, Sink& sink) {
             return load_scalar(at_field(f), h.fields[f].type, h.fields[f].size);
         };
         auto bits = [&](int f) { return load_bits(at_field(f)); };
-        sink.add(in, i, value, bits);
+        const Field& fx = h.fields[h.role_field[kX]];
+        sink.add(in, i, h.points * fx.offset + i * fx.size, value, bits);
     }
 }
 

@@ -70,8 +70,10 @@ class InputFile {
         std::memcpy(out, buffer_.data() + pos_, got);
         pos_ += got;
         if (got < n) {
-            got += std::fread(out + got, 1, n - got, file_.get());
+            const size_t more = std::fread(out + got, 1, n - got, file_.get());
             check_read();
+            read_ += more;
+            got += more;
         }
         offset_ += got;
         return got;
@@ -79,15 +81,20 @@ class InputFile {
 
   private:
     void refill() {
-        constexpr size_t kBlock = size_t{1} << 20;
+        // A block of 1 MiB, or what the file has left (plus one byte, to see its end) when that
+        // is less, so that small files are not read into a megabyte of zeroes.
+        constexpr uint64_t kBlock = uint64_t{1} << 20;
+        const uint64_t left = size_ > read_ ? size_ - read_ : 0;
+        const size_t want = static_cast<size_t>(std::clamp<uint64_t>(left + 1, 4096, kBlock));
         std::memmove(buffer_.data(), buffer_.data() + pos_, end_ - pos_);
         end_ -= pos_;
         pos_ = 0;
-        if (buffer_.size() < end_ + kBlock + 1) buffer_.resize(end_ + kBlock + 1);
-        const size_t got = std::fread(buffer_.data() + end_, 1, kBlock, file_.get());
+        if (buffer_.size() < end_ + want + 1) buffer_.resize(end_ + want + 1);
+        const size_t got = std::fread(buffer_.data() + end_, 1, want, file_.get());
         check_read();
+        read_ += got;
         end_ += got;
-        eof_ = got < kBlock;
+        eof_ = got < want;
         buffer_[end_] = '\0';
     }
 
@@ -98,6 +105,7 @@ class InputFile {
     std::string path_;
     std::unique_ptr<std::FILE, int (*)(std::FILE*)> file_;
     uint64_t size_ = 0;
+    uint64_t read_ = 0;  // bytes taken from the file
     std::vector<char> buffer_ = std::vector<char>(1, '\0');
     size_t pos_ = 0, end_ = 0;
     bool eof_ = false;

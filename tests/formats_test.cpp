@@ -548,6 +548,17 @@ TEST(PlyFields, EmissionRoundTripsThroughTheWriter) {
     EXPECT_TRUE(read_ply(dir.path("n.ply")).points.emission.empty());
 }
 
+TEST(OffNotes, FaceColoursAndExtraVertexValuesAreNoted) {
+    const ModelData m = read_off(std::string(VMAP_TEST_DATA) + "/io/pyramid.off");
+    ASSERT_FALSE(m.notes.empty());
+    EXPECT_NE(m.notes.back().find("after the faces' indices"), std::string::npos);
+    ScratchDir dir;
+    const ModelData v =
+        read_off(dir.write("uv.off", "OFF\n3 1 0\n0 0 0 9\n1 0 0 9\n0 1 0 9\n3 0 1 2\n"));
+    ASSERT_EQ(v.notes.size(), 1u);
+    EXPECT_NE(v.notes[0].find("vertex lines"), std::string::npos);
+}
+
 // ---- dispatch ------------------------------------------------------------------------------
 
 TEST(Formats, MeshFilesAreToldFromPointClouds) {

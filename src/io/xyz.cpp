@@ -215,8 +215,7 @@ struct Reader {
             if (layout.guessed_at != 0 && std::fabs(norm3(p.normals.back()) - 1) >= 0.01) {
                 fail(in.path(), "line ", in.line(),
                      ": columns 4-6 are not a unit normal as on line ", layout.guessed_at,
-                     "; name the columns with a first line such as "
-                     "//X,Y,Z,R,G,B");
+                     "; name the columns with a first line such as //X,Y,Z,R,G,B");
             }
         }
         if (layout.color[0] >= 0) {
@@ -228,11 +227,8 @@ struct Reader {
                 const bool integer = is_integer_token(w[layout.color[k]]);
                 if (layout.guessed_at != 0 && !integer) {
                     fail(in.path(), "line ", in.line(),
-                         ": columns 4-6 are not integer colours "
-                         "as on line ",
-                         layout.guessed_at,
-                         "; name the columns with a first "
-                         "line such as //X,Y,Z,Nx,Ny,Nz");
+                         ": columns 4-6 are not integer colours as on line ", layout.guessed_at,
+                         "; name the columns with a first line such as //X,Y,Z,Nx,Ny,Nz");
                 }
                 colours_all_integers &= integer;
             }

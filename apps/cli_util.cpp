@@ -9,6 +9,7 @@
 
 #include "apps/commands.h"
 #include "vmap/error.h"
+#include "vmap/scene.h"
 
 namespace vmap::cli {
 
@@ -16,6 +17,18 @@ bool ends_with_ci(std::string s, const std::string& suffix) {
     std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
     return s.size() >= suffix.size() &&
            s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
+}
+
+bool sampled_input(const std::string& path, bool as_points) {
+    try {
+        return is_scene_input(path, as_points);
+    } catch (const Error&) {
+        return true;
+    }
+}
+
+void print_notes(const std::vector<std::string>& notes) {
+    for (const std::string& note : notes) fmt::print(stderr, "note:       {}\n", note);
 }
 
 Vec3 parse_vec3(const std::string& text, const std::string& option) {

@@ -7,6 +7,7 @@
 #include <functional>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "vmap/vec.h"
 
@@ -27,6 +28,13 @@ Vec3 parse_vec3(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
+
+// Whether the input is sampled: a scene file, or a mesh file unless `as_points` (is_scene_input),
+// so --points/--seed apply. A file that cannot be read counts as sampled: its loader reports it.
+bool sampled_input(const std::string& path, bool as_points);
+
+// Prints what the input files held but vmap does not use (Scene::notes), one "note:" line each.
+void print_notes(const std::vector<std::string>& notes);
 
 // Fails early (before any work or output) when an output's folder does not exist; throws
 // vmap::Error naming the file and `option`. An empty path is no output.

@@ -1,7 +1,8 @@
 // `vmap gi`: diffuse global illumination over the V-map (paper §6.3, include/vmap/gi.h).
-//   vmap gi [SCENE.json | MAP.vmap] [-o image.png] [--ply lit.ply] [--bounces 3] [--theta 1]
-// A scene is sampled and its V-map built on the fly (the scene's octree defaults); a .vmap file
-// carries the points' emission, albedo and splat radii itself.
+//   vmap gi [SCENE.json | MESH | CLOUD | MAP.vmap] [-o image.png] [--ply lit.ply] [--bounces 3]
+// A scene or mesh is sampled and its V-map built on the fly (the scene's octree defaults), a
+// point cloud's V-map built from its points; a .vmap file carries the points' emission, albedo
+// and splat radii itself.
 #include "apps/gi_cmd.h"
 
 #include <fmt/format.h>
@@ -46,33 +47,71 @@ struct GiOptions {
     std::optional<float> fov;
     RenderOptions render;
     bool compare = false;
+    bool as_points = false;
 };
 
-// The V-map of the input: loaded, or built from a scene with its octree defaults.
+// The points that emit; none is an error naming what to add, raised before any V-map is built.
+size_t count_emitters(const PointSet& ps, const std::string& input) {
+    size_t emitters = 0;
+    for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
+    if (emitters == 0)
+        throw Error(fmt::format(
+            "{}: no emitters: no point has emission > 0; add \"emission\": [r, g, b] to a mesh "
+            "or cloud entry of a scene file (or a \"light\" with the room), or the properties "
+            "emission_r, emission_g, emission_b to a PLY cloud (a .vmap keeps its input's)",
+            input));
+    return emitters;
+}
+
+BuildParams build_params(const GiOptions& o, const std::optional<OctreeParams>& file_octree) {
+    BuildParams bp;
+    if (file_octree) bp.octree = *file_octree;
+    if (o.max_height) bp.octree.max_height = *o.max_height;
+    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    bp.backend = o.gi.backend;
+    bp.progress = detail::stderr_is_terminal();
+    return bp;
+}
+
+// The V-map of the input: loaded, or built from a scene or mesh (sampled, with the scene's
+// octree defaults) or a point cloud.
 VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
-    if (has_suffix_ci(o.input, ".json")) {
+    const bool is_vmap = has_suffix_ci(o.input, ".vmap");
+    if (!is_vmap && is_scene_input(o.input, o.as_points)) {
         Scene sc = load_scene(o.input);
+        print_notes(sc.notes);
         camera = sc.camera;
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
-        BuildParams bp;
-        if (sc.octree) bp.octree = *sc.octree;
-        if (o.max_height) bp.octree.max_height = *o.max_height;
-        if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-        bp.backend = o.gi.backend;
-        bp.progress = detail::stderr_is_terminal();
         BuildStats st;
-        VisibilityMap vm = build_vmap(sample_scene(sc), bp, &st, o.input);
+        PointSet points = sample_scene(sc);
+        count_emitters(points, o.input);
+        VisibilityMap vm = build_vmap(std::move(points), build_params(o, sc.octree), &st, o.input);
         build_s = seconds_since(t0);
-        what = fmt::format("scene {} ({}), V-map built on {} in {:.2f} s", sc.name, o.input,
+        what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
+                           has_suffix_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
                            st.backend, build_s);
         return vm;
     }
-    if (o.points || o.seed || o.max_height || o.leaf_points)
+    if (o.points || o.seed)
+        throw Error(fmt::format("{}: --points/--seed apply to scene and mesh files", o.input));
+    if (!is_vmap) {
+        BuildStats st;
+        PointSet points = load_point_cloud(o.input);
+        count_emitters(points, o.input);
+        VisibilityMap vm =
+            build_vmap(std::move(points), build_params(o, std::nullopt), &st, o.input);
+        if (!o.scene.empty()) camera = load_scene(o.scene).camera;
+        build_s = seconds_since(t0);
+        what = fmt::format("point cloud {}, V-map built on {} in {:.2f} s", o.input, st.backend,
+                           build_s);
+        return vm;
+    }
+    if (o.max_height || o.leaf_points)
         throw Error(fmt::format(
-            "{}: --points/--seed/--max-height/--leaf-points apply to scene files (.json)",
+            "{}: --max-height/--leaf-points apply when the V-map is built, not to a .vmap",
             o.input));
     VisibilityMap vm = load_vmap(o.input);
     if (!o.scene.empty()) camera = load_scene(o.scene).camera;
@@ -105,13 +144,7 @@ int run_gi(GiOptions& o) {
     if (o.fov) cam.fov_y_deg = *o.fov;
     if (!o.image.empty())
         check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    size_t emitters = 0;
-    for (const Vec3& e : ps.emission) emitters += e.x > 0 || e.y > 0 || e.z > 0;
-    if (emitters == 0)
-        throw Error(fmt::format(
-            "{}: no emitters: no point has emission > 0 (a scene needs a \"light\"; a .vmap keeps "
-            "the emission its scene gave)",
-            o.input));
+    const size_t emitters = count_emitters(ps, o.input);
     if (!ps.has_radii())
         throw Error(
             fmt::format("{}: points have no splat radii (needed for their areas)", o.input));
@@ -188,8 +221,8 @@ GiCommands add_gi_commands(CLI::App& app) {
         "gi", "Diffuse global illumination over the V-map (hierarchical radiosity; paper §6.3)");
     c.gi = gi;
     gi->add_option("input", o->input,
-                   "Scene file (.json; V-map built on the fly) or .vmap file. Default: "
-                   "scenes/cornell-bunny.json");
+                   "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
+                   "file. Default: scenes/cornell-bunny.json");
     gi->add_option("-o,--output", o->image, "Write the lit scene as a PNG");
     gi->add_option("--ply", o->ply, "Write the points with their lit display colours (PLY)");
     gi->add_option("--bounces", o->gi.bounces, "Gather steps after B = E (1: direct light)")
@@ -227,6 +260,8 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("--supersample", o->render.supersample, "s x s samples per pixel (1..4)")
         ->check(CLI::Range(1, 4))
         ->capture_default_str();
+    gi->add_flag("--as-points", o->as_points,
+                 "Take a mesh file's vertices as a point cloud instead of sampling its faces");
     gi->add_option("--points", o->points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     gi->add_option("--seed", o->seed, "Override the scene's sampling seed");

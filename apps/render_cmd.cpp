@@ -1,6 +1,6 @@
 // `vmap render`: pictures of a scene, a point cloud or a .vmap file (issue 4).
 //
-// Input: a scene (.json: sampled; --points/--seed override), a point cloud (.ply/.off) or a
+// Input: a scene (.json) or a mesh file (sampled; --points/--seed override), a point cloud or a
 // .vmap file (its points; the camera from --scene, else the default). Modes:
 //   albedo    the points' colours, unshaded
 //   shaded    colours x (ambient + |n.v|)
@@ -38,6 +38,7 @@ struct RenderArgs {
     std::vector<int> heights{7, 9};
     std::string backend = "auto";
     int time_runs = 0;
+    bool as_points = false;
     RenderOptions opt;
 };
 
@@ -52,8 +53,9 @@ struct Source {
 Source load_source(RenderArgs& a) {
     Source s;
     if (a.input.empty()) a.input = default_scene_path();
-    if (ends_with_ci(a.input, ".json")) {
+    if (!ends_with_ci(a.input, ".vmap") && is_scene_input(a.input, a.as_points)) {
         Scene sc = load_scene(a.input);
+        print_notes(sc.notes);
         if (a.points) sc.points = *a.points;
         if (a.seed) sc.seed = *a.seed;
         s.points = sample_scene(sc);
@@ -138,8 +140,10 @@ void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
 
 int run_render(RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
-    if ((a.points || a.seed) && !a.input.empty() && !ends_with_ci(a.input, ".json")) {
-        fmt::print(stderr, "vmap render: --points/--seed apply to scene files (.json), not to {}\n",
+    if ((a.points || a.seed) && !a.input.empty() &&
+        (ends_with_ci(a.input, ".vmap") || !sampled_input(a.input, a.as_points))) {
+        fmt::print(stderr,
+                   "vmap render: --points/--seed apply to scene and mesh files, not to {}\n",
                    a.input);
         return 2;
     }
@@ -220,7 +224,7 @@ Command add_render_command(CLI::App& app) {
     auto a = std::make_shared<RenderArgs>();
     auto* c = app.add_subcommand("render", "Render a scene, point cloud or V-map to PNG");
     c->add_option("input", a->input,
-                  "Scene (.json), point cloud (.ply/.off) or .vmap file. Default: "
+                  "Scene (.json), mesh (area-sampled), point cloud or .vmap file. Default: "
                   "scenes/cornell-bunny.json");
     c->add_option("-o,--output", a->output, "PNG file (default: <input name>-<mode>.png)");
     c->add_option("--mode", a->mode,
@@ -249,6 +253,8 @@ Command add_render_command(CLI::App& app) {
         ->check(CLI::Range(1, 21));
     c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
         ->check(CLI::Range(1, 1000000));
+    c->add_flag("--as-points", a->as_points,
+                "Take a mesh file's vertices as a point cloud instead of sampling its faces");
     c->add_option("--points", a->points, "Scene input: number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     c->add_option("--seed", a->seed, "Scene input: sampling seed");

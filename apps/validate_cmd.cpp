@@ -58,7 +58,9 @@ CLI::App* add_validate_command(CLI::App& app) {
         "validate",
         "Measure V-map answers against exact visibility from the scene's triangles (Embree "
         "rays), per octree height");
-    c->add_option("scene", opt.scenes, "Scene files (.json)")->required();
+    c->add_option("scene", opt.scenes,
+                  "Scene files (.json) or mesh files (the mesh is its own truth)")
+        ->required();
     c->add_option("--points", opt.vp.points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(2), uint64_t(50000000)));
     c->add_option("--pairs", opt.vp.pairs, "Random point pairs")

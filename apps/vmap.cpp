@@ -1,5 +1,5 @@
 // vmap: view-independent mutual visibility for point models.
-//   vmap build [SCENE.json | CLOUD.ply] -o out.vmap   octree + V-map, with a summary
+//   vmap build [SCENE.json | MESH | CLOUD] -o out.vmap  octree + V-map, with a summary
 //   vmap info out.vmap                                what a .vmap holds
 //   vmap query out.vmap --pair I J | --from I | --ray I --dir D   (apps/query_cmd.cpp)
 //   vmap render [SCENE | CLOUD | out.vmap] --mode M   pictures (apps/render_cmd.cpp)
@@ -72,6 +72,7 @@ struct BuildOptions {
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
     bool count_links = false;
+    bool as_points = false;
     BuildParams params;
 };
 
@@ -80,16 +81,20 @@ int run_build(BuildOptions& o) {
     PointSet pts;
     std::string what;
     std::optional<OctreeParams> file_octree;
-    if (ends_with_ci(o.input, ".json")) {
+    if (is_scene_input(o.input, o.as_points)) {
         Scene sc = load_scene(o.input);
+        cli::print_notes(sc.notes);
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
         file_octree = sc.octree;
         pts = sample_scene(sc);
-        what = fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size());
+        what = ends_with_ci(o.input, ".json")
+                   ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size())
+                   : fmt::format("mesh {} ({} triangles, area-sampled)", o.input,
+                                 sc.surfaces[0].mesh.triangles.size());
     } else {
         if (o.points || o.seed)
-            throw Error("--points/--seed apply to scene files, not point clouds");
+            throw Error("--points/--seed apply to scene and mesh files, not point clouds");
         pts = load_point_cloud(o.input);
         what = fmt::format("point cloud {}", o.input);
     }
@@ -179,9 +184,12 @@ int main(int argc, char** argv) {
     BuildOptions bo;
     auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
     build->add_option("input", bo.input,
-                      "Scene file (.json) or point cloud (.ply/.off; normals estimated if absent). "
-                      "Default: scenes/cornell-bunny.json");
+                      "Scene file (.json), mesh (.ply with faces, .off, .obj, .stl: area-sampled) "
+                      "or point cloud (.ply, .xyz, .xyzn, .xyzrgb, .pts, .pcd, ...; normals "
+                      "estimated if absent). Default: scenes/cornell-bunny.json");
     build->add_option("-o,--output", bo.output, "Output .vmap file (default: <input name>.vmap)");
+    build->add_flag("--as-points", bo.as_points,
+                    "Take a mesh file's vertices as a point cloud instead of sampling its faces");
     build->add_option("--points", bo.points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     build->add_option("--seed", bo.seed, "Override the scene's sampling seed");
@@ -273,8 +281,11 @@ int main(int argc, char** argv) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
-    if (*build && (bo.points || bo.seed) && !bo.input.empty() && !ends_with_ci(bo.input, ".json")) {
-        fmt::print(stderr, "vmap build: --points/--seed apply to scene files (.json), not to {}\n",
+    if (*build && (bo.points || bo.seed) && !bo.input.empty() &&
+        !cli::sampled_input(bo.input, bo.as_points)) {
+        fmt::print(stderr,
+                   "vmap build: --points/--seed apply to scene and mesh files, not to the point "
+                   "cloud {}\n",
                    bo.input);
         return 2;
     }

@@ -418,6 +418,70 @@ expect_input_error "gi --ply into a missing folder" no_dir/lit.ply gi x.vmap --b
 bad=$(ls no_dir 2>/dev/null)
 if [ -n "$bad" ]; then fail "gi left files in no_dir: $bad"; else ok "gi wrote nothing half"; fi
 
+# ---- formats: meshes are sampled, point lists and PCD read, any emitter lights -----------------
+
+# Two unit boxes side by side as OBJ quads (a convex mesh alone sees nothing of itself).
+awk 'BEGIN {
+    for (b = 0; b < 2; b++) {
+        for (i = 0; i < 8; i++)
+            printf "v %d %d %d\n", (i % 2) + 2 * b, int(i / 2) % 2, int(i / 4);
+    }
+    split("1 3 4 2|5 6 8 7|1 2 6 5|3 7 8 4|1 5 7 3|2 4 8 6", q, "|");
+    for (b = 0; b < 2; b++)
+        for (f = 1; f <= 6; f++) {
+            split(q[f], c, " ");
+            printf "f %d %d %d %d\n", c[1] + 8 * b, c[2] + 8 * b, c[3] + 8 * b, c[4] + 8 * b;
+        }
+}' >boxes.obj
+if expect_ok "build an OBJ mesh" build boxes.obj --points 3000 --max-height 5 --backend cpu \
+    -o boxes.vmap; then
+    expect_stdout "a mesh is area-sampled" '^input: +mesh .*area-sampled'
+    expect_stdout "--points applies to a mesh" '^points: +3000$'
+fi
+if expect_ok "build a mesh's vertices" build boxes.obj --as-points --max-height 3 \
+    --backend cpu -o boxes-v.vmap; then
+    expect_stdout "--as-points keeps the vertices" '^points: +16$'
+fi
+awk 'BEGIN { for (i = 0; i < 300; i++) printf "%.5f %.5f 0 0 0 1\n", (i % 20) / 20, int(i / 20) / 15 }' \
+    >plate.xyzn
+if expect_ok "build an xyzn cloud" build plate.xyzn --max-height 4 --backend cpu -o plate.vmap; then
+    expect_stdout "an xyzn cloud keeps its points" '^points: +300$'
+fi
+expect_usage_error "build --points on a point list" build plate.xyzn --points 10
+printf 'FIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nPOINTS 2\nDATA ascii\n0 0 0\n1 0 nope\n' >bad.pcd
+expect_input_error "a bad PCD names the point and field" "bad.pcd" build bad.pcd
+if grep -q 'point 1 (line 7): field z' err.txt; then ok "PCD error names point 1, field z"
+else fail "PCD error lacks the point and field"; show build bad.pcd; fi
+expect_input_error "gi on a cloud with no emitters names the field" plate.xyzn \
+    gi plate.xyzn --bounces 1 --backend cpu
+if grep -q '"emission"' err.txt; then ok "the no-emitter message names \"emission\""
+else fail "the no-emitter message lacks \"emission\""; show gi plate.xyzn; fi
+cat >lit.json <<'JSON'
+{ "room": null,
+  "meshes": [ { "file": "boxes.obj", "emission": [5, 5, 5] } ],
+  "sampling": { "points": 2000, "seed": 2 } }
+JSON
+if expect_ok "gi on meshes without the room" gi lit.json --bounces 1 --backend cpu \
+    --max-height 5 -o lit.png --size 64x64; then
+    expect_stdout "every point of an emitting mesh emits" '^points: +2000 \(2000 emitting\)'
+fi
+# A PLY cloud whose emission is per point: a lit plate facing a plate.
+awk 'BEGIN {
+    printf "ply\nformat ascii 1.0\nelement vertex 800\nproperty float x\nproperty float y\n";
+    printf "property float z\nproperty float nx\nproperty float ny\nproperty float nz\n";
+    printf "property float emission_r\nproperty float emission_g\nproperty float emission_b\n";
+    printf "end_header\n";
+    for (i = 0; i < 400; i++) printf "%.4f 0 %.4f 0 1 0 0 0 0\n", (i % 20) / 20, int(i / 20) / 20;
+    for (i = 0; i < 400; i++) printf "%.4f 0.5 %.4f 0 -1 0 3 3 3\n", (i % 20) / 20, int(i / 20) / 20;
+}' >plates.ply
+if expect_ok "gi on a PLY cloud with per-point emission" gi plates.ply --bounces 1 \
+    --backend cpu --max-height 4 --ply plates-lit.ply; then
+    expect_stdout "the cloud's emission is used" '^points: +800 \(400 emitting\)'
+fi
+run validate boxes.obj --points 2000 --pairs 2000 --heights 4
+if [ "$rc" -eq 0 ] && grep -q 'boxes' out.txt; then ok "validate takes a mesh as its own truth"
+else fail "validate on a mesh file"; show validate boxes.obj --points 2000 --pairs 2000 --heights 4; fi
+
 # ---- done ------------------------------------------------------------------------------------
 
 leftovers=$(ls -- *.tmp 2>/dev/null)

@@ -1021,8 +1021,8 @@ TEST(Model, ReaderIsChosenByExtensionIgnoringCase) {
 
 TEST(Model, UnknownOrMissingExtensionsAreRejected) {
     ScratchDir dir;
-    EXPECT_READ_ERROR(read_model(dir.write("m.obj", "v 0 0 0\n")), "m.obj",
-                      "unknown model format '.obj'");
+    EXPECT_READ_ERROR(read_model(dir.write("m.3ds", "v 0 0 0\n")), "m.3ds",
+                      "unknown model format '.3ds'");
     EXPECT_READ_ERROR(read_model(dir.write("model", "OFF\n0 0 0\n")), "model", "no extension");
     EXPECT_READ_ERROR(read_model(dir.path("gone.ply")), "gone.ply: no such file");
 }

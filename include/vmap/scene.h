@@ -1,5 +1,7 @@
-// Scenes (DESIGN.md "Scenes"): a JSON file describing a Cornell room, meshes placed in it and an
-// area light, sampled into one mixed point set. Also raw point clouds (PLY/OFF without faces).
+// Scenes (DESIGN.md "Scenes"): a JSON file describing a Cornell room, meshes and point clouds
+// placed in it and an area light, sampled into one mixed point set. A mesh file on its own
+// (PLY with faces, OFF, OBJ, STL) is a scene of one surface with no room. Also raw point clouds
+// (files without faces).
 //
 // Scene file (all lengths in metres; see scenes/*.json):
 // {
@@ -7,13 +9,21 @@
 //   "room":  { "size": [0.5528, 0.5488, 0.5592],            // x (width), y (height), z (depth)
 //              "floor": [r,g,b], "ceiling": [..], "back": [..],
 //              "left": [..] (red, x = width), "right": [..] (green, x = 0) },   // albedo
+//            or null: no room, no light (just the meshes and clouds); absent: the default room
 //   "light": { "center": [x, z], "size": [sx, sz], "emission": [r,g,b] },       // on the ceiling
-//            (clipped to the room; the ceiling is not sampled under it)
-//   "meshes": [ { "file": "../models/bunny.off",   // relative to the scene file
+//            (clipped to the room; the ceiling is not sampled under it; needs the room)
+//   "meshes": [ { "file": "../models/bunny.off",   // relative to the scene file; any mesh format
 //                 "size": 0.25,                    // largest extent after scaling (or "scale")
 //                 "rotate": [rx, ry, rz],           // degrees, applied x then y then z
 //                 "position": [x, y, z],            // where the bottom centre of its box goes
-//                 "albedo": [r, g, b], "flip_normals": false } ],
+//                 "albedo": [r, g, b],              // default: the file's vertex colours, else
+//                 0.75 "emission": [r, g, b],            // W/m^2; default: the file's, else none
+//                 "flip_normals": false } ],
+//   "clouds": [ { "file": "scan.ply", ... } ]       // point clouds, placed like meshes (same keys
+//                                                   // but flip_normals); normals estimated and
+//                                                   // radii set when the file has none
+//   Without a room, a mesh or cloud with none of size, scale, rotate and position keeps the
+//   file's coordinates exactly; with some, position defaults to its own bottom centre.
 //   "sampling": { "points": 60000, "seed": 1 }      // or "density": points per square metre
 //   "octree": { "max_height": 9, "leaf_points": 4 } // defaults for `vmap build`
 //   "camera": { "eye": [x,y,z], "target": [x,y,z], "fov": 40, "up": [0,1,0] }  // `vmap render`
@@ -38,26 +48,45 @@ struct SceneSurface {
     Mesh mesh;         // world space; triangle winding gives the outward normal
     Vec3 albedo{0.8f, 0.8f, 0.8f};
     Vec3 emission{0, 0, 0};
+    // Per-vertex values from the mesh file, interpolated over each triangle when sampling; when
+    // empty, albedo and emission hold for the whole surface.
+    std::vector<Vec3> vertex_colors;
+    std::vector<Vec3> vertex_emission;
 };
 
 struct Scene {
     std::string name;
     std::string path;  // the file it came from
     std::vector<SceneSurface> surfaces;
-    uint64_t points = 60000;  // samples in total (after any density rule)
+    // Point clouds in world space, complete (normals, colours, radii, emission), appended after
+    // the surfaces' samples.
+    std::vector<PointSet> clouds;
+    uint64_t points = 60000;  // samples of the surfaces in total (after any density rule)
     uint64_t seed = 1;
     std::optional<OctreeParams> octree;  // the file's defaults, if it gave any
+    bool has_room = true;
+    // The room's size; without a room, the size of the surfaces' and clouds' bounding box (the
+    // scene's scale, for validation tolerances).
     Vec3 room_size{0.5528f, 0.5488f, 0.5592f};
     std::optional<Camera> camera;  // the file's view for `vmap render`, if it gave one
+    // What the files held that is not used (ModelData::notes), for the tool to print.
+    std::vector<std::string> notes;
 };
 
-// Reads a scene file and the meshes it names. Throws vmap::Error naming the file and the field
-// ("scenes/x.json: meshes[0].file: ../models/nope.off: no such file").
+// Reads a scene file (.json) and the meshes and clouds it names, or a mesh file as a scene of
+// that one surface (no room, faces wound outward as for a scene's mesh, the file's vertex colours
+// and emission, else albedo 0.8). Throws vmap::Error naming the file and the field
+// ("scenes/x.json: meshes[0].file: ../models/nope.off: no such file"; "scan.xyz: has no faces").
 Scene load_scene(const std::string& path);
 
+// Whether `vmap build/render/gi/validate` take the file as a scene: a .json file, or a mesh
+// file (model_has_faces) unless `as_points` asks for its vertices as a point cloud.
+bool is_scene_input(const std::string& path, bool as_points = false);
+
 // Area-weighted, seeded sampling of every surface into points with the triangle's normal, the
-// surface's albedo and emission, and a splat radius sqrt(area / (pi * points)). The same seed
-// gives the same points on every machine and thread count.
+// surface's albedo and emission (or the per-vertex values, interpolated), and a splat radius
+// sqrt(area / (pi * points)); then the scene's clouds. The same seed gives the same points on
+// every machine and thread count.
 PointSet sample_scene(const Scene& scene);
 
 // Reads a raw point cloud (PLY or OFF; faces ignored). Estimates normals when the file has none

@@ -112,11 +112,13 @@ ModelData read_off(const std::string& path) try {
     if (has_colors) points.colors.reserve(vertex_count);
     const size_t needed_values = 3 + (has_normals ? 3 : 0) + (has_colors ? 3 : 0);
     float max_channel = 0;
+    bool extra_vertex_values = false, extra_face_values = false;
     for (int64_t i = 0; i < vertex_count; ++i) {
         if (!lines.next(tokens)) {
             fail(path, "truncated: expected ", vertex_count, " vertices, found ", i);
         }
-        // Extra values (alpha, texture coordinates) are allowed and ignored.
+        // Extra values (alpha, texture coordinates) are allowed, ignored and noted.
+        extra_vertex_values |= tokens.size() > needed_values;
         if (tokens.size() < needed_values) {
             fail(path, "vertex ", i, " (line ", lines.line(), "): expected ", needed_values,
                  " values, found ", tokens.size());
@@ -174,7 +176,8 @@ ModelData read_off(const std::string& path) try {
             fail(path, "face ", f, " (line ", lines.line(), "): degenerate face with ", corners,
                  corners == 1 ? " vertex" : " vertices");
         }
-        // Values after the indices (a face colour) are allowed and ignored.
+        // Values after the indices (a face colour) are allowed, ignored and noted.
+        extra_face_values |= tokens.size() - 1 > static_cast<uint64_t>(corners);
         if (tokens.size() - 1 < static_cast<uint64_t>(corners)) {
             fail(path, "face ", f, " (line ", lines.line(), "): expected ", corners + 1,
                  " values, found ", tokens.size());
@@ -200,6 +203,10 @@ ModelData read_off(const std::string& path) try {
             index[1] = u;
         }
     }
+    if (extra_vertex_values)
+        out.notes.push_back(path +
+                            ": ignored extra values on vertex lines (alpha, texture coordinates)");
+    if (extra_face_values) out.notes.push_back(path + ": ignored values after the faces' indices");
     return out;
 } catch (const std::bad_alloc&) {
     // Counts are checked against the file size, so only a file too big for memory gets here.

@@ -92,6 +92,9 @@ enum Role : uint8_t {
     kGreen,
     kBlue,
     kRadius,
+    kEmissionR,
+    kEmissionG,
+    kEmissionB,
     kIndices,
     kRoleCount
 };
@@ -146,6 +149,9 @@ Role vertex_role(std::string_view name) {
         {"nx", kNx},
         {"ny", kNy},
         {"nz", kNz},
+        {"normal_x", kNx},  // PCL
+        {"normal_y", kNy},
+        {"normal_z", kNz},
         {"red", kRed},
         {"green", kGreen},
         {"blue", kBlue},
@@ -156,6 +162,9 @@ Role vertex_role(std::string_view name) {
         {"diffuse_green", kGreen},
         {"diffuse_blue", kBlue},
         {"radius", kRadius},
+        {"emission_r", kEmissionR},
+        {"emission_g", kEmissionG},
+        {"emission_b", kEmissionB},
     };
     for (const auto& [n, role] : kNames) {
         if (n == name) return role;
@@ -201,6 +210,7 @@ void assign_roles(const std::string& path, Header& header) {
             };
             all_or_none(kNx, "normal (nx, ny, nz)");
             all_or_none(kRed, "colour (red, green, blue)");
+            all_or_none(kEmissionR, "emission (emission_r, emission_g, emission_b)");
         } else if (element.name == "face") {
             if (seen_face) fail(path, "header: more than one 'face' element");
             seen_face = true;
@@ -363,6 +373,23 @@ Header parse_header(const std::string& path, const FileBuffer& file) {
     assign_roles(path, header);
     check_counts_fit(path, header, file.size - header.data_offset);
     return header;
+}
+
+// What the header declares that vmap does not use, for ModelData::notes.
+void note_skipped(const std::string& path, const Header& header, ModelData& out) {
+    std::string skipped;
+    for (const Element& element : header.elements) {
+        const bool known = element.name == "vertex" || element.name == "face";
+        if (!known && element.count > 0) {
+            skipped += (skipped.empty() ? "element " : ", element ") + element.name;
+            continue;
+        }
+        for (const Property& p : element.properties) {
+            if (p.role != kSkip || element.count == 0) continue;
+            skipped += (skipped.empty() ? "" : ", ") + element.name + "." + p.name;
+        }
+    }
+    if (!skipped.empty()) out.notes.push_back(path + ": ignored " + skipped);
 }
 
 // ---- data sources --------------------------------------------------------------------------
@@ -607,19 +634,21 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
         if (element.properties.empty()) continue;
         const bool is_vertex = element.name == "vertex";
         const bool is_face = element.name == "face";
-        bool has_normals = false, has_colors = false, has_radii = false;
+        bool has_normals = false, has_colors = false, has_radii = false, has_emission = false;
         float range[3] = {1, 1, 1};
         if (is_vertex) {
             for (const Property& p : element.properties) {
                 has_normals |= p.role == kNx;
                 has_colors |= p.role == kRed;
                 has_radii |= p.role == kRadius;
+                has_emission |= p.role == kEmissionR;
                 if (p.role >= kRed && p.role <= kBlue) range[p.role - kRed] = colour_range(p.type);
             }
             points.positions.reserve(element.count);
             if (has_normals) points.normals.reserve(element.count);
             if (has_colors) points.colors.reserve(element.count);
             if (has_radii) points.radii.reserve(element.count);
+            if (has_emission) points.emission.reserve(element.count);
         }
         if (is_face) out.triangles.reserve(element.count);
 
@@ -676,6 +705,16 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
                         fail(path, source.where(), ": invalid radius ", v[kRadius]);
                     }
                     points.radii.push_back(r);
+                }
+                if (has_emission) {
+                    const Vec3 e{static_cast<float>(v[kEmissionR]),
+                                 static_cast<float>(v[kEmissionG]),
+                                 static_cast<float>(v[kEmissionB])};
+                    if (!is_finite(e) || e.x < 0 || e.y < 0 || e.z < 0) {
+                        fail(path, source.where(), ": invalid emission (", v[kEmissionR], ", ",
+                             v[kEmissionG], ", ", v[kEmissionB], "): must be finite and >= 0");
+                    }
+                    points.emission.push_back(e);
                 }
             } else if (is_face) {
                 if (corners.size() < 3) {
@@ -774,6 +813,7 @@ ModelData read_ply(const std::string& path) try {
         BinarySource source(path, data, file.end(), header.format == Format::kBinaryBig);
         read_data(path, header, source, out);
     }
+    note_skipped(path, header, out);
     return out;
 } catch (const std::bad_alloc&) {
     // Counts are checked against the file size, so only a file too big for memory gets here.
@@ -790,6 +830,9 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
     check_size(points.normals.size(), "normals");
     check_size(points.colors.size(), "colours");
     check_size(points.radii.size(), "radii");
+    check_size(points.emission.size(), "emission values");
+    bool emits = false;
+    for (const Vec3& e : points.emission) emits |= e.x > 0 || e.y > 0 || e.z > 0;
     // Refuse what read_ply would refuse, so that every file written can be read back.
     for (size_t i = 0; i < n; ++i) {
         if (!is_finite(points.positions[i])) fail(path, "point ", i, ": non-finite position");
@@ -798,6 +841,12 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
         }
         if (points.has_radii() && !(points.radii[i] >= 0 && std::isfinite(points.radii[i]))) {
             fail(path, "point ", i, ": invalid radius ", points.radii[i]);
+        }
+        if (emits) {
+            const Vec3 e = points.emission[i];
+            if (!is_finite(e) || e.x < 0 || e.y < 0 || e.z < 0) {
+                fail(path, "point ", i, ": invalid emission");
+            }
         }
     }
 
@@ -810,6 +859,11 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
         header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
     }
     if (points.has_radii()) header += "property float radius\n";
+    if (emits) {
+        header +=
+            "property float emission_r\nproperty float emission_g\n"
+            "property float emission_b\n";
+    }
     header += "end_header\n";
 
     TempFile file(path);
@@ -836,6 +890,11 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
                 chunk += static_cast<char>(colour_byte(c.z));
             }
             if (points.has_radii()) put_le(chunk, points.radii[i]);
+            if (emits) {
+                put_le(chunk, points.emission[i].x);
+                put_le(chunk, points.emission[i].y);
+                put_le(chunk, points.emission[i].z);
+            }
         } else {
             put_text(chunk, p.x);
             chunk += ' ';
@@ -859,6 +918,13 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
             if (points.has_radii()) {
                 chunk += ' ';
                 put_text(chunk, points.radii[i]);
+            }
+            if (emits) {
+                const Vec3 e = points.emission[i];
+                for (float f : {e.x, e.y, e.z}) {
+                    chunk += ' ';
+                    put_text(chunk, f);
+                }
             }
             chunk += '\n';
         }

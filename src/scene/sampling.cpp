@@ -25,9 +25,30 @@ uint64_t mix(uint64_t x) {
 double u01(uint64_t bits) { return double(bits >> 11) * (1.0 / 9007199254740992.0); }
 
 struct Tri {
-    uint32_t surface;
+    uint32_t surface, index;  // the surface, and the triangle in its mesh
     Vec3 a, b, c, n;
 };
+
+// A per-vertex value at barycentric weights (w0, w1, w2) of triangle t, or `whole` when the
+// surface has none.
+Vec3 at_corner(const std::vector<Vec3>& values, const Mesh& m, uint32_t t, Vec3 whole, double w0,
+               double w1, double w2) {
+    if (values.empty()) return whole;
+    const auto& c = m.triangles[t];
+    const Vec3 a = values[c[0]], b = values[c[1]], d = values[c[2]];
+    return {float(w0 * a.x + w1 * b.x + w2 * d.x), float(w0 * a.y + w1 * b.y + w2 * d.y),
+            float(w0 * a.z + w1 * b.z + w2 * d.z)};
+}
+
+void append_clouds(const Scene& scene, PointSet& ps) {
+    for (const PointSet& c : scene.clouds) {
+        ps.positions.insert(ps.positions.end(), c.positions.begin(), c.positions.end());
+        ps.normals.insert(ps.normals.end(), c.normals.begin(), c.normals.end());
+        ps.colors.insert(ps.colors.end(), c.colors.begin(), c.colors.end());
+        ps.radii.insert(ps.radii.end(), c.radii.begin(), c.radii.end());
+        ps.emission.insert(ps.emission.end(), c.emission.begin(), c.emission.end());
+    }
+}
 
 }  // namespace
 
@@ -37,21 +58,26 @@ PointSet sample_scene(const Scene& scene) {
     double area = 0;
     for (uint32_t s = 0; s < scene.surfaces.size(); ++s) {
         const Mesh& m = scene.surfaces[s].mesh;
-        for (const auto& t : m.triangles) {
+        for (uint32_t k = 0; k < m.triangles.size(); ++k) {
+            const auto& t = m.triangles[k];
             const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
             const Vec3 x = cross(b - a, c - a);
             const double ar =
                 0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
             if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
-            tris.push_back({s, a, b, c, x / float(2 * ar)});
+            tris.push_back({s, k, a, b, c, x / float(2 * ar)});
             area += ar;
             cdf.push_back(area);
         }
     }
+    PointSet ps;
+    if (tris.empty() && !scene.clouds.empty()) {
+        append_clouds(scene, ps);
+        return ps;
+    }
     if (tris.empty()) throw Error(fmt::format("{}: the scene has no surface area", scene.path));
     const uint64_t n = scene.points;
     if (n == 0) throw Error(fmt::format("{}: sampling.points must be at least 1", scene.path));
-    PointSet ps;
     ps.positions.resize(n);
     ps.normals.resize(n);
     ps.colors.resize(n);
@@ -73,9 +99,11 @@ PointSet sample_scene(const Scene& scene) {
                            float(w0 * t.a.y + w1 * t.b.y + w2 * t.c.y),
                            float(w0 * t.a.z + w1 * t.b.z + w2 * t.c.z)};
         ps.normals[i] = t.n;
-        ps.colors[i] = scene.surfaces[t.surface].albedo;
-        ps.emission[i] = scene.surfaces[t.surface].emission;
+        const SceneSurface& s = scene.surfaces[t.surface];
+        ps.colors[i] = at_corner(s.vertex_colors, s.mesh, t.index, s.albedo, w0, w1, w2);
+        ps.emission[i] = at_corner(s.vertex_emission, s.mesh, t.index, s.emission, w0, w1, w2);
     });
+    append_clouds(scene, ps);
     return ps;
 }
 
@@ -95,6 +123,7 @@ struct CloudAdaptor {
 
 PointSet load_point_cloud(const std::string& path) {
     ModelData md = read_model(path);
+    for (const std::string& note : md.notes) fmt::print(stderr, "note:       {}\n", note);
     PointSet ps = std::move(md.points);
     if (ps.size() == 0) throw Error(fmt::format("{}: the point cloud is empty", path));
     if (!ps.has_normals()) estimate_normals(ps, {}, path.c_str());

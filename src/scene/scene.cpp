@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -76,30 +78,10 @@ double signed_volume(const Mesh& m) {
     return v / 6.0;
 }
 
-}  // namespace
+// ---- the room --------------------------------------------------------------------------------
 
-std::string default_scene_path() {
-    return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json";
-}
-
-Scene load_scene(const std::string& path) {
-    Ctx cx{path};
-    std::ifstream in(path);
-    if (!in) throw Error(fmt::format("{}: cannot open scene file", path));
-    json j;
-    try {
-        j = json::parse(in, nullptr, true, /*ignore_comments=*/true);
-    } catch (const json::parse_error& e) {
-        throw Error(fmt::format("{}: not valid JSON: {}", path, e.what()));
-    }
-    cx.known(j, "",
-             {"name", "description", "room", "light", "meshes", "sampling", "octree", "camera"});
-    Scene sc;
-    sc.path = path;
-    sc.name = j.value("name", fs::path(path).stem().string());
-
-    // The Cornell room: published dimensions (552.8 x 548.8 x 559.2 mm) and wall colours.
-    const json room = j.value("room", json::object());
+// The Cornell room: published dimensions (552.8 x 548.8 x 559.2 mm) and wall colours.
+void add_walls(const Ctx& cx, const json& room, Scene& sc) {
     cx.known(room, "room", {"size", "floor", "ceiling", "back", "left", "right"});
     if (room.contains("size")) sc.room_size = cx.vec3(room["size"], "room.size", 1e-3, 1e4);
     auto albedo = [&](const char* key, Vec3 def) {
@@ -134,9 +116,16 @@ Scene load_scene(const std::string& path) {
         add_quad(s, w.a, w.b, w.c, w.d);
         sc.surfaces.push_back(std::move(s));
     }
+    // The ceiling, with a hole for the light: add_light fills it in.
+    SceneSurface ceiling;
+    ceiling.name = "ceiling";
+    ceiling.albedo = albedo("ceiling", white);
+    sc.surfaces.insert(sc.surfaces.begin() + 1, std::move(ceiling));
+}
 
-    // The area light, just below the ceiling, facing down (Cornell: 130 x 105 mm, centred).
-    const json light = j.value("light", json::object());
+// The area light, just below the ceiling, facing down (Cornell: 130 x 105 mm, centred).
+void add_light(const Ctx& cx, const json& light, Scene& sc) {
+    const float W = sc.room_size.x, H = sc.room_size.y, D = sc.room_size.z;
     cx.known(light, "light", {"center", "size", "emission"});
     float lx = W * 0.5f, lz = D * 0.5f, sx = 0.13f * W / 0.5528f, sz = 0.105f * D / 0.5592f;
     if (light.contains("center")) {
@@ -157,9 +146,7 @@ Scene load_scene(const std::string& path) {
         // The ceiling around the light: the part the light covers is not sampled (its points
         // would be hidden from everything, by a light 0.5 mm below them, closer than any
         // leaf-level occluder test can resolve; docs/validation.md, "buried points").
-        SceneSurface s;
-        s.name = "ceiling";
-        s.albedo = albedo("ceiling", white);
+        SceneSurface& s = sc.surfaces[1];
         auto strip = [&](float xa, float xb, float za, float zb) {
             if (xb > xa && zb > za) add_quad(s, {xa, H, za}, {xb, H, za}, {xb, H, zb}, {xa, H, zb});
         };
@@ -167,84 +154,144 @@ Scene load_scene(const std::string& path) {
         strip(0, W, z1, D);
         strip(0, x0, z0, z1);
         strip(x1, W, z0, z1);
-        sc.surfaces.insert(sc.surfaces.begin() + 1, std::move(s));
     }
-    {
-        SceneSurface s;
-        s.name = "light";
-        s.albedo = {0.78f, 0.78f, 0.78f};
-        s.emission = light.contains("emission")
-                         ? cx.vec3(light["emission"], "light.emission", 0, 1e6)
-                         : Vec3{17.f, 12.f, 4.f};
-        const float y = H * 0.999f;  // a hair below the ceiling, so the two never coincide
-        add_quad(s, {x0, y, z0}, {x1, y, z0}, {x1, y, z1}, {x0, y, z1});
-        sc.surfaces.push_back(std::move(s));
-    }
+    SceneSurface s;
+    s.name = "light";
+    s.albedo = {0.78f, 0.78f, 0.78f};
+    s.emission = light.contains("emission") ? cx.vec3(light["emission"], "light.emission", 0, 1e6)
+                                            : Vec3{17.f, 12.f, 4.f};
+    const float y = H * 0.999f;  // a hair below the ceiling, so the two never coincide
+    add_quad(s, {x0, y, z0}, {x1, y, z0}, {x1, y, z1}, {x0, y, z1});
+    sc.surfaces.push_back(std::move(s));
+}
 
-    // Meshes placed in the room.
-    const json meshes = j.value("meshes", json::array());
-    if (!meshes.is_array()) cx.fail("meshes", "expected an array");
-    const fs::path dir = fs::path(path).parent_path();
-    for (size_t i = 0; i < meshes.size(); ++i) {
-        const std::string f = fmt::format("meshes[{}]", i);
-        const json& m = meshes[i];
-        cx.known(m, f,
-                 {"file", "name", "size", "scale", "rotate", "position", "albedo", "flip_normals"});
-        if (!m.contains("file") || !m["file"].is_string()) cx.fail(f + ".file", "missing");
-        const std::string rel = m["file"].get<std::string>();
-        const fs::path file = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
-        if (!fs::exists(file))
-            cx.fail(f + ".file", fmt::format("{}: no such file (scripts/fetch-models.sh fetches "
-                                             "the models)",
-                                             file.string()));
-        ModelData md;
-        try {
-            md = read_model(file.string());
-        } catch (const Error& e) {
-            cx.fail(f + ".file", e.what());
-        }
-        if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
-        SceneSurface s;
-        s.name = m.value("name", fs::path(rel).stem().string());
-        s.albedo = m.contains("albedo") ? cx.vec3(m["albedo"], f + ".albedo", 0, 1)
-                                        : Vec3{0.75f, 0.75f, 0.8f};
-        s.mesh = md.mesh();
-        // Centre the box at the origin, scale, rotate, then stand its bottom centre on position.
-        Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
-        for (Vec3 v : s.mesh.vertices) {
-            lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
-            hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
-        }
-        const Vec3 mid = (lo + hi) * 0.5f;
-        const float ext = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
-        if (!(ext > 0) || !std::isfinite(ext))
-            cx.fail(f + ".file",
-                    file.string() + ": the mesh has zero extent (all vertices coincide)");
-        float scale = 1;
-        if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
-        if (m.contains("size")) scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
-        if (m.contains("scale")) scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
-        const Vec3 rot =
-            m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
-        const Vec3 pos = m.contains("position") ? cx.vec3(m["position"], f + ".position", -1e6, 1e6)
-                                                : Vec3{W / 2, 0, D / 2};
-        for (Vec3& v : s.mesh.vertices) v = rotate((v - mid) * scale, rot);
-        float ylo = INFINITY, xlo = INFINITY, xhi = -INFINITY, zlo = INFINITY, zhi = -INFINITY;
-        for (Vec3 v : s.mesh.vertices) {
-            ylo = std::min(ylo, v.y);
-            xlo = std::min(xlo, v.x), xhi = std::max(xhi, v.x);
-            zlo = std::min(zlo, v.z), zhi = std::max(zhi, v.z);
-        }
-        const Vec3 shift = pos - Vec3{(xlo + xhi) / 2, ylo, (zlo + zhi) / 2};
-        for (Vec3& v : s.mesh.vertices) v = v + shift;
-        // Outward normals: a closed mesh wound inside-out has negative signed volume.
-        bool flip = signed_volume(s.mesh) < 0;
-        if (m.value("flip_normals", false)) flip = !flip;
-        if (flip)
-            for (auto& t : s.mesh.triangles) std::swap(t[1], t[2]);
-        sc.surfaces.push_back(std::move(s));
-    }
+// ---- meshes and clouds ------------------------------------------------------------------------
 
+// Scale, rotation and placement of a mesh or cloud entry: centre the box at the origin, scale,
+// rotate, then stand its bottom centre on position.
+struct Placement {
+    bool identity = true;
+    Vec3 mid;
+    float scale = 1;
+    Vec3 rot;
+    Vec3 shift;
+    Vec3 point(Vec3 v) const { return identity ? v : rotate((v - mid) * scale, rot) + shift; }
+    Vec3 direction(Vec3 n) const { return identity ? n : rotate(n, rot); }
+};
+
+Placement placement(const Ctx& cx, const json& m, const std::string& f, const std::string& file,
+                    const std::vector<Vec3>& pts, const Scene& sc) {
+    Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    for (Vec3 v : pts) {
+        lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
+        hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
+    }
+    Placement pl;
+    pl.mid = (lo + hi) * 0.5f;
+    const float ext = std::max({hi.x - lo.x, hi.y - lo.y, hi.z - lo.z});
+    if (!(ext > 0) || !std::isfinite(ext))
+        cx.fail(f + ".file", file + ": zero extent (all points coincide)");
+    if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
+    if (m.contains("size")) pl.scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
+    if (m.contains("scale")) pl.scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
+    pl.rot = m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
+    const bool moved =
+        m.contains("size") || m.contains("scale") || m.contains("rotate") || m.contains("position");
+    if (!sc.has_room && !moved) return pl;  // the file's own coordinates, exactly
+    pl.identity = false;
+    const Vec3 own_base{pl.mid.x, lo.y, pl.mid.z};
+    const Vec3 base = sc.has_room ? Vec3{sc.room_size.x / 2, 0, sc.room_size.z / 2} : own_base;
+    const Vec3 pos =
+        m.contains("position") ? cx.vec3(m["position"], f + ".position", -1e6, 1e6) : base;
+    float ylo = INFINITY, xlo = INFINITY, xhi = -INFINITY, zlo = INFINITY, zhi = -INFINITY;
+    for (Vec3 v : pts) {
+        v = rotate((v - pl.mid) * pl.scale, pl.rot);
+        ylo = std::min(ylo, v.y);
+        xlo = std::min(xlo, v.x), xhi = std::max(xhi, v.x);
+        zlo = std::min(zlo, v.z), zhi = std::max(zhi, v.z);
+    }
+    pl.shift = pos - Vec3{(xlo + xhi) / 2, ylo, (zlo + zhi) / 2};
+    return pl;
+}
+
+fs::path entry_file(const Ctx& cx, const json& m, const std::string& f, const fs::path& dir) {
+    if (!m.contains("file") || !m["file"].is_string()) cx.fail(f + ".file", "missing");
+    const std::string rel = m["file"].get<std::string>();
+    const fs::path file = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
+    if (!fs::exists(file))
+        cx.fail(f + ".file", fmt::format("{}: no such file (scripts/fetch-models.sh fetches "
+                                         "the models)",
+                                         file.string()));
+    return file;
+}
+
+// Outward normals: a closed mesh wound inside-out has negative signed volume.
+void orient_outward(Mesh& mesh, bool flip_requested) {
+    bool flip = signed_volume(mesh) < 0;
+    if (flip_requested) flip = !flip;
+    if (flip)
+        for (auto& t : mesh.triangles) std::swap(t[1], t[2]);
+}
+
+void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path& dir, Scene& sc) {
+    cx.known(m, f,
+             {"file", "name", "size", "scale", "rotate", "position", "albedo", "emission",
+              "flip_normals"});
+    const fs::path file = entry_file(cx, m, f, dir);
+    ModelData md;
+    try {
+        md = read_model(file.string());
+    } catch (const Error& e) {
+        cx.fail(f + ".file", e.what());
+    }
+    if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
+    SceneSurface s;
+    s.name = m.value("name", file.stem().string());
+    if (m.contains("albedo")) {
+        s.albedo = cx.vec3(m["albedo"], f + ".albedo", 0, 1);
+    } else {
+        s.albedo = Vec3{0.75f, 0.75f, 0.8f};
+        s.vertex_colors = std::move(md.points.colors);
+    }
+    if (m.contains("emission")) {
+        s.emission = cx.vec3(m["emission"], f + ".emission", 0, 1e6);
+    } else {
+        s.vertex_emission = std::move(md.points.emission);
+    }
+    s.mesh = md.mesh();
+    const Placement pl = placement(cx, m, f, file.string(), s.mesh.vertices, sc);
+    for (Vec3& v : s.mesh.vertices) v = pl.point(v);
+    orient_outward(s.mesh, m.value("flip_normals", false));
+    sc.notes.insert(sc.notes.end(), md.notes.begin(), md.notes.end());
+    sc.surfaces.push_back(std::move(s));
+}
+
+void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::path& dir, Scene& sc) {
+    cx.known(c, f, {"file", "name", "size", "scale", "rotate", "position", "albedo", "emission"});
+    const fs::path file = entry_file(cx, c, f, dir);
+    PointSet ps;
+    try {
+        ps = load_point_cloud(file.string());
+    } catch (const Error& e) {
+        cx.fail(f + ".file", e.what());
+    }
+    const Placement pl = placement(cx, c, f, file.string(), ps.positions, sc);
+    for (Vec3& p : ps.positions) p = pl.point(p);
+    for (Vec3& n : ps.normals) n = pl.direction(n);
+    for (float& r : ps.radii) r *= pl.scale;
+    if (c.contains("albedo"))
+        ps.colors.assign(ps.size(), cx.vec3(c["albedo"], f + ".albedo", 0, 1));
+    if (c.contains("emission")) {
+        ps.emission.assign(ps.size(), cx.vec3(c["emission"], f + ".emission", 0, 1e6));
+    } else if (ps.emission.empty()) {
+        ps.emission.assign(ps.size(), Vec3{});
+    }
+    sc.clouds.push_back(std::move(ps));
+}
+
+// ---- the rest of the file ---------------------------------------------------------------------
+
+void read_sampling(const Ctx& cx, const json& j, Scene& sc) {
     const json sampling = j.value("sampling", json::object());
     cx.known(sampling, "sampling", {"points", "density", "seed"});
     if (sampling.contains("points") && sampling.contains("density"))
@@ -266,33 +313,134 @@ Scene load_scene(const std::string& path) {
     }
     if (sampling.contains("seed"))
         sc.seed = uint64_t(cx.number(sampling["seed"], "sampling.seed", 0, 1e15));
+}
 
-    if (j.contains("octree")) {
-        const json& o = j["octree"];
-        cx.known(o, "octree", {"max_height", "leaf_points"});
-        OctreeParams op;
-        if (o.contains("max_height"))
-            op.max_height = int(cx.number(o["max_height"], "octree.max_height", 1, 21));
-        if (o.contains("leaf_points"))
-            op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
-        sc.octree = op;
-    }
+void read_octree(const Ctx& cx, const json& j, Scene& sc) {
+    if (!j.contains("octree")) return;
+    const json& o = j["octree"];
+    cx.known(o, "octree", {"max_height", "leaf_points"});
+    OctreeParams op;
+    if (o.contains("max_height"))
+        op.max_height = int(cx.number(o["max_height"], "octree.max_height", 1, 21));
+    if (o.contains("leaf_points"))
+        op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
+    sc.octree = op;
+}
 
-    if (j.contains("camera")) {
-        const json& c = j["camera"];
-        cx.known(c, "camera", {"eye", "target", "fov", "up"});
-        if (!c.contains("eye")) cx.fail("camera.eye", "missing");
-        if (!c.contains("target")) cx.fail("camera.target", "missing");
-        Camera cam;
-        cam.eye = cx.vec3(c["eye"], "camera.eye", -1e6, 1e6);
-        cam.target = cx.vec3(c["target"], "camera.target", -1e6, 1e6);
-        if (c.contains("up")) cam.up = cx.vec3(c["up"], "camera.up", -1e6, 1e6);
-        if (c.contains("fov")) cam.fov_y_deg = float(cx.number(c["fov"], "camera.fov", 0.1, 179));
-        if (!(length(cam.target - cam.eye) > 0)) cx.fail("camera.target", "equals camera.eye");
-        if (!(length(cross(cam.target - cam.eye, cam.up)) > 0))
-            cx.fail("camera.up", "zero or parallel to the view direction");
-        sc.camera = cam;
+void read_camera(const Ctx& cx, const json& j, Scene& sc) {
+    if (!j.contains("camera")) return;
+    const json& c = j["camera"];
+    cx.known(c, "camera", {"eye", "target", "fov", "up"});
+    if (!c.contains("eye")) cx.fail("camera.eye", "missing");
+    if (!c.contains("target")) cx.fail("camera.target", "missing");
+    Camera cam;
+    cam.eye = cx.vec3(c["eye"], "camera.eye", -1e6, 1e6);
+    cam.target = cx.vec3(c["target"], "camera.target", -1e6, 1e6);
+    if (c.contains("up")) cam.up = cx.vec3(c["up"], "camera.up", -1e6, 1e6);
+    if (c.contains("fov")) cam.fov_y_deg = float(cx.number(c["fov"], "camera.fov", 0.1, 179));
+    if (!(length(cam.target - cam.eye) > 0)) cx.fail("camera.target", "equals camera.eye");
+    if (!(length(cross(cam.target - cam.eye, cam.up)) > 0))
+        cx.fail("camera.up", "zero or parallel to the view direction");
+    sc.camera = cam;
+}
+
+// Without a room, the scene's size is its contents' bounding box.
+void set_extent(const std::string& path, Scene& sc) {
+    Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    auto grow = [&](Vec3 v) {
+        lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)};
+        hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
+    };
+    for (const auto& s : sc.surfaces)
+        for (Vec3 v : s.mesh.vertices) grow(v);
+    for (const auto& c : sc.clouds)
+        for (Vec3 v : c.positions) grow(v);
+    if (!(hi.x >= lo.x))
+        throw Error(fmt::format("{}: no room (\"room\": null) and no meshes or clouds", path));
+    sc.room_size = hi - lo;
+}
+
+// A mesh file on its own: one surface in the file's coordinates, no room.
+Scene mesh_file_scene(const std::string& path) {
+    ModelData md = read_model(path);
+    if (md.triangles.empty())
+        throw Error(fmt::format("{}: has no faces (a point cloud; a scene needs a mesh)", path));
+    Scene sc;
+    sc.path = path;
+    sc.name = fs::path(path).stem().string();
+    sc.has_room = false;
+    SceneSurface s;
+    s.name = sc.name;
+    s.vertex_colors = std::move(md.points.colors);
+    s.vertex_emission = std::move(md.points.emission);
+    s.mesh = md.mesh();
+    orient_outward(s.mesh, false);
+    sc.notes = std::move(md.notes);
+    if (md.points.has_normals())
+        sc.notes.push_back(path + ": vertex normals not used (samples take their triangle's)");
+    sc.surfaces.push_back(std::move(s));
+    set_extent(path, sc);
+    return sc;
+}
+
+}  // namespace
+
+std::string default_scene_path() {
+    return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json";
+}
+
+bool is_scene_input(const std::string& path, bool as_points) {
+    std::string ext = fs::path(path).extension().string();
+    for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    if (ext == ".json") return true;
+    return !as_points && model_has_faces(path);
+}
+
+Scene load_scene(const std::string& path) {
+    std::string ext = fs::path(path).extension().string();
+    for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+    if (ext != ".json") return mesh_file_scene(path);
+    Ctx cx{path};
+    std::ifstream in(path);
+    if (!in) throw Error(fmt::format("{}: cannot open scene file", path));
+    json j;
+    try {
+        j = json::parse(in, nullptr, true, /*ignore_comments=*/true);
+    } catch (const json::parse_error& e) {
+        throw Error(fmt::format("{}: not valid JSON: {}", path, e.what()));
     }
+    cx.known(j, "",
+             {"name", "description", "room", "light", "meshes", "clouds", "sampling", "octree",
+              "camera"});
+    Scene sc;
+    sc.path = path;
+    sc.name = j.value("name", fs::path(path).stem().string());
+    sc.has_room = !(j.contains("room") && j["room"].is_null());
+    if (sc.has_room) {
+        add_walls(cx, j.value("room", json::object()), sc);
+        add_light(cx, j.value("light", json::object()), sc);
+    } else if (j.contains("light")) {
+        cx.fail("light",
+                "a light needs the room (\"room\": null); give a mesh or cloud "
+                "\"emission\" instead");
+    }
+    const fs::path dir = fs::path(path).parent_path();
+    for (const char* key : {"meshes", "clouds"}) {
+        const json list = j.value(key, json::array());
+        if (!list.is_array()) cx.fail(key, "expected an array");
+        for (size_t i = 0; i < list.size(); ++i) {
+            const std::string f = fmt::format("{}[{}]", key, i);
+            if (key[0] == 'm') {
+                add_mesh(cx, list[i], f, dir, sc);
+            } else {
+                add_cloud(cx, list[i], f, dir, sc);
+            }
+        }
+    }
+    read_sampling(cx, j, sc);
+    read_octree(cx, j, sc);
+    read_camera(cx, j, sc);
+    if (!sc.has_room) set_extent(path, sc);
     return sc;
 }
 

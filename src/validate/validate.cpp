@@ -158,13 +158,17 @@ struct DirectPredictor {
 
 ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
     check_params(params, path);
-    const std::string ext = std::filesystem::path(path).extension().string();
-    if (ext != ".json" && ext != ".JSON")
+    if (!is_scene_input(path))
         throw Error(
-            fmt::format("{}: validate needs a scene file (.json): a point cloud has no "
+            fmt::format("{}: validate needs a scene file (.json) or a mesh: a point cloud has no "
                         "triangles to take the truth from",
                         path));
     Scene sc = load_scene(path);
+    if (!sc.clouds.empty())
+        throw Error(
+            fmt::format("{}: clouds: validate takes the truth from triangles, which a "
+                        "point cloud does not have",
+                        path));
     if (params.points) sc.points = params.points;
     PointSet pts = sample_scene(sc);
     const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});

@@ -1,0 +1,31 @@
+// libFuzzer target for the STL reader: the input bytes as a .stl file, read with
+// read_stl; a vmap::Error is the expected answer to bad input, anything else (a crash, a sanitizer
+// report, another exception) is a bug. Seeds: fuzz/corpus/stl/.
+// vec.h calls isfinite unqualified; <math.h> must come first.
+// clang-format off
+#include <math.h>
+// clang-format on
+
+#include <unistd.h>
+
+#include <cstddef>
+#include <cstdint>
+#include <cstdio>
+#include <string>
+
+#include "vmap/error.h"
+#include "vmap/io.h"
+
+extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
+    static const std::string path = "/tmp/vmap_fuzz_stl_" + std::to_string(::getpid()) + ".stl";
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (f == nullptr) return 0;
+    std::fwrite(data, 1, size, f);
+    std::fclose(f);
+    try {
+        const vmap::ModelData m = vmap::read_stl(path);
+        (void)m;
+    } catch (const vmap::Error&) {
+    }
+    return 0;
+}

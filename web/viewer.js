@@ -1,0 +1,405 @@
+// The page of `vmap view`: the points as round splats, orbit and walk, and the V-map's answers
+// from the server (src/view/view_server.h has the endpoints). window.vmapView is for tests.
+import * as THREE from 'three';
+import { OrbitControls } from 'three/addons/OrbitControls.js';
+
+const kVisible = [149, 39, 220];  // sRGB of render.h's VisibleStyle: purple
+const kEye = [0, 238, 238];       // cyan
+const kHiddenDim = 0.45;          // hidden points: albedo x this (in linear light)
+
+const $ = (id) => document.getElementById(id);
+
+// sRGB byte -> byte of the same colour dimmed in linear light (as visible_colors does).
+const dimLut = new Uint8Array(256).map((_, c) => {
+    const s = c / 255;
+    const lin = s <= 0.04045 ? s / 12.92 : Math.pow((s + 0.055) / 1.055, 2.4);
+    const d = lin * kHiddenDim;
+    const o = d <= 0.0031308 ? 12.92 * d : 1.055 * Math.pow(d, 1 / 2.4) - 0.055;
+    return Math.round(Math.min(1, Math.max(0, o)) * 255);
+});
+
+async function postJson(url, body) {
+    const r = await fetch(url, { method: 'POST', body: JSON.stringify(body) });
+    const j = await r.json();
+    if (!r.ok) throw new Error(j.error || `${url}: status ${r.status}`);
+    return j;
+}
+
+// The /api/points buffer: positions, normals, albedo, radii, GI colours (view_server.h).
+function splitPoints(buf, n, hasGi) {
+    let at = 0;
+    const take = (Type, count) => {
+        const a = new Type(buf, at, count);
+        at += count * Type.BYTES_PER_ELEMENT;
+        return a;
+    };
+    const positions = take(Float32Array, 3 * n);
+    const normals = take(Float32Array, 3 * n);
+    const albedo = take(Uint8Array, 3 * n);
+    // The radii follow 3n bytes: copy to an aligned buffer when 3n is not a multiple of 4.
+    const radii = (at % 4 === 0) ? take(Float32Array, n)
+                                 : new Float32Array(buf.slice(at, (at += 4 * n)));
+    const gi = hasGi ? take(Uint8Array, 3 * n) : null;
+    return { positions, normals, albedo, radii, gi };
+}
+
+const vertexShader = `
+attribute float radius;
+attribute vec3 vcolor;
+uniform float uScale;   // pixels per scene unit at distance 1
+uniform float uSplat;   // splat radius multiplier
+uniform float uShade;   // 1: shade by |n . view|
+varying vec3 vColor;
+void main() {
+    vec4 mv = modelViewMatrix * vec4(position, 1.0);
+    gl_Position = projectionMatrix * mv;
+    gl_PointSize = clamp(2.0 * radius * uSplat * uScale / max(-mv.z, 1e-6), 1.5, 64.0);
+    float s = abs(dot(normal, normalize(cameraPosition - position)));
+    vColor = vcolor * mix(1.0, 0.25 + 0.75 * s, uShade);
+}`;
+const fragmentShader = `
+varying vec3 vColor;
+void main() {
+    vec2 d = gl_PointCoord - vec2(0.5);
+    if (dot(d, d) > 0.25) discard;
+    gl_FragColor = vec4(vColor, 1.0);
+}`;
+
+class Viewer {
+    constructor(info, pts) {
+        this.info = info;
+        this.n = info.points;
+        this.pts = pts;
+        this.eye = -1;
+        this.visible = null;
+        this.size = Math.hypot(...info.bounds.max.map((v, i) => v - info.bounds.min[i]));
+        this.renderer = new THREE.WebGLRenderer({ canvas: $('view'), antialias: false });
+        this.renderer.setPixelRatio(1);
+        this.renderer.setClearColor(0x0b0b0e);
+        this.scene = new THREE.Scene();
+        this.initCamera();
+        this.initPoints();
+        this.markers = new THREE.Group();
+        this.scene.add(this.markers);
+        this.keys = new Set();
+        this.walk = false;
+        this.resize();
+        this.bindEvents();
+        this.setMode(info.gi ? 'gi' : 'shaded');
+    }
+
+    initCamera() {
+        const c = this.info.camera;
+        this.camera = new THREE.PerspectiveCamera(c.fov, 1, this.size * 1e-3, this.size * 20);
+        this.camera.position.fromArray(c.eye);
+        this.camera.up.fromArray(c.up);
+        this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+        this.controls.target.fromArray(c.target);
+        this.controls.update();
+        this.controls.addEventListener('change', () => this.requestRender());
+    }
+
+    initPoints() {
+        const g = new THREE.BufferGeometry();
+        g.setAttribute('position', new THREE.BufferAttribute(this.pts.positions, 3));
+        g.setAttribute('normal', new THREE.BufferAttribute(this.pts.normals, 3));
+        const radii = this.info.radii ? this.pts.radii
+                                      : new Float32Array(this.n).fill(this.size * 2e-3);
+        g.setAttribute('radius', new THREE.BufferAttribute(radii, 1));
+        this.colors = new Uint8Array(3 * this.n);
+        this.colorAttr = new THREE.BufferAttribute(this.colors, 3, true);
+        g.setAttribute('vcolor', this.colorAttr);
+        this.material = new THREE.ShaderMaterial({
+            uniforms: { uScale: { value: 1 }, uSplat: { value: 1.5 }, uShade: { value: 1 } },
+            vertexShader, fragmentShader,
+        });
+        this.points = new THREE.Points(g, this.material);
+        this.points.frustumCulled = false;
+        this.scene.add(this.points);
+    }
+
+    bindEvents() {
+        window.addEventListener('resize', () => this.resize());
+        $('mode').addEventListener('change', (e) => this.setMode(e.target.value));
+        $('splat').addEventListener('input', (e) => {
+            this.material.uniforms.uSplat.value = Number(e.target.value);
+            this.requestRender();
+        });
+        $('showLeaf').addEventListener('change', () => this.drawMarkers());
+        const el = this.renderer.domElement;
+        let down = null;
+        el.addEventListener('pointerdown', (e) => { down = [e.clientX, e.clientY]; });
+        el.addEventListener('pointerup', (e) => {
+            if (!down || e.button !== 0) return;
+            const moved = Math.hypot(e.clientX - down[0], e.clientY - down[1]);
+            down = null;
+            if (moved < 4) this.onClick(e.clientX, e.clientY, e.shiftKey);
+        });
+        window.addEventListener('keydown', (e) => this.onKey(e, true));
+        window.addEventListener('keyup', (e) => this.onKey(e, false));
+    }
+
+    resize() {
+        const w = window.innerWidth, h = window.innerHeight;
+        this.renderer.setSize(w, h, false);
+        this.camera.aspect = w / h;
+        this.camera.updateProjectionMatrix();
+        const fov = THREE.MathUtils.degToRad(this.camera.fov);
+        this.material.uniforms.uScale.value = h / (2 * Math.tan(fov / 2));
+        this.requestRender();
+    }
+
+    requestRender() {
+        if (this.pending) return;
+        this.pending = true;
+        requestAnimationFrame(() => this.frame());
+    }
+
+    frame() {
+        this.pending = false;
+        if (this.keys.size) {
+            this.stepWalk();
+            this.requestRender();
+        }
+        this.renderer.render(this.scene, this.camera);
+        this.frames = (this.frames || 0) + 1;
+    }
+
+    setMode(mode) {
+        if (mode === 'gi' && !this.pts.gi) mode = 'shaded';
+        this.mode = mode;
+        $('mode').value = mode;
+        this.material.uniforms.uShade.value = mode === 'shaded' ? 1 : 0;
+        this.updateColors();
+    }
+
+    baseColors() { return this.mode === 'gi' ? this.pts.gi : this.pts.albedo; }
+
+    // Colours of every point: the base colour, or Fig. 9's when an eye is set.
+    updateColors() {
+        const base = this.baseColors(), c = this.colors;
+        if (!this.visible) {
+            c.set(base);
+        } else {
+            for (let i = 0; i < c.length; ++i) c[i] = dimLut[base[i]];
+            for (const id of this.visible.ids) c.set(kVisible, 3 * id);
+            for (const id of this.visible.leaf_ids) c.set(kEye, 3 * id);
+        }
+        this.colorAttr.needsUpdate = true;
+        this.requestRender();
+    }
+
+    position(id) { return new THREE.Vector3().fromArray(this.pts.positions, 3 * id); }
+
+    // Where point `id` lands on the canvas, in CSS pixels, and its depth (null: behind).
+    screenOf(id) {
+        const p = this.position(id).project(this.camera);
+        if (p.z < -1 || p.z > 1) return null;
+        const r = this.renderer.domElement.getBoundingClientRect();
+        return { x: r.left + (p.x + 1) / 2 * r.width, y: r.top + (1 - p.y) / 2 * r.height, z: p.z };
+    }
+
+    // The point under a canvas position: of the points whose splat covers it (at least 4 px),
+    // those within 1% of the nearest depth, the one nearest on screen.
+    pickAt(cx, cy) {
+        const r = this.renderer.domElement.getBoundingClientRect();
+        const m = new THREE.Matrix4().multiplyMatrices(this.camera.projectionMatrix,
+                                                       this.camera.matrixWorldInverse).elements;
+        const P = this.pts.positions, R = this.points.geometry.attributes.radius.array;
+        const k = this.material.uniforms.uScale.value * this.material.uniforms.uSplat.value;
+        const cand = [];
+        for (let i = 0; i < this.n; ++i) {
+            const x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
+            const w = m[3] * x + m[7] * y + m[11] * z + m[15];
+            if (w <= 0) continue;
+            const sx = r.left + ((m[0] * x + m[4] * y + m[8] * z + m[12]) / w + 1) / 2 * r.width;
+            const sy = r.top + (1 - (m[1] * x + m[5] * y + m[9] * z + m[13]) / w) / 2 * r.height;
+            const d2 = (sx - cx) ** 2 + (sy - cy) ** 2;
+            const rad = Math.max(4, R[i] * k / w);
+            if (d2 <= rad * rad) cand.push([w, d2, i]);
+        }
+        if (!cand.length) return -1;
+        const near = Math.min(...cand.map((c) => c[0])) * 1.01;
+        let best = null;
+        for (const c of cand)
+            if (c[0] <= near && (!best || c[1] < best[1])) best = c;
+        return best[2];
+    }
+
+    async onClick(cx, cy, shift) {
+        const t0 = performance.now();
+        const id = this.pickAt(cx, cy);
+        if (id < 0) return;
+        if (shift && this.eye >= 0) return this.queryPair(id);
+        await this.setEye(id, t0);
+    }
+
+    async setEye(id, t0 = performance.now()) {
+        const tPick = performance.now();
+        const v = await postJson('api/visible', { id });
+        const tFetch = performance.now();
+        this.eye = id;
+        this.visible = v;
+        this.pair = null;
+        this.ray = null;
+        this.updateColors();
+        this.drawMarkers();
+        this.renderer.render(this.scene, this.camera);
+        const t1 = performance.now();
+        this.latency = { total: t1 - t0, pick: tPick - t0, fetch: tFetch - tPick,
+                         server: v.server_ms, draw: t1 - tFetch };
+        $('eye').textContent = `#${id}`;
+        $('count').textContent = `${v.count} of ${this.n} points`;
+        $('leaf').textContent = `leaf ${v.leaf} at level ${v.level} (octree height ${v.height}), ` +
+                                `${v.leaf_ids.length} points`;
+        $('pair').textContent = 'shift-click a second point';
+        $('ray').textContent = 'press R';
+        $('timing').textContent = `click to picture ${this.latency.total.toFixed(1)} ms ` +
+                                  `(server ${v.server_ms.toFixed(1)} ms)`;
+        document.body.dataset.eye = id;
+        document.body.dataset.count = v.count;
+        return v;
+    }
+
+    async queryPair(id) {
+        const r = await postJson('api/pair', { a: this.eye, b: id });
+        this.pair = { id, result: r.result };
+        $('pair').textContent = `#${this.eye} and #${id}: ${r.result}`;
+        document.body.dataset.pair = r.result;
+        this.drawMarkers();
+        return r;
+    }
+
+    async shootRay() {
+        if (this.eye < 0) return null;
+        const dir = new THREE.Vector3();
+        this.camera.getWorldDirection(dir);
+        const r = await postJson('api/ray', { id: this.eye, dir: dir.toArray() });
+        this.ray = { dir, hit: r.hit ? r : null };
+        $('ray').textContent = r.hit ? `hits #${r.hit_id} at ${r.distance.toPrecision(3)}`
+                                     : 'no hit';
+        document.body.dataset.ray = r.hit ? r.hit_id : 'none';
+        this.drawMarkers();
+        return r;
+    }
+
+    sphere(p, color, scale = 1) {
+        const s = new THREE.Mesh(new THREE.SphereGeometry(this.size * 0.006 * scale, 12, 8),
+                                 new THREE.MeshBasicMaterial({ color }));
+        s.position.copy(p);
+        this.markers.add(s);
+    }
+
+    line(a, b, color) {
+        const g = new THREE.BufferGeometry().setFromPoints([a, b]);
+        this.markers.add(new THREE.Line(g, new THREE.LineBasicMaterial({ color })));
+    }
+
+    // The eye (cyan), its leaf cell, the pair's second point and line, the ray and its hit.
+    drawMarkers() {
+        this.markers.clear();
+        if (this.eye < 0) return this.requestRender();
+        const e = this.position(this.eye);
+        this.sphere(e, 0x00eeee);
+        if ($('showLeaf').checked) {
+            const c = new THREE.Vector3().fromArray(this.visible.cell.center);
+            const h = this.visible.cell.half;
+            const box = new THREE.Box3(c.clone().subScalar(h), c.clone().addScalar(h));
+            this.markers.add(new THREE.Box3Helper(box, 0xffffff));
+        }
+        if (this.pair) {
+            const q = this.position(this.pair.id);
+            this.sphere(q, 0xff9900);
+            this.line(e, q, this.pair.result === 'visible' ? 0x33dd55 : 0xee3333);
+        }
+        if (this.ray) {
+            const end = this.ray.hit ? new THREE.Vector3().fromArray(this.ray.hit.point)
+                                     : e.clone().addScaledVector(this.ray.dir, this.size);
+            this.line(e, end, 0xffee00);
+            if (this.ray.hit) this.sphere(end, 0xffee00, 0.8);
+        }
+        this.requestRender();
+    }
+
+    clear() {
+        this.eye = -1;
+        this.visible = this.pair = this.ray = null;
+        $('eye').textContent = 'none: click a point';
+        $('count').textContent = $('leaf').textContent = '\u2013';
+        this.updateColors();
+        this.drawMarkers();
+    }
+
+    onKey(e, down) {
+        const k = e.key.toLowerCase();
+        if (down && k === 'r') return void this.shootRay();
+        if (down && k === 'escape') return this.clear();
+        if (down && k === 'f') return this.toggleWalk();
+        if (!'wasdqe'.includes(k) || k.length !== 1) return;
+        if (down) this.keys.add(k); else this.keys.delete(k);
+        this.requestRender();
+    }
+
+    // Walk mode: the orbit centre just in front of the eye, so a drag looks around.
+    toggleWalk() {
+        this.walk = !this.walk;
+        const dir = new THREE.Vector3();
+        this.camera.getWorldDirection(dir);
+        const dist = this.walk ? this.size * 0.02 : this.size * 0.5;
+        this.controls.target.copy(this.camera.position).addScaledVector(dir, dist);
+        this.controls.update();
+    }
+
+    stepWalk() {
+        const f = new THREE.Vector3(), s = new THREE.Vector3();
+        this.camera.getWorldDirection(f);
+        s.crossVectors(f, this.camera.up).normalize();
+        const v = new THREE.Vector3(), step = this.size * 0.004;
+        if (this.keys.has('w')) v.add(f);
+        if (this.keys.has('s')) v.sub(f);
+        if (this.keys.has('d')) v.add(s);
+        if (this.keys.has('a')) v.sub(s);
+        if (this.keys.has('e')) v.add(this.camera.up);
+        if (this.keys.has('q')) v.sub(this.camera.up);
+        v.multiplyScalar(step);
+        this.camera.position.add(v);
+        this.controls.target.add(v);
+        this.controls.update();
+    }
+
+    // For benchmarks: draw `frames` frames, each finished (a one-pixel read waits for the GPU
+    // or SwiftShader), while the camera orbits; milliseconds per frame.
+    timeFrames(frames) {
+        const gl = this.renderer.getContext(), px = new Uint8Array(4);
+        const times = [];
+        for (let f = 0; f < frames; ++f) {
+            this.controls.autoRotate = false;
+            const t0 = performance.now();
+            this.camera.position.applyAxisAngle(this.camera.up, (2 * Math.PI) / frames);
+            this.camera.lookAt(this.controls.target);
+            this.renderer.render(this.scene, this.camera);
+            gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+            times.push(performance.now() - t0);
+        }
+        return times;
+    }
+}
+
+async function main() {
+    const info = await (await fetch('api/info')).json();
+    const buf = await (await fetch('api/points')).arrayBuffer();
+    const pts = splitPoints(buf, info.points, info.gi);
+    $('mode').querySelector('[value=gi]').disabled = !info.gi;
+    $('scene').textContent = `${info.name}: ${info.points} points, ${info.leaves} leaves, ` +
+                             `octree height ${info.height}, ${info.links} links`;
+    const v = new Viewer(info, pts);
+    window.vmapView.viewer = v;
+    window.vmapView.ready = true;
+    document.body.dataset.ready = '1';
+}
+
+window.vmapView = { ready: false };
+main().catch((e) => {
+    $('scene').textContent = `error: ${e.message}`;
+    window.vmapView.error = e.message;
+});

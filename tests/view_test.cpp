@@ -145,6 +145,18 @@ TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
     EXPECT_GT(total, 0u);
 }
 
+TEST_F(ViewTest, LargeAnswersAreNotCompressed) {
+    // Brotli at httplib's quality took half a second for a visible set; the loopback needs none.
+    const httplib::Headers br{{"Accept-Encoding", "br, gzip, deflate"}};
+    auto v = client_->Post("/api/visible", br, "{\"id\": 3}", "application/json");
+    ASSERT_TRUE(v);
+    EXPECT_EQ(v->status, 200);
+    EXPECT_FALSE(v->has_header("Content-Encoding"));
+    auto js = client_->Get("/app.js", br);
+    ASSERT_TRUE(js);
+    EXPECT_FALSE(js->has_header("Content-Encoding"));
+}
+
 TEST_F(ViewTest, PairAndRayEqualTheLibrary) {
     const uint32_t n = uint32_t(vm_->points.size());
     std::mt19937 rng(9);
@@ -212,7 +224,7 @@ TEST_F(ViewTest, ServesItsOwnFiles) {
     auto js = client_->Get("/app.js");
     ASSERT_TRUE(js);
     EXPECT_EQ(js->status, 200);
-    EXPECT_EQ(js->get_header_value("Content-Type"), "text/javascript; charset=utf-8");
+    EXPECT_EQ(js->get_header_value("Content-Type"), "application/javascript; charset=utf-8");
     auto css = client_->Get("/sub/style.css");
     ASSERT_TRUE(css);
     EXPECT_EQ(css->status, 200);

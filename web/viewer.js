@@ -43,11 +43,41 @@ function splitPoints(buf, n, hasGi) {
     return { positions, normals, albedo, radii, gi };
 }
 
+// A seeded random order of the points (Fisher-Yates, mulberry32): any prefix of it is a uniform
+// sample of the cloud, whatever order the file had, so a moving view can draw a prefix.
+// Returns order (slot -> id) and slot (id -> slot), and the arrays permuted into slot order.
+function shuffled(pts, n) {
+    let a = 0x9e3779b9;
+    const rand = () => {
+        a = (a + 0x6d2b79f5) | 0;
+        let t = Math.imul(a ^ (a >>> 15), 1 | a);
+        t = (t + Math.imul(t ^ (t >>> 7), 61 | t)) ^ t;
+        return ((t ^ (t >>> 14)) >>> 0) / 4294967296;
+    };
+    const order = new Uint32Array(n).map((_, i) => i);
+    for (let i = n - 1; i > 0; --i) {
+        const j = Math.floor(rand() * (i + 1));
+        [order[i], order[j]] = [order[j], order[i]];
+    }
+    const slot = new Uint32Array(n);
+    order.forEach((id, k) => { slot[id] = k; });
+    const permute = (src, width) => {
+        if (!src) return null;
+        const out = new src.constructor(src.length);
+        for (let k = 0; k < n; ++k)
+            for (let c = 0; c < width; ++c) out[width * k + c] = src[width * order[k] + c];
+        return out;
+    };
+    return { order, slot, positions: permute(pts.positions, 3), normals: permute(pts.normals, 3),
+             albedo: permute(pts.albedo, 3), radii: permute(pts.radii, 1),
+             gi: permute(pts.gi, 3) };
+}
+
 const vertexShader = `
 attribute float radius;
 attribute vec3 vcolor;
 uniform float uScale;   // pixels per scene unit at distance 1
-uniform float uSplat;   // splat radius multiplier
+uniform float uSplat;   // splat radius multiplier (larger when only a prefix is drawn)
 uniform float uShade;   // 1: shade by |n . view|
 varying vec3 vColor;
 void main() {
@@ -69,7 +99,9 @@ class Viewer {
     constructor(info, pts) {
         this.info = info;
         this.n = info.points;
-        this.pts = pts;
+        this.pts = shuffled(pts, this.n);  // slot order; ids map through order and slot
+        this.budget = Math.min(this.n, 100000);  // points drawn while the view moves (adapted)
+        this.lastMove = 0;
         this.eye = -1;
         this.visible = null;
         this.size = Math.hypot(...info.bounds.max.map((v, i) => v - info.bounds.min[i]));
@@ -96,7 +128,7 @@ class Viewer {
         this.controls = new OrbitControls(this.camera, this.renderer.domElement);
         this.controls.target.fromArray(c.target);
         this.controls.update();
-        this.controls.addEventListener('change', () => this.requestRender());
+        this.controls.addEventListener('change', () => this.moved());
     }
 
     initPoints() {
@@ -113,6 +145,7 @@ class Viewer {
             uniforms: { uScale: { value: 1 }, uSplat: { value: 1.5 }, uShade: { value: 1 } },
             vertexShader, fragmentShader,
         });
+        this.splat = 1.5;
         this.points = new THREE.Points(g, this.material);
         this.points.frustumCulled = false;
         this.scene.add(this.points);
@@ -122,7 +155,7 @@ class Viewer {
         window.addEventListener('resize', () => this.resize());
         $('mode').addEventListener('change', (e) => this.setMode(e.target.value));
         $('splat').addEventListener('input', (e) => {
-            this.material.uniforms.uSplat.value = Number(e.target.value);
+            this.splat = Number(e.target.value);
             this.requestRender();
         });
         $('showLeaf').addEventListener('change', () => this.drawMarkers());
@@ -141,28 +174,63 @@ class Viewer {
 
     resize() {
         const w = window.innerWidth, h = window.innerHeight;
-        this.renderer.setSize(w, h, false);
         this.camera.aspect = w / h;
         this.camera.updateProjectionMatrix();
         const fov = THREE.MathUtils.degToRad(this.camera.fov);
-        this.material.uniforms.uScale.value = h / (2 * Math.tan(fov / 2));
+        this.cssScale = h / (2 * Math.tan(fov / 2));  // CSS pixels per unit at distance 1
+        this.ratio = 0;
+        this.setResolution(1);
         this.requestRender();
+    }
+
+    // Draws at `ratio` of the CSS resolution (the canvas is stretched to the window).
+    setResolution(ratio) {
+        if (ratio === this.ratio) return;
+        this.ratio = ratio;
+        this.renderer.setPixelRatio(ratio);
+        this.renderer.setSize(window.innerWidth, window.innerHeight, false);
+        this.material.uniforms.uScale.value = this.cssScale * ratio;
     }
 
     requestRender() {
         if (this.pending) return;
         this.pending = true;
-        requestAnimationFrame(() => this.frame());
+        requestAnimationFrame((t) => this.frame(t));
     }
 
-    frame() {
+    moved() {
+        this.lastMove = performance.now();
+        this.movedSinceFrame = true;
+        this.requestRender();
+    }
+
+    // While the view moves, the picture is drawn at half resolution and only a prefix of the
+    // shuffled points, with splats grown to cover the same area; the prefix follows the frame
+    // time towards 30 frames a second. 150 ms after the last move the full cloud is drawn once
+    // at full resolution.
+    frame(now) {
         this.pending = false;
-        if (this.keys.size) {
-            this.stepWalk();
-            this.requestRender();
+        if (this.keys.size) this.stepWalk();
+        const moving = this.keys.size > 0 || this.movedSinceFrame || now - this.lastMove < 150;
+        this.movedSinceFrame = false;
+        if (moving && this.lastFrame) {
+            const dt = now - this.lastFrame;
+            if (dt > 40) this.budget = Math.max(10000, this.budget * 0.8);
+            else if (dt < 28) this.budget = Math.min(this.n, this.budget * 1.15);
         }
+        const m = moving ? Math.min(this.n, Math.round(this.budget)) : this.n;
+        this.setResolution(moving ? 0.5 : 1);
+        this.drawPrefix(m);
         this.renderer.render(this.scene, this.camera);
         this.frames = (this.frames || 0) + 1;
+        this.lastFrame = moving ? now : 0;
+        if (moving) this.requestRender();
+    }
+
+    drawPrefix(m) {
+        this.points.geometry.setDrawRange(0, m);
+        this.material.uniforms.uSplat.value = this.splat * Math.sqrt(this.n / m);
+        this.drawn = m;
     }
 
     setMode(mode) {
@@ -182,14 +250,17 @@ class Viewer {
             c.set(base);
         } else {
             for (let i = 0; i < c.length; ++i) c[i] = dimLut[base[i]];
-            for (const id of this.visible.ids) c.set(kVisible, 3 * id);
-            for (const id of this.visible.leaf_ids) c.set(kEye, 3 * id);
+            const slot = this.pts.slot;
+            for (const id of this.visible.ids) c.set(kVisible, 3 * slot[id]);
+            for (const id of this.visible.leaf_ids) c.set(kEye, 3 * slot[id]);
         }
         this.colorAttr.needsUpdate = true;
         this.requestRender();
     }
 
-    position(id) { return new THREE.Vector3().fromArray(this.pts.positions, 3 * id); }
+    position(id) {
+        return new THREE.Vector3().fromArray(this.pts.positions, 3 * this.pts.slot[id]);
+    }
 
     // Where point `id` lands on the canvas, in CSS pixels, and its depth (null: behind).
     screenOf(id) {
@@ -206,7 +277,7 @@ class Viewer {
         const m = new THREE.Matrix4().multiplyMatrices(this.camera.projectionMatrix,
                                                        this.camera.matrixWorldInverse).elements;
         const P = this.pts.positions, R = this.points.geometry.attributes.radius.array;
-        const k = this.material.uniforms.uScale.value * this.material.uniforms.uSplat.value;
+        const k = this.cssScale * this.splat;
         const cand = [];
         for (let i = 0; i < this.n; ++i) {
             const x = P[3 * i], y = P[3 * i + 1], z = P[3 * i + 2];
@@ -223,7 +294,7 @@ class Viewer {
         let best = null;
         for (const c of cand)
             if (c[0] <= near && (!best || c[1] < best[1])) best = c;
-        return best[2];
+        return this.pts.order[best[2]];
     }
 
     async onClick(cx, cy, shift) {
@@ -245,9 +316,12 @@ class Viewer {
         this.updateColors();
         this.drawMarkers();
         this.renderer.render(this.scene, this.camera);
+        const tDraw = performance.now();
+        // Benchmarks wait for the frame to be finished (a one-pixel read), the page does not.
+        if (window.vmapView.finishFrames) this.finish();
         const t1 = performance.now();
         this.latency = { total: t1 - t0, pick: tPick - t0, fetch: tFetch - tPick,
-                         server: v.server_ms, draw: t1 - tFetch };
+                         server: v.server_ms, draw: tDraw - tFetch, finish: t1 - tDraw };
         $('eye').textContent = `#${id}`;
         $('count').textContent = `${v.count} of ${this.n} points`;
         $('leaf').textContent = `leaf ${v.leaf} at level ${v.level} (octree height ${v.height}), ` +
@@ -367,18 +441,30 @@ class Viewer {
         this.controls.update();
     }
 
-    // For benchmarks: draw `frames` frames, each finished (a one-pixel read waits for the GPU
-    // or SwiftShader), while the camera orbits; milliseconds per frame.
+    // Turns the camera about the vertical through the orbit centre by `angle` radians.
+    orbitStep(angle) {
+        const t = this.controls.target;
+        this.camera.position.sub(t).applyAxisAngle(this.camera.up, angle).add(t);
+        this.controls.update();
+    }
+
+    // Waits until the GPU (or SwiftShader) has drawn what was submitted: a one-pixel read.
+    finish() {
+        const gl = this.renderer.getContext();
+        gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, new Uint8Array(4));
+    }
+
+    // For benchmarks: draw `frames` frames, each finished, while the camera orbits; milliseconds
+    // per frame.
     timeFrames(frames) {
-        const gl = this.renderer.getContext(), px = new Uint8Array(4);
+        this.setResolution(1);
+        this.drawPrefix(this.n);
         const times = [];
         for (let f = 0; f < frames; ++f) {
-            this.controls.autoRotate = false;
             const t0 = performance.now();
-            this.camera.position.applyAxisAngle(this.camera.up, (2 * Math.PI) / frames);
-            this.camera.lookAt(this.controls.target);
+            this.orbitStep((2 * Math.PI) / frames);
             this.renderer.render(this.scene, this.camera);
-            gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, px);
+            this.finish();
             times.push(performance.now() - t0);
         }
         return times;

@@ -1,30 +1,23 @@
 // `vmap view` in a real browser: Debian's chromium, headless, driven by puppeteer-core.
 //   node view_browser_test.mjs VMAP_BINARY SOURCE_DIR
 // Builds a small V-map, starts `vmap view`, loads the page, clicks a known point and checks the
-// page against the CLI (`vmap query` on the same file): the eye, the visible count, the colours of the points in
-// a screenshot, a pair query and a ray; then stops the server with SIGINT (exit 0).
+// page against the CLI (`vmap query` on the same file): the eye, the visible count, the colours
+// of the points in a screenshot, a pair query and a ray; then stops the server with SIGINT.
 // Exit 0: all passed; 1: a check failed; 77: skipped (prerequisite missing).
 import { execFileSync, spawn } from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { fileURLToPath } from 'node:url';
+
+import { launch, missing, startView } from './chromium.mjs';
 
 const [vmap, src] = process.argv.slice(2);
-const here = path.dirname(fileURLToPath(import.meta.url));
-const chromium = process.env.VMAP_CHROMIUM || '/usr/bin/chromium';
 const shotPath = process.env.VMAP_VIEW_SCREENSHOT;  // also save the final screenshot there
-
-function skip(why) {
+const why = missing(src);
+if (why) {
     console.log(`SKIPPED: ${why}`);
     process.exit(77);
 }
-if (!fs.existsSync(chromium)) skip(`${chromium} not found (scripts/setup.sh installs chromium)`);
-const pptr = path.join(here, 'node_modules/puppeteer-core/lib/esm/puppeteer/puppeteer-core.js');
-if (!fs.existsSync(pptr)) skip('puppeteer-core not installed (scripts/fetch-web.sh)');
-if (!fs.existsSync(path.join(src, 'web/vendor/three.module.js')))
-    skip('three.js not vendored (scripts/fetch-web.sh)');
-const { default: puppeteer } = await import(pptr);
 
 let passed = 0, failed = 0;
 function check(ok, what) {
@@ -37,22 +30,6 @@ const cli = (...args) => execFileSync(vmap, args, { encoding: 'utf8' });
 const map = path.join(tmp, 'small.vmap');
 const scene = path.join(src, 'scenes/cornell-bunny.json');
 cli('build', scene, '--points', '3000', '-o', map);
-
-function startServer() {
-    const child = spawn(vmap, ['view', map, '--scene', scene], { stdio: ['ignore', 'pipe', 'pipe'] });
-    let out = '';
-    child.stdout.on('data', (d) => { out += d; });
-    child.stderr.on('data', (d) => { out += d; });
-    const url = new Promise((resolve, reject) => {
-        const t = setInterval(() => {
-            const m = out.match(/url: +(http:\/\/\S+)/);
-            if (m) { clearInterval(t); resolve(m[1]); }
-        }, 50);
-        child.on('exit', (code) => { clearInterval(t); reject(new Error(`vmap view exited ${code}: ${out}`)); });
-    });
-    const exited = new Promise((resolve) => child.on('exit', (code, sig) => resolve({ code, sig })));
-    return { child, url, exited, output: () => out };
-}
 
 // Pixels of a screenshot at the given points, decoded by the browser itself.
 async function pixelsAt(page, points) {
@@ -73,14 +50,9 @@ async function pixelsAt(page, points) {
 const near = (p, q, tol = 16) => p.every((v, i) => Math.abs(v - q[i]) <= tol);
 const kPurple = [149, 39, 220], kCyan = [0, 238, 238];
 
-const server = startServer();
+const server = startView(spawn, vmap, [map, '--scene', scene]);
 const userDir = fs.mkdtempSync(path.join(tmp, 'chromium-'));
-const browser = await puppeteer.launch({
-    executablePath: chromium, headless: true,
-    args: ['--headless', '--no-sandbox', '--disable-gpu', '--disable-quic', '--no-first-run',
-           '--disable-background-networking', '--disable-component-update', '--disable-sync',
-           '--enable-unsafe-swiftshader', `--user-data-dir=${userDir}`],
-});
+const browser = await launch(userDir);
 try {
     const url = await server.url;
     const page = await browser.newPage();

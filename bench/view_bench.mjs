@@ -1,6 +1,6 @@
 // How responsive `vmap view` is, in headless chromium with its GPU off (SwiftShader WebGL):
 //   node bench/view_bench.mjs VMAP_BINARY MAP.vmap [--scene SCENE] [--clicks 30] [--frames 120]
-//        [--size 1280x800] [--json out.json]
+//        [--size 1280x800] [--json out.json] [--shot picture.png]
 // Starts `vmap view MAP`, loads the page and measures
 //   clicks: points on screen are clicked (real mouse events) one after another; per click the
 //     time from the mouse-up to the recoloured picture drawn and finished (pick, POST
@@ -46,6 +46,35 @@ const stats = (xs) => {
 };
 const fmt = (s, unit = 'ms') =>
     `median ${s.median.toFixed(1)} ${unit} (min ${s.min.toFixed(1)}, max ${s.max.toFixed(1)}, n ${s.n})`;
+
+// The picture for the README: the Fig. 9 eye on the floor clicked, a ray along the view, and a
+// pair query with a point high on the back wall.
+async function screenshot(page, file) {
+    await page.keyboard.press('Escape');
+    await page.keyboard.press('h');
+    await page.evaluate(() => { window.vmapView.finishFrames = false; });
+    const [eye, other] = await page.evaluate((targets) => {
+        const v = window.vmapView.viewer;
+        return targets.map((t) => {
+            const ids = [...Array(v.n).keys()];
+            const d = ids.map((i) => v.position(i).distanceToSquared({ x: t[0], y: t[1], z: t[2] }));
+            ids.sort((a, b) => d[a] - d[b]);
+            return v.screenOf(ids.find((i) => { const s = v.screenOf(i); return s && v.pickAt(s.x, s.y) === i; }));
+        });
+    }, [[0.2764, 0, 0.1], [0.12, 0.42, 0.5592]]);
+    await page.evaluate(() => { delete document.body.dataset.count; });
+    await page.mouse.click(eye.x, eye.y);
+    await page.waitForFunction('document.body.dataset.count !== undefined');
+    await page.keyboard.down('Shift');
+    await page.mouse.click(other.x, other.y);
+    await page.keyboard.up('Shift');
+    await page.waitForFunction('document.body.dataset.pair !== undefined');
+    await page.keyboard.press('r');
+    await page.waitForFunction('document.body.dataset.ray !== undefined');
+    await new Promise((r) => setTimeout(r, 500));
+    await page.screenshot({ path: file });
+    console.log(`wrote:      ${file}`);
+}
 
 const viewArgs = [map, ...(opt('--scene') ? ['--scene', opt('--scene')] : [])];
 const server = startView(spawn, vmap, viewArgs);
@@ -124,6 +153,7 @@ try {
     result.moving_points = stats(moving.drawn);
     console.log(`moving:     orbiting for 4 s (requestAnimationFrame): ${moving.fps.toFixed(1)} fps, ` +
                 `drawing ${fmt(result.moving_points, 'points')} (last 2 s)`);
+    if (opt('--shot')) await screenshot(page, opt('--shot'));
 } finally {
     await browser.close();
     server.child.kill('SIGINT');

@@ -123,12 +123,19 @@ class Viewer {
     initCamera() {
         const c = this.info.camera;
         this.camera = new THREE.PerspectiveCamera(c.fov, 1, this.size * 1e-3, this.size * 20);
+        this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+        this.home();
+        this.controls.addEventListener('change', () => this.moved());
+    }
+
+    // The server's camera: the scene's, or the default view through the room's open side.
+    home() {
+        const c = this.info.camera;
         this.camera.position.fromArray(c.eye);
         this.camera.up.fromArray(c.up);
-        this.controls = new OrbitControls(this.camera, this.renderer.domElement);
         this.controls.target.fromArray(c.target);
+        this.walk = false;
         this.controls.update();
-        this.controls.addEventListener('change', () => this.moved());
     }
 
     initPoints() {
@@ -142,10 +149,10 @@ class Viewer {
         this.colorAttr = new THREE.BufferAttribute(this.colors, 3, true);
         g.setAttribute('vcolor', this.colorAttr);
         this.material = new THREE.ShaderMaterial({
-            uniforms: { uScale: { value: 1 }, uSplat: { value: 1.5 }, uShade: { value: 1 } },
+            uniforms: { uScale: { value: 1 }, uSplat: { value: 2 }, uShade: { value: 1 } },
             vertexShader, fragmentShader,
         });
-        this.splat = 1.5;
+        this.splat = 2;
         this.points = new THREE.Points(g, this.material);
         this.points.frustumCulled = false;
         this.scene.add(this.points);
@@ -357,16 +364,20 @@ class Viewer {
         return r;
     }
 
+    // Markers are drawn over the points (no depth test), so a ray inside the model still shows.
     sphere(p, color, scale = 1) {
-        const s = new THREE.Mesh(new THREE.SphereGeometry(this.size * 0.006 * scale, 12, 8),
-                                 new THREE.MeshBasicMaterial({ color }));
+        const s = new THREE.Mesh(new THREE.SphereGeometry(this.size * 0.008 * scale, 12, 8),
+                                 new THREE.MeshBasicMaterial({ color, depthTest: false }));
         s.position.copy(p);
+        s.renderOrder = 2;
         this.markers.add(s);
     }
 
     line(a, b, color) {
         const g = new THREE.BufferGeometry().setFromPoints([a, b]);
-        this.markers.add(new THREE.Line(g, new THREE.LineBasicMaterial({ color })));
+        const l = new THREE.Line(g, new THREE.LineBasicMaterial({ color, depthTest: false }));
+        l.renderOrder = 1;
+        this.markers.add(l);
     }
 
     // The eye (cyan), its leaf cell, the pair's second point and line, the ray and its hit.
@@ -409,6 +420,7 @@ class Viewer {
         if (down && k === 'r') return void this.shootRay();
         if (down && k === 'escape') return this.clear();
         if (down && k === 'f') return this.toggleWalk();
+        if (down && k === 'h') return this.home();
         if (!'wasdqe'.includes(k) || k.length !== 1) return;
         if (down) this.keys.add(k); else this.keys.delete(k);
         this.requestRender();

@@ -29,6 +29,7 @@ void write_file(const fs::path& p, const std::string& text) {
 }
 
 const char kSecret[] = "secret outside the web folder";
+const char kBase64[] = "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
 
 class ViewTest : public ::testing::Test {
   protected:
@@ -141,6 +142,23 @@ TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
         EXPECT_EQ(j["level"], int(vm_->octree.level[node]));
         EXPECT_EQ(leaf.size(), vm_->octree.point_end[node] - vm_->octree.point_begin[node]);
         total += want.size();
+        // The same set as a base64 bit mask.
+        const std::string b64 = post("/api/visible", {{"id", id}, {"as", "bits"}})["bits"];
+        std::vector<uint32_t> got;
+        std::string bytes;
+        for (size_t i = 0; i + 3 < b64.size(); i += 4) {
+            uint32_t v = 0;
+            for (int c = 0; c < 4; ++c) {
+                const char ch = b64[i + c];
+                const auto at = std::string(kBase64).find(ch);
+                v = v << 6 | (ch == '=' ? 0 : uint32_t(at));
+            }
+            bytes += char(v >> 16), bytes += char(v >> 8), bytes += char(v);
+        }
+        ASSERT_GE(bytes.size(), (n + 7) / 8);
+        for (uint32_t k = 0; k < n; ++k)
+            if (uint8_t(bytes[k >> 3]) >> (k & 7) & 1) got.push_back(k);
+        ASSERT_EQ(got, want) << "bits of " << id;
     }
     EXPECT_GT(total, 0u);
 }
@@ -199,6 +217,7 @@ TEST_F(ViewTest, BadRequestsGet400WithAMessage) {
     expect_400("/api/visible", "{\"id\": 99999999999999}", "out of range");
     expect_400("/api/visible", "{\"id\": \"3\"}", "not an integer");
     expect_400("/api/visible", "{\"id\": 2.5}", "not an integer");
+    expect_400("/api/visible", "{\"id\": 1, \"as\": \"png\"}", "field 'as'");
     expect_400("/api/pair", "{\"a\": 1}", "field 'b' missing");
     expect_400("/api/ray", "{\"id\": 1}", "field 'dir' missing");
     expect_400("/api/ray", "{\"id\": 1, \"dir\": [0, 0, 0]}", "non-zero");
@@ -269,6 +288,28 @@ TEST_F(ViewTest, StopEndsServeAndAPortInUseIsAnError) {
     early.bind("127.0.0.1", 0);
     early.stop();
     EXPECT_TRUE(early.serve()) << "stop() before serve(): serve() returns at once";
+}
+
+TEST_F(ViewTest, GiColoursFollowThePointsAndMustMatchTheirCount) {
+    view::ServerConfig cfg;
+    cfg.web_root = (dir_ / "web").string();
+    const size_t n = vm_->points.size();
+    for (size_t i = 0; i < n; ++i) cfg.gi_colors.push_back({float(i % 7) / 7, 0.5f, 1.0f});
+    view::Server gi(*vm_, cfg);
+    const int port = gi.bind("127.0.0.1", 0);
+    std::thread t([&] { gi.serve(); });
+    httplib::Client c("127.0.0.1", port);
+    auto info = c.Get("/api/info");
+    auto pts = c.Get("/api/points");
+    gi.stop();
+    t.join();
+    ASSERT_TRUE(info && pts);
+    EXPECT_EQ(json::parse(info->body)["gi"], true);
+    ASSERT_EQ(pts->body.size(), n * (12 + 12 + 3 + 4 + 3));
+    for (size_t i = 0; i < n; ++i)
+        ASSERT_EQ(uint8_t(pts->body[31 * n + 3 * i]), linear_to_srgb8(float(i % 7) / 7)) << i;
+    cfg.gi_colors.pop_back();
+    EXPECT_THROW(view::Server(*vm_, cfg), Error);
 }
 
 TEST(ViewServer, AWebFolderWithoutIndexIsAnError) {

@@ -257,8 +257,12 @@ class Viewer {
             c.set(base);
         } else {
             for (let i = 0; i < c.length; ++i) c[i] = dimLut[base[i]];
-            const slot = this.pts.slot;
-            for (const id of this.visible.ids) c.set(kVisible, 3 * slot[id]);
+            const slot = this.pts.slot, bits = this.visible.mask;
+            for (let b = 0; b < bits.length; ++b) {
+                if (!bits[b]) continue;
+                for (let k = 0; k < 8; ++k)
+                    if (bits[b] & (1 << k)) c.set(kVisible, 3 * slot[8 * b + k]);
+            }
             for (const id of this.visible.leaf_ids) c.set(kEye, 3 * slot[id]);
         }
         this.colorAttr.needsUpdate = true;
@@ -314,7 +318,8 @@ class Viewer {
 
     async setEye(id, t0 = performance.now()) {
         const tPick = performance.now();
-        const v = await postJson('api/visible', { id });
+        const v = await postJson('api/visible', { id, as: 'bits' });
+        v.mask = Uint8Array.from(atob(v.bits), (ch) => ch.charCodeAt(0));
         const tFetch = performance.now();
         this.eye = id;
         this.visible = v;

@@ -82,6 +82,40 @@ Vec3 direction_field(const json& j, const char* key) {
 
 json vec_json(Vec3 v) { return json::array({v.x, v.y, v.z}); }
 
+// Standard base64 (RFC 4648, with padding).
+std::string base64(const std::vector<uint8_t>& bytes) {
+    static const char kDigits[] =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    out.reserve((bytes.size() + 2) / 3 * 4);
+    for (size_t i = 0; i < bytes.size(); i += 3) {
+        const size_t left = bytes.size() - i;
+        const uint32_t v = uint32_t(bytes[i]) << 16 | (left > 1 ? uint32_t(bytes[i + 1]) << 8 : 0) |
+                           (left > 2 ? bytes[i + 2] : 0);
+        out += kDigits[v >> 18];
+        out += kDigits[(v >> 12) & 63];
+        out += left > 1 ? kDigits[(v >> 6) & 63] : '=';
+        out += left > 2 ? kDigits[v & 63] : '=';
+    }
+    return out;
+}
+
+// A set of ids < n as a bit mask: id k is bit (k & 7) of byte k >> 3.
+std::vector<uint8_t> bit_mask(const std::vector<uint32_t>& ids, size_t n) {
+    std::vector<uint8_t> bits((n + 7) / 8, 0);
+    for (uint32_t k : ids) bits[k >> 3] |= uint8_t(1u << (k & 7));
+    return bits;
+}
+
+// The "as" field of /api/visible: "ids" (default, a list) or "bits" (a base64 bit mask).
+bool wants_bits(const json& j) {
+    if (!j.contains("as")) return false;
+    const json& v = j.at("as");
+    if (v == "ids") return false;
+    if (v == "bits") return true;
+    throw BadRequest(fmt::format("field 'as': {} is not \"ids\" or \"bits\"", v.dump()));
+}
+
 template <class T>
 void append_raw(std::string& out, const T* data, size_t count) {
     out.append(reinterpret_cast<const char*>(data), count * sizeof(T));
@@ -217,6 +251,7 @@ json Server::Impl::make_info(const PointSet& p) const {
 json Server::Impl::on_visible(const json& req) const {
     const auto t0 = std::chrono::steady_clock::now();
     const uint32_t id = id_field(req, "id", vm.points.size());
+    const bool bits = wants_bits(req);
     const std::vector<uint32_t> set = vm.visible_set(id);
     const Octree& t = vm.octree;
     const int32_t leaf = t.leaf_of_point(vm.inverse[id]);
@@ -232,8 +267,12 @@ json Server::Impl::on_visible(const json& req) const {
              {"level", int(t.level[node])},
              {"height", t.height()},
              {"cell", {{"center", vec_json(t.spheres[node].center)}, {"half", t.half_size[node]}}},
-             {"leaf_ids", leaf_ids},
-             {"ids", set}};
+             {"leaf_ids", leaf_ids}};
+    if (bits) {
+        out["bits"] = base64(bit_mask(set, vm.points.size()));
+    } else {
+        out["ids"] = set;
+    }
     out["server_ms"] =
         std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
     return out;

@@ -6,7 +6,10 @@
 //   GET  /api/points          binary, little-endian, input order, n = info.points:
 //                             f32 positions[3n], f32 normals[3n], u8 albedo sRGB[3n],
 //                             f32 radii[n], then u8 GI sRGB[3n] when info.gi is true
-//   POST /api/visible {"id"}  VisibilityMap::visible_set(id), the id's leaf, its level and cell
+//   POST /api/visible {"id", "as"}   VisibilityMap::visible_set(id) as a sorted list "ids", or
+//                             with "as": "bits" as "bits": a base64 bit mask over the points
+//                             (id k is bit k & 7 of byte k >> 3; 8x smaller than the list);
+//                             the id's leaf, its points, level and cell
 //   POST /api/pair {"a","b"}  VisibilityMap::query(a, b): "visible" | "hidden" | "same-leaf"
 //   POST /api/ray {"id","dir":[x,y,z]}   shoot_ray: the first splat hit from the point
 //   GET  /<file>              a file under the web folder ("/" is index.html)

@@ -12,13 +12,13 @@
 //     it draws a shuffled prefix of the points sized to hold 30 fps (web/viewer.js), with the
 //     number of points it settled on.
 // Prints medians with min and max; the first click and 10 frames warm up and are not counted.
-import { spawn } from 'node:child_process';
+import {spawn} from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
-import { fileURLToPath } from 'node:url';
+import {fileURLToPath} from 'node:url';
 
-import { launch, missing, startView } from '../tests/browser/chromium.mjs';
+import {launch, missing, startView} from '../tests/browser/chromium.mjs';
 
 const args = process.argv.slice(2);
 const opt = (name, def) => {
@@ -27,8 +27,9 @@ const opt = (name, def) => {
 };
 const [vmap, map] = args;
 if (!vmap || !map) {
-    console.error('usage: node bench/view_bench.mjs VMAP_BINARY MAP.vmap [--scene S] [--clicks N] ' +
-                  '[--frames N] [--size WxH] [--json out.json]');
+    console.error(
+        'usage: node bench/view_bench.mjs VMAP_BINARY MAP.vmap [--scene S] [--clicks N] ' +
+        '[--frames N] [--size WxH] [--json out.json]');
     process.exit(2);
 }
 const src = path.resolve(path.dirname(fileURLToPath(import.meta.url)), '..');
@@ -42,27 +43,34 @@ const [width, height] = opt('--size', '1280x800').split('x').map(Number);
 
 const stats = (xs) => {
     const s = [...xs].sort((a, b) => a - b);
-    return { median: s[Math.floor(s.length / 2)], min: s[0], max: s[s.length - 1], n: s.length };
+    return {median: s[Math.floor(s.length / 2)], min: s[0], max: s[s.length - 1], n: s.length};
 };
-const fmt = (s, unit = 'ms') =>
-    `median ${s.median.toFixed(1)} ${unit} (min ${s.min.toFixed(1)}, max ${s.max.toFixed(1)}, n ${s.n})`;
+const fmt = (s, unit = 'ms') => `median ${s.median.toFixed(1)} ${unit} (min ${
+    s.min.toFixed(1)}, max ${s.max.toFixed(1)}, n ${s.n})`;
 
 // The picture for the README: the Fig. 9 eye on the floor clicked, a ray along the view, and a
 // pair query with a point high on the back wall.
 async function screenshot(page, file) {
     await page.keyboard.press('Escape');
     await page.keyboard.press('h');
-    await page.evaluate(() => { window.vmapView.finishFrames = false; });
+    await page.evaluate(() => {
+        window.vmapView.finishFrames = false;
+    });
     const [eye, other] = await page.evaluate((targets) => {
         const v = window.vmapView.viewer;
         return targets.map((t) => {
             const ids = [...Array(v.n).keys()];
-            const d = ids.map((i) => v.position(i).distanceToSquared({ x: t[0], y: t[1], z: t[2] }));
+            const d = ids.map((i) => v.position(i).distanceToSquared({x: t[0], y: t[1], z: t[2]}));
             ids.sort((a, b) => d[a] - d[b]);
-            return v.screenOf(ids.find((i) => { const s = v.screenOf(i); return s && v.pickAt(s.x, s.y) === i; }));
+            return v.screenOf(ids.find((i) => {
+                const s = v.screenOf(i);
+                return s && v.pickAt(s.x, s.y) === i;
+            }));
         });
     }, [[0.2764, 0, 0.1], [0.12, 0.42, 0.5592]]);
-    await page.evaluate(() => { delete document.body.dataset.count; });
+    await page.evaluate(() => {
+        delete document.body.dataset.count;
+    });
     await page.mouse.click(eye.x, eye.y);
     await page.waitForFunction('document.body.dataset.count !== undefined');
     await page.keyboard.down('Shift');
@@ -72,7 +80,7 @@ async function screenshot(page, file) {
     await page.keyboard.press('r');
     await page.waitForFunction('document.body.dataset.ray !== undefined');
     await new Promise((r) => setTimeout(r, 500));
-    await page.screenshot({ path: file });
+    await page.screenshot({path: file});
     console.log(`wrote:      ${file}`);
 }
 
@@ -80,13 +88,17 @@ const viewArgs = [map, ...(opt('--scene') ? ['--scene', opt('--scene')] : [])];
 const server = startView(spawn, vmap, viewArgs);
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'vmap-view-bench-'));
 const browser = await launch(tmp);
-const result = { map, width, height };
+const result = {
+    map,
+    width,
+    height
+};
 try {
     const url = await server.url;
     const page = await browser.newPage();
-    await page.setViewport({ width, height, deviceScaleFactor: 1 });
+    await page.setViewport({width, height, deviceScaleFactor: 1});
     await page.goto(url);
-    await page.waitForFunction('window.vmapView.ready || window.vmapView.error', { timeout: 120000 });
+    await page.waitForFunction('window.vmapView.ready || window.vmapView.error', {timeout: 120000});
     const info = await page.evaluate(() => window.vmapView.viewer.info);
     result.points = info.points;
     result.renderer = await page.evaluate(() => {
@@ -94,8 +106,10 @@ try {
         const d = gl.getExtension('WEBGL_debug_renderer_info');
         return d ? gl.getParameter(d.UNMASKED_RENDERER_WEBGL) : gl.getParameter(gl.RENDERER);
     });
-    console.log(`map:        ${map}: ${info.points} points, ${info.leaves} leaves, height ${info.height}`);
-    console.log(`browser:    ${await browser.version()}, ${width}x${height}, WebGL on ${result.renderer}`);
+    console.log(
+        `map:        ${map}: ${info.points} points, ${info.leaves} leaves, height ${info.height}`);
+    console.log(
+        `browser:    ${await browser.version()}, ${width}x${height}, WebGL on ${result.renderer}`);
 
     // Click targets: a grid over the canvas right of the panel, kept where a point is hit.
     const targets = await page.evaluate((want) => {
@@ -108,12 +122,17 @@ try {
         }
         return out;
     }, clicks + 1);
-    await page.evaluate(() => { window.vmapView.finishFrames = true; });
-    const lat = [], server_ms = [], counts = [], parts = { pick: [], fetch: [], draw: [], finish: [] };
+    await page.evaluate(() => {
+        window.vmapView.finishFrames = true;
+    });
+    const lat = [], server_ms = [], counts = [],
+          parts = {pick: [], fetch: [], draw: [], finish: []};
     for (const [k, [x, y]] of targets.entries()) {
-        await page.evaluate(() => { delete document.body.dataset.count; });
+        await page.evaluate(() => {
+            delete document.body.dataset.count;
+        });
         await page.mouse.click(x, y);
-        await page.waitForFunction('document.body.dataset.count !== undefined', { timeout: 10000 });
+        await page.waitForFunction('document.body.dataset.count !== undefined', {timeout: 10000});
         const l = await page.evaluate(() => window.vmapView.viewer.latency);
         const c = await page.evaluate(() => Number(document.body.dataset.count));
         if (k === 0) continue;
@@ -135,29 +154,36 @@ try {
     await page.keyboard.press('Escape');
     const times = await page.evaluate((n) => window.vmapView.viewer.timeFrames(n), frames + 10);
     result.frame_ms = stats(times.slice(10));
-    console.log(`frames:     rendered and finished ${fmt(result.frame_ms)} = ` +
-                `${(1000 / result.frame_ms.median).toFixed(1)} fps`);
+    console.log(
+        `frames:     rendered and finished ${fmt(result.frame_ms)} = ` +
+        `${(1000 / result.frame_ms.median).toFixed(1)} fps`);
     // Moving: the page draws a prefix of its shuffled points, sized to the frame time.
-    const moving = await page.evaluate(() => new Promise((resolve) => {
-        const v = window.vmapView.viewer, t0 = performance.now(), f0 = v.frames, drawn = [];
-        const step = () => {
-            v.orbitStep(0.01);
-            drawn.push(v.drawn);
-            if (performance.now() - t0 < 4000) requestAnimationFrame(step);
-            else resolve({ fps: (v.frames - f0) / ((performance.now() - t0) / 1000),
-                           drawn: drawn.slice(drawn.length >> 1) });
-        };
-        requestAnimationFrame(step);
-    }));
+    const moving = await page.evaluate(
+        () => new Promise((resolve) => {
+            const v = window.vmapView.viewer, t0 = performance.now(), f0 = v.frames, drawn = [];
+            const step = () => {
+                v.orbitStep(0.01);
+                drawn.push(v.drawn);
+                if (performance.now() - t0 < 4000)
+                    requestAnimationFrame(step);
+                else
+                    resolve({
+                        fps: (v.frames - f0) / ((performance.now() - t0) / 1000),
+                        drawn: drawn.slice(drawn.length >> 1)
+                    });
+            };
+            requestAnimationFrame(step);
+        }));
     result.moving_fps = moving.fps;
     result.moving_points = stats(moving.drawn);
-    console.log(`moving:     orbiting for 4 s (requestAnimationFrame): ${moving.fps.toFixed(1)} fps, ` +
-                `drawing ${fmt(result.moving_points, 'points')} (last 2 s)`);
+    console.log(
+        `moving:     orbiting for 4 s (requestAnimationFrame): ${moving.fps.toFixed(1)} fps, ` +
+        `drawing ${fmt(result.moving_points, 'points')} (last 2 s)`);
     if (opt('--shot')) await screenshot(page, opt('--shot'));
 } finally {
     await browser.close();
     server.child.kill('SIGINT');
     await server.exited;
-    fs.rmSync(tmp, { recursive: true, force: true });
+    fs.rmSync(tmp, {recursive: true, force: true});
 }
 if (opt('--json')) fs.writeFileSync(opt('--json'), JSON.stringify(result, null, 2) + '\n');

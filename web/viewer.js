@@ -1,7 +1,7 @@
 // The page of `vmap view`: the points as round splats, orbit and walk, and the V-map's answers
 // from the server (src/view/view_server.h has the endpoints). window.vmapView is for tests.
 import * as THREE from 'three';
-import { OrbitControls } from 'three/addons/OrbitControls.js';
+import {OrbitControls} from 'three/addons/OrbitControls.js';
 
 const kVisible = [149, 39, 220];  // sRGB of render.h's VisibleStyle: purple
 const kEye = [0, 238, 238];       // cyan
@@ -19,7 +19,7 @@ const dimLut = new Uint8Array(256).map((_, c) => {
 });
 
 async function postJson(url, body) {
-    const r = await fetch(url, { method: 'POST', body: JSON.stringify(body) });
+    const r = await fetch(url, {method: 'POST', body: JSON.stringify(body)});
     const j = await r.json();
     if (!r.ok) throw new Error(j.error || `${url}: status ${r.status}`);
     return j;
@@ -37,10 +37,10 @@ function splitPoints(buf, n, hasGi) {
     const normals = take(Float32Array, 3 * n);
     const albedo = take(Uint8Array, 3 * n);
     // The radii follow 3n bytes: copy to an aligned buffer when 3n is not a multiple of 4.
-    const radii = (at % 4 === 0) ? take(Float32Array, n)
-                                 : new Float32Array(buf.slice(at, (at += 4 * n)));
+    const radii =
+        (at % 4 === 0) ? take(Float32Array, n) : new Float32Array(buf.slice(at, (at += 4 * n)));
     const gi = hasGi ? take(Uint8Array, 3 * n) : null;
-    return { positions, normals, albedo, radii, gi };
+    return {positions, normals, albedo, radii, gi};
 }
 
 // A seeded random order of the points (Fisher-Yates, mulberry32): any prefix of it is a uniform
@@ -60,7 +60,9 @@ function shuffled(pts, n) {
         [order[i], order[j]] = [order[j], order[i]];
     }
     const slot = new Uint32Array(n);
-    order.forEach((id, k) => { slot[id] = k; });
+    order.forEach((id, k) => {
+        slot[id] = k;
+    });
     const permute = (src, width) => {
         if (!src) return null;
         const out = new src.constructor(src.length);
@@ -68,9 +70,15 @@ function shuffled(pts, n) {
             for (let c = 0; c < width; ++c) out[width * k + c] = src[width * order[k] + c];
         return out;
     };
-    return { order, slot, positions: permute(pts.positions, 3), normals: permute(pts.normals, 3),
-             albedo: permute(pts.albedo, 3), radii: permute(pts.radii, 1),
-             gi: permute(pts.gi, 3) };
+    return {
+        order,
+        slot,
+        positions: permute(pts.positions, 3),
+        normals: permute(pts.normals, 3),
+        albedo: permute(pts.albedo, 3),
+        radii: permute(pts.radii, 1),
+        gi: permute(pts.gi, 3)
+    };
 }
 
 const vertexShader = `
@@ -99,13 +107,13 @@ class Viewer {
     constructor(info, pts) {
         this.info = info;
         this.n = info.points;
-        this.pts = shuffled(pts, this.n);  // slot order; ids map through order and slot
+        this.pts = shuffled(pts, this.n);        // slot order; ids map through order and slot
         this.budget = Math.min(this.n, 100000);  // points drawn while the view moves (adapted)
         this.lastMove = 0;
         this.eye = -1;
         this.visible = null;
         this.size = Math.hypot(...info.bounds.max.map((v, i) => v - info.bounds.min[i]));
-        this.renderer = new THREE.WebGLRenderer({ canvas: $('view'), antialias: false });
+        this.renderer = new THREE.WebGLRenderer({canvas: $('view'), antialias: false});
         this.renderer.setPixelRatio(1);
         this.renderer.setClearColor(0x0b0b0e);
         this.scene = new THREE.Scene();
@@ -142,15 +150,16 @@ class Viewer {
         const g = new THREE.BufferGeometry();
         g.setAttribute('position', new THREE.BufferAttribute(this.pts.positions, 3));
         g.setAttribute('normal', new THREE.BufferAttribute(this.pts.normals, 3));
-        const radii = this.info.radii ? this.pts.radii
-                                      : new Float32Array(this.n).fill(this.size * 2e-3);
+        const radii =
+            this.info.radii ? this.pts.radii : new Float32Array(this.n).fill(this.size * 2e-3);
         g.setAttribute('radius', new THREE.BufferAttribute(radii, 1));
         this.colors = new Uint8Array(3 * this.n);
         this.colorAttr = new THREE.BufferAttribute(this.colors, 3, true);
         g.setAttribute('vcolor', this.colorAttr);
         this.material = new THREE.ShaderMaterial({
-            uniforms: { uScale: { value: 1 }, uSplat: { value: 2 }, uShade: { value: 1 } },
-            vertexShader, fragmentShader,
+            uniforms: {uScale: {value: 1}, uSplat: {value: 2}, uShade: {value: 1}},
+            vertexShader,
+            fragmentShader,
         });
         this.splat = 2;
         this.points = new THREE.Points(g, this.material);
@@ -168,7 +177,9 @@ class Viewer {
         $('showLeaf').addEventListener('change', () => this.drawMarkers());
         const el = this.renderer.domElement;
         let down = null;
-        el.addEventListener('pointerdown', (e) => { down = [e.clientX, e.clientY]; });
+        el.addEventListener('pointerdown', (e) => {
+            down = [e.clientX, e.clientY];
+        });
         el.addEventListener('pointerup', (e) => {
             if (!down || e.button !== 0) return;
             const moved = Math.hypot(e.clientX - down[0], e.clientY - down[1]);
@@ -222,8 +233,10 @@ class Viewer {
         this.movedSinceFrame = false;
         if (moving && this.lastFrame) {
             const dt = now - this.lastFrame;
-            if (dt > 40) this.budget = Math.max(10000, this.budget * 0.8);
-            else if (dt < 28) this.budget = Math.min(this.n, this.budget * 1.15);
+            if (dt > 40)
+                this.budget = Math.max(10000, this.budget * 0.8);
+            else if (dt < 28)
+                this.budget = Math.min(this.n, this.budget * 1.15);
         }
         const m = moving ? Math.min(this.n, Math.round(this.budget)) : this.n;
         this.setResolution(moving ? 0.5 : 1);
@@ -248,7 +261,9 @@ class Viewer {
         this.updateColors();
     }
 
-    baseColors() { return this.mode === 'gi' ? this.pts.gi : this.pts.albedo; }
+    baseColors() {
+        return this.mode === 'gi' ? this.pts.gi : this.pts.albedo;
+    }
 
     // Colours of every point: the base colour, or Fig. 9's when an eye is set.
     updateColors() {
@@ -278,15 +293,17 @@ class Viewer {
         const p = this.position(id).project(this.camera);
         if (p.z < -1 || p.z > 1) return null;
         const r = this.renderer.domElement.getBoundingClientRect();
-        return { x: r.left + (p.x + 1) / 2 * r.width, y: r.top + (1 - p.y) / 2 * r.height, z: p.z };
+        return {x: r.left + (p.x + 1) / 2 * r.width, y: r.top + (1 - p.y) / 2 * r.height, z: p.z};
     }
 
     // The point under a canvas position: of the points whose splat covers it (at least 4 px),
     // those within 1% of the nearest depth, the one nearest on screen.
     pickAt(cx, cy) {
         const r = this.renderer.domElement.getBoundingClientRect();
-        const m = new THREE.Matrix4().multiplyMatrices(this.camera.projectionMatrix,
-                                                       this.camera.matrixWorldInverse).elements;
+        const m =
+            new THREE.Matrix4()
+                .multiplyMatrices(this.camera.projectionMatrix, this.camera.matrixWorldInverse)
+                .elements;
         const P = this.pts.positions, R = this.points.geometry.attributes.radius.array;
         const k = this.cssScale * this.splat;
         const cand = [];
@@ -318,7 +335,7 @@ class Viewer {
 
     async setEye(id, t0 = performance.now()) {
         const tPick = performance.now();
-        const v = await postJson('api/visible', { id, as: 'bits' });
+        const v = await postJson('api/visible', {id, as: 'bits'});
         v.mask = Uint8Array.from(atob(v.bits), (ch) => ch.charCodeAt(0));
         const tFetch = performance.now();
         this.eye = id;
@@ -332,24 +349,30 @@ class Viewer {
         // Benchmarks wait for the frame to be finished (a one-pixel read), the page does not.
         if (window.vmapView.finishFrames) this.finish();
         const t1 = performance.now();
-        this.latency = { total: t1 - t0, pick: tPick - t0, fetch: tFetch - tPick,
-                         server: v.server_ms, draw: tDraw - tFetch, finish: t1 - tDraw };
+        this.latency = {
+            total: t1 - t0,
+            pick: tPick - t0,
+            fetch: tFetch - tPick,
+            server: v.server_ms,
+            draw: tDraw - tFetch,
+            finish: t1 - tDraw
+        };
         $('eye').textContent = `#${id}`;
         $('count').textContent = `${v.count} of ${this.n} points`;
         $('leaf').textContent = `leaf ${v.leaf} at level ${v.level} (octree height ${v.height}), ` +
-                                `${v.leaf_ids.length} points`;
+            `${v.leaf_ids.length} points`;
         $('pair').textContent = 'shift-click a second point';
         $('ray').textContent = 'press R';
         $('timing').textContent = `click to picture ${this.latency.total.toFixed(1)} ms ` +
-                                  `(server ${v.server_ms.toFixed(1)} ms)`;
+            `(server ${v.server_ms.toFixed(1)} ms)`;
         document.body.dataset.eye = id;
         document.body.dataset.count = v.count;
         return v;
     }
 
     async queryPair(id) {
-        const r = await postJson('api/pair', { a: this.eye, b: id });
-        this.pair = { id, result: r.result };
+        const r = await postJson('api/pair', {a: this.eye, b: id});
+        this.pair = {id, result: r.result};
         $('pair').textContent = `#${this.eye} and #${id}: ${r.result}`;
         document.body.dataset.pair = r.result;
         this.drawMarkers();
@@ -360,10 +383,10 @@ class Viewer {
         if (this.eye < 0) return null;
         const dir = new THREE.Vector3();
         this.camera.getWorldDirection(dir);
-        const r = await postJson('api/ray', { id: this.eye, dir: dir.toArray() });
-        this.ray = { dir, hit: r.hit ? r : null };
-        $('ray').textContent = r.hit ? `hits #${r.hit_id} at ${r.distance.toPrecision(3)}`
-                                     : 'no hit';
+        const r = await postJson('api/ray', {id: this.eye, dir: dir.toArray()});
+        this.ray = {dir, hit: r.hit ? r : null};
+        $('ray').textContent =
+            r.hit ? `hits #${r.hit_id} at ${r.distance.toPrecision(3)}` : 'no hit';
         document.body.dataset.ray = r.hit ? r.hit_id : 'none';
         this.drawMarkers();
         return r;
@@ -371,8 +394,9 @@ class Viewer {
 
     // Markers are drawn over the points (no depth test), so a ray inside the model still shows.
     sphere(p, color, scale = 1) {
-        const s = new THREE.Mesh(new THREE.SphereGeometry(this.size * 0.008 * scale, 12, 8),
-                                 new THREE.MeshBasicMaterial({ color, depthTest: false }));
+        const s = new THREE.Mesh(
+            new THREE.SphereGeometry(this.size * 0.008 * scale, 12, 8),
+            new THREE.MeshBasicMaterial({color, depthTest: false}));
         s.position.copy(p);
         s.renderOrder = 2;
         this.markers.add(s);
@@ -380,7 +404,7 @@ class Viewer {
 
     line(a, b, color) {
         const g = new THREE.BufferGeometry().setFromPoints([a, b]);
-        const l = new THREE.Line(g, new THREE.LineBasicMaterial({ color, depthTest: false }));
+        const l = new THREE.Line(g, new THREE.LineBasicMaterial({color, depthTest: false}));
         l.renderOrder = 1;
         this.markers.add(l);
     }
@@ -403,8 +427,8 @@ class Viewer {
             this.line(e, q, this.pair.result === 'visible' ? 0x33dd55 : 0xee3333);
         }
         if (this.ray) {
-            const end = this.ray.hit ? new THREE.Vector3().fromArray(this.ray.hit.point)
-                                     : e.clone().addScaledVector(this.ray.dir, this.size);
+            const end = this.ray.hit ? new THREE.Vector3().fromArray(this.ray.hit.point) :
+                                       e.clone().addScaledVector(this.ray.dir, this.size);
             this.line(e, end, 0xffee00);
             if (this.ray.hit) this.sphere(end, 0xffee00, 0.8);
         }
@@ -427,7 +451,10 @@ class Viewer {
         if (down && k === 'f') return this.toggleWalk();
         if (down && k === 'h') return this.home();
         if (!'wasdqe'.includes(k) || k.length !== 1) return;
-        if (down) this.keys.add(k); else this.keys.delete(k);
+        if (down)
+            this.keys.add(k);
+        else
+            this.keys.delete(k);
         this.requestRender();
     }
 
@@ -494,14 +521,16 @@ async function main() {
     const pts = splitPoints(buf, info.points, info.gi);
     $('mode').querySelector('[value=gi]').disabled = !info.gi;
     $('scene').textContent = `${info.name}: ${info.points} points, ${info.leaves} leaves, ` +
-                             `octree height ${info.height}, ${info.links} links`;
+        `octree height ${info.height}, ${info.links} links`;
     const v = new Viewer(info, pts);
     window.vmapView.viewer = v;
     window.vmapView.ready = true;
     document.body.dataset.ready = '1';
 }
 
-window.vmapView = { ready: false };
+window.vmapView = {
+    ready: false
+};
 main().catch((e) => {
     $('scene').textContent = `error: ${e.message}`;
     window.vmapView.error = e.message;

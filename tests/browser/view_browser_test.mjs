@@ -4,12 +4,12 @@
 // page against the CLI (`vmap query` on the same file): the eye, the visible count, the colours
 // of the points in a screenshot, a pair query and a ray; then stops the server with SIGINT.
 // Exit 0: all passed; 1: a check failed; 77: skipped (prerequisite missing).
-import { execFileSync, spawn } from 'node:child_process';
+import {execFileSync, spawn} from 'node:child_process';
 import fs from 'node:fs';
 import os from 'node:os';
 import path from 'node:path';
 
-import { launch, missing, startView } from './chromium.mjs';
+import {launch, missing, startView} from './chromium.mjs';
 
 const [vmap, src] = process.argv.slice(2);
 const shotPath = process.env.VMAP_VIEW_SCREENSHOT;  // also save the final screenshot there
@@ -26,14 +26,14 @@ function check(ok, what) {
 }
 
 const tmp = fs.mkdtempSync(path.join(os.tmpdir(), 'vmap-view-browser-'));
-const cli = (...args) => execFileSync(vmap, args, { encoding: 'utf8' });
+const cli = (...args) => execFileSync(vmap, args, {encoding: 'utf8'});
 const map = path.join(tmp, 'small.vmap');
 const scene = path.join(src, 'scenes/cornell-bunny.json');
 cli('build', scene, '--points', '3000', '-o', map);
 
 // Pixels of a screenshot at the given points, decoded by the browser itself.
 async function pixelsAt(page, points) {
-    const png = await page.screenshot({ encoding: 'base64' });
+    const png = await page.screenshot({encoding: 'base64'});
     return page.evaluate(async (b64, pts) => {
         const img = new Image();
         img.src = `data:image/png;base64,${b64}`;
@@ -43,7 +43,8 @@ async function pixelsAt(page, points) {
         const g = c.getContext('2d');
         g.drawImage(img, 0, 0);
         const d = g.getImageData(0, 0, c.width, c.height).data;
-        return pts.map(([x, y]) => Array.from(d.slice(4 * (y * c.width + x), 4 * (y * c.width + x) + 3)));
+        return pts.map(
+            ([x, y]) => Array.from(d.slice(4 * (y * c.width + x), 4 * (y * c.width + x) + 3)));
     }, png, points);
 }
 
@@ -57,9 +58,9 @@ try {
     const url = await server.url;
     const page = await browser.newPage();
     page.on('pageerror', (e) => check(false, `no page error (${e.message})`));
-    await page.setViewport({ width: 900, height: 800, deviceScaleFactor: 1 });
+    await page.setViewport({width: 900, height: 800, deviceScaleFactor: 1});
     await page.goto(url);
-    await page.waitForFunction('window.vmapView.ready || window.vmapView.error', { timeout: 30000 });
+    await page.waitForFunction('window.vmapView.ready || window.vmapView.error', {timeout: 30000});
     check(!(await page.evaluate('window.vmapView.error')), 'the page loads the map');
     await page.select('#mode', 'albedo');  // flat colours: purple is purple
     await page.evaluate(() => {
@@ -74,40 +75,48 @@ try {
         const v = window.vmapView.viewer;
         return targets.map((t) => {
             const ids = [...Array(v.n).keys()];
-            const d = ids.map((i) => v.position(i).distanceToSquared({ x: t[0], y: t[1], z: t[2] }));
+            const d = ids.map((i) => v.position(i).distanceToSquared({x: t[0], y: t[1], z: t[2]}));
             ids.sort((a, b) => d[a] - d[b]);
-            return ids.find((i) => { const s = v.screenOf(i); return s && v.pickAt(s.x, s.y) === i; });
+            return ids.find((i) => {
+                const s = v.screenOf(i);
+                return s && v.pickAt(s.x, s.y) === i;
+            });
         });
     }, [[0.2764, 0, 0.1], [0.08, 0.45, 0.5592]]);
     const fromOut = cli('query', map, '--from', String(eye), '--ids');
     const count = Number(fromOut.match(/(\d+) points visible from/)[1]);
     const visibleIds = fromOut.split('\n').slice(1).filter((l) => /^\d+$/.test(l)).map(Number);
-    const pairResult = cli('query', map, '--pair', String(eye), String(second)).trim().split(' ')[2];
+    const pairResult =
+        cli('query', map, '--pair', String(eye), String(second)).trim().split(' ')[2];
 
     // Screen positions of the eye, a sample of visible and of hidden points (not under the panel).
     const sample = await page.evaluate((eyeId, visList) => {
         const v = window.vmapView.viewer;
         const panel = document.getElementById('panel').getBoundingClientRect();
-        const visSet = new Set(visList), out = { vis: [], hid: [] };
+        const visSet = new Set(visList), out = {vis: [], hid: []};
         for (let id = 0; id < v.n; id += 1) {
             const s = v.screenOf(id);
             if (!s || s.x < 2 || s.y < 2 || s.x > innerWidth - 3 || s.y > innerHeight - 3) continue;
             if (s.x < panel.right + 4 && s.y < panel.bottom + 4) continue;
             if (v.pickAt(s.x, s.y) !== id) continue;  // covered by a nearer point
-            (visSet.has(id) ? out.vis : out.hid).push([id, Math.round(s.x - 0.5), Math.round(s.y - 0.5)]);
+            (visSet.has(id) ? out.vis : out.hid).push([
+                id, Math.round(s.x - 0.5), Math.round(s.y - 0.5)
+            ]);
         }
-        return { eye: v.screenOf(eyeId), ...out };
+        return {eye: v.screenOf(eyeId), ...out};
     }, eye, visibleIds);
 
     const before = await pixelsAt(page, sample.vis.map((s) => [s[1], s[2]]));
     check(before.filter((p) => near(p, kPurple)).length === 0, 'no purple before the click');
 
     await page.mouse.click(sample.eye.x, sample.eye.y);
-    await page.waitForFunction('document.body.dataset.count !== undefined', { timeout: 10000 });
+    await page.waitForFunction('document.body.dataset.count !== undefined', {timeout: 10000});
     const shown = await page.evaluate(() => ({
-        eye: Number(document.body.dataset.eye), count: Number(document.body.dataset.count),
-        text: document.getElementById('count').textContent, latency: window.vmapView.viewer.latency,
-    }));
+                                          eye: Number(document.body.dataset.eye),
+                                          count: Number(document.body.dataset.count),
+                                          text: document.getElementById('count').textContent,
+                                          latency: window.vmapView.viewer.latency,
+                                      }));
     check(shown.eye === eye, `the click picks the known point ${eye} (page: ${shown.eye})`);
     check(shown.count === count, `visible count ${shown.count} equals the CLI's ${count}`);
     check(shown.text.startsWith(`${count} of 3000`), `the panel says "${shown.text}"`);
@@ -115,13 +124,18 @@ try {
 
     // The colours in a screenshot against the CLI's visible set (eye leaf points are cyan).
     const leaf = new Set(await page.evaluate('window.vmapView.viewer.visible.leaf_ids'));
-    const vs = sample.vis.filter((s) => !leaf.has(s[0])), hs = sample.hid.filter((s) => !leaf.has(s[0]));
+    const vs = sample.vis.filter((s) => !leaf.has(s[0])),
+          hs = sample.hid.filter((s) => !leaf.has(s[0]));
     const pv = await pixelsAt(page, vs.map((s) => [s[1], s[2]]));
     const ph = await pixelsAt(page, hs.map((s) => [s[1], s[2]]));
     const fv = pv.filter((p) => near(p, kPurple)).length / Math.max(1, pv.length);
     const fh = ph.filter((p) => near(p, kPurple)).length / Math.max(1, ph.length);
-    check(vs.length > 50 && fv > 0.9, `${(100 * fv).toFixed(1)}% of ${vs.length} visible points on screen are purple`);
-    check(hs.length > 50 && fh < 0.05, `${(100 * fh).toFixed(1)}% of ${hs.length} hidden points on screen are purple`);
+    check(
+        vs.length > 50 && fv > 0.9,
+        `${(100 * fv).toFixed(1)}% of ${vs.length} visible points on screen are purple`);
+    check(
+        hs.length > 50 && fh < 0.05,
+        `${(100 * fh).toFixed(1)}% of ${hs.length} hidden points on screen are purple`);
     const [eyePx] = await pixelsAt(page, [[Math.round(sample.eye.x), Math.round(sample.eye.y)]]);
     check(near(eyePx, kCyan, 40), `the eye is drawn cyan (${eyePx})`);
 
@@ -130,21 +144,38 @@ try {
     await page.keyboard.down('Shift');
     await page.mouse.click(b.x, b.y);
     await page.keyboard.up('Shift');
-    await page.waitForFunction('document.body.dataset.pair !== undefined', { timeout: 10000 });
+    await page.waitForFunction('document.body.dataset.pair !== undefined', {timeout: 10000});
     const pair = await page.evaluate(() => document.body.dataset.pair);
     check(pair === pairResult, `pair ${eye} ${second}: page "${pair}", CLI "${pairResult}"`);
 
     // A ray from the eye along the view direction, against the CLI with the same direction.
     await page.keyboard.press('r');
-    await page.waitForFunction('document.body.dataset.ray !== undefined', { timeout: 10000 });
+    await page.waitForFunction('document.body.dataset.ray !== undefined', {timeout: 10000});
     const ray = await page.evaluate(() => {
         const v = window.vmapView.viewer;
-        return { hit: document.body.dataset.ray, dir: v.ray.dir.toArray() };
+        return {hit: document.body.dataset.ray, dir: v.ray.dir.toArray()};
     });
     const rayOut = cli('query', map, '--ray', String(eye), '--dir', ray.dir.join(','));
     const cliHit = (rayOut.match(/hits point (\d+)/) || [, 'none'])[1];
     check(ray.hit === cliHit, `ray from ${eye}: page hits ${ray.hit}, CLI ${cliHit}`);
-    if (shotPath) await page.screenshot({ path: shotPath });
+    if (shotPath) await page.screenshot({path: shotPath});
+
+    // Walk mode: F, then W held moves the camera forward along the view direction.
+    const cam = () => page.evaluate(() => {
+        const v = window.vmapView.viewer, d = v.camera.getWorldDirection(v.camera.position.clone());
+        return {p: v.camera.position.toArray(), d: d.toArray()};
+    });
+    const c0 = await cam();
+    await page.keyboard.press('f');
+    await page.keyboard.down('w');
+    await new Promise((r) => setTimeout(r, 400));
+    await page.keyboard.up('w');
+    const c1 = await cam();
+    const step = c1.p.map((v, i) => v - c0.p[i]);
+    const along = step.reduce((a, v, i) => a + v * c0.d[i], 0);
+    check(
+        along > 0.01 && Math.hypot(...step) < along * 1.01,
+        `W walks forward (${along.toFixed(3)})`);
 } catch (e) {
     check(false, `no exception (${e.stack})`);
 } finally {
@@ -152,10 +183,11 @@ try {
 }
 
 server.child.kill('SIGINT');
-const ended = await Promise.race([server.exited, new Promise((r) => setTimeout(() => r(null), 10000))]);
+const ended =
+    await Promise.race([server.exited, new Promise((r) => setTimeout(() => r(null), 10000))]);
 check(ended && ended.code === 0, `SIGINT stops the server with exit 0 (${JSON.stringify(ended)})`);
 check(/stopped\./.test(server.output()), 'the server says it stopped');
 if (!ended) server.child.kill('SIGKILL');
-fs.rmSync(tmp, { recursive: true, force: true });
+fs.rmSync(tmp, {recursive: true, force: true});
 console.log(`${passed} passed, ${failed} failed`);
 process.exit(failed ? 1 : 0);

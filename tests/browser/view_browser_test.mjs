@@ -167,14 +167,16 @@ try {
     });
     const c0 = await cam();
     await page.keyboard.press('f');
+    const f0 = await page.evaluate('window.vmapView.viewer.frames');
     await page.keyboard.down('w');
-    await new Promise((r) => setTimeout(r, 400));
+    // Held for at least three frames, however slow the machine.
+    await page.waitForFunction(`window.vmapView.viewer.frames >= ${f0 + 3}`, {timeout: 20000});
     await page.keyboard.up('w');
     const c1 = await cam();
     const step = c1.p.map((v, i) => v - c0.p[i]);
     const along = step.reduce((a, v, i) => a + v * c0.d[i], 0);
     check(
-        along > 0.01 && Math.hypot(...step) < along * 1.01,
+        along > 0.005 && Math.hypot(...step) < along * 1.01,
         `W walks forward (${along.toFixed(3)})`);
 } catch (e) {
     check(false, `no exception (${e.stack})`);

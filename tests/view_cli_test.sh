@@ -56,10 +56,11 @@ start_view() {
     done
     return 1
 }
-# http_get PORT PATH: the status line of a GET over bash's /dev/tcp.
+# http_get PORT PATH [HOST]: the status line of a GET over bash's /dev/tcp (Host: HOST, by default
+# 127.0.0.1:PORT).
 http_get() {
     exec 3<>"/dev/tcp/127.0.0.1/$1" || return 1
-    printf 'GET %s HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n' "$2" >&3
+    printf 'GET %s HTTP/1.1\r\nHost: %s\r\nConnection: close\r\n\r\n' "$2" "${3:-127.0.0.1:$1}" >&3
     head -1 <&3 | tr -d '\r'
     exec 3<&-
 }
@@ -88,6 +89,9 @@ if start_view "$log"; then
     status=$(http_get "$port" /../../etc/passwd)
     [[ "$status" == *" 404 "* || "$status" == *" 400 "* ]] && ok "GET /../../etc/passwd: $status" ||
         fail "GET /../../etc/passwd: $status"
+    status=$(http_get "$port" /api/info "rebound.example:$port")
+    [[ "$status" == *" 403 "* ]] && ok "Host rebound.example: $status" ||
+        fail "Host rebound.example: $status"
     expect 1 "cannot listen" view small.vmap --web web --port "$port"
     stops TERM
 else

@@ -270,6 +270,25 @@ TEST_F(ViewTest, RefusesEveryPathOutsideItsFolder) {
     }
 }
 
+TEST_F(ViewTest, AnswersOnlyLoopbackHostNames) {
+    for (const char* host : {"127.0.0.1", "localhost", "[::1]", "127.1.2.3"}) {
+        auto r =
+            client_->Get("/api/info", {{"Host", std::string(host) + ":" + std::to_string(port_)}});
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->status, 200) << host;
+    }
+    for (const char* host : {"evil.example", "127.0.0.1.evil.example", "10.0.0.1", "[::2]", ""}) {
+        auto r =
+            client_->Get("/api/info", {{"Host", std::string(host) + ":" + std::to_string(port_)}});
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->status, 403) << host;
+        EXPECT_EQ(r->body.find("\"points\""), std::string::npos) << host;
+    }
+    EXPECT_TRUE(view::is_loopback_host("127.0.0.1"));
+    EXPECT_FALSE(view::is_loopback_host("127.0.0.256"));
+    EXPECT_FALSE(view::is_loopback_host("0.0.0.0"));
+}
+
 TEST(ViewPaths, SafeRelativePaths) {
     EXPECT_TRUE(view::is_safe_relative_path("index.html"));
     EXPECT_TRUE(view::is_safe_relative_path("vendor/three.module.js"));

@@ -167,7 +167,21 @@ const char* content_type(const fs::path& file) {
     return nullptr;
 }
 
+// The host part of a Host header ("127.0.0.1:8080", "[::1]:8080", "localhost").
+std::string host_name(const std::string& header) {
+    if (!header.empty() && header[0] == '[') return header.substr(0, header.find(']') + 1);
+    return header.substr(0, header.find(':'));
+}
+
 }  // namespace
+
+bool is_loopback_host(const std::string& host) {
+    if (host == "localhost" || host == "::1" || host == "[::1]") return true;
+    unsigned a, b, c, d;
+    char extra;
+    return std::sscanf(host.c_str(), "%u.%u.%u.%u%c", &a, &b, &c, &d, &extra) == 4 && a == 127 &&
+           b < 256 && c < 256 && d < 256;
+}
 
 bool is_safe_relative_path(const std::string& relative) {
     if (relative.empty()) return false;
@@ -192,6 +206,7 @@ struct Server::Impl {
     httplib::Server http;
     std::atomic<bool> stop_requested{false};
     std::atomic<int> state{0};  // 0 before serve(), 1 in serve(), 2 after
+    bool loopback = false;      // bound to a loopback address: Host headers must name one too
 
     Impl(VisibilityMap map, ServerConfig cfg);
     void routes();
@@ -349,6 +364,15 @@ void Server::Impl::routes() {
     http.set_payload_max_length(config.max_request_bytes);
     http.set_default_headers(
         {{"X-Content-Type-Options", "nosniff"}, {"Cache-Control", "no-store"}});
+    // A page on another site cannot read a loopback server's answers (same-origin policy), unless
+    // its own name is made to resolve to 127.0.0.1 (DNS rebinding); its requests then carry that
+    // name as Host. A server bound to the loopback answers only Host names of the loopback.
+    http.set_pre_routing_handler([this](const httplib::Request& req, httplib::Response& res) {
+        const std::string host = host_name(req.get_header_value("Host"));
+        if (!loopback || is_loopback_host(host)) return httplib::Server::HandlerResponse::Unhandled;
+        reply_error(res, 403, fmt::format("Host '{}' is not this machine's loopback name", host));
+        return httplib::Server::HandlerResponse::Handled;
+    });
     http.Get("/api/info", [this](const httplib::Request&, httplib::Response& res) {
         res.set_content(info.dump(), kJson);
     });
@@ -387,6 +411,7 @@ int Server::bind(const std::string& host, int port) {
     if (port < 0 || port > 65535) throw Error(fmt::format("--port: {} is not 0..65535", port));
     const int got = port == 0 ? impl_->http.bind_to_any_port(host)
                               : (impl_->http.bind_to_port(host, port) ? port : -1);
+    impl_->loopback = is_loopback_host(host);
     if (got < 0)
         throw Error(
             fmt::format("{}:{}: cannot listen there (address in use, or not this "

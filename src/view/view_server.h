@@ -17,6 +17,8 @@
 // {"error": message}. Files: only regular files inside the web folder with a known extension
 // are served; a path with a ".." or "." segment, a backslash, or one that resolves (through
 // symbolic links) outside the folder is refused with 404, so nothing else on disk is reachable.
+// A server bound to a loopback address answers 403 to a request whose Host header names another
+// host (a page of another site whose name was made to resolve to 127.0.0.1: DNS rebinding).
 #pragma once
 
 #include <memory>
@@ -67,5 +69,8 @@ class Server {
 // file under the web folder: no empty, "." or ".." segment, no backslash, NUL or other control
 // character. The server still checks the resolved path against the folder.
 bool is_safe_relative_path(const std::string& relative);
+
+// "localhost", "::1", "[::1]" or 127.x.y.z.
+bool is_loopback_host(const std::string& host);
 
 }  // namespace vmap::view

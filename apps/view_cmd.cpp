@@ -1,0 +1,186 @@
+// `vmap view`: an interactive viewer in the browser (src/view/view_server.h, web/).
+//   vmap view [MAP.vmap | SCENE.json | CLOUD.ply] [--scene SCENE] [--port P] [--host H] [--gi]
+// A scene or cloud is sampled and its V-map built first. The server binds 127.0.0.1 (a free port
+// unless --port) and prints the URL; Ctrl-C (SIGINT) or SIGTERM stops it cleanly (exit 0).
+#include <fmt/format.h>
+#include <pthread.h>
+#include <signal.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <optional>
+#include <thread>
+
+#include "apps/commands.h"
+#include "util/progress.h"
+#include "view/view_server.h"
+#include "vmap/error.h"
+#include "vmap/gi.h"
+#include "vmap/io.h"
+#include "vmap/render.h"
+#include "vmap/scene.h"
+
+namespace vmap::cli {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct ViewArgs {
+    std::string input, scene, host = "127.0.0.1", web;
+    int port = 0;
+    std::optional<uint64_t> points, seed;
+    std::optional<int> max_height, leaf_points;
+    std::string backend = "auto";
+    bool gi = false;
+};
+
+// The map to show: loaded, or built from a scene or cloud (the scene's octree defaults).
+VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
+    const bool is_vmap = ends_with_ci(a.input, ".vmap");
+    if (is_vmap && (a.points || a.seed || a.max_height || a.leaf_points))
+        throw Error(fmt::format(
+            "{}: --points/--seed/--max-height/--leaf-points apply when building (scene or cloud)",
+            a.input));
+    if (!a.scene.empty()) {
+        const Scene sc = load_scene(a.scene);
+        cfg.camera = sc.camera;
+        cfg.name = sc.name;
+    }
+    if (is_vmap) {
+        if (cfg.name.empty()) cfg.name = fs::path(a.input).filename().string();
+        return load_vmap(a.input);
+    }
+    BuildParams bp;
+    PointSet pts;
+    if (ends_with_ci(a.input, ".json")) {
+        Scene sc = load_scene(a.input);
+        if (a.points) sc.points = *a.points;
+        if (a.seed) sc.seed = *a.seed;
+        if (sc.octree) bp.octree = *sc.octree;
+        if (!cfg.camera) cfg.camera = sc.camera;
+        if (cfg.name.empty()) cfg.name = sc.name;
+        pts = sample_scene(sc);
+    } else {
+        if (a.points || a.seed) throw Error(a.input + ": --points/--seed apply to scene files");
+        pts = load_point_cloud(a.input);
+        if (cfg.name.empty()) cfg.name = fs::path(a.input).filename().string();
+    }
+    if (a.max_height) bp.octree.max_height = *a.max_height;
+    if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
+    bp.backend = a.backend;
+    bp.progress = detail::stderr_is_terminal();
+    BuildStats st;
+    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.input);
+    fmt::print(
+        "built:      V-map of {} points at max_height {}: {} leaves, {} links, {:.2f} s on "
+        "{}\n",
+        vm.points.size(), bp.octree.max_height, vm.octree.num_leaves(), vm.num_links(),
+        st.seconds_total, st.backend);
+    return vm;
+}
+
+// GI display colours in input order (the page's "GI" mode).
+std::vector<Vec3> gi_colors(const VisibilityMap& vm, const std::string& backend) {
+    GiParams gp;
+    gp.backend = backend;
+    gp.progress = detail::stderr_is_terminal();
+    GiStats st;
+    const auto t0 = std::chrono::steady_clock::now();
+    const std::vector<Vec3> B = solve_radiosity(vm, gp, &st);
+    std::vector<Vec3> colors;
+    tone_map(vm, B, 0, colors);
+    std::vector<Vec3> out(colors.size());
+    for (size_t k = 0; k < colors.size(); ++k) out[vm.order[k]] = colors[k];
+    fmt::print("gi:         {} bounces, theta {} on {}: {:.2f} s\n", gp.bounces, gp.theta,
+               st.backend,
+               std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
+    return out;
+}
+
+// SIGINT and SIGTERM are blocked in every thread (set before any is started) and taken by one
+// waiting thread: while serving it stops the server (serve() returns, main exits 0); before,
+// it ends the process at once (exit 130), as an interrupted build would.
+std::atomic<view::Server*> g_server{nullptr};
+
+void start_signal_thread() {
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, SIGINT);
+    sigaddset(&set, SIGTERM);
+    pthread_sigmask(SIG_BLOCK, &set, nullptr);
+    std::thread([set] {
+        int sig = 0;
+        sigwait(&set, &sig);
+        view::Server* s = g_server.load();
+        if (!s) {
+            std::fputs("vmap view: interrupted\n", stderr);
+            std::_Exit(130);
+        }
+        s->stop();
+    }).detach();
+}
+
+int run_view(ViewArgs& a) {
+    if (a.input.empty()) a.input = default_scene_path();
+    if (a.web.empty()) a.web = std::string(VMAP_SOURCE_DIR) + "/web";
+    const fs::path three = fs::path(a.web) / "vendor" / "three.module.js";
+    if (!fs::is_regular_file(three))
+        throw Error(
+            fmt::format("{}: missing: the page needs three.js, fetched at set-up time "
+                        "(run scripts/fetch-web.sh)",
+                        three.string()));
+    start_signal_thread();
+    view::ServerConfig cfg;
+    cfg.web_root = a.web;
+    VisibilityMap vm = input_map(a, cfg);
+    if (a.gi) cfg.gi_colors = gi_colors(vm, a.backend);
+    view::Server server(std::move(vm), cfg);
+    const int port = server.bind(a.host, a.port);
+    const VisibilityMap& m = server.map();
+    fmt::print("serving:    {} ({} points, octree height {}, {} links)\n", cfg.name,
+               m.points.size(), m.octree.height(), m.num_links());
+    const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
+    fmt::print("url:        http://{}:{}/   (Ctrl-C stops)\n", host, port);
+    std::fflush(stdout);
+    g_server = &server;
+    const bool ok = server.serve();
+    g_server = nullptr;
+    if (!ok) throw Error(fmt::format("{}:{}: the server stopped with an error", a.host, port));
+    fmt::print("stopped.\n");
+    return 0;
+}
+
+}  // namespace
+
+Command add_view_command(CLI::App& app) {
+    auto a = std::make_shared<ViewArgs>();
+    auto* c = app.add_subcommand(
+        "view", "Interactive viewer in the browser: a local server holding the V-map");
+    c->add_option("input", a->input,
+                  "A .vmap file, or a scene (.json) or cloud (.ply/.off) to build one from "
+                  "(default: scenes/cornell-bunny.json)");
+    c->add_option("--scene", a->scene, "Take the camera and name from this scene file");
+    c->add_option("--host", a->host, "Address to bind (only this machine unless changed)")
+        ->capture_default_str();
+    c->add_option("--port", a->port, "TCP port (0: a free one)")
+        ->check(CLI::Range(0, 65535))
+        ->capture_default_str();
+    c->add_option("--web", a->web, "The page's folder (default: the source tree's web/)");
+    c->add_option("--points", a->points, "Scene input: number of sample points")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    c->add_option("--seed", a->seed, "Scene input: sampling seed");
+    c->add_option("--max-height", a->max_height, "Octree height when building")
+        ->check(CLI::Range(1, 21));
+    c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
+        ->check(CLI::Range(1, 1000000));
+    c->add_option("--backend", a->backend, "auto, cpu or cuda (building and --gi)")
+        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
+        ->capture_default_str();
+    c->add_flag("--gi", a->gi, "Compute global illumination first (the page's GI colours)");
+    return {c, [a] { return run_view(*a); }};
+}
+
+}  // namespace vmap::cli

@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "vmap/progress.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
@@ -27,6 +28,19 @@ Vec3 parse_vec3(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
+
+// How much the commands say: -q nothing but errors and asked-for output, the default a short
+// summary, -v the timing breakdown too. Set once by main() from -q/-v.
+enum class Verbosity { kQuiet, kNormal, kVerbose };
+Verbosity& verbosity();
+
+// "42 s", "12 min 5 s", "3 h 20 min".
+std::string format_duration(double seconds);
+
+// Progress on stderr for the library's callbacks: unless -q, one line naming the job's size,
+// where it runs and the library's estimate of its time (with a warning beyond an hour) before
+// the work starts; then, when stderr is a terminal, a line that moves with percent and ETA.
+ProgressCallback stderr_progress();
 
 // Fails early (before any work or output) when an output's folder does not exist; throws
 // vmap::Error naming the file and `option`. An empty path is no output.

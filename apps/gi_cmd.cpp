@@ -62,7 +62,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         if (o.max_height) bp.octree.max_height = *o.max_height;
         if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
         bp.backend = o.gi.backend;
-        bp.progress = detail::stderr_is_terminal();
+        bp.progress = stderr_progress();
         BuildStats st;
         VisibilityMap vm = build_vmap(sample_scene(sc), bp, &st, o.input);
         build_s = seconds_since(t0);
@@ -132,12 +132,13 @@ int run_gi(GiOptions& o) {
     std::vector<double> brute_s;
     if (o.compare) brute_force_radiosity(vm, o.gi.bounces, &ref, &brute_s);
     {
-        detail::Progress bar("gi bounces", uint64_t(o.gi.bounces), detail::stderr_is_terminal());
+        const ProgressCallback cb = stderr_progress();
+        detail::Progress bar("gi bounces", uint64_t(o.gi.bounces), &cb);
         const Vec3 p0 = total_power(vm, solver.radiosity());
         fmt::print("power:      emitted {:.4g} {:.4g} {:.4g} W\n", p0.x, p0.y, p0.z);
         for (int b = 0; b < o.gi.bounces; ++b) {
             solver.bounce();
-            bar.update(uint64_t(b + 1));
+            bar.set(uint64_t(b + 1));
             const auto B = solver.radiosity();
             const Vec3 p = total_power(vm, B);
             std::string cmp;

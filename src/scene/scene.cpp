@@ -9,6 +9,7 @@
 #include <nlohmann/json.hpp>
 
 #include "vmap/error.h"
+#include "vmap/version.h"
 #include "vmap/io.h"
 
 namespace vmap {
@@ -78,9 +79,7 @@ double signed_volume(const Mesh& m) {
 
 }  // namespace
 
-std::string default_scene_path() {
-    return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json";
-}
+std::string default_scene_path() { return data_dir() + "/scenes/cornell-bunny.json"; }
 
 Scene load_scene(const std::string& path) {
     Ctx cx{path};

@@ -230,7 +230,7 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
-    detail::Progress progress("heights", params.heights.size(), params.progress);
+    detail::Progress progress("heights", params.heights.size(), &params.progress);
     // 0 = hidden, 1 = visible, 2 = same leaf
     std::vector<uint8_t> pred(pairs.size());
     for (size_t hi = 0; hi < params.heights.size(); ++hi) {
@@ -310,7 +310,8 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
             if (!buried[pairs[k].i] && !buried[pairs[k].j]) row.live.add(truth[k], pred[k]);
         }
         r.rows.push_back(row);
-        progress.update(hi + 1);
+        progress.set(hi + 1);
+        progress.throw_if_cancelled();
     }
     return r;
 }

@@ -1,0 +1,32 @@
+# The Python module `vmap` (python/vmap_py.cpp, pybind11 + numpy from Debian: python3-pybind11,
+# python3-numpy, python3-dev). Built into build/python/vmap/ when the interpreter, its headers and
+# pybind11 are found; scripts/main.sh puts that folder on the Debian python3's path.
+option(VMAP_PYTHON "Build the Python module when Python 3 and pybind11 are found" ON)
+if(NOT VMAP_PYTHON)
+  return()
+endif()
+# Debian's interpreter first (a pyenv or venv python3 on PATH may lack numpy or headers).
+if(NOT DEFINED Python3_EXECUTABLE AND EXISTS /usr/bin/python3)
+  set(Python3_EXECUTABLE /usr/bin/python3)
+endif()
+find_package(Python3 COMPONENTS Interpreter Development.Module)
+if(Python3_FOUND)
+  set(PYBIND11_FINDPYTHON ON)
+  find_package(pybind11 CONFIG QUIET)
+endif()
+if(NOT Python3_FOUND OR NOT pybind11_FOUND)
+  message(STATUS "vmap: Python 3 headers or pybind11 not found, no Python module "
+                 "(scripts/setup.sh installs python3-dev python3-pybind11 python3-numpy)")
+  set(VMAP_HAVE_PYTHON OFF)
+  return()
+endif()
+set(VMAP_HAVE_PYTHON ON)
+set(VMAP_PYTHON_DIR ${CMAKE_BINARY_DIR}/python)
+pybind11_add_module(vmap_python python/vmap_py.cpp)
+set_target_properties(vmap_python PROPERTIES OUTPUT_NAME _vmap
+                      LIBRARY_OUTPUT_DIRECTORY ${VMAP_PYTHON_DIR}/vmap)
+target_link_libraries(vmap_python PRIVATE vmap_core)
+target_include_directories(vmap_python PRIVATE src)
+configure_file(python/vmap/__init__.py ${VMAP_PYTHON_DIR}/vmap/__init__.py COPYONLY)
+message(STATUS "vmap: Python module for ${Python3_EXECUTABLE} (${Python3_VERSION}) in "
+               "${VMAP_PYTHON_DIR}")

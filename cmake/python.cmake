@@ -30,3 +30,18 @@ target_include_directories(vmap_python PRIVATE src)
 configure_file(python/vmap/__init__.py ${VMAP_PYTHON_DIR}/vmap/__init__.py COPYONLY)
 message(STATUS "vmap: Python module for ${Python3_EXECUTABLE} (${Python3_VERSION}) in "
                "${VMAP_PYTHON_DIR}")
+
+# The pytest suite (python/tests), when pytest is there (python3-pytest).
+if(VMAP_TESTS)
+  execute_process(COMMAND ${Python3_EXECUTABLE} -c "import pytest, numpy"
+                  RESULT_VARIABLE vmap_no_pytest OUTPUT_QUIET ERROR_QUIET)
+  if(vmap_no_pytest)
+    message(STATUS "vmap: pytest or numpy missing for ${Python3_EXECUTABLE}: no Python tests")
+  else()
+    add_test(NAME Python.Pytest
+             COMMAND ${Python3_EXECUTABLE} -m pytest -q -p no:cacheprovider
+                     ${CMAKE_SOURCE_DIR}/python/tests)
+    set_tests_properties(Python.Pytest PROPERTIES LABELS cpu ENVIRONMENT
+                         "PYTHONPATH=${VMAP_PYTHON_DIR};VMAP_BIN=$<TARGET_FILE:vmap>")
+  endif()
+endif()

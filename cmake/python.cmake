@@ -45,3 +45,10 @@ if(VMAP_TESTS)
                          "PYTHONPATH=${VMAP_PYTHON_DIR};VMAP_BIN=$<TARGET_FILE:vmap>")
   endif()
 endif()
+
+# Installed where Debian's python3 looks for packages under a prefix (/usr/local/lib/python3.11/
+# dist-packages for the default prefix); the module finds the scenes at <prefix>/share/vmap.
+set(VMAP_PYTHON_INSTALL_DIR
+    lib/python${Python3_VERSION_MAJOR}.${Python3_VERSION_MINOR}/dist-packages/vmap)
+install(TARGETS vmap_python LIBRARY DESTINATION ${VMAP_PYTHON_INSTALL_DIR})
+install(FILES python/vmap/__init__.py DESTINATION ${VMAP_PYTHON_INSTALL_DIR})

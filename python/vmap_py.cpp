@@ -407,6 +407,17 @@ PYBIND11_MODULE(_vmap, m) {
     m.attr("commit") = vmap::commit();
     m.attr("built_with_cuda") = vmap::built_with_cuda();
     m.def("data_dir", &data_dir, "The folder holding vmap's scenes/ and models/.");
+    m.def(
+        "write_png",
+        [](const std::string& path, const py::array_t<uint8_t, py::array::c_style>& rgb) {
+            if (rgb.ndim() != 3 || rgb.shape(2) != 3)
+                throw Error(path + ": write_png: expected an H x W x 3 uint8 array");
+            Image img;
+            img.height = int(rgb.shape(0)), img.width = int(rgb.shape(1));
+            img.rgb.assign(rgb.data(), rgb.data() + rgb.size());
+            write_png(path, img);
+        },
+        py::arg("path"), py::arg("image"), "Writes an H x W x 3 uint8 array as a PNG.");
     def_build(m);
     def_map(m);
 }

@@ -10,7 +10,7 @@
 Errors are vmap.Error (a RuntimeError) carrying the library's message.
 """
 from ._vmap import (Cancelled, Error, VisibilityMap, __version__, build, build_file,
-                    built_with_cuda, commit, data_dir, load)
+                    built_with_cuda, commit, data_dir, load, write_png)
 
 __all__ = ["Cancelled", "Error", "VisibilityMap", "__version__", "build", "build_file",
-           "built_with_cuda", "commit", "data_dir", "load"]
+           "built_with_cuda", "commit", "data_dir", "load", "write_png"]

@@ -83,6 +83,8 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
 
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
+    if (o.image.empty())
+        o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
     check_output(o.ply, "--ply");
     check_output(o.image, "-o");
     const auto [width, height] = parse_size(o.size, "--size");
@@ -191,7 +193,7 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("input", o->input,
                    "Scene file (.json; V-map built on the fly) or .vmap file. Default: "
                    "scenes/cornell-bunny.json");
-    gi->add_option("-o,--output", o->image, "Write the lit scene as a PNG");
+    gi->add_option("-o,--output", o->image, "PNG of the lit scene (default: <input name>-gi.png)");
     gi->add_option("--ply", o->ply, "Write the points with their lit display colours (PLY)");
     gi->add_option("--bounces", o->gi.bounces, "Gather steps after B = E (1: direct light)")
         ->check(CLI::Range(0, 10000))

@@ -362,6 +362,10 @@ int main(int argc, char** argv) {
     cli::verbosity() = quiet     ? cli::Verbosity::kQuiet
                        : verbose ? cli::Verbosity::kVerbose
                                  : cli::Verbosity::kNormal;
+    // Commands whose stdout is a summary (not the answers asked for) print nothing with -q.
+    if (quiet && (render.app->parsed() || bench_query.app->parsed() || *validate ||
+                  gi.selected() || *benchc))
+        if (!std::freopen("/dev/null", "w", stdout)) return 1;
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,

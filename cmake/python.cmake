@@ -52,3 +52,4 @@ set(VMAP_PYTHON_INSTALL_DIR
     lib/python${Python3_VERSION_MAJOR}.${Python3_VERSION_MINOR}/dist-packages/vmap)
 install(TARGETS vmap_python LIBRARY DESTINATION ${VMAP_PYTHON_INSTALL_DIR})
 install(FILES python/vmap/__init__.py DESTINATION ${VMAP_PYTHON_INSTALL_DIR})
+file(WRITE ${VMAP_PYTHON_DIR}/interpreter "${Python3_EXECUTABLE}")

@@ -168,6 +168,29 @@ if expect_ok "query --from 0 --ids" query x.vmap --from 0 --ids; then
     sort -n out.txt >ids_from0.txt
 fi
 
+# ---- conventions: --version, -q, -v -------------------------------------------------------------
+if expect_ok "vmap --version" --version; then
+    expect_stdout "--version names the version, commit and CUDA" '^vmap [0-9]+\.[0-9]+\.[0-9]+ \(commit [^,]+, CUDA (on|off)\)$'
+fi
+if expect_ok "build -q" -q build "$SCENE" --points 1000 --max-height 4 -o q.vmap --backend cpu; then
+    if [ -s out.txt ] || [ -s err.txt ]; then fail "build -q printed something"; else ok "build -q is silent"; fi
+fi
+if expect_ok "build -v" build "$SCENE" --points 1000 --max-height 4 -o v.vmap --backend cpu -v; then
+    expect_stdout "build -v has the timing breakdown" '^ +plan [0-9.]+ s, waiting on backend'
+    expect_stdout "build -v has the links per level" '^ +level +nodes +leaves +links$'
+fi
+if grep -q 'waiting on backend' <("$VMAP" build "$SCENE" --points 1000 --max-height 4 -o d.vmap \
+    --backend cpu 2>/dev/null); then fail "the default summary has the breakdown"; else
+    ok "the default summary is short"; fi
+if grep -Eq '^leaf pairs: [0-9]+ to do on cpu .*, about ' <("$VMAP" build "$SCENE" --points 1000 \
+    --max-height 4 -o d.vmap --backend cpu 2>&1 >/dev/null); then
+    ok "build says the job's size and an estimate before the work"; else
+    fail "build: no size and estimate on stderr"; fi
+if expect_ok "build --json" build "$SCENE" --points 1000 --max-height 4 -o j.vmap --backend cpu --json; then
+    if /usr/bin/env python3 -c 'import json,sys; d=json.load(open("out.txt")); assert d["links"] > 0 and d["output"] == "j.vmap"' 2>/dev/null ||
+        grep -q '"links": [1-9]' out.txt; then ok "build --json has the links"; else fail "build --json"; fi
+fi
+
 # ---- batches: --pairs (text, stdin, .npy), --out answers.npy, --from with many ids, --json ----
 printf '0 1\n# a comment\n\n2999 0\n5,6\n' >pairs.txt
 if expect_ok "query --pairs FILE" query x.vmap --pairs pairs.txt; then
@@ -439,7 +462,9 @@ expect_input_error "validate --json into a missing folder" no_such_dir/v.json \
 
 # ---- vmap gi (global illumination) ----------------------------------------------------------
 
-if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu; then
+if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu \
+    --size 32x32; then
+    if [ -s x-gi.png ]; then ok "gi writes <input>-gi.png by default"; else fail "gi wrote no x-gi.png"; fi
     expect_stdout "gi reports each bounce" '^bounce +2: '
     expect_stdout "gi reports the refinement" '^refinement: blocks, theta 4: [0-9]+ interactions'
     if [ "$(head -c 3 lit.ply)" = "ply" ] && grep -aq 'property uchar red' lit.ply; then

@@ -97,8 +97,8 @@ ProgressCallback stderr_progress() {
             fmt::print(stderr, "\r\033[K");
         } else {
             const double f = p.total ? double(p.done) / double(p.total) : 1.0;
-            fmt::print(stderr, "\r\033[K{}: {:5.1f}%  {} elapsed, about {} left", p.stage,
-                       100 * f, format_duration(p.seconds),
+            fmt::print(stderr, "\r\033[K{}: {:5.1f}%  {} elapsed, about {} left", p.stage, 100 * f,
+                       format_duration(p.seconds),
                        p.done ? format_duration(p.eta_seconds) : std::string("?"));
         }
         std::fflush(stderr);

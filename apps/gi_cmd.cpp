@@ -83,8 +83,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
 
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
-    if (o.image.empty())
-        o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
+    if (o.image.empty()) o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
     check_output(o.ply, "--ply");
     check_output(o.image, "-o");
     const auto [width, height] = parse_size(o.size, "--size");

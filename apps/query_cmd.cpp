@@ -71,7 +71,8 @@ int check_args(const QueryArgs& a) {
             "give --pair I J, --pair-pos P Q, --pairs FILE, --from I.., --from-pos P, or "
             "--ray I/--ray-pos P with --dir D");
     if (ray != !a.dir.empty()) return usage("--ray/--ray-pos and --dir go together");
-    if ((a.ids || !a.ply.empty()) && !from) return usage("--ids and --ply go with --from/--from-pos");
+    if ((a.ids || !a.ply.empty()) && !from)
+        return usage("--ids and --ply go with --from/--from-pos");
     if (!a.out.empty() && a.pairs.empty()) return usage("--out goes with --pairs");
     if (!a.ply.empty() && a.from.size() > 1) return usage("--ply takes one --from point");
     if (!a.out.empty() && !ends_with_ci(a.out, ".npy"))

@@ -97,10 +97,15 @@ PointSet load_input(BuildOptions& o, std::string& what) {
 nlohmann::json params_json(const VisibilityMap& vm) {
     const auto& o = vm.octree_params;
     const auto& v = vm.visibility_params;
-    return {{"max_height", o.max_height}, {"leaf_points", o.leaf_points},
-            {"height", vm.octree.height()}, {"nodes", vm.octree.num_nodes()},
-            {"leaves", vm.octree.num_leaves()}, {"K", v.K}, {"eps", v.eps},
-            {"facing_tol", v.facing_tol}, {"parallel_tol", v.parallel_tol}};
+    return {{"max_height", o.max_height},
+            {"leaf_points", o.leaf_points},
+            {"height", vm.octree.height()},
+            {"nodes", vm.octree.num_nodes()},
+            {"leaves", vm.octree.num_leaves()},
+            {"K", v.K},
+            {"eps", v.eps},
+            {"facing_tol", v.facing_tol},
+            {"parallel_tol", v.parallel_tol}};
 }
 
 nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const BuildStats& st,
@@ -119,10 +124,14 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
     j["links"] = st.links;
     j["links_kept"] = !o.count_links;
     j["batches"] = st.batches;
-    j["seconds"] = {{"total", st.seconds_total},     {"octree", st.seconds_octree},
-                    {"visibility", st.seconds_visibility}, {"plan", st.seconds_plan},
-                    {"wait", st.seconds_wait},       {"backend", st.seconds_backend},
-                    {"extract", st.seconds_extract}, {"links", st.seconds_links},
+    j["seconds"] = {{"total", st.seconds_total},
+                    {"octree", st.seconds_octree},
+                    {"visibility", st.seconds_visibility},
+                    {"plan", st.seconds_plan},
+                    {"wait", st.seconds_wait},
+                    {"backend", st.seconds_backend},
+                    {"extract", st.seconds_extract},
+                    {"links", st.seconds_links},
                     {"save", save_s}};
     j["peak_device_bytes"] = st.peak_device_bytes;
     j["output"] = o.count_links ? nlohmann::json(nullptr) : nlohmann::json(o.output);
@@ -245,9 +254,9 @@ int main(int argc, char** argv) {
     int threads = 0;
     app.add_option("--threads", threads, "CPU threads (default: all cores)")
         ->check(CLI::Range(0, 4096));
-    app.set_version_flag("--version", fmt::format("vmap {} (commit {}, CUDA {})", vmap::version(),
-                                                  vmap::commit(),
-                                                  built_with_cuda() ? "on" : "off"));
+    app.set_version_flag(
+        "--version", fmt::format("vmap {} (commit {}, CUDA {})", vmap::version(), vmap::commit(),
+                                 built_with_cuda() ? "on" : "off"));
     bool verbose = false, quiet = false;
     auto* vflag = app.add_flag("-v,--verbose", verbose, "Say more: timing breakdowns, tables");
     app.add_flag("-q,--quiet", quiet, "Say nothing but errors and the output asked for")
@@ -363,8 +372,8 @@ int main(int argc, char** argv) {
                        : verbose ? cli::Verbosity::kVerbose
                                  : cli::Verbosity::kNormal;
     // Commands whose stdout is a summary (not the answers asked for) print nothing with -q.
-    if (quiet && (render.app->parsed() || bench_query.app->parsed() || *validate ||
-                  gi.selected() || *benchc))
+    if (quiet && (render.app->parsed() || bench_query.app->parsed() || *validate || gi.selected() ||
+                  *benchc))
         if (!std::freopen("/dev/null", "w", stdout)) return 1;
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)

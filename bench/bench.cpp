@@ -19,9 +19,9 @@
 #include <random>
 
 #include "visibility/backend.h"
-#include "vmap/version.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
+#include "vmap/version.h"
 #include "vmap/vmap.h"
 
 namespace vmap::bench {

@@ -2,18 +2,18 @@
 // them, with numpy arrays in and out. Ids are input point ids everywhere, as in the CLI.
 // vmap::Error becomes vmap.Error (a RuntimeError) with the library's message; a progress
 // callback that returns False, raises, or a Ctrl-C cancels a build (vmap.Cancelled).
+#include <fmt/format.h>
 #include <pybind11/functional.h>
 #include <pybind11/numpy.h>
 #include <pybind11/pybind11.h>
 #include <pybind11/stl.h>
-
-#include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
 #include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <map>
 #include <optional>
 
 #include "vmap/error.h"
@@ -44,7 +44,8 @@ std::vector<Vec3> vec3s(const Array<float>& a, const char* name, py::ssize_t row
                                 a.ndim() ? shape : std::string("a scalar")));
     }
     if (rows >= 0 && a.shape(0) != rows)
-        throw Error(fmt::format("{}: {} rows, expected {} (one per point)", name, a.shape(0), rows));
+        throw Error(
+            fmt::format("{}: {} rows, expected {} (one per point)", name, a.shape(0), rows));
     std::vector<Vec3> v(size_t(a.shape(0)));
     const float* f = a.data();
     for (size_t k = 0; k < v.size(); ++k) v[k] = {f[3 * k], f[3 * k + 1], f[3 * k + 2]};
@@ -235,7 +236,6 @@ py::array_t<float> input_order(const VisibilityMap& vm, const std::vector<Vec3>&
     return out;
 }
 
-
 void save_vmap_of(const VisibilityMap& vm, const std::string& path) { save_vmap(path, vm); }
 
 py::array_t<uint8_t> render(const VisibilityMap& vm, int64_t eye_id, int width, int height,
@@ -270,32 +270,39 @@ py::array_t<float> gi(const VisibilityMap& vm, int bounces, float theta, const s
     return input_order(vm, b);
 }
 
-void def_build(py::module_& m) {
-    py::class_<BuildArgs>(m, "_BuildArgs");
-    auto args = [](py::kwargs kw) {
-        BuildArgs a;
-        for (auto [k, v] : kw) {
-            const std::string key = py::str(k);
-            if (key == "max_height") a.max_height = v.cast<int>();
-            else if (key == "leaf_points") a.leaf_points = v.cast<int>();
-            else if (key == "K") a.K = v.cast<int>();
-            else if (key == "eps") a.eps = v.cast<float>();
-            else if (key == "facing_tol") a.facing_tol = v.cast<float>();
-            else if (key == "parallel_tol") a.parallel_tol = v.cast<float>();
-            else if (key == "backend") a.backend = v.cast<std::string>();
-            else if (key == "occluders") a.occluders = v.cast<std::string>();
-            else if (key == "threads") a.threads = v.cast<int>();
-            else if (key == "batch_pairs") a.batch_pairs = v.cast<uint64_t>();
-            else if (key == "progress") a.progress = py::reinterpret_borrow<py::object>(v);
-            else
-                throw py::type_error(
-                    fmt::format("unknown build option '{}' (max_height, leaf_points, K, eps, "
-                                "facing_tol, parallel_tol, backend, occluders, threads, "
-                                "batch_pairs, progress)",
-                                key));
-        }
-        return a;
+// The keyword options of build() and build_file(), by BuildParams' names.
+BuildArgs build_args(const py::kwargs& kw) {
+    using Set = void (*)(BuildArgs&, py::handle);
+    static const std::map<std::string, Set> setters = {
+        {"max_height", [](BuildArgs& a, py::handle v) { a.max_height = v.cast<int>(); }},
+        {"leaf_points", [](BuildArgs& a, py::handle v) { a.leaf_points = v.cast<int>(); }},
+        {"K", [](BuildArgs& a, py::handle v) { a.K = v.cast<int>(); }},
+        {"eps", [](BuildArgs& a, py::handle v) { a.eps = v.cast<float>(); }},
+        {"facing_tol", [](BuildArgs& a, py::handle v) { a.facing_tol = v.cast<float>(); }},
+        {"parallel_tol", [](BuildArgs& a, py::handle v) { a.parallel_tol = v.cast<float>(); }},
+        {"backend", [](BuildArgs& a, py::handle v) { a.backend = v.cast<std::string>(); }},
+        {"occluders", [](BuildArgs& a, py::handle v) { a.occluders = v.cast<std::string>(); }},
+        {"threads", [](BuildArgs& a, py::handle v) { a.threads = v.cast<int>(); }},
+        {"batch_pairs", [](BuildArgs& a, py::handle v) { a.batch_pairs = v.cast<uint64_t>(); }},
+        {"progress",
+         [](BuildArgs& a, py::handle v) { a.progress = py::reinterpret_borrow<py::object>(v); }},
     };
+    BuildArgs a;
+    for (auto [k, v] : kw) {
+        const std::string key = py::str(k);
+        const auto it = setters.find(key);
+        if (it == setters.end()) {
+            std::string known;
+            for (const auto& [name, set] : setters) known += (known.empty() ? "" : ", ") + name;
+            throw py::type_error(fmt::format("unknown build option '{}' ({})", key, known));
+        }
+        it->second(a, v);
+    }
+    return a;
+}
+
+void def_build(py::module_& m) {
+    auto args = [](const py::kwargs& kw) { return build_args(kw); };
     m.def(
         "build",
         [args](const Array<float>& points, std::optional<Array<float>> normals,
@@ -314,9 +321,8 @@ void def_build(py::module_& m) {
     m.def(
         "build_file",
         [args](const std::string& path, std::optional<uint64_t> points,
-               std::optional<uint64_t> seed, py::kwargs kw) {
-            return build_file(path, points, seed, args(kw));
-        },
+               std::optional<uint64_t> seed,
+               py::kwargs kw) { return build_file(path, points, seed, args(kw)); },
         py::arg("path"), py::arg("points") = py::none(), py::arg("seed") = py::none(),
         "V-map of a scene file (.json: sampled with `points` and `seed` when given, its octree "
         "defaults) or a point cloud (.ply/.off); options as build().");
@@ -328,12 +334,13 @@ void def_map(py::module_& m) {
     py::class_<VisibilityMap>(m, "VisibilityMap")
         .def_property_readonly("num_points", [](const VisibilityMap& v) { return v.order.size(); })
         .def_property_readonly("num_links", &VisibilityMap::num_links)
-        .def_property_readonly("num_nodes", [](const VisibilityMap& v) { return v.octree.num_nodes(); })
-        .def_property_readonly("num_leaves", [](const VisibilityMap& v) { return v.octree.num_leaves(); })
+        .def_property_readonly("num_nodes",
+                               [](const VisibilityMap& v) { return v.octree.num_nodes(); })
+        .def_property_readonly("num_leaves",
+                               [](const VisibilityMap& v) { return v.octree.num_leaves(); })
         .def_property_readonly("height", [](const VisibilityMap& v) { return v.octree.height(); })
         .def_property_readonly(
-            "points",
-            [](const VisibilityMap& v) { return input_order(v, v.points.positions); },
+            "points", [](const VisibilityMap& v) { return input_order(v, v.points.positions); },
             "Positions, N x 3 float32, in input order.")
         .def_property_readonly(
             "normals", [](const VisibilityMap& v) { return input_order(v, v.points.normals); },
@@ -363,11 +370,12 @@ void def_map(py::module_& m) {
             py::arg("pairs"), "Visibility of point pairs (M x 2 ids) -> bool[M].")
         .def("query_codes", &query_codes, py::arg("pairs"),
              "The same as uint8[M]: 0 hidden, 1 visible, 2 same leaf (the V-map does not say).")
-        .def("visible_set",
-             [](const VisibilityMap& v, int64_t i) {
-                 return py::array(py::cast(v.visible_set(id_of(v, i, "visible_set"))));
-             },
-             py::arg("id"), "Sorted ids visible from point `id`.")
+        .def(
+            "visible_set",
+            [](const VisibilityMap& v, int64_t i) {
+                return py::array(py::cast(v.visible_set(id_of(v, i, "visible_set"))));
+            },
+            py::arg("id"), "Sorted ids visible from point `id`.")
         .def("visible_from", &visible_from, py::arg("ids"),
              "Visible sets of many points as CSR: (offsets uint64[len(ids)+1], ids uint32); the "
              "set of ids[k] is targets[offsets[k]:offsets[k+1]].")

@@ -20,8 +20,8 @@ namespace vmap {
 namespace {
 
 const VisibilityMap& small_map() {
-    static const VisibilityMap vm =
-        build_vmap(test::sample(test::scene_path("cornell-empty"), 1500, 2), test::cpu_params(5, 4));
+    static const VisibilityMap vm = build_vmap(
+        test::sample(test::scene_path("cornell-empty"), 1500, 2), test::cpu_params(5, 4));
     return vm;
 }
 
@@ -105,7 +105,8 @@ TEST(Api, CudaWithoutAUsableDeviceIsAnErrorAndAutoFallsBackWithANote) {
 TEST(Api, BatchQueriesAgreeWithSingleOnes) {
     const VisibilityMap& vm = small_map();
     std::vector<uint32_t> pairs;
-    for (uint32_t k = 0; k < 3000; ++k) pairs.insert(pairs.end(), {(k * 7919) % 1500, (k * 104729 + 3) % 1500});
+    for (uint32_t k = 0; k < 3000; ++k)
+        pairs.insert(pairs.end(), {(k * 7919) % 1500, (k * 104729 + 3) % 1500});
     std::vector<uint8_t> ans(pairs.size() / 2);
     query_pairs(vm, pairs, ans);
     for (size_t k = 0; k < ans.size(); ++k)

@@ -14,10 +14,10 @@ struct ProgressInfo {
     const char* stage = "";
     uint64_t done = 0;
     uint64_t total = 0;
-    double seconds = 0;      // since the stage began
-    double eta_seconds = 0;  // projected time left (0 until something is done)
-    const char* backend = "";  // where the work runs, in words ("cpu (2 threads)")
-    const char* note = "";     // e.g. why the GPU is not used (backend auto without a GPU)
+    double seconds = 0;           // since the stage began
+    double eta_seconds = 0;       // projected time left (0 until something is done)
+    const char* backend = "";     // where the work runs, in words ("cpu (2 threads)")
+    const char* note = "";        // e.g. why the GPU is not used (backend auto without a GPU)
     double estimate_seconds = 0;  // the library's guess of the whole stage, before it starts
 };
 

@@ -29,7 +29,8 @@ std::string dict_value(const std::string& h, const std::string& key, const std::
     const size_t k = h.find("'" + key + "'");
     if (k == std::string::npos) throw Error(fmt::format("{}: npy header: no '{}'", path, key));
     size_t at = h.find(':', k);
-    if (at == std::string::npos) throw Error(fmt::format("{}: npy header: {}: no value", path, key));
+    if (at == std::string::npos)
+        throw Error(fmt::format("{}: npy header: {}: no value", path, key));
     ++at;
     while (at < h.size() && h[at] == ' ') ++at;
     size_t end = at;
@@ -59,7 +60,8 @@ Header parse_header(const std::string& h, const std::string& path) {
                                 path, d));
     const std::string f = dict_value(h, "fortran_order", path);
     if (f != "False" && f != "True")
-        throw Error(fmt::format("{}: npy header: fortran_order {}: expected True or False", path, f));
+        throw Error(
+            fmt::format("{}: npy header: fortran_order {}: expected True or False", path, f));
     r.fortran = f == "True";
     const std::string s = dict_value(h, "shape", path);
     for (size_t at = 0; at < s.size();) {
@@ -73,8 +75,8 @@ Header parse_header(const std::string& h, const std::string& path) {
         at = size_t(end - s.c_str());
     }
     if (r.shape.size() != 2 || r.shape[1] != 2)
-        throw Error(fmt::format("{}: npy header: shape ({}): expected (M, 2) point-id pairs", path,
-                                s));
+        throw Error(
+            fmt::format("{}: npy header: shape ({}): expected (M, 2) point-id pairs", path, s));
     return r;
 }
 
@@ -102,17 +104,18 @@ std::vector<uint32_t> read_npy_pairs(std::string_view data, const std::string& p
     const uint64_t m = hd.shape[0];
     const uint64_t body = m * 2 * uint64_t(hd.bytes);
     if (m > (uint64_t(1) << 40) || data.size() < here + body)
-        throw Error(fmt::format("{}: truncated: the header promises {} pairs ({} bytes), the file "
-                                "holds {}",
-                                path, m, body, data.size() - here));
+        throw Error(
+            fmt::format("{}: truncated: the header promises {} pairs ({} bytes), the file "
+                        "holds {}",
+                        path, m, body, data.size() - here));
     std::vector<uint32_t> out(m * 2);
     const bool big = hd.order == '>';
     const uint64_t sign = uint64_t(1) << (8 * hd.bytes - 1);
     for (uint64_t e = 0; e < m * 2; ++e) {
         const uint64_t v = read_uint(b + here + e * hd.bytes, hd.bytes, big);
         if ((hd.kind == 'i' && (v & sign)) || v > 0xffffffffull)
-            throw Error(fmt::format("{}: pair {}: id out of range (negative or above 2^32-1)",
-                                    path, hd.fortran ? e % m : e / 2));
+            throw Error(fmt::format("{}: pair {}: id out of range (negative or above 2^32-1)", path,
+                                    hd.fortran ? e % m : e / 2));
         // Fortran order stores column 0 (all i) then column 1 (all j).
         out[hd.fortran ? (e % m) * 2 + e / m : e] = static_cast<uint32_t>(v);
     }
@@ -120,8 +123,8 @@ std::vector<uint32_t> read_npy_pairs(std::string_view data, const std::string& p
 }
 
 void write_npy_u8(const std::string& path, std::span<const uint8_t> values) {
-    std::string h = fmt::format("{{'descr': '|u1', 'fortran_order': False, 'shape': ({},), }}",
-                                values.size());
+    std::string h =
+        fmt::format("{{'descr': '|u1', 'fortran_order': False, 'shape': ({},), }}", values.size());
     // Magic (6) + version (2) + length (2) + header + '\n' padded to a multiple of 64.
     const size_t total = (10 + h.size() + 1 + 63) / 64 * 64;
     h.append(total - 10 - h.size() - 1, ' ');
@@ -130,7 +133,14 @@ void write_npy_u8(const std::string& path, std::span<const uint8_t> values) {
     {
         std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
         if (!out) throw Error(fmt::format("{}: cannot write", tmp));
-        const unsigned char pre[10] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0,
+        const unsigned char pre[10] = {0x93,
+                                       'N',
+                                       'U',
+                                       'M',
+                                       'P',
+                                       'Y',
+                                       1,
+                                       0,
                                        static_cast<unsigned char>(h.size() & 0xff),
                                        static_cast<unsigned char>(h.size() >> 8)};
         out.write(reinterpret_cast<const char*>(pre), 10);

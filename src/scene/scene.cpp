@@ -9,8 +9,8 @@
 #include <nlohmann/json.hpp>
 
 #include "vmap/error.h"
-#include "vmap/version.h"
 #include "vmap/io.h"
+#include "vmap/version.h"
 
 namespace vmap {
 namespace {

@@ -39,8 +39,7 @@ void Progress::finish() {
 }
 
 void Progress::throw_if_cancelled() const {
-    if (cancelled())
-        throw Cancelled(fmt::format("{}: cancelled by the progress callback", stage_));
+    if (cancelled()) throw Cancelled(fmt::format("{}: cancelled by the progress callback", stage_));
 }
 
 void Progress::report(uint64_t done, bool force) {

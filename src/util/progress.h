@@ -18,9 +18,9 @@ class Progress {
     // call a no-op (and never cancels).
     Progress(const char* stage, uint64_t total, const ProgressCallback* callback,
              std::string backend = "", std::string note = "", double estimate_seconds = 0);
-    void add(uint64_t units);   // from any thread
-    void set(uint64_t done);    // done = max(done, this)
-    void finish();              // reports done == total
+    void add(uint64_t units);  // from any thread
+    void set(uint64_t done);   // done = max(done, this)
+    void finish();             // reports done == total
     // True once the callback returned false; the work then winds down and throw_if_cancelled()
     // throws vmap::Cancelled.
     bool cancelled() const { return cancelled_.load(std::memory_order_relaxed); }

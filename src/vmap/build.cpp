@@ -320,9 +320,10 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     std::unique_ptr<detail::Backend> backend;
     if (params.occluders == "bresenham") {
         if (params.backend == "cuda")
-            throw Error(fmt::format("{}: backend cuda: the GPU does occluders spheres only "
-                                    "(bresenham runs on the CPU; use backend auto or cpu)",
-                                    source));
+            throw Error(
+                fmt::format("{}: backend cuda: the GPU does occluders spheres only "
+                            "(bresenham runs on the CPU; use backend auto or cpu)",
+                            source));
         if (params.backend != "auto" && params.backend != "cpu")
             detail::make_backend(params.backend, &note);  // throws for an unknown name
         backend = detail::make_bresenham_backend();

@@ -94,6 +94,9 @@ PointSet load_input(BuildOptions& o, std::string& what) {
     return sample_scene(sc);
 }
 
+// A float as the shortest decimal that reads back to it (0.01, not 0.009999999776).
+double short_decimal(float f) { return std::stod(fmt::format("{}", f)); }
+
 nlohmann::json params_json(const VisibilityMap& vm) {
     const auto& o = vm.octree_params;
     const auto& v = vm.visibility_params;
@@ -103,9 +106,9 @@ nlohmann::json params_json(const VisibilityMap& vm) {
             {"nodes", vm.octree.num_nodes()},
             {"leaves", vm.octree.num_leaves()},
             {"K", v.K},
-            {"eps", v.eps},
-            {"facing_tol", v.facing_tol},
-            {"parallel_tol", v.parallel_tol}};
+            {"eps", short_decimal(v.eps)},
+            {"facing_tol", short_decimal(v.facing_tol)},
+            {"parallel_tol", short_decimal(v.parallel_tol)}};
 }
 
 nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const BuildStats& st,

@@ -372,8 +372,9 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     std::vector<uint8_t> job_full(plan.jobs.size(), 0);
     Sinks sinks;
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+    const double rate = backend->expected_pairs_per_second();
     detail::Progress progress("leaf pairs", total_pairs, &params.progress, st.backend, note,
-                              total_pairs / std::max(1.0, backend->expected_pairs_per_second()));
+                              rate > 0 ? double(total_pairs) / rate : 0.0);
     backend->set_progress(&progress);
     uint64_t done_pairs = 0;
     uint64_t counted_links = 0;  // when the links are not kept

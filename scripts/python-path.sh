@@ -5,7 +5,9 @@
 # Undo: rm "$(python3 -m site --user-site)/vmap-build.pth"
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-build="$(cd "$root/${1:-build}" && pwd)"
+build="${1:-build}"
+[[ "$build" = /* ]] || build="$root/$build"
+build="$(cd "$build" && pwd)"
 py="$(cat "$build/python/interpreter" 2>/dev/null || true)"
 [[ -n "$py" && -f "$build/python/vmap/__init__.py" ]] ||
     { echo "python-path: no Python module in $build/python (build the vmap_python target)" >&2; exit 1; }

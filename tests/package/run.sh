@@ -50,6 +50,12 @@ if [ -n "$py" ]; then
         grep -q '^wrote out/minimal.png' py.txt && [ -s out/minimal.png ]) ||
         { cat "$work/py.txt"; echo "FAIL: examples/minimal.py"; exit 1; }
     echo "ok:   examples/minimal.py writes out/minimal.png"
+    # scripts/main.sh's step: a .pth in the user site-packages (here a scratch one) makes
+    # `import vmap` work without PYTHONPATH.
+    (cd "$work" && PYTHONUSERBASE="$work/userbase" "$src/scripts/python-path.sh" "$build" 2>/dev/null &&
+        PYTHONUSERBASE="$work/userbase" "$py" -c "import vmap, numpy; vmap.data_dir()") ||
+        { echo "FAIL: scripts/python-path.sh did not make import vmap work"; exit 1; }
+    echo "ok:   scripts/python-path.sh makes import vmap work"
     site=$(ls -d "$prefix"/lib/python3*/dist-packages 2>/dev/null | head -1)
     (cd "$work" && PYTHONPATH="$site" "$py" -c \
         "import vmap, os; assert vmap.data_dir() == os.path.join('$prefix', 'share', 'vmap')") ||

@@ -4,10 +4,12 @@
 #include <algorithm>
 #include <cctype>
 #include <cmath>
+#include <cstdio>
 #include <filesystem>
 #include <sstream>
 
 #include "apps/commands.h"
+#include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
 
@@ -68,6 +70,53 @@ void check_output(const std::string& path, const char* option) {
     if (!dir.empty() && !std::filesystem::is_directory(dir))
         throw Error(
             fmt::format("{}: {}: the folder {} does not exist", path, option, dir.string()));
+}
+
+Verbosity& verbosity() {
+    static Verbosity v = Verbosity::kNormal;
+    return v;
+}
+
+std::string format_duration(double s) {
+    if (!(s >= 0) || s > 1e9) return "a very long time";
+    const auto t = static_cast<uint64_t>(s + 0.5);
+    if (s < 10) return fmt::format("{:.1f} s", s);
+    if (t < 60) return fmt::format("{} s", t);
+    if (t < 3600) return fmt::format("{} min {} s", t / 60, t % 60);
+    return fmt::format("{} h {} min", t / 3600, (t % 3600) / 60);
+}
+
+ProgressCallback stderr_progress() {
+    const bool quiet = verbosity() == Verbosity::kQuiet;
+    const bool moving = !quiet && detail::stderr_is_terminal();
+    return [quiet, moving](const ProgressInfo& p) {
+        if (quiet) return true;
+        if (p.done == 0 && p.seconds < 1e-3) {
+            std::string line = fmt::format("{}: {} to do", p.stage, p.total);
+            if (*p.backend) line += fmt::format(" on {}", p.backend);
+            if (p.estimate_seconds > 0)
+                line += fmt::format(", about {}", format_duration(p.estimate_seconds));
+            fmt::print(stderr, "{}\n", line);
+            if (*p.note) fmt::print(stderr, "note: {}\n", p.note);
+            if (p.estimate_seconds > 3600)
+                fmt::print(stderr,
+                           "warning: this is estimated to take {}; Ctrl-C stops it (fewer "
+                           "--points or a lower --max-height make it smaller)\n",
+                           format_duration(p.estimate_seconds));
+            return true;
+        }
+        if (!moving) return true;
+        if (p.done >= p.total) {
+            fmt::print(stderr, "\r\033[K");
+        } else {
+            const double f = p.total ? double(p.done) / double(p.total) : 1.0;
+            fmt::print(stderr, "\r\033[K{}: {:5.1f}%  {} elapsed, about {} left", p.stage, 100 * f,
+                       format_duration(p.seconds),
+                       p.done ? format_duration(p.eta_seconds) : std::string("?"));
+        }
+        std::fflush(stderr);
+        return true;
+    };
 }
 
 }  // namespace vmap::cli

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "vmap/progress.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
@@ -36,6 +37,19 @@ bool sampled_input(const std::string& path, bool as_points);
 
 // Prints what the input files held but vmap does not use (Scene::notes), one "note:" line each.
 void print_notes(const std::vector<std::string>& notes);
+
+// How much the commands say: -q nothing but errors and asked-for output, the default a short
+// summary, -v the timing breakdown too. Set once by main() from -q/-v.
+enum class Verbosity { kQuiet, kNormal, kVerbose };
+Verbosity& verbosity();
+
+// "42 s", "12 min 5 s", "3 h 20 min".
+std::string format_duration(double seconds);
+
+// Progress on stderr for the library's callbacks: unless -q, one line naming the job's size,
+// where it runs and the library's estimate of its time (with a warning beyond an hour) before
+// the work starts; then, when stderr is a terminal, a line that moves with percent and ETA.
+ProgressCallback stderr_progress();
 
 // Fails early (before any work or output) when an output's folder does not exist; throws
 // vmap::Error naming the file and `option`. An empty path is no output.

@@ -69,7 +69,7 @@ BuildParams build_params(const GiOptions& o, const std::optional<OctreeParams>& 
     if (o.max_height) bp.octree.max_height = *o.max_height;
     if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
     bp.backend = o.gi.backend;
-    bp.progress = detail::stderr_is_terminal();
+    bp.progress = stderr_progress();
     return bp;
 }
 
@@ -122,6 +122,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
 
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
+    if (o.image.empty()) o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
     check_output(o.ply, "--ply");
     check_output(o.image, "-o");
     const auto [width, height] = parse_size(o.size, "--size");
@@ -165,12 +166,13 @@ int run_gi(GiOptions& o) {
     std::vector<double> brute_s;
     if (o.compare) brute_force_radiosity(vm, o.gi.bounces, &ref, &brute_s);
     {
-        detail::Progress bar("gi bounces", uint64_t(o.gi.bounces), detail::stderr_is_terminal());
+        const ProgressCallback cb = stderr_progress();
+        detail::Progress bar("gi bounces", uint64_t(o.gi.bounces), &cb);
         const Vec3 p0 = total_power(vm, solver.radiosity());
         fmt::print("power:      emitted {:.4g} {:.4g} {:.4g} W\n", p0.x, p0.y, p0.z);
         for (int b = 0; b < o.gi.bounces; ++b) {
             solver.bounce();
-            bar.update(uint64_t(b + 1));
+            bar.set(uint64_t(b + 1));
             const auto B = solver.radiosity();
             const Vec3 p = total_power(vm, B);
             std::string cmp;
@@ -223,7 +225,7 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("input", o->input,
                    "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
                    "file. Default: scenes/cornell-bunny.json");
-    gi->add_option("-o,--output", o->image, "Write the lit scene as a PNG");
+    gi->add_option("-o,--output", o->image, "PNG of the lit scene (default: <input name>-gi.png)");
     gi->add_option("--ply", o->ply, "Write the points with their lit display colours (PLY)");
     gi->add_option("--bounces", o->gi.bounces, "Gather steps after B = E (1: direct light)")
         ->check(CLI::Range(0, 10000))

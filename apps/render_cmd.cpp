@@ -88,7 +88,7 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
     if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
     if (height) bp.octree.max_height = *height;
     bp.backend = a.backend;
-    bp.progress = detail::stderr_is_terminal();
+    bp.progress = stderr_progress();
     BuildStats st;
     VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",

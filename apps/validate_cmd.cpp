@@ -137,7 +137,7 @@ CLI::App* add_validate_command(CLI::App& app) {
 
 int run_validate_command() {
     ValidateParams& vp = opt.vp;
-    vp.progress = detail::stderr_is_terminal();
+    vp.progress = stderr_progress();
     check_output(opt.json, "--json");
     check_output(opt.md, "--md");
     if (opt.time_embree && !opt.json.empty())

@@ -22,6 +22,7 @@
 #include "vmap/io.h"
 #include "vmap/render.h"
 #include "vmap/scene.h"
+#include "vmap/version.h"
 
 namespace vmap::cli {
 namespace {
@@ -71,7 +72,7 @@ VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
     if (a.max_height) bp.octree.max_height = *a.max_height;
     if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
     bp.backend = a.backend;
-    bp.progress = detail::stderr_is_terminal();
+    bp.progress = cli::stderr_progress();
     BuildStats st;
     VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.input);
     fmt::print(
@@ -125,7 +126,7 @@ void start_signal_thread() {
 
 int run_view(ViewArgs& a) {
     if (a.input.empty()) a.input = default_scene_path();
-    if (a.web.empty()) a.web = std::string(VMAP_SOURCE_DIR) + "/web";
+    if (a.web.empty()) a.web = data_dir() + "/web";
     const fs::path three = fs::path(a.web) / "vendor" / "three.module.js";
     if (!fs::is_regular_file(three))
         throw Error(

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <nlohmann/json.hpp>
 #include <optional>
 
 #include "apps/commands.h"
@@ -30,6 +31,7 @@
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
+#include "vmap/version.h"
 
 namespace {
 
@@ -74,49 +76,105 @@ struct BuildOptions {
     std::optional<int> max_height, leaf_points;
     bool count_links = false;
     bool as_points = false;
+    bool json = false;
     BuildParams params;
 };
 
-int run_build(BuildOptions& o) {
-    if (o.input.empty()) o.input = default_scene_path();
-    PointSet pts;
-    std::string what;
-    std::optional<OctreeParams> file_octree;
-    if (is_scene_input(o.input, o.as_points)) {
-        Scene sc = load_scene(o.input);
-        cli::print_notes(sc.notes);
-        if (o.points) sc.points = *o.points;
-        if (o.seed) sc.seed = *o.seed;
-        file_octree = sc.octree;
-        pts = sample_scene(sc);
-        what = ends_with_ci(o.input, ".json")
-                   ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size())
-                   : fmt::format("mesh {} ({} triangles, area-sampled)", o.input,
-                                 sc.surfaces[0].mesh.triangles.size());
-    } else {
+// The input's points and a description of it: a scene or mesh file is sampled (scene options
+// apply), a point cloud is read as it is.
+PointSet load_input(BuildOptions& o, std::string& what) {
+    if (!is_scene_input(o.input, o.as_points)) {
         if (o.points || o.seed)
             throw Error("--points/--seed apply to scene and mesh files, not point clouds");
-        pts = load_point_cloud(o.input);
         what = fmt::format("point cloud {}", o.input);
+        return load_point_cloud(o.input);
     }
-    BuildParams& bp = o.params;
-    if (file_octree) bp.octree = *file_octree;
-    if (o.max_height) bp.octree.max_height = *o.max_height;
-    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-    if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
-    bp.progress = detail::stderr_is_terminal();
+    Scene sc = load_scene(o.input);
+    cli::print_notes(sc.notes);
+    if (o.points) sc.points = *o.points;
+    if (o.seed) sc.seed = *o.seed;
+    if (sc.octree) o.params.octree = *sc.octree;
+    what = ends_with_ci(o.input, ".json")
+               ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size())
+               : fmt::format("mesh {} ({} triangles, area-sampled)", o.input,
+                             sc.surfaces[0].mesh.triangles.size());
+    return sample_scene(sc);
+}
 
-    BuildStats st;
-    const size_t npts = pts.size();
-    bp.keep_links = !o.count_links;
-    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
-    const auto ts = std::chrono::steady_clock::now();
-    if (!o.count_links) save_vmap(o.output, vm);
-    const double save_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+// A float as the shortest decimal that reads back to it (0.01, not 0.009999999776).
+double short_decimal(float f) { return std::stod(fmt::format("{}", f)); }
 
+nlohmann::json params_json(const VisibilityMap& vm) {
+    const auto& o = vm.octree_params;
+    const auto& v = vm.visibility_params;
+    return {{"max_height", o.max_height},
+            {"leaf_points", o.leaf_points},
+            {"height", vm.octree.height()},
+            {"nodes", vm.octree.num_nodes()},
+            {"leaves", vm.octree.num_leaves()},
+            {"K", v.K},
+            {"eps", short_decimal(v.eps)},
+            {"facing_tol", short_decimal(v.facing_tol)},
+            {"parallel_tol", short_decimal(v.parallel_tol)}};
+}
+
+nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const BuildStats& st,
+                          size_t npts, double save_s) {
+    const auto& w = st.work;
+    nlohmann::json j = params_json(vm);
+    j["input"] = o.input;
+    j["points"] = npts;
+    j["backend"] = st.backend;
+    j["note"] = st.note;
+    j["leaf_pairs"] = w.pairs;
+    j["facing_pairs"] = w.facing_pairs;
+    j["visible_pairs"] = w.visible_pairs;
+    j["node_tests"] = w.node_tests;
+    j["occluder_tests"] = w.occluder_tests;
+    j["links"] = st.links;
+    j["links_kept"] = !o.count_links;
+    j["batches"] = st.batches;
+    j["seconds"] = {{"total", st.seconds_total},
+                    {"octree", st.seconds_octree},
+                    {"visibility", st.seconds_visibility},
+                    {"plan", st.seconds_plan},
+                    {"wait", st.seconds_wait},
+                    {"backend", st.seconds_backend},
+                    {"extract", st.seconds_extract},
+                    {"links", st.seconds_links},
+                    {"save", save_s}};
+    j["peak_device_bytes"] = st.peak_device_bytes;
+    j["output"] = o.count_links ? nlohmann::json(nullptr) : nlohmann::json(o.output);
+    return j;
+}
+
+void print_build_details(const VisibilityMap& vm, const BuildStats& st, double save_s) {
     const auto& w = st.work;
     const int cores = tbb::this_task_arena::max_concurrency();
+    fmt::print(
+        "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
+        double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
+        double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
+    fmt::print("time:       octree {:.3f} s, visibility + links {:.3f} s in {} batches\n",
+               st.seconds_octree, st.seconds_visibility, st.batches);
+    fmt::print(
+        "            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+        "link arrays {:.3f} s; saving {:.3f} s\n",
+        st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
+    const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
+    fmt::print(
+        "throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
+        "backend alone {:.3g} leaf pairs/s ({:.3f} s)\n",
+        pps, pps / cores, cores, w.pairs / std::max(1e-9, st.seconds_backend), st.seconds_backend);
+    if (st.peak_device_bytes)
+        fmt::print("device:     peak {:.1f} MiB\n", st.peak_device_bytes / 1048576.0);
+    if (vm.has_links()) print_tree_summary(vm);
+}
+
+void print_build_summary(const BuildOptions& o, const std::string& what, const VisibilityMap& vm,
+                         const BuildStats& st, size_t npts, double save_s) {
+    const bool verbose = cli::verbosity() == cli::Verbosity::kVerbose;
+    const auto& w = st.work;
     fmt::print("input:      {}\n", what);
     fmt::print("points:     {}\n", npts);
     print_params(vm);
@@ -125,38 +183,63 @@ int run_build(BuildOptions& o) {
     fmt::print("leaf pairs: {} tested, {} facing ({:.1f}%), {} visible ({:.1f}%)\n", w.pairs,
                w.facing_pairs, 100.0 * w.facing_pairs / std::max<uint64_t>(1, w.pairs),
                w.visible_pairs, 100.0 * w.visible_pairs / std::max<uint64_t>(1, w.pairs));
-    fmt::print(
-        "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
-        double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
-        double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
     if (o.count_links)
         fmt::print("links:      {} counted, not kept (as link ends they would take {:.2f} GiB)\n",
                    st.links, st.links * 8 / 1073741824.0);
     else
         fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
                    vm.link_targets.size() * 4);
-    const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
-    fmt::print(
-        "time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
-        st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
-    fmt::print(
-        "            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
-        "link arrays {:.3f} s; saving {:.3f} s\n",
-        st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
-    fmt::print(
-        "throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
-        "backend alone {:.3g} leaf pairs/s ({:.3f} s)\n",
-        pps, pps / cores, cores, w.pairs / std::max(1e-9, st.seconds_backend), st.seconds_backend);
-    if (st.peak_device_bytes)
-        fmt::print("device:     peak {:.1f} MiB\n", st.peak_device_bytes / 1048576.0);
-    if (o.count_links) return 0;
-    print_tree_summary(vm);
-    fmt::print("wrote:      {}\n", o.output);
+    fmt::print("time:       {:.3f} s total{}\n", st.seconds_total,
+               verbose ? "" : " (-v for the breakdown and the links per level)");
+    if (verbose) print_build_details(vm, st, save_s);
+    if (!o.count_links) fmt::print("wrote:      {}\n", o.output);
+}
+
+int run_build(BuildOptions& o) {
+    if (o.input.empty()) o.input = default_scene_path();
+    if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
+    if (!o.count_links) cli::check_output(o.output, "-o");
+    std::string what;
+    PointSet pts = load_input(o, what);
+    BuildParams& bp = o.params;
+    if (o.max_height) bp.octree.max_height = *o.max_height;
+    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    bp.progress = cli::stderr_progress();
+    bp.keep_links = !o.count_links;
+
+    BuildStats st;
+    const size_t npts = pts.size();
+    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
+    const auto ts = std::chrono::steady_clock::now();
+    if (!o.count_links) save_vmap(o.output, vm);
+    const double save_s =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    if (o.json)
+        fmt::print("{}\n", build_json(o, vm, st, npts, save_s).dump(2));
+    else if (cli::verbosity() != cli::Verbosity::kQuiet)
+        print_build_summary(o, what, vm, st, npts, save_s);
     return 0;
 }
 
-int run_info(const std::string& path) {
+int run_info(const std::string& path, bool json) {
     VisibilityMap vm = load_vmap(path);
+    if (json) {
+        nlohmann::json j = params_json(vm);
+        j["file"] = path;
+        j["bytes"] = fs::file_size(path);
+        j["points"] = vm.points.size();
+        j["links"] = vm.num_links();
+        const Octree& t = vm.octree;
+        int h = 0;
+        for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level[n]));
+        std::vector<uint64_t> links_per_level(h + 1);
+        for (int32_t n = 0; n < t.num_nodes(); ++n)
+            for (int32_t m : vm.links(n))
+                if (m > n) links_per_level[t.level[n]]++;
+        j["links_per_level"] = links_per_level;
+        fmt::print("{}\n", j.dump(2));
+        return 0;
+    }
     fmt::print("file:       {} ({} bytes)\n", path, fs::file_size(path));
     fmt::print("points:     {}\n", vm.points.size());
     print_params(vm);
@@ -181,6 +264,13 @@ int main(int argc, char** argv) {
     int threads = 0;
     app.add_option("--threads", threads, "CPU threads (default: all cores)")
         ->check(CLI::Range(0, 4096));
+    app.set_version_flag(
+        "--version", fmt::format("vmap {} (commit {}, CUDA {})", vmap::version(), vmap::commit(),
+                                 built_with_cuda() ? "on" : "off"));
+    bool verbose = false, quiet = false;
+    auto* vflag = app.add_flag("-v,--verbose", verbose, "Say more: timing breakdowns, tables");
+    app.add_flag("-q,--quiet", quiet, "Say nothing but errors and the output asked for")
+        ->excludes(vflag);
 
     BuildOptions bo;
     auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
@@ -238,9 +328,13 @@ int main(int argc, char** argv) {
                     "Count the links without keeping them and write no file: sizes a V-map "
                     "too large for memory");
 
+    build->add_flag("--json", bo.json, "Print the summary as one JSON object (for scripts)");
+
     std::string info_path;
+    bool info_json = false;
     auto* info = app.add_subcommand("info", "Describe a .vmap file");
     info->add_option("file", info_path, "The .vmap file")->required();
+    info->add_flag("--json", info_json, "Print it as one JSON object (for scripts)");
 
     const cli::Command query = cli::add_query_command(app);
     const cli::Command render = cli::add_render_command(app);
@@ -291,17 +385,24 @@ int main(int argc, char** argv) {
                    bo.input);
         return 2;
     }
+    cli::verbosity() = quiet     ? cli::Verbosity::kQuiet
+                       : verbose ? cli::Verbosity::kVerbose
+                                 : cli::Verbosity::kNormal;
+    // Commands whose stdout is a summary (not the answers asked for) print nothing with -q.
+    if (quiet && (render.app->parsed() || bench_query.app->parsed() || *validate || gi.selected() ||
+                  *benchc))
+        if (!std::freopen("/dev/null", "w", stdout)) return 1;
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       threads);
     try {
         if (*build) return run_build(bo);
-        if (*info) return run_info(info_path);
+        if (*info) return run_info(info_path, info_json);
         if (*benchc) {
             if (bo2.scenes.empty())
                 for (const char* n : {"cornell-bunny", "cornell-dragon", "cornell-two-models"})
-                    bo2.scenes.push_back(std::string(VMAP_SOURCE_DIR) + "/scenes/" + n + ".json");
+                    bo2.scenes.push_back(data_dir() + "/scenes/" + n + ".json");
             return bench::run(bo2);
         }
         for (const cli::Command* c : {&query, &render, &bench_query, &view})

@@ -21,6 +21,7 @@
 #include "visibility/backend.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
+#include "vmap/version.h"
 #include "vmap/vmap.h"
 
 namespace vmap::bench {
@@ -86,14 +87,7 @@ double sampled_cpu_rate(const Octree& t, const BuildParams& bp, uint64_t samples
 
 std::string git_commit() {
     if (const char* c = getenv("VMAP_COMMIT")) return c;
-    std::string out;
-    if (FILE* f = popen("git -C " VMAP_SOURCE_DIR " rev-parse --short HEAD 2>/dev/null", "r")) {
-        char buf[64];
-        if (fgets(buf, sizeof buf, f)) out = buf;
-        pclose(f);
-    }
-    while (!out.empty() && (out.back() == '\n' || out.back() == '\r')) out.pop_back();
-    return out.empty() ? "unknown" : out;
+    return vmap::commit();
 }
 
 std::string fmt_time(const Stat& s, bool done, bool est) {

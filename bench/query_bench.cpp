@@ -85,7 +85,7 @@ int run_bench_query(QueryBenchArgs& a) {
         bp.octree.max_height = a.max_height;
         bp.octree.leaf_points = a.leaf_points;
         bp.backend = a.backend;
-        bp.progress = detail::stderr_is_terminal();
+        bp.progress = cli::stderr_progress();
         BuildStats st;
         const VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.scene);
         Row r;

@@ -23,6 +23,7 @@
 
 #include "vmap/error.h"
 #include "vmap/io.h"
+#include "vmap/version.h"
 
 namespace {
 
@@ -186,7 +187,7 @@ int run(const std::string& mesh, int runs, const fs::path& dir) {
 }  // namespace
 
 int main(int argc, char** argv) {
-    std::string mesh = std::string(VMAP_SOURCE_DIR) + "/models/dragon.ply";
+    std::string mesh = vmap::data_dir() + "/models/dragon.ply";
     int runs = 5;
     fs::path dir = fs::temp_directory_path() / "vmap_read_bench";
     for (int i = 1; i < argc; ++i) {

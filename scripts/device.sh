@@ -45,8 +45,7 @@ fi
 if [[ "$cmd" == run ]]; then
     : "${OUT:=$root/out/device}"
     mkdir -p "$OUT"
-    # The binaries carry this checkout's absolute path for scenes and models: recreate it.
-    if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
+    # The binaries find scenes, models and tests/data from their own folder up (vmap::data_dir()).
     export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
     for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
     mkdir -p models

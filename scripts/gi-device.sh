@@ -12,8 +12,7 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 : "${OUT:=$root/out/device}"
 mkdir -p "$OUT"
-# The binaries carry this checkout's absolute path for scenes and models: recreate it.
-if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
+# The binaries find scenes and models from their own folder up (vmap::data_dir()).
 export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 mkdir -p models
 for f in .device/models/*.gz; do

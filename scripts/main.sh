@@ -4,13 +4,19 @@
 # draws the paper's Fig. 9 from it: the points visible from a point on the floor in front of the
 # bunny in purple (the eye cyan), the bunny's shadow on the back wall not (out/fig9.png). Then
 # global illumination over that V-map (vmap gi): out/cornell-bunny-gi.png and the lit points as a
-# PLY. Extra arguments go to `vmap build` (e.g. --backend cpu, --points 20000).
+# PLY. It also builds the Python module and makes `import vmap` work (scripts/python-path.sh).
+# Extra arguments go to `vmap build` (e.g. --backend cpu, --points 20000).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 scripts/setup.sh
 cmake --preset default >/dev/null
 cmake --build build -j"$(nproc)" --target vmap
+# The Python module, where CMake found python3-dev and pybind11, importable from then on.
+if [[ -d build/python ]]; then
+    cmake --build build -j"$(nproc)" --target vmap_python
+    scripts/python-path.sh build
+fi
 mkdir -p out
 build/vmap build scenes/cornell-bunny.json -o out/cornell-bunny.vmap "$@"
 build/vmap render out/cornell-bunny.vmap --scene scenes/cornell-bunny.json --mode visible \

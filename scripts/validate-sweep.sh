@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The parameter sweep behind docs/validation.md: `vmap validate` over the shipped scenes, and
 # the tables written between the "sweep" markers of docs/validation.md (the prose around them is
-# kept). Usage:  scripts/validate-sweep.sh [path/to/vmap]   (default build-cpu/vmap)
+# kept). Usage:  scripts/validate-sweep.sh [path/to/vmap]   (default build/vmap, the README's
+# build, else build-cpu/vmap)
 # Environment: PAIRS (default 200000), SCENES (default: empty bunny two-models dragon),
 # VMAP_POINTS (points for the V-map-mode tables, default 10000).
 # The V-map-mode tables and the build timings use the compiled-in defaults.
@@ -11,7 +12,12 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
-vmap="${1:-build-cpu/vmap}"
+vmap="${1:-}"
+if [[ -z "$vmap" ]]; then
+    vmap=build/vmap
+    [[ -x "$vmap" ]] || vmap=build-cpu/vmap
+fi
+[[ -x "$vmap" ]] || { echo "validate-sweep: no $vmap (build first: scripts/main.sh)" >&2; exit 1; }
 pairs="${PAIRS:-200000}"
 scenes="${SCENES:-empty bunny two-models dragon}"
 vpoints="${VMAP_POINTS:-10000}"

@@ -155,12 +155,88 @@ if expect_ok "query --from 0" query x.vmap --from 0; then
 fi
 count=$(sed -nE 's/^([0-9]+) points visible.*/\1/p' out.txt)
 if expect_ok "query --from 0 --ids" query x.vmap --from 0 --ids; then
-    ids=$(($(wc -l <out.txt) - 1))
+    ids=$(wc -l <out.txt)
     if [ "$ids" = "${count:-none}" ]; then
         ok "--ids lists as many ids as the count"
     else
         fail "--ids listed $ids ids for a count of ${count:-none}"
     fi
+    if grep -Evq '^[0-9]+$' out.txt; then fail "--ids printed more than ids on stdout"; else
+        ok "--ids prints ids only on stdout"; fi
+    if grep -q "^$count points visible from 0" err.txt; then ok "--ids says the count on stderr"
+    else fail "--ids: no count on stderr"; fi
+    sort -n out.txt >ids_from0.txt
+fi
+
+# ---- conventions: --version, -q, -v -------------------------------------------------------------
+if expect_ok "vmap --version" --version; then
+    expect_stdout "--version names the version, commit and CUDA" '^vmap [0-9]+\.[0-9]+\.[0-9]+ \(commit [^,]+, CUDA (on|off)\)$'
+fi
+if expect_ok "build -q" -q build "$SCENE" --points 1000 --max-height 4 -o q.vmap --backend cpu; then
+    if [ -s out.txt ] || [ -s err.txt ]; then fail "build -q printed something"; else ok "build -q is silent"; fi
+fi
+if expect_ok "build -v" build "$SCENE" --points 1000 --max-height 4 -o v.vmap --backend cpu -v; then
+    expect_stdout "build -v has the timing breakdown" '^ +plan [0-9.]+ s, waiting on backend'
+    expect_stdout "build -v has the links per level" '^ +level +nodes +leaves +links$'
+fi
+if grep -q 'waiting on backend' <("$VMAP" build "$SCENE" --points 1000 --max-height 4 -o d.vmap \
+    --backend cpu 2>/dev/null); then fail "the default summary has the breakdown"; else
+    ok "the default summary is short"; fi
+if grep -Eq '^leaf pairs: [0-9]+ to do on cpu .*, about ' <("$VMAP" build "$SCENE" --points 1000 \
+    --max-height 4 -o d.vmap --backend cpu 2>&1 >/dev/null); then
+    ok "build says the job's size and an estimate before the work"; else
+    fail "build: no size and estimate on stderr"; fi
+if expect_ok "build --json" build "$SCENE" --points 1000 --max-height 4 -o j.vmap --backend cpu --json; then
+    if /usr/bin/env python3 -c 'import json,sys; d=json.load(open("out.txt")); assert d["links"] > 0 and d["output"] == "j.vmap"' 2>/dev/null ||
+        grep -q '"links": [1-9]' out.txt; then ok "build --json has the links"; else fail "build --json"; fi
+fi
+
+# ---- batches: --pairs (text, stdin, .npy), --out answers.npy, --from with many ids, --json ----
+printf '0 1\n# a comment\n\n2999 0\n5,6\n' >pairs.txt
+if expect_ok "query --pairs FILE" query x.vmap --pairs pairs.txt; then
+    if [ "$(wc -l <out.txt)" = 3 ] && ! grep -Evq '^[0-9]+ [0-9]+ (visible|hidden|same-leaf)$' out.txt
+    then ok "--pairs answers one line per pair"; else fail "--pairs output"; show query x.vmap --pairs pairs.txt; fi
+    cp out.txt batch.txt
+    : >single.txt
+    for p in "0 1" "2999 0" "5 6"; do "$VMAP" query x.vmap --pair $p >>single.txt; done
+    if cmp -s batch.txt single.txt; then ok "--pairs agrees with --pair one by one"; else
+        fail "--pairs differs from --pair"; diff batch.txt single.txt | head; fi
+fi
+"$VMAP" query x.vmap --pairs - <pairs.txt >stdin.txt 2>err.txt
+if cmp -s stdin.txt batch.txt; then ok "--pairs - reads stdin"; else fail "--pairs - (stdin)"; fi
+# A hand-made .npy (version 1.0, little-endian int32, shape (3, 2)) of the same pairs.
+{
+    printf '\x93NUMPY\x01\x00\x76\x00'
+    h="{'descr': '<i4', 'fortran_order': False, 'shape': (3, 2), }"
+    printf '%s' "$h"
+    printf '%*s\n' $((0x76 - ${#h} - 1)) ''
+    printf '\x00\x00\x00\x00\x01\x00\x00\x00\xb7\x0b\x00\x00\x00\x00\x00\x00\x05\x00\x00\x00\x06\x00\x00\x00'
+} >pairs.npy
+if expect_ok "query --pairs .npy --out" query x.vmap --pairs pairs.npy --out ans.npy; then
+    # The answers: 10-byte prefix + 118-byte header, then one byte per pair (0/1/2).
+    want=$(awk '{print ($3=="hidden")?0:($3=="visible")?1:2}' batch.txt | tr -d '\n')
+    got=$(tail -c 3 ans.npy | od -An -tu1 | tr -d ' \n')
+    if [ "$(head -c 6 ans.npy | tail -c 5)" = NUMPY ] && [ "$got" = "$want" ]; then
+        ok "--out writes the answers as .npy"; else fail "--out answers.npy: got '$got', want '$want'"; fi
+fi
+printf '0 1\n3 x\n' >bad_pairs.txt
+expect_input_error "--pairs with a bad line" "bad_pairs.txt: line 2" query x.vmap --pairs bad_pairs.txt
+printf '0 1\n7 3000\n' >range_pairs.txt
+expect_input_error "--pairs id out of range" "range_pairs.txt: pair 1" query x.vmap --pairs range_pairs.txt
+expect_usage_error "--out without --pairs" query x.vmap --pair 0 1 --out a.npy
+if expect_ok "query --from with many ids --ids" query x.vmap --from 0 1 2 --ids; then
+    if [ "$(wc -l <out.txt)" = 3 ]; then ok "--from I J K --ids: one line per point"; else
+        fail "--from I J K --ids: $(wc -l <out.txt) lines"; fi
+    head -1 out.txt | tr ' ' '\n' | sed '/^$/d' | sort -n >first.txt
+    if cmp -s first.txt ids_from0.txt; then ok "the first line is --from 0's ids"; else
+        fail "--from 0 1 2: the first line differs from --from 0 --ids"; fi
+fi
+if expect_ok "query --json" query x.vmap --pair 0 1 --from 0 --json; then
+    if grep -q '"pairs"' out.txt && grep -q '"count"' out.txt; then ok "query --json has pairs and counts"
+    else fail "query --json"; show query x.vmap --pair 0 1 --from 0 --json; fi
+fi
+if expect_ok "info --json" info x.vmap --json; then
+    expect_stdout "info --json has the links" "\"links\": ${links:-none},"
 fi
 
 # The same scene built on one thread gives the same file, byte for byte.
@@ -322,7 +398,8 @@ expect_input_error "render into a missing folder" no_such_dir/r.png render x.vma
     -o no_such_dir/r.png
 
 if expect_ok "query --pair-pos" query x.vmap --pair-pos 0.1,0,0.2 0.2,0.5488,0.3; then
-    expect_stdout "pair-pos names the nearest points" '^--pair-pos .*: nearest point [0-9]+'
+    if grep -Eq '^--pair-pos .*: nearest point [0-9]+' err.txt; then
+        ok "pair-pos names the nearest points on stderr"; else fail "pair-pos: no nearest point on stderr"; fi
     expect_stdout "pair-pos answers" '^[0-9]+ [0-9]+ (visible|hidden|same-leaf)$'
 fi
 if expect_ok "query --from-pos with --ply" query x.vmap --from-pos 0.27,0,0.2 --ply from.ply; then
@@ -385,7 +462,9 @@ expect_input_error "validate --json into a missing folder" no_such_dir/v.json \
 
 # ---- vmap gi (global illumination) ----------------------------------------------------------
 
-if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu; then
+if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 2 --ply lit.ply --backend cpu \
+    --size 32x32; then
+    if [ -s x-gi.png ]; then ok "gi writes <input>-gi.png by default"; else fail "gi wrote no x-gi.png"; fi
     expect_stdout "gi reports each bounce" '^bounce +2: '
     expect_stdout "gi reports the refinement" '^refinement: blocks, theta 4: [0-9]+ interactions'
     if [ "$(head -c 3 lit.ply)" = "ply" ] && grep -aq 'property uchar red' lit.ply; then

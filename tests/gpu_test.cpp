@@ -103,15 +103,17 @@ TEST(GpuBackend, AutoPicksTheGpuAndSaysSo) {
     EXPECT_NE(st.backend.find("cuda"), std::string::npos) << st.backend;
 }
 
-TEST(GpuBackend, CudaRequestWithoutDeviceFallsBackWithANote) {
+TEST(GpuBackend, CudaRequestWithoutDeviceIsAnError) {
     std::string why;
-    if (have_device(&why)) GTEST_SKIP() << "a GPU is present; the fallback is not reachable";
+    if (have_device(&why)) GTEST_SKIP() << "a GPU is present; the error is not reachable";
     BuildParams bp = test::cpu_params(5, 4);
     bp.backend = "cuda";
-    BuildStats st;
-    build_vmap(test::sample(test::scene_path("cornell-empty"), 500, 1), bp, &st);
-    EXPECT_NE(st.backend.find("cpu"), std::string::npos);
-    EXPECT_NE(st.note.find("--backend cuda"), std::string::npos) << st.note;
+    try {
+        build_vmap(test::sample(test::scene_path("cornell-empty"), 500, 1), bp);
+        ADD_FAILURE() << "backend cuda ran without a device";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("backend cuda"), std::string::npos) << e.what();
+    }
 }
 
 }  // namespace

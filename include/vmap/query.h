@@ -16,6 +16,8 @@
 #pragma once
 
 #include <cstdint>
+#include <span>
+#include <vector>
 
 #include "vmap/vmap.h"
 
@@ -51,5 +53,24 @@ RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* sta
 // vm.visible_set(from) when visible_only. For tests and benchmarks.
 RayHit shoot_ray_brute(const VisibilityMap& vm, uint32_t from, Vec3 dir, bool visible_only,
                        float splat_scale = 2.f);
+
+}  // namespace vmap
+
+namespace vmap {
+
+// Many point pairs at once, on all cores: `pairs` holds input ids (i0, j0, i1, j1, ...), and
+// out[k] becomes the PairVisibility of pair k as a byte (0 hidden, 1 visible, 2 same leaf).
+// Throws vmap::Error naming the first pair with an id out of range, before answering any, or
+// when out.size() != pairs.size() / 2.
+void query_pairs(const VisibilityMap& vm, std::span<const uint32_t> pairs, std::span<uint8_t> out);
+
+// The visible sets of several points, as one CSR: the set of ids[k] is
+// targets[offsets[k] .. offsets[k + 1]), sorted (VisibilityMap::visible_set). Throws vmap::Error
+// for an id out of range.
+struct VisibleSets {
+    std::vector<uint64_t> offsets;
+    std::vector<uint32_t> targets;
+};
+VisibleSets visible_sets(const VisibilityMap& vm, std::span<const uint32_t> ids);
 
 }  // namespace vmap

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "vmap/mesh.h"
+#include "vmap/progress.h"
 #include "vmap/scene.h"
 #include "vmap/visibility.h"
 
@@ -67,7 +68,7 @@ struct ValidateParams {
     // Leave the buried points out before sampling pairs: what not sampling covered surface
     // (the ceiling under the light, floor under a model) would give.
     bool drop_buried = false;
-    bool progress = false;
+    ProgressCallback progress;  // heights done (vmap/progress.h); false cancels
 };
 
 // One octree height's outcome.

@@ -10,6 +10,7 @@
 
 #include "vmap/mesh.h"
 #include "vmap/octree.h"
+#include "vmap/progress.h"
 #include "vmap/visibility.h"
 
 namespace vmap {
@@ -40,11 +41,16 @@ using LinkTargets = std::vector<int32_t, UninitAllocator<int32_t>>;
 struct BuildParams {
     OctreeParams octree;
     VisibilityParams visibility;
-    std::string backend = "auto";           // auto | cpu | cuda
+    // auto: the GPU when one is usable, else the CPU (the progress callback's first report
+    // and BuildStats::note say why); cuda: the GPU or vmap::Error; cpu.
+    std::string backend = "auto";
     std::string occluders = "spheres";      // spheres (paper §5.2) | bresenham (the grid walk
                                             // of [7], CPU only: visibility/bresenham.h)
     uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
-    bool progress = false;                  // progress bar on stderr (callers pass isatty(2))
+    int threads = 0;  // CPU threads for the build (0: all cores; the caller's limit, if any)
+    // Called with the leaf pairs done (vmap/progress.h); returning false cancels the build
+    // (vmap::Cancelled). The library itself never prints.
+    ProgressCallback progress;
     // false: extract and count the links but keep none (BuildStats::links; the map then has no
     // links). Sizes a V-map too large for host memory, and times the GPU on it.
     bool keep_links = true;
@@ -102,7 +108,8 @@ class VisibilityMap {
 };
 
 // Builds the octree over `points` (which need normals) and the V-map. Throws vmap::Error naming
-// `source` for bad input or parameters.
+// `source` for bad input or parameters (messages name the BuildParams field), or for backend
+// "cuda" without a usable GPU; vmap::Cancelled when the progress callback returned false.
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
                          const std::string& source = "points");
 

@@ -397,7 +397,7 @@ void RadiositySolver::Impl::setup() {
     if (total > params.max_interactions)
         throw Error(fmt::format(
             "gi: theta {}: the refinement has {} interactions (more than the limit {}); use a "
-            "smaller --theta",
+            "smaller theta",
             params.theta, total, params.max_interactions));
     row.assign(num_el + 1, 0);
     for (uint64_t e = 0; e < num_el; ++e) row[e + 1] = row[e] + count[e].load();
@@ -444,7 +444,8 @@ void RadiositySolver::Impl::setup() {
         std::string why;
         device = detail::make_gi_cuda(&why);
         if (!device && params.backend == "cuda")
-            stats.note = fmt::format("--backend cuda: {}; using the CPU", why);
+            throw Error(fmt::format("gi: backend cuda: {} (backend auto falls back to the CPU)",
+                                    why));
     }
     if (device) {
         try {
@@ -453,7 +454,7 @@ void RadiositySolver::Impl::setup() {
             // Too large for the device (or the device failed): the CPU gives the same answers.
             device.reset();
             stats.note = fmt::format(
-                "--backend {}: the GPU could not take the problem ({}); "
+                "backend {}: the GPU could not take the problem ({}); "
                 "using the CPU",
                 params.backend, e.what());
         }
@@ -496,7 +497,7 @@ RadiositySolver::RadiositySolver(const VisibilityMap& vm, const GiParams& params
         throw Error(
             fmt::format("gi: refine: unknown mode '{}' (expected blocks or links)", params.refine));
     if (params.backend != "auto" && params.backend != "cpu" && params.backend != "cuda")
-        throw Error(fmt::format("gi: --backend: unknown backend '{}' (expected auto, cpu or cuda)",
+        throw Error(fmt::format("gi: backend: unknown backend '{}' (expected auto, cpu or cuda)",
                                 params.backend));
     check_points(vm, "gi");
     impl_->params = params;

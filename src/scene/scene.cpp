@@ -12,6 +12,7 @@
 
 #include "vmap/error.h"
 #include "vmap/io.h"
+#include "vmap/version.h"
 
 namespace vmap {
 namespace {
@@ -385,9 +386,7 @@ Scene mesh_file_scene(const std::string& path) {
 
 }  // namespace
 
-std::string default_scene_path() {
-    return std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-bunny.json";
-}
+std::string default_scene_path() { return data_dir() + "/scenes/cornell-bunny.json"; }
 
 bool is_scene_input(const std::string& path, bool as_points) {
     std::string ext = fs::path(path).extension().string();

@@ -3,34 +3,68 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
-#include <cstdio>
-
 namespace vmap::detail {
 
 bool stderr_is_terminal() { return isatty(2) == 1; }
 
-Progress::Progress(std::string label, uint64_t total, bool enabled)
-    : label_(std::move(label)),
+Progress::Progress(const char* stage, uint64_t total, const ProgressCallback* callback,
+                   std::string backend, std::string note, double estimate_seconds)
+    : stage_(stage),
       total_(total),
-      enabled_(enabled && stderr_is_terminal()),
-      start_(std::chrono::steady_clock::now()),
-      last_(start_) {}
-
-Progress::~Progress() {
-    if (enabled_) fmt::print(stderr, "\r\033[K");
+      cb_(callback && *callback ? callback : nullptr),
+      backend_(std::move(backend)),
+      note_(std::move(note)),
+      estimate_(estimate_seconds),
+      start_(std::chrono::steady_clock::now()) {
+    report(0, true);
 }
 
-void Progress::update(uint64_t done) {
-    if (!enabled_) return;
+void Progress::add(uint64_t units) {
+    if (!cb_) return;
+    report(done_.fetch_add(units, std::memory_order_relaxed) + units, false);
+}
+
+void Progress::set(uint64_t done) {
+    if (!cb_) return;
+    uint64_t cur = done_.load(std::memory_order_relaxed);
+    while (cur < done && !done_.compare_exchange_weak(cur, done)) {
+    }
+    report(std::max(cur, done), false);
+}
+
+void Progress::finish() {
+    if (!cb_) return;
+    done_.store(total_);
+    report(total_, true);
+}
+
+void Progress::throw_if_cancelled() const {
+    if (cancelled()) throw Cancelled(fmt::format("{}: cancelled by the progress callback", stage_));
+}
+
+void Progress::report(uint64_t done, bool force) {
+    if (!cb_) return;
     const auto now = std::chrono::steady_clock::now();
-    if (now - last_ < std::chrono::milliseconds(100) && done < total_) return;
-    last_ = now;
-    const double s = std::chrono::duration<double>(now - start_).count();
-    const double f = total_ ? double(done) / double(total_) : 1.0;
-    const double eta = f > 0 ? s / f - s : 0;
-    fmt::print(stderr, "\r\033[K{}: {:5.1f}%  {:.1f}s elapsed, ~{:.0f}s left", label_, 100 * f, s,
-               eta);
-    std::fflush(stderr);
+    const int64_t ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now - start_).count();
+    int64_t last = last_ns_.load(std::memory_order_relaxed);
+    if (!force && ns - last < 100'000'000) return;
+    if (!force && !last_ns_.compare_exchange_strong(last, ns)) return;
+    std::unique_lock lock(mu_, std::defer_lock);
+    if (force)
+        lock.lock();
+    else if (!lock.try_lock())
+        return;
+    ProgressInfo info;
+    info.stage = stage_;
+    info.total = total_;
+    info.done = std::min(done, total_);
+    info.seconds = double(ns) * 1e-9;
+    const double f = total_ ? double(info.done) / double(total_) : 1.0;
+    info.eta_seconds = f > 0 ? info.seconds / f - info.seconds : 0;
+    info.backend = backend_.c_str();
+    info.note = note_.c_str();
+    info.estimate_seconds = estimate_;
+    if (!(*cb_)(info)) cancelled_.store(true);
 }
 
 }  // namespace vmap::detail

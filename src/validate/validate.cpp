@@ -54,18 +54,18 @@ void check_visibility(const VisibilityParams& vp, const std::string& src) {
 
 void check_params(const ValidateParams& p, const std::string& src) {
     if (p.pairs < 1 || p.pairs > 1000000000ull)
-        throw Error(fmt::format("{}: --pairs {} out of range (1..1000000000)", src, p.pairs));
-    if (p.heights.empty()) throw Error(fmt::format("{}: --heights: no height given", src));
+        throw Error(fmt::format("{}: pairs {} out of range (1..1000000000)", src, p.pairs));
+    if (p.heights.empty()) throw Error(fmt::format("{}: heights: no height given", src));
     for (int h : p.heights)
         if (h < 1 || h > 21)
-            throw Error(fmt::format("{}: --heights: height {} out of range (1..21)", src, h));
+            throw Error(fmt::format("{}: heights: height {} out of range (1..21)", src, h));
     if (p.leaf_points < 0 || p.leaf_points > 1000000)
         throw Error(
             fmt::format("{}: --leaf-points {} out of range (1..1000000)", src, p.leaf_points));
     if (p.points > 50000000)
-        throw Error(fmt::format("{}: --points {} out of range (1..50000000)", src, p.points));
+        throw Error(fmt::format("{}: points {} out of range (1..50000000)", src, p.points));
     if (p.predict != "vmap" && p.predict != "direct")
-        throw Error(fmt::format("{}: --predict: unknown mode '{}' (expected vmap or direct)", src,
+        throw Error(fmt::format("{}: predict: unknown mode '{}' (expected vmap or direct)", src,
                                 p.predict));
     if (p.occluders != "spheres" && p.occluders != "bresenham")
         throw Error(
@@ -78,12 +78,12 @@ void check_params(const ValidateParams& p, const std::string& src) {
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
     check_visibility(p.visibility, src);
     if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
-        throw Error(fmt::format("{}: --delta-scale {} out of range [0.1, 10]", src, p.delta_scale));
+        throw Error(fmt::format("{}: delta_scale {} out of range [0.1, 10]", src, p.delta_scale));
     if (!(p.splat_floor <= 10.f))
-        throw Error(fmt::format("{}: --splat-floor {} out of range [0, 10]", src, p.splat_floor));
+        throw Error(fmt::format("{}: splat_floor {} out of range [0, 10]", src, p.splat_floor));
     if ((p.delta_scale != 1.f || p.splat_floor >= 0.f) && p.predict != "direct")
         throw Error(fmt::format(
-            "{}: --delta-scale/--splat-floor change the octree's Delta rule and need --predict "
+            "{}: delta_scale/splat_floor change the octree's Delta rule and need predict "
             "direct (the V-map build uses the octree's own rule)",
             src));
 }
@@ -234,7 +234,7 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
-    detail::Progress progress("heights", params.heights.size(), params.progress);
+    detail::Progress progress("heights", params.heights.size(), &params.progress);
     // 0 = hidden, 1 = visible, 2 = same leaf
     std::vector<uint8_t> pred(pairs.size());
     for (size_t hi = 0; hi < params.heights.size(); ++hi) {
@@ -314,7 +314,8 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
             if (!buried[pairs[k].i] && !buried[pairs[k].j]) row.live.add(truth[k], pred[k]);
         }
         r.rows.push_back(row);
-        progress.update(hi + 1);
+        progress.set(hi + 1);
+        progress.throw_if_cancelled();
     }
     return r;
 }
@@ -446,7 +447,7 @@ Spread spread(std::vector<double> v) {
 EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
     check_visibility(p.visibility, path);
     if (p.runs < 1 || p.runs > 100)
-        throw Error(fmt::format("{}: --runs {} out of range (1..100)", path, p.runs));
+        throw Error(fmt::format("{}: runs {} out of range (1..100)", path, p.runs));
     if (p.sample_pairs < 1 || p.sample_pairs > 1000000000ull)
         throw Error(
             fmt::format("{}: --pairs {} out of range (1..1000000000)", path, p.sample_pairs));

@@ -19,11 +19,12 @@ std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note
     if (name == "auto" || name == "cuda") {
         std::string why;
         if (auto b = make_cuda_backend(&why)) return b;
-        if (name == "cuda" && note)
-            *note = fmt::format("--backend cuda: {}; using the CPU backend", why);
+        if (name == "cuda")
+            throw Error(fmt::format("backend cuda: {} (backend auto falls back to the CPU)", why));
+        if (note) *note = fmt::format("no usable GPU ({}); using the CPU", why);
         return make_cpu_backend();
     }
-    throw Error(fmt::format("--backend: unknown backend '{}' (expected auto, cpu or cuda)", name));
+    throw Error(fmt::format("backend: unknown backend '{}' (expected auto, cpu or cuda)", name));
 }
 
 }  // namespace vmap::detail

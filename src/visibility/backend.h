@@ -8,6 +8,7 @@
 #include <span>
 #include <string>
 
+#include "util/progress.h"
 #include "vmap/octree.h"
 #include "vmap/visibility.h"
 
@@ -43,6 +44,15 @@ class Backend {
     virtual double busy_seconds() const = 0;
     // Peak device memory the backend held, bytes (0 for the CPU).
     virtual uint64_t peak_device_bytes() const { return 0; }
+    // Leaf pairs per second to expect, for the estimate reported before the work starts (0:
+    // no idea).
+    virtual double expected_pairs_per_second() const { return 0; }
+    // Counts evaluated leaf pairs into `p` while a batch runs (and stops early once it is
+    // cancelled); null for none.
+    void set_progress(Progress* p) { progress_ = p; }
+
+  protected:
+    Progress* progress_ = nullptr;
 };
 
 std::unique_ptr<Backend> make_cpu_backend();

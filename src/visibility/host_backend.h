@@ -8,6 +8,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <chrono>
@@ -30,7 +31,9 @@ class HostBackend : public Backend {
         tbb::combinable<WorkCounters> counters;
         tbb::parallel_for(
             tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
+                if (progress_ && progress_->cancelled()) return;
                 WorkCounters& wc = counters.local();
+                uint64_t range_pairs = 0;
                 size_t j =
                     std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
                 for (uint64_t item = range.begin(); item < range.end(); ++item) {
@@ -46,10 +49,13 @@ class HostBackend : public Backend {
                     for (int32_t c = c0; c < c1; ++c)
                         if (self.visible(a, job.col0 + c, &wc)) word |= 1u << (c - c0);
                     wc.pairs += c1 - c0;
+                    range_pairs += c1 - c0;
                     wc.visible_pairs += __builtin_popcount(word);
                     bits[job.word_offset + local] = word;
                 }
+                if (progress_) progress_->add(range_pairs);
             });
+        if (progress_) progress_->throw_if_cancelled();
         pending_[slot] = counters.combine([](WorkCounters x, const WorkCounters& y) {
             x += y;
             return x;
@@ -64,6 +70,10 @@ class HostBackend : public Backend {
     }
 
     double busy_seconds() const override { return busy_; }
+    // About 2.5e6 leaf pairs per second per core (docs/results.md; 2-4e6 by scene).
+    double expected_pairs_per_second() const override {
+        return 2.5e6 * tbb::this_task_arena::max_concurrency();
+    }
 
   private:
     double busy_ = 0;

@@ -10,6 +10,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -270,8 +271,8 @@ void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs
     la.finish(vm, one);
 }
 
-VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
-                         const std::string& source) {
+VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildStats* stats,
+                             const std::string& source) {
     const auto t0 = Clock::now();
     const VisibilityParams& vp = params.visibility;
     if (vp.K < 1 || vp.K > 1000)
@@ -286,10 +287,10 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
             fmt::format("{}: parallel tolerance {} out of range [0, 1)", source, vp.parallel_tol));
     if (params.occluders != "spheres" && params.occluders != "bresenham")
         throw Error(
-            fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)",
+            fmt::format("{}: occluders: unknown search '{}' (expected spheres or bresenham)",
                         source, params.occluders));
     if (params.max_batch_pairs < 1024)
-        throw Error(fmt::format("{}: batch of {} pairs is too small (>= 1024)", source,
+        throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
                                 params.max_batch_pairs));
 
     BuildStats st;
@@ -319,8 +320,11 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     std::unique_ptr<detail::Backend> backend;
     if (params.occluders == "bresenham") {
         if (params.backend == "cuda")
-            note = "--occluders bresenham: the GPU backend does spheres only; using the CPU";
-        else if (params.backend != "auto" && params.backend != "cpu")
+            throw Error(
+                fmt::format("{}: backend cuda: the GPU does occluders spheres only "
+                            "(bresenham runs on the CPU; use backend auto or cpu)",
+                            source));
+        if (params.backend != "auto" && params.backend != "cpu")
             detail::make_backend(params.backend, &note);  // throws for an unknown name
         backend = detail::make_bresenham_backend();
     } else {
@@ -368,7 +372,10 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     std::vector<uint8_t> job_full(plan.jobs.size(), 0);
     Sinks sinks;
     const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
-    detail::Progress progress("leaf pairs", total_pairs, params.progress);
+    const double rate = backend->expected_pairs_per_second();
+    detail::Progress progress("leaf pairs", total_pairs, &params.progress, st.backend, note,
+                              rate > 0 ? double(total_pairs) / rate : 0.0);
+    backend->set_progress(&progress);
     uint64_t done_pairs = 0;
     uint64_t counted_links = 0;  // when the links are not kept
 
@@ -411,9 +418,11 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         }
         for (size_t k = b.begin; k < b.end; ++k)
             done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
-        progress.update(done_pairs);
+        progress.set(done_pairs);
+        progress.throw_if_cancelled();
         st.seconds_extract += seconds_since(te);
     }
+    progress.finish();
     st.batches = batches.size();
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();
@@ -460,6 +469,16 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     st.seconds_total = seconds_since(t0);
     if (stats) *stats = st;
     return vm;
+}
+
+VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
+                         const std::string& source) {
+    if (params.threads < 0 || params.threads > 4096)
+        throw Error(fmt::format("{}: threads {} out of range (0 = all cores, up to 4096)", source,
+                                params.threads));
+    if (params.threads == 0) return build_in_arena(std::move(points), params, stats, source);
+    tbb::task_arena arena(params.threads);
+    return arena.execute([&] { return build_in_arena(std::move(points), params, stats, source); });
 }
 
 }  // namespace vmap

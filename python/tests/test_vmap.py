@@ -1,0 +1,161 @@
+"""The Python binding against the library's other paths: the CLI's files and answers, the
+visible sets, round trips through arrays and files, and bad input. Run by ctest (Python.Pytest)
+with PYTHONPATH at the built module and VMAP_BIN at the vmap binary."""
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import vmap
+
+SCENE = os.path.join(vmap.data_dir(), "scenes", "cornell-empty.json")
+OPTS = dict(max_height=5, leaf_points=4, backend="cpu")
+
+
+@pytest.fixture(scope="module")
+def small():
+    return vmap.build_file(SCENE, points=2000, seed=3, **OPTS)
+
+
+def vmap_bin():
+    path = os.environ.get("VMAP_BIN")
+    if not path:
+        pytest.skip("VMAP_BIN is not set (ctest sets it)")
+    return path
+
+
+def test_build_file_writes_the_same_bytes_as_the_cli(small, tmp_path):
+    py_file, cli_file = tmp_path / "py.vmap", tmp_path / "cli.vmap"
+    small.save(str(py_file))
+    subprocess.run([vmap_bin(), "-q", "build", SCENE, "--points", "2000", "--seed", "3",
+                    "--max-height", "5", "--leaf-points", "4", "--backend", "cpu", "-o",
+                    str(cli_file)], check=True)
+    assert py_file.read_bytes() == cli_file.read_bytes()
+
+
+def test_query_agrees_with_the_cli_batch(small, tmp_path):
+    rng = np.random.default_rng(1)
+    pairs = rng.integers(0, small.num_points, size=(500, 2))
+    small.save(str(tmp_path / "m.vmap"))
+    np.savetxt(tmp_path / "pairs.txt", pairs, fmt="%d")
+    out = subprocess.run([vmap_bin(), "query", str(tmp_path / "m.vmap"), "--pairs",
+                          str(tmp_path / "pairs.txt")], check=True, capture_output=True,
+                         text=True).stdout.split("\n")
+    words = {"hidden": 0, "visible": 1, "same-leaf": 2}
+    cli = np.array([words[line.split()[2]] for line in out if line])
+    assert np.array_equal(small.query_codes(pairs), cli)
+    assert np.array_equal(small.query(pairs), cli == 1)
+
+
+def test_query_matches_the_visible_sets(small):
+    rng = np.random.default_rng(2)
+    pairs = rng.integers(0, small.num_points, size=(300, 2))
+    codes = small.query_codes(pairs)
+    offsets, targets = small.visible_from(pairs[:, 0])
+    assert offsets.dtype == np.uint64 and len(offsets) == len(pairs) + 1
+    for k, (i, j) in enumerate(pairs):
+        seen = targets[offsets[k]:offsets[k + 1]]
+        assert np.array_equal(seen, small.visible_set(i))
+        if codes[k] != 2:
+            assert (codes[k] == 1) == (j in seen)
+    assert codes.dtype == np.uint8 and set(np.unique(codes)) <= {0, 1, 2}
+
+
+def test_build_from_arrays_round_trips(small):
+    again = vmap.build(small.points, small.normals, small.radii, small.colors, small.emission,
+                       **OPTS)
+    assert again.num_links == small.num_links
+    assert again.num_leaves == small.num_leaves
+    pairs = np.random.default_rng(4).integers(0, small.num_points, size=(2000, 2))
+    assert np.array_equal(again.query_codes(pairs), small.query_codes(pairs))
+    assert np.allclose(again.points, small.points)
+
+
+def test_save_and_load(small, tmp_path):
+    small.save(str(tmp_path / "a.vmap"))
+    back = vmap.load(str(tmp_path / "a.vmap"))
+    assert (back.num_points, back.num_links, back.height) == (
+        small.num_points, small.num_links, small.height)
+
+
+def test_one_thread_gives_the_same_map(small):
+    one = vmap.build_file(SCENE, points=2000, seed=3, threads=1, **OPTS)
+    pairs = np.random.default_rng(5).integers(0, small.num_points, size=(2000, 2))
+    assert one.num_links == small.num_links
+    assert np.array_equal(one.query_codes(pairs), small.query_codes(pairs))
+
+
+def test_normals_are_estimated_when_missing():
+    rng = np.random.default_rng(6)
+    # A closed box of 6 faces, 300 points each, seen from inside and out.
+    faces = []
+    for axis in range(3):
+        for side in (0.0, 1.0):
+            p = rng.random((300, 3))
+            p[:, axis] = side
+            faces.append(p)
+    pts = np.concatenate(faces).astype(np.float32)
+    vm = vmap.build(pts, max_height=4, backend="cpu")
+    assert vm.num_points == len(pts) and vm.normals.shape == pts.shape
+    assert np.allclose(np.linalg.norm(vm.normals, axis=1), 1, atol=1e-4)
+
+
+def test_rays_hit_points_of_the_visible_set(small):
+    origins = np.arange(0, small.num_points, 97)
+    dirs = np.random.default_rng(7).normal(size=(len(origins), 3))
+    hits, dist = small.shoot_rays(origins, dirs)
+    assert hits.dtype == np.int64 and dist.dtype == np.float32
+    for o, h, d in zip(origins, hits, dist):
+        if h >= 0:
+            assert h in small.visible_set(o) and np.isfinite(d) and d > 0
+        else:
+            assert np.isinf(d)
+
+
+def test_render_and_gi_give_arrays(small):
+    img = small.render(eye_id=10, width=64, height=48)
+    assert img.shape == (48, 64, 3) and img.dtype == np.uint8 and img.std() > 0
+    shaded = small.render(width=32, height=32)
+    assert shaded.shape == (32, 32, 3)
+    radiosity = small.gi(bounces=2)
+    assert radiosity.shape == (small.num_points, 3) and radiosity.dtype == np.float32
+    assert np.isfinite(radiosity).all() and radiosity.max() > 0
+
+
+def test_progress_reports_and_cancels():
+    seen = []
+
+    def record(p):
+        seen.append((p["done"], p["total"]))
+        return True
+
+    vmap.build_file(SCENE, points=1500, progress=record, **OPTS)
+    assert seen[0][0] == 0 and seen[-1][0] == seen[-1][1] > 0
+    assert all(a[0] <= b[0] for a, b in zip(seen, seen[1:]))
+    with pytest.raises(vmap.Cancelled, match="cancelled"):
+        vmap.build_file(SCENE, points=1500, progress=lambda p: False, **OPTS)
+
+
+def test_bad_input_raises_the_library_message(small, tmp_path):
+    with pytest.raises(vmap.Error, match="out of range"):
+        small.query(np.array([[0, small.num_points]]))
+    with pytest.raises(vmap.Error, match="M x 2"):
+        small.query(np.array([1, 2, 3]))
+    with pytest.raises(vmap.Error, match="N x 3"):
+        vmap.build(np.zeros((10, 2), np.float32))
+    with pytest.raises(vmap.Error, match="radii"):
+        vmap.build(small.points, small.normals, radii=np.ones(3, np.float32))
+    with pytest.raises(vmap.Error, match="nope.vmap"):
+        vmap.load(str(tmp_path / "nope.vmap"))
+    with pytest.raises(vmap.Error, match="K"):
+        vmap.build_file(SCENE, points=500, K=0, backend="cpu")
+    with pytest.raises(TypeError, match="max_hieght"):
+        vmap.build_file(SCENE, points=500, max_hieght=3)
+    assert issubclass(vmap.Error, RuntimeError) and issubclass(vmap.Cancelled, vmap.Error)
+
+
+@pytest.mark.skipif(vmap.built_with_cuda, reason="a CUDA build may have a device")
+def test_cuda_without_a_device_is_an_error():
+    with pytest.raises(vmap.Error, match="backend cuda"):
+        vmap.build_file(SCENE, points=500, max_height=4, backend="cuda")

@@ -10,7 +10,8 @@
 //   "light": { "center": [x, z], "size": [sx, sz], "emission": [r,g,b] },       // on the ceiling
 //            (clipped to the room; the ceiling is not sampled under it)
 //   "meshes": [ { "file": "../models/bunny.off",   // relative to the scene file
-//                 "size": 0.25,                    // largest extent after scaling (or "scale")
+//                 "size": 0.25,                    // largest extent after scaling (or "scale":
+//                                                  //  a factor, or [sx, sy, sz] per axis)
 //                 "rotate": [rx, ry, rz],           // degrees, applied x then y then z
 //                 "position": [x, y, z],            // where the bottom centre of its box goes
 //                 "albedo": [r, g, b], "flip_normals": false } ],
@@ -38,6 +39,7 @@ struct SceneSurface {
     Mesh mesh;         // world space; triangle winding gives the outward normal
     Vec3 albedo{0.8f, 0.8f, 0.8f};
     Vec3 emission{0, 0, 0};
+    bool is_model = false;  // a mesh placed in the scene (not the room or its light)
 };
 
 struct Scene {
@@ -58,7 +60,8 @@ Scene load_scene(const std::string& path);
 // Area-weighted, seeded sampling of every surface into points with the triangle's normal, the
 // surface's albedo and emission, and a splat radius sqrt(area / (pi * points)). The same seed
 // gives the same points on every machine and thread count.
-PointSet sample_scene(const Scene& scene);
+// `surface_of`, when given, receives each point's index into scene.surfaces.
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
 
 // Reads a raw point cloud (PLY or OFF; faces ignored). Estimates normals when the file has none
 // (k nearest neighbours), sets splat radii from the neighbour spacing when absent, and albedo 0.8

@@ -31,7 +31,7 @@ struct Tri {
 
 }  // namespace
 
-PointSet sample_scene(const Scene& scene) {
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     std::vector<Tri> tris;
     std::vector<double> cdf;
     double area = 0;
@@ -59,6 +59,7 @@ PointSet sample_scene(const Scene& scene) {
     // Each sample stands for an equal share of the area: a disc of that area.
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
+    if (surface_of) surface_of->resize(n);
     tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) {
         const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
                        r2 = mix(seed + 3 * i + 2);
@@ -75,6 +76,7 @@ PointSet sample_scene(const Scene& scene) {
         ps.normals[i] = t.n;
         ps.colors[i] = scene.surfaces[t.surface].albedo;
         ps.emission[i] = scene.surfaces[t.surface].emission;
+        if (surface_of) (*surface_of)[i] = t.surface;
     });
     return ps;
 }

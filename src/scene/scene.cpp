@@ -205,6 +205,7 @@ Scene load_scene(const std::string& path) {
         }
         if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
         SceneSurface s;
+        s.is_model = true;
         s.name = m.value("name", fs::path(rel).stem().string());
         s.albedo = m.contains("albedo") ? cx.vec3(m["albedo"], f + ".albedo", 0, 1)
                                         : Vec3{0.75f, 0.75f, 0.8f};
@@ -220,15 +221,28 @@ Scene load_scene(const std::string& path) {
         if (!(ext > 0) || !std::isfinite(ext))
             cx.fail(f + ".file",
                     file.string() + ": the mesh has zero extent (all vertices coincide)");
-        float scale = 1;
+        Vec3 scale{1, 1, 1};
         if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
-        if (m.contains("size")) scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
-        if (m.contains("scale")) scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
+        if (m.contains("size")) {
+            const float k = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
+            scale = {k, k, k};
+        }
+        if (m.contains("scale")) {
+            if (m["scale"].is_array()) {
+                scale = cx.vec3(m["scale"], f + ".scale", 1e-9, 1e9);
+            } else {
+                const float k = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
+                scale = {k, k, k};
+            }
+        }
         const Vec3 rot =
             m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
         const Vec3 pos = m.contains("position") ? cx.vec3(m["position"], f + ".position", -1e6, 1e6)
                                                 : Vec3{W / 2, 0, D / 2};
-        for (Vec3& v : s.mesh.vertices) v = rotate((v - mid) * scale, rot);
+        for (Vec3& v : s.mesh.vertices) {
+            const Vec3 c = v - mid;
+            v = rotate(Vec3{c.x * scale.x, c.y * scale.y, c.z * scale.z}, rot);
+        }
         float ylo = INFINITY, xlo = INFINITY, xhi = -INFINITY, zlo = INFINITY, zhi = -INFINITY;
         for (Vec3 v : s.mesh.vertices) {
             ylo = std::min(ylo, v.y);

@@ -112,6 +112,19 @@ CLI::App* add_validate_command(CLI::App& app) {
                   "Truth rays skip this fraction of the room size at both ends")
         ->check(CLI::Range(1e-7, 0.01))
         ->capture_default_str();
+    c->add_option("--eyes", opt.vp.eyes,
+                  "Eyes on the models (and as many uniform), each scored against every point")
+        ->check(CLI::Range(uint64_t(0), uint64_t(10000)))
+        ->capture_default_str();
+    c->add_option("--eye-seed", opt.vp.eye_seed, "Seed of the eyes")->capture_default_str();
+    c->add_option("--as-cloud", opt.vp.as_cloud,
+                  "Build from the samples as a raw cloud: normals (true normals, radii "
+                  "estimated) or bare (normals and radii estimated, as for a scan)")
+        ->check(CLI::IsMember({"normals", "bare"}));
+    c->add_option("--cloud", opt.vp.cloud,
+                  "Score this cloud file (PLY/OFF) against the scene's triangles instead of the "
+                  "scene's samples")
+        ->check(CLI::ExistingFile);
     c->add_flag("--drop-buried", opt.vp.drop_buried,
                 "Leave out buried points (covered surface) before sampling pairs");
     c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
@@ -130,7 +143,8 @@ CLI::App* add_validate_command(CLI::App& app) {
     for (const char* name :
          {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
           "--parallel-tol", "--occluders", "--backend", "--predict", "--delta-scale",
-          "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs"})
+          "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
+          "--eye-seed", "--as-cloud", "--cloud"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return c;
 }

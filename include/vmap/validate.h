@@ -68,6 +68,18 @@ struct ValidateParams {
     // Leave the buried points out before sampling pairs: what not sampling covered surface
     // (the ceiling under the light, floor under a model) would give.
     bool drop_buried = false;
+    // Eyes: `eyes` seeded points on the models (and as many uniform over all points), each
+    // scored against every other point: where a user looks. 0: none.
+    uint64_t eyes = 100;
+    uint64_t eye_seed = 1;
+    // The points the prediction is built from. "" : the scene's samples as they are (true
+    // normals, splat radii from the sampling). "normals": the same points as a raw cloud with
+    // their true normals and no radii; "bare": positions only (normals and radii estimated, as
+    // for a scan). Either goes through load_point_cloud, as `vmap build cloud.ply` would.
+    std::string as_cloud;
+    // A cloud file to score instead of the scene's samples (truth from the scene's triangles;
+    // each point's true normal and model flag from the nearest point of a dense scene sample).
+    std::string cloud;
     ProgressCallback progress;  // heights done (vmap/progress.h); false cancels
 };
 
@@ -81,6 +93,9 @@ struct HeightResult {
     Confusion all;           // every pair whose points lie in different leaves
     Confusion facing;        // those of them whose points face each other (truth's facing test)
     Confusion live;          // those of them where neither point is buried (ValidationReport)
+    Confusion model;         // the model-pair sample: one end on a model, the other anywhere
+    Confusion eyes_model;    // eyes on the models against every point
+    Confusion eyes_all;      // eyes uniform over the points against every point
     uint64_t same_leaf = 0;  // pairs sharing a leaf (the V-map says nothing of them)
     uint64_t same_leaf_visible = 0;  // ... of which truly visible
     double build_seconds = 0;        // octree (+ V-map in vmap mode)
@@ -99,6 +114,13 @@ struct ValidationReport {
     // out of HeightResult::live.
     uint64_t buried_points = 0, live_pairs = 0;
     uint64_t dropped_points = 0;  // with drop_buried: points left out before sampling
+    uint64_t model_points = 0;    // points on a model (a mesh of the scene, not the room)
+    uint64_t model_pairs = 0;     // pairs of the model-pair sample (as many as `pairs`)
+    uint64_t eyes = 0;            // eyes per set (0 when the scene has no model points)
+    std::string source;           // what the prediction was built from, in words
+    // Of the prediction's points: the fraction (by count) whose normal points to the side of the
+    // true one, over all points and over model points (1 when the normals are the true ones).
+    double normal_agreement = 1, normal_agreement_model = 1;
     double bury_distance = 0;
     uint64_t triangles = 0;
     double offset = 0;  // absolute ray offset, scene units

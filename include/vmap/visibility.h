@@ -8,7 +8,7 @@ namespace vmap {
 struct VisibilityParams {
     int K = 2;                   // actual occluders that make a pair invisible (>= 1)
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
-    float facing_tol = 0.005f;   // facing: n_a . d > facing_tol |d| (cosine of the angle to 90°)
+    float facing_tol = 0.001f;   // facing: n_a . d > facing_tol |d| (a rounding guard)
     float parallel_tol = 1e-3f;  // a plane with |n . d| <= parallel_tol |d| is parallel to pq
 };
 

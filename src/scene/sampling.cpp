@@ -52,7 +52,7 @@ void append_clouds(const Scene& scene, PointSet& ps) {
 
 }  // namespace
 
-PointSet sample_scene(const Scene& scene) {
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     std::vector<Tri> tris;
     std::vector<double> cdf;
     double area = 0;
@@ -73,6 +73,7 @@ PointSet sample_scene(const Scene& scene) {
     PointSet ps;
     if (tris.empty() && !scene.clouds.empty()) {
         append_clouds(scene, ps);
+        if (surface_of) surface_of->assign(ps.size(), kNoSurface);
         return ps;
     }
     if (tris.empty()) throw Error(fmt::format("{}: the scene has no surface area", scene.path));
@@ -85,6 +86,7 @@ PointSet sample_scene(const Scene& scene) {
     // Each sample stands for an equal share of the area: a disc of that area.
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
+    if (surface_of) surface_of->resize(n);
     tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) {
         const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
                        r2 = mix(seed + 3 * i + 2);
@@ -102,8 +104,10 @@ PointSet sample_scene(const Scene& scene) {
         const SceneSurface& s = scene.surfaces[t.surface];
         ps.colors[i] = at_corner(s.vertex_colors, s.mesh, t.index, s.albedo, w0, w1, w2);
         ps.emission[i] = at_corner(s.vertex_emission, s.mesh, t.index, s.emission, w0, w1, w2);
+        if (surface_of) (*surface_of)[i] = t.surface;
     });
     append_clouds(scene, ps);
+    if (surface_of) surface_of->resize(ps.size(), kNoSurface);
     return ps;
 }
 

@@ -174,9 +174,14 @@ struct Placement {
     bool identity = true;
     Vec3 mid;
     float scale = 1;
+    Vec3 axes{1, 1, 1};  // a per-axis scale (meshes only: "scale": [sx, sy, sz])
     Vec3 rot;
     Vec3 shift;
-    Vec3 point(Vec3 v) const { return identity ? v : rotate((v - mid) * scale, rot) + shift; }
+    Vec3 scaled(Vec3 v) const {
+        const Vec3 c = (v - mid) * scale;
+        return {c.x * axes.x, c.y * axes.y, c.z * axes.z};
+    }
+    Vec3 point(Vec3 v) const { return identity ? v : rotate(scaled(v), rot) + shift; }
     Vec3 direction(Vec3 n) const { return identity ? n : rotate(n, rot); }
 };
 
@@ -194,7 +199,10 @@ Placement placement(const Ctx& cx, const json& m, const std::string& f, const st
         cx.fail(f + ".file", file + ": zero extent (all points coincide)");
     if (m.contains("size") && m.contains("scale")) cx.fail(f, "give size or scale, not both");
     if (m.contains("size")) pl.scale = float(cx.number(m["size"], f + ".size", 1e-6, 1e6)) / ext;
-    if (m.contains("scale")) pl.scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
+    if (m.contains("scale") && m["scale"].is_array())
+        pl.axes = cx.vec3(m["scale"], f + ".scale", 1e-9, 1e9);
+    else if (m.contains("scale"))
+        pl.scale = float(cx.number(m["scale"], f + ".scale", 1e-9, 1e9));
     pl.rot = m.contains("rotate") ? cx.vec3(m["rotate"], f + ".rotate", -3600, 3600) : Vec3{};
     const bool moved =
         m.contains("size") || m.contains("scale") || m.contains("rotate") || m.contains("position");
@@ -206,7 +214,7 @@ Placement placement(const Ctx& cx, const json& m, const std::string& f, const st
         m.contains("position") ? cx.vec3(m["position"], f + ".position", -1e6, 1e6) : base;
     float ylo = INFINITY, xlo = INFINITY, xhi = -INFINITY, zlo = INFINITY, zhi = -INFINITY;
     for (Vec3 v : pts) {
-        v = rotate((v - pl.mid) * pl.scale, pl.rot);
+        v = rotate(pl.scaled(v), pl.rot);
         ylo = std::min(ylo, v.y);
         xlo = std::min(xlo, v.x), xhi = std::max(xhi, v.x);
         zlo = std::min(zlo, v.z), zhi = std::max(zhi, v.z);
@@ -247,6 +255,7 @@ void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path
     }
     if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
     SceneSurface s;
+    s.is_model = true;
     s.name = m.value("name", file.stem().string());
     if (m.contains("albedo")) {
         s.albedo = cx.vec3(m["albedo"], f + ".albedo", 0, 1);
@@ -276,6 +285,8 @@ void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::pat
     } catch (const Error& e) {
         cx.fail(f + ".file", e.what());
     }
+    if (c.contains("scale") && c["scale"].is_array())
+        cx.fail(f + ".scale", "a per-axis scale applies to meshes, not clouds (give one factor)");
     const Placement pl = placement(cx, c, f, file.string(), ps.positions, sc);
     for (Vec3& p : ps.positions) p = pl.point(p);
     for (Vec3& n : ps.normals) n = pl.direction(n);
@@ -371,6 +382,7 @@ Scene mesh_file_scene(const std::string& path) {
     sc.name = fs::path(path).stem().string();
     sc.has_room = false;
     SceneSurface s;
+    s.is_model = true;
     s.name = sc.name;
     s.vertex_colors = std::move(md.points.colors);
     s.vertex_emission = std::move(md.points.emission);

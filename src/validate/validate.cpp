@@ -11,14 +11,17 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <random>
+#include <unistd.h>
 
 #include "octree/delta_rule.h"
 #include "util/progress.h"
 #include "visibility/bresenham.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
+#include "vmap/io.h"
 #include "vmap/octree.h"
 #include "vmap/vmap.h"
 
@@ -76,6 +79,13 @@ void check_params(const ValidateParams& p, const std::string& src) {
             fmt::format("{}: bury distance {} out of range [0, 0.1]", src, p.bury_distance));
     if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
+    if (!p.as_cloud.empty() && p.as_cloud != "normals" && p.as_cloud != "bare")
+        throw Error(fmt::format("{}: --as-cloud: unknown mode '{}' (expected normals or bare)",
+                                src, p.as_cloud));
+    if (!p.as_cloud.empty() && !p.cloud.empty())
+        throw Error(fmt::format("{}: give --as-cloud or --cloud, not both", src));
+    if (p.eyes > 10000)
+        throw Error(fmt::format("{}: --eyes {} out of range (0..10000)", src, p.eyes));
     check_visibility(p.visibility, src);
     if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
         throw Error(fmt::format("{}: delta_scale {} out of range [0.1, 10]", src, p.delta_scale));
@@ -156,6 +166,305 @@ struct DirectPredictor {
 
 }  // namespace
 
+namespace {
+
+// The points a validation scores: the truth's (true positions, normals, model flags) and the
+// prediction's (what the V-map is built from: the same points, perhaps with estimated normals
+// and radii). Index i is the same point in both.
+struct ScoredPoints {
+    PointSet truth, pred;
+    std::vector<uint8_t> on_model;
+};
+
+// Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
+// raw-cloud path, as `vmap build cloud.ply` would.
+PointSet through_cloud_path(const PointSet& pts, bool normals, const std::string& path) {
+    PointSet bare;
+    bare.positions = pts.positions;
+    if (normals) bare.normals = pts.normals;
+    const std::string tmp =
+        (std::filesystem::temp_directory_path() /
+         fmt::format("vmap-validate-{}-{}.ply", ::getpid(), std::hash<std::string>{}(path)))
+            .string();
+    write_ply(tmp, bare);
+    PointSet out;
+    try {
+        out = load_point_cloud(tmp);
+    } catch (...) {
+        std::filesystem::remove(tmp);
+        throw;
+    }
+    std::filesystem::remove(tmp);
+    return out;
+}
+
+struct CloudAdaptor3 {
+    const std::vector<Vec3>& p;
+    size_t kdtree_get_point_count() const { return p.size(); }
+    float kdtree_get_pt(size_t i, size_t d) const {
+        return d == 0 ? p[i].x : d == 1 ? p[i].y : p[i].z;
+    }
+    template <class B>
+    bool kdtree_get_bbox(B&) const {
+        return false;
+    }
+};
+
+// A cloud file scored against the scene: each point takes the true normal and model flag of
+// the nearest point of a dense sample of the scene's surfaces.
+ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
+    ScoredPoints sp;
+    sp.pred = load_point_cloud(cloud);
+    Scene dense = scene;
+    dense.points = std::clamp<uint64_t>(8 * sp.pred.size(), 200000, 4000000);
+    std::vector<uint32_t> surf;
+    const PointSet ref = sample_scene(dense, &surf);
+    using Tree =
+        nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor3>,
+                                            CloudAdaptor3, 3, uint32_t>;
+    CloudAdaptor3 ad{ref.positions};
+    Tree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    tree.buildIndex();
+    const size_t n = sp.pred.size();
+    sp.truth.positions = sp.pred.positions;
+    sp.truth.normals.resize(n);
+    sp.on_model.resize(n);
+    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+        const Vec3 q = sp.pred.positions[i];
+        const float qq[3] = {q.x, q.y, q.z};
+        uint32_t k = 0;
+        float d2 = 0;
+        tree.knnSearch(qq, 1, &k, &d2);
+        sp.truth.normals[i] = ref.normals[k];
+        sp.on_model[i] = surf[k] != kNoSurface && scene.surfaces[surf[k]].is_model;
+    });
+    return sp;
+}
+
+ScoredPoints scored_points(const Scene& sc, const ValidateParams& p, const std::string& path) {
+    if (!p.cloud.empty()) return cloud_file_points(sc, p.cloud);
+    ScoredPoints sp;
+    std::vector<uint32_t> surf;
+    sp.truth = sample_scene(sc, &surf);
+    sp.on_model.resize(surf.size());
+    for (size_t i = 0; i < surf.size(); ++i)
+        sp.on_model[i] = surf[i] != kNoSurface && sc.surfaces[surf[i]].is_model;
+    if (p.as_cloud.empty())
+        sp.pred = sp.truth;
+    else
+        sp.pred = through_cloud_path(sp.truth, p.as_cloud == "normals", path);
+    return sp;
+}
+
+// Leaves out the buried points (ValidateParams::drop_buried) from every array.
+uint64_t drop_points(ScoredPoints& sp, const std::vector<uint8_t>& drop) {
+    uint64_t dropped = 0;
+    auto keep = [&](auto& v) {
+        if (v.empty()) return;
+        size_t o = 0;
+        for (size_t i = 0; i < v.size(); ++i)
+            if (!drop[i]) v[o++] = v[i];
+        v.resize(o);
+    };
+    for (PointSet* ps : {&sp.truth, &sp.pred}) {
+        keep(ps->positions), keep(ps->normals), keep(ps->colors), keep(ps->radii);
+        keep(ps->emission);
+    }
+    keep(sp.on_model);
+    for (uint8_t d : drop) dropped += d;
+    return dropped;
+}
+
+// 0 hidden, 1 visible, 2 same leaf: the V-map's answer for a point pair, or the leaf-pair
+// predicate's on the pair's leaves (direct mode).
+struct Predictor {
+    const VisibilityMap* vm = nullptr;
+    const Octree* tree = nullptr;
+    const std::vector<uint32_t>* inverse = nullptr;
+    const DirectPredictor* direct = nullptr;
+
+    int32_t leaf(uint32_t i) const { return tree->leaf_of_point((*inverse)[i]); }
+    uint8_t operator()(uint32_t i, uint32_t j, WorkCounters* wc) const {
+        if (vm) {
+            const PairVisibility v = vm->query(i, j);
+            return v == PairVisibility::kSameLeaf ? 2 : v == PairVisibility::kVisible;
+        }
+        const int32_t a = leaf(i), b = leaf(j);
+        if (a == b) return 2;
+        wc->pairs++;
+        const bool vis = (*direct)(a, b, wc);
+        wc->visible_pairs += vis;
+        return vis;
+    }
+};
+
+std::vector<uint8_t> predict_pairs(const Predictor& pr, const std::vector<Pair>& pairs,
+                                   WorkCounters* work) {
+    std::vector<uint8_t> out(pairs.size());
+    tbb::combinable<WorkCounters> counters;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 64), [&](const auto& rg) {
+        WorkCounters& wc = counters.local();
+        for (size_t k = rg.begin(); k < rg.end(); ++k) out[k] = pr(pairs[k].i, pairs[k].j, &wc);
+    });
+    if (work) *work = counters.combine([](WorkCounters x, const WorkCounters& y) {
+        x += y;
+        return x;
+    });
+    return out;
+}
+
+// Eye e against every point j != e, flattened eye-major (n - 1 entries an eye: j skips e).
+std::vector<Pair> eye_pairs(const std::vector<uint32_t>& eyes, uint32_t n) {
+    std::vector<Pair> out;
+    out.reserve(eyes.size() * (n - 1));
+    for (uint32_t e : eyes)
+        for (uint32_t j = 0; j < n; ++j)
+            if (j != e) out.push_back({e, j});
+    return out;
+}
+
+// Seeded choice of `count` indices among those with `want(i)` (with repetition).
+template <class F>
+std::vector<uint32_t> sample_indices(uint32_t n, uint64_t count, uint64_t seed, F&& want) {
+    std::vector<uint32_t> pool;
+    for (uint32_t i = 0; i < n; ++i)
+        if (want(i)) pool.push_back(i);
+    std::vector<uint32_t> out;
+    if (pool.empty()) return out;
+    std::mt19937_64 rng(seed);
+    for (uint64_t k = 0; k < count; ++k) out.push_back(pool[rng() % pool.size()]);
+    return out;
+}
+
+// Pairs with one end on a model (uniform over model points), the other uniform over all.
+std::vector<Pair> model_pair_sample(const std::vector<uint8_t>& on_model, uint64_t count,
+                                    uint64_t seed) {
+    const uint32_t n = uint32_t(on_model.size());
+    const std::vector<uint32_t> ends =
+        sample_indices(n, count, seed ^ 0x6d6f64656cULL, [&](uint32_t i) { return on_model[i]; });
+    std::vector<Pair> out;
+    std::mt19937_64 rng(seed ^ 0x6f74686572ULL);
+    for (uint32_t i : ends) {
+        uint32_t j = uint32_t(rng() % (n - 1));
+        if (j >= i) ++j;
+        out.push_back({i, j});
+    }
+    return out;
+}
+
+// The truth for a list of pairs: facing and not occluded (ExactVisibility::visible).
+void truth_of(const ExactVisibility& exact, const PointSet& pts, const std::vector<Pair>& pairs,
+              float offset, std::vector<uint8_t>& truth, std::vector<uint8_t>* facing) {
+    truth.resize(pairs.size());
+    if (facing) facing->resize(pairs.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 256), [&](const auto& rg) {
+        for (size_t k = rg.begin(); k < rg.end(); ++k) {
+            const auto [i, j] = pairs[k];
+            const Vec3 a = pts.positions[i], b = pts.positions[j];
+            const Vec3 na = pts.normals[i], nb = pts.normals[j];
+            const bool f = ExactVisibility::facing(a, na, b, nb);
+            if (facing) (*facing)[k] = f;
+            truth[k] = f && exact.visible(a, na, b, nb, offset);
+        }
+    });
+}
+
+Confusion tally(const std::vector<uint8_t>& truth, const std::vector<uint8_t>& pred) {
+    Confusion c;
+    for (size_t k = 0; k < truth.size(); ++k)
+        if (pred[k] != 2) c.add(truth[k], pred[k]);
+    return c;
+}
+
+// Fraction of points whose predicted normal lies on the side of the true one.
+std::pair<double, double> normal_agreement(const ScoredPoints& sp) {
+    uint64_t n = 0, ok = 0, nm = 0, okm = 0;
+    for (size_t i = 0; i < sp.pred.size(); ++i) {
+        const bool good = dot(sp.pred.normals[i], sp.truth.normals[i]) > 0;
+        ++n, ok += good;
+        if (sp.on_model[i]) ++nm, okm += good;
+    }
+    return {n ? double(ok) / n : 1.0, nm ? double(okm) / nm : 1.0};
+}
+
+// The sampled pairs of one validation, with their truth.
+struct PairSets {
+    std::vector<Pair> pairs, model, eyes_model, eyes_all;
+    std::vector<uint8_t> truth, facing, truth_model, truth_eyes_model, truth_eyes_all;
+};
+
+// One octree height: build the V-map (or the octree alone, direct mode) from the prediction's
+// points and score every pair set.
+HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
+                             const std::vector<uint8_t>& buried, const ValidateParams& params,
+                             int leaf_points, int max_height, const std::string& path) {
+    HeightResult row;
+    row.max_height = max_height;
+    row.leaf_points = leaf_points;
+    OctreeParams op;
+    op.max_height = max_height;
+    op.leaf_points = leaf_points;
+    const auto tb = Clock::now();
+    Predictor pr;
+    VisibilityMap vm;
+    Octree t;
+    std::vector<uint32_t> inverse;
+    std::unique_ptr<detail::LeafGrid> grid;
+    std::unique_ptr<DirectPredictor> direct;
+    if (params.predict == "vmap") {
+        BuildParams bp;
+        bp.octree = op;
+        bp.visibility = params.visibility;
+        bp.backend = params.backend;
+        bp.occluders = params.occluders;
+        BuildStats st;
+        vm = build_vmap(pred_pts, bp, &st, path);
+        row.height = vm.octree.height();
+        row.leaves = vm.octree.num_leaves();
+        row.links = vm.num_links();
+        row.work = st.work;
+        row.backend = st.backend;
+        pr.vm = &vm;
+    } else {
+        PointSet copy = pred_pts;
+        std::vector<uint32_t> order;
+        t = Octree::build(copy, op, order, path);
+        if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
+            apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
+        inverse.resize(order.size());
+        for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
+        if (params.occluders == "bresenham") grid = std::make_unique<detail::LeafGrid>(t);
+        row.height = t.height();
+        row.leaves = t.num_leaves();
+        row.backend =
+            params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
+        direct = std::make_unique<DirectPredictor>(DirectPredictor{t, params.visibility, grid.get()});
+        pr.tree = &t, pr.inverse = &inverse, pr.direct = direct.get();
+    }
+    row.build_seconds = seconds_since(tb);
+    const auto tq = Clock::now();
+    WorkCounters work;
+    const std::vector<uint8_t> pred = predict_pairs(pr, ps.pairs, &work);
+    if (params.predict != "vmap") row.work = work;
+    row.predict_seconds = seconds_since(tq);
+    for (size_t k = 0; k < ps.pairs.size(); ++k) {
+        if (pred[k] == 2) {
+            row.same_leaf++;
+            row.same_leaf_visible += ps.truth[k];
+            continue;
+        }
+        row.all.add(ps.truth[k], pred[k]);
+        if (ps.facing[k]) row.facing.add(ps.truth[k], pred[k]);
+        if (!buried[ps.pairs[k].i] && !buried[ps.pairs[k].j]) row.live.add(ps.truth[k], pred[k]);
+    }
+    row.model = tally(ps.truth_model, predict_pairs(pr, ps.model, nullptr));
+    row.eyes_model = tally(ps.truth_eyes_model, predict_pairs(pr, ps.eyes_model, nullptr));
+    row.eyes_all = tally(ps.truth_eyes_all, predict_pairs(pr, ps.eyes_all, nullptr));
+    return row;
+}
+
+}  // namespace
+
 ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
     check_params(params, path);
     if (!is_scene_input(path))
@@ -170,34 +479,23 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                         "point cloud does not have",
                         path));
     if (params.points) sc.points = params.points;
-    PointSet pts = sample_scene(sc);
+    ScoredPoints sp = scored_points(sc, params, path);
     const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
     const auto t0 = Clock::now();
     ExactVisibility exact(sc.surfaces, path);
     const double offset = params.ray_offset * room, bury = params.bury_distance * room;
     auto is_buried = [&](size_t i) {
-        const Vec3 q = pts.positions[i], nq = pts.normals[i];
+        const Vec3 q = sp.truth.positions[i], nq = sp.truth.normals[i];
         return exact.occluded(q, q + nq, float(offset), float(bury));
     };
     uint64_t dropped = 0;
     if (params.drop_buried) {
         // What not sampling covered surface would give: the same points less the buried ones.
-        std::vector<uint8_t> b(pts.size());
-        tbb::parallel_for(size_t(0), pts.size(), [&](size_t i) { b[i] = is_buried(i); });
-        PointSet kept;
-        for (size_t i = 0; i < pts.size(); ++i) {
-            if (b[i]) {
-                ++dropped;
-                continue;
-            }
-            kept.positions.push_back(pts.positions[i]);
-            kept.normals.push_back(pts.normals[i]);
-            if (!pts.colors.empty()) kept.colors.push_back(pts.colors[i]);
-            if (!pts.radii.empty()) kept.radii.push_back(pts.radii[i]);
-            if (!pts.emission.empty()) kept.emission.push_back(pts.emission[i]);
-        }
-        pts = std::move(kept);
+        std::vector<uint8_t> b(sp.truth.size());
+        tbb::parallel_for(size_t(0), sp.truth.size(), [&](size_t i) { b[i] = is_buried(i); });
+        dropped = drop_points(sp, b);
     }
+    const PointSet& pts = sp.truth;
     const uint64_t n = pts.size();
     if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
 
@@ -208,112 +506,49 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     r.points = n;
     r.pairs = params.pairs;
     r.params = params;
+    r.source = !params.cloud.empty()          ? "the cloud " + params.cloud
+               : params.as_cloud == "normals" ? "the samples as a raw cloud with true normals"
+               : params.as_cloud == "bare"    ? "the samples as a bare raw cloud (normals and "
+                                                "radii estimated)"
+                                              : "the scene's samples";
     if (!r.params.leaf_points)
         r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
     r.offset = offset;
+    std::tie(r.normal_agreement, r.normal_agreement_model) = normal_agreement(sp);
+    for (uint8_t m : sp.on_model) r.model_points += m;
 
     // Truth, once for all heights.
     r.triangles = exact.triangles();
-    const std::vector<Pair> pairs = sample_pairs(n, params.pairs, params.pair_seed);
-    std::vector<uint8_t> truth(pairs.size()), facing(pairs.size());
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 256), [&](const auto& rg) {
-        for (size_t k = rg.begin(); k < rg.end(); ++k) {
-            const auto [i, j] = pairs[k];
-            const Vec3 a = pts.positions[i], b = pts.positions[j];
-            const Vec3 na = pts.normals[i], nb = pts.normals[j];
-            facing[k] = ExactVisibility::facing(a, na, b, nb);
-            truth[k] = facing[k] && exact.visible(a, na, b, nb, float(r.offset));
-        }
-    });
-    for (size_t k = 0; k < pairs.size(); ++k)
-        r.truth_facing += facing[k], r.truth_visible += truth[k];
+    PairSets ps;
+    ps.pairs = sample_pairs(n, params.pairs, params.pair_seed);
+    truth_of(exact, pts, ps.pairs, float(offset), ps.truth, &ps.facing);
+    for (size_t k = 0; k < ps.pairs.size(); ++k)
+        r.truth_facing += ps.facing[k], r.truth_visible += ps.truth[k];
+    ps.model = model_pair_sample(sp.on_model, params.pairs, params.pair_seed);
+    r.model_pairs = ps.model.size();
+    truth_of(exact, pts, ps.model, float(offset), ps.truth_model, nullptr);
+    if (params.eyes && r.model_points) {
+        auto on_model = [&](uint32_t i) { return bool(sp.on_model[i]); };
+        auto any = [](uint32_t) { return true; };
+        ps.eyes_model = eye_pairs(
+            sample_indices(uint32_t(n), params.eyes, params.eye_seed, on_model), uint32_t(n));
+        ps.eyes_all = eye_pairs(
+            sample_indices(uint32_t(n), params.eyes, params.eye_seed + 1, any), uint32_t(n));
+        truth_of(exact, pts, ps.eyes_model, float(offset), ps.truth_eyes_model, nullptr);
+        truth_of(exact, pts, ps.eyes_all, float(offset), ps.truth_eyes_all, nullptr);
+        r.eyes = params.eyes;
+    }
     r.bury_distance = bury;
     std::vector<uint8_t> buried(n);
     tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) { buried[i] = is_buried(i); });
     for (uint8_t b : buried) r.buried_points += b;
-    for (const Pair& q : pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
+    for (const Pair& q : ps.pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
     detail::Progress progress("heights", params.heights.size(), &params.progress);
-    // 0 = hidden, 1 = visible, 2 = same leaf
-    std::vector<uint8_t> pred(pairs.size());
     for (size_t hi = 0; hi < params.heights.size(); ++hi) {
-        HeightResult row;
-        row.max_height = params.heights[hi];
-        row.leaf_points = r.params.leaf_points;
-        OctreeParams op;
-        op.max_height = row.max_height;
-        op.leaf_points = row.leaf_points;
-        const auto tb = Clock::now();
-        if (params.predict == "vmap") {
-            BuildParams bp;
-            bp.octree = op;
-            bp.visibility = params.visibility;
-            bp.backend = params.backend;
-            bp.occluders = params.occluders;
-            BuildStats st;
-            const VisibilityMap vm = build_vmap(pts, bp, &st, path);
-            row.build_seconds = seconds_since(tb);
-            row.height = vm.octree.height();
-            row.leaves = vm.octree.num_leaves();
-            row.links = vm.num_links();
-            row.work = st.work;
-            row.backend = st.backend;
-            const auto tq = Clock::now();
-            tbb::parallel_for(size_t(0), pairs.size(), [&](size_t k) {
-                const PairVisibility v = vm.query(pairs[k].i, pairs[k].j);
-                pred[k] = v == PairVisibility::kSameLeaf ? 2 : v == PairVisibility::kVisible;
-            });
-            row.predict_seconds = seconds_since(tq);
-        } else {
-            PointSet copy = pts;
-            std::vector<uint32_t> order;
-            Octree t = Octree::build(copy, op, order, path);
-            if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
-                apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
-            std::vector<uint32_t> inverse(order.size());
-            for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
-            std::unique_ptr<detail::LeafGrid> grid;
-            if (params.occluders == "bresenham") grid = std::make_unique<detail::LeafGrid>(t);
-            row.build_seconds = seconds_since(tb);
-            row.height = t.height();
-            row.leaves = t.num_leaves();
-            row.backend =
-                params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
-            const DirectPredictor predict{t, params.visibility, grid.get()};
-            const auto tq = Clock::now();
-            tbb::combinable<WorkCounters> counters;
-            tbb::parallel_for(tbb::blocked_range<size_t>(0, pairs.size(), 64), [&](const auto& rg) {
-                WorkCounters& wc = counters.local();
-                for (size_t k = rg.begin(); k < rg.end(); ++k) {
-                    const int32_t a = t.leaf_of_point(inverse[pairs[k].i]);
-                    const int32_t b = t.leaf_of_point(inverse[pairs[k].j]);
-                    if (a == b) {
-                        pred[k] = 2;
-                        continue;
-                    }
-                    wc.pairs++;
-                    pred[k] = predict(a, b, &wc);
-                    wc.visible_pairs += pred[k];
-                }
-            });
-            row.work = counters.combine([](WorkCounters x, const WorkCounters& y) {
-                x += y;
-                return x;
-            });
-            row.predict_seconds = seconds_since(tq);
-        }
-        for (size_t k = 0; k < pairs.size(); ++k) {
-            if (pred[k] == 2) {
-                row.same_leaf++;
-                row.same_leaf_visible += truth[k];
-                continue;
-            }
-            row.all.add(truth[k], pred[k]);
-            if (facing[k]) row.facing.add(truth[k], pred[k]);
-            if (!buried[pairs[k].i] && !buried[pairs[k].j]) row.live.add(truth[k], pred[k]);
-        }
-        r.rows.push_back(row);
+        r.rows.push_back(validate_height(sp.pred, ps, buried, params, r.params.leaf_points,
+                                         params.heights[hi], path));
         progress.set(hi + 1);
         progress.throw_if_cancelled();
     }
@@ -367,6 +602,26 @@ std::string validation_markdown(const ValidationReport& r) {
             pct(h.live.agreement()), pct(h.live.false_visible_rate()),
             pct(h.live.false_hidden_rate()), h.build_seconds, h.predict_seconds);
     s += "\n";
+    s += fmt::format(
+        "Where people look: {} model points ({}); {} pairs with one end on a model; {} eyes on "
+        "the models and {} uniform eyes, each against every point (pairs sharing a leaf left "
+        "out).  \nPrediction built from {}; normals on the true side: {} of all points, {} of "
+        "model points.\n\n",
+        r.model_points, pct(double(r.model_points) / std::max<uint64_t>(1, r.points)),
+        r.model_pairs, r.eyes, r.eyes, r.source, pct(r.normal_agreement),
+        pct(r.normal_agreement_model));
+    s += "| max_height | model pairs | agreement | false visible | false hidden | eyes on models "
+         "| agreement | false visible | false hidden | eyes uniform | agreement | false visible | "
+         "false hidden |\n";
+    s += "|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
+    for (const HeightResult& h : r.rows) {
+        s += fmt::format("| {} ", h.max_height);
+        for (const Confusion* c : {&h.model, &h.eyes_model, &h.eyes_all})
+            s += fmt::format("| {} | {} | {} | {} ", c->total(), pct(c->agreement()),
+                             pct(c->false_visible_rate()), pct(c->false_hidden_rate()));
+        s += "|\n";
+    }
+    s += "\n";
     return s;
 }
 
@@ -406,7 +661,14 @@ std::string validation_json(const ValidationReport& r) {
            {"facing_tol", p.visibility.facing_tol},
            {"parallel_tol", p.visibility.parallel_tol},
            {"delta_scale", p.delta_scale},
-           {"splat_floor", floor_of(p)}};
+           {"splat_floor", floor_of(p)},
+           {"model_points", r.model_points},
+           {"model_pairs", r.model_pairs},
+           {"eyes", r.eyes},
+           {"eye_seed", p.eye_seed},
+           {"source", r.source},
+           {"normal_agreement", r.normal_agreement},
+           {"normal_agreement_model", r.normal_agreement_model}};
     json rows = json::array();
     for (const HeightResult& h : r.rows)
         rows.push_back(json{{"max_height", h.max_height},
@@ -418,6 +680,9 @@ std::string validation_json(const ValidationReport& r) {
                             {"all", conf(h.all)},
                             {"facing", conf(h.facing)},
                             {"live", conf(h.live)},
+                            {"model", conf(h.model)},
+                            {"eyes_model", conf(h.eyes_model)},
+                            {"eyes_all", conf(h.eyes_all)},
                             {"build_seconds", h.build_seconds},
                             {"predict_seconds", h.predict_seconds},
                             {"backend", h.backend},

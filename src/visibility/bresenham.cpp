@@ -52,14 +52,15 @@ bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, 
     if (!(len > 0.f)) return false;
     if (!leaves_face(la, lb, d, len, vp)) return false;
     wc->facing_pairs++;
-    // Only crossings with eps < t < 1 - eps count (is_actual_occluder), so only that part of
+    // Only crossings with eps < t < 1 - eps count (counts_as_occluder), so only that part of
     // the segment is walked, a little wider for rounding (as leaf_pair_visible does).
     int occluders = 0;
     return g.for_each_leaf(
         p, lb.centroid, vp.eps * 0.999f, 1.f - vp.eps * 0.999f, a, b, &wc->cells_stepped,
         [&](int32_t l) {
             wc->occluder_tests++;
-            return !(is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K);
+            return !(counts_as_occluder(la, lb, p, d, len, t.leaves[l], vp) &&
+                     ++occluders >= vp.K);
         });
 }
 

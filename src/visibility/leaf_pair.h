@@ -82,6 +82,27 @@ VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
     return length2(hit - x.centroid) <= x.delta * x.delta;
 }
 
+// Can leaf x stand between the ends at all? The segment lies in front of the tangent plane of
+// each end leaf (the facing test), so a surface wholly behind one of those planes cannot cut
+// it. A leaf whose centroid lies behind an end's plane is, in practice, a neighbour on a
+// surface curving away from that end: on a convex patch the tangent disc of radius Delta pokes
+// out past the surface it stands for, into the segment's first or last stretch, and it used to
+// hide half the pairs that leave a curved object at a shallow angle (docs/validation.md,
+// "Where people look"). The rule needs no scale: it compares centroids with planes. An end
+// without a usable normal (flagged) has no plane and culls nothing.
+VMAP_HD bool in_front_of_ends(const LeafDisc& a, const LeafDisc& b, const LeafDisc& x) {
+    const bool fa = (a.flags & kLeafNormalDegenerate) || dot(a.normal, x.centroid - a.centroid) > 0.f;
+    const bool fb = (b.flags & kLeafNormalDegenerate) || dot(b.normal, x.centroid - b.centroid) > 0.f;
+    return fa && fb;
+}
+
+// Leaf x is one of the K occluders of the segment between leaves a and b (p = a's centroid,
+// d = b's centroid - p, len = |d|).
+VMAP_HD bool counts_as_occluder(const LeafDisc& a, const LeafDisc& b, Vec3 p, Vec3 d, float len,
+                                const LeafDisc& x, const VisibilityParams& vp) {
+    return in_front_of_ends(a, b, x) && is_actual_occluder(p, d, len, x, vp);
+}
+
 // Facing test: n_a . d > tol |d| and n_b . (-d) > tol |d|. A leaf whose normals cancel out has
 // no side, so it faces everything.
 VMAP_HD bool leaves_face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len,
@@ -153,7 +174,8 @@ VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
         const int32_t l = w.leaf;
         if (l >= 0 && l != a && l != b) {
             if (kCount) wc->occluder_tests++;
-            if (is_actual_occluder(p, d, len, t.leaves[l], vp) && ++occluders >= vp.K) return false;
+            if (counts_as_occluder(la, lb, p, d, len, t.leaves[l], vp) && ++occluders >= vp.K)
+                return false;
         }
         ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
         if (kPrefetch)

@@ -142,7 +142,8 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
             }
             if (hit && w.leaf >= 0 && w.leaf != a && w.leaf != b) {
                 wc.occluder_tests++;
-                if (is_actual_occluder(p, d, len, t.leaves[w.leaf], vp) && ++occluders >= vp.K)
+                if (counts_as_occluder(la, lb, p, d, len, t.leaves[w.leaf], vp) &&
+                    ++occluders >= vp.K)
                     vis = false;
             }
             n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;

@@ -248,15 +248,19 @@ TEST(Normals, TwoSeparateSpheresAreBothOrientedOutward) {
     expect_radial(ps, c2, 12000, 20000, 1.0f, 5.0f);
 }
 
-TEST(Normals, NestedSpheresAreEachOrientedAwayFromTheCentre) {
-    // Both components are seeded at their point farthest from the shared centre, so the inner
-    // sphere too ends up pointing away from it.
+TEST(Normals, ABallInsideASphereIsARoomWithAnObject) {
+    // The region between the spheres lies two levels from the outside with the ball's inside
+    // below it and is the larger: free space, as a room's air around an object. So the outer
+    // sphere faces inward (a room's walls) and the inner one outward.
     PointSet ps = sphere({0, 0, 0}, 2.0f, 20000, 7);
     std::mt19937 rng(8);
     add_sphere(ps, {0, 0, 0}, 1.0f, 8000, rng);
-    estimate_normals(ps);
+    OrientationReport rep;
+    estimate_normals(ps, {}, "nested", &rep);
     expect_unit_normals(ps);
+    for (size_t i = 0; i < 20000; ++i) ps.normals[i] = -ps.normals[i];
     expect_radial(ps, {0, 0, 0}, 0, ps.size(), 1.0f, 5.0f);
+    EXPECT_NE(rep.method.find("room"), std::string::npos) << rep.method;
 }
 
 TEST(Normals, DuplicatePointsAreFine) {

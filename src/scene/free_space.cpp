@@ -223,19 +223,25 @@ Nesting nest(const std::vector<std::array<int32_t, 2>>& sides, size_t regions, s
     return n;
 }
 
-// Which parity of nesting depth is free space, and the verdict in words.
-int free_parity(const Nesting& n, const Regions& r, size_t npts, std::string& method) {
-    uint64_t odd = 0, even = 0;
-    for (size_t i = 0; i < n.level.size(); ++i) {
-        if (n.level[i] < 0) continue;
-        (n.level[i] % 2 ? odd : even) += r.cells[i];
-    }
+// Which parity of nesting depth is free space, and the verdict in words. `faces` counts, per
+// region, the point sides that face it (its surface area, for area-uniform samples).
+int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>& faces,
+                size_t npts, std::string& method) {
     // Something two levels deep, separated by at least 0.5% of the points, is a room with things
-    // in it (its air, depth 1, the larger volume inside the bounding box: the outside reaches in
-    // only where the room is open) or a shell around a cavity (the outside and the cavity
-    // larger than the shell's solid). Without that, a lone object: its outside is free.
-    const bool deep = n.deep_points * 200 >= npts;
-    if (deep && odd > even) {
+    // in it or a shell around a cavity. Free space is roomy and solids are thin: the depth-1
+    // regions are free (a room's air) when their volume per area of surface is larger than that
+    // of the depth-2 regions (the things in it); otherwise (a shell's solid around a larger
+    // cavity) the outside and the cavities are. Without anything that deep, a lone object: its
+    // outside is free.
+    double vol[3] = {}, area[3] = {};
+    for (size_t i = 0; i < n.level.size(); ++i) {
+        if (n.level[i] == 1 || n.level[i] == 2) {
+            vol[n.level[i]] += double(r.cells[i]);
+            area[n.level[i]] += double(faces[i]);
+        }
+    }
+    const bool deep = n.deep_points * 200 >= npts && area[1] > 0 && area[2] > 0;
+    if (deep && vol[1] / area[1] > vol[2] / area[2]) {
         method = "free space: an enclosure with things inside (room: walls face inward)";
         return 1;
     }
@@ -263,7 +269,11 @@ class DiscCaster {
     // another disc. A ray that meets none escapes into unbounded free space (it counts as
     // travelling far), unless it leaves the bounding box at once: the outer side of a room's
     // wall, which lies on the box, sees nothing.
-    float side_depth(uint32_t i, Vec3 side, float tmin) const {
+    struct Depth {
+        float mean = 0;  // over the rays
+        int hits = 0;    // rays that met a disc
+    };
+    Depth side_depth(uint32_t i, Vec3 side, float tmin) const {
         Vec3 u = std::fabs(side.x) < 0.6f ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
         u = cross(side, u);
         u = u / length(u);
@@ -271,13 +281,19 @@ class DiscCaster {
         // The axis and a ring of six at 40 degrees, the ring turned per point (golden angle)
         // so neighbouring points do not sample the same directions.
         const float ring = 0.6428f, axial = 0.7660f, turn = 2.39996f * float(i % 1024);
-        float sum = travel(i, side, tmin);
+        Depth out;
+        auto add = [&](Vec3 d) {
+            const float t = travel(i, d, tmin);
+            out.mean += t >= 0 ? t : escape(i, d);
+            out.hits += t >= 0;
+        };
+        add(side);
         for (int k = 0; k < 6; ++k) {
             const float a = turn + 1.0472f * float(k);
-            const Vec3 d = side * axial + u * (ring * std::cos(a)) + v * (ring * std::sin(a));
-            sum += travel(i, d, tmin);
+            add(side * axial + u * (ring * std::cos(a)) + v * (ring * std::sin(a)));
         }
-        return sum / 7;
+        out.mean /= 7;
+        return out;
     }
 
     // Distance from o along d to the cloud's bounding box.
@@ -340,13 +356,17 @@ class DiscCaster {
         return best;
     }
 
-    // Distance to the first disc along the ray (3D DDA over the cells), else to the box.
+    // How far an escaping ray counts as travelling.
+    float escape(uint32_t self, Vec3 d) const {
+        const float t_box = box_exit(pts_[self], d);
+        return t_box > immediate_ ? far_ : t_box;
+    }
+
+    // Distance to the first disc along the ray (3D DDA over the cells), or -1 if none.
     float travel(uint32_t self, Vec3 d, float tmin) const {
         const Vec3 o = pts_[self];
-        const float t_box = box_exit(o, d);
         std::array<int, 3> c;
-        auto escape = [&]() { return t_box > immediate_ ? far_ : t_box; };
-        if (!grid_.cell(o, c)) return escape();
+        if (!grid_.cell(o, c)) return -1;
         const float oo[3] = {o.x - grid_.lo.x, o.y - grid_.lo.y, o.z - grid_.lo.z};
         const float dd[3] = {d.x, d.y, d.z};
         int step[3];
@@ -366,7 +386,7 @@ class DiscCaster {
             if (best <= t_next[a]) return best;
             c[a] += step[a];
             if (c[a] < 0 || c[a] >= grid_.n[a])
-                return best < std::numeric_limits<float>::max() ? best : escape();
+                return best < std::numeric_limits<float>::max() ? best : -1;
             t_next[a] += t_delta[a];
         }
     }
@@ -404,7 +424,11 @@ SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
                         probe(g, regions, pts[i], -normals[i])};
     });
     const Nesting nesting = nest(sides, regions.cells.size(), n);
-    const int parity = free_parity(nesting, regions, n, v.method);
+    std::vector<uint64_t> faces(regions.cells.size(), 0);
+    for (const auto& sd : sides)
+        for (int32_t region : sd)
+            if (region >= 0) ++faces[region];
+    const int parity = free_parity(nesting, regions, faces, n, v.method);
     auto state = [&](int32_t region) {  // 1 free, 0 solid, -1 unknown
         if (region < 0 || nesting.level[region] < 0) return -1;
         return nesting.level[region] % 2 == parity ? 1 : 0;
@@ -444,10 +468,12 @@ SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
                 v.cue[i] = SideCue::kSpace;
                 continue;
             }
-            const float dp = depth(1), dm = depth(-1);
-            // A weak preference (less than half as far again) is noise, as on a lone plane whose
-            // rays all escape: such points take their sign from their neighbours.
-            if (std::max(dp, dm) <= 1.5f * std::min(dp, dm) + 0.1f * r_med) continue;
+            const DiscCaster::Depth p = depth(1), m = depth(-1);
+            const float dp = p.mean, dm = m.mean;
+            // No surface seen on either side (a lone plane), or a weak preference (less than half
+            // as far again): no evidence, so the point takes its sign from its neighbours.
+            if (p.hits + m.hits == 0 || std::max(dp, dm) <= 1.5f * std::min(dp, dm) + 0.1f * r_med)
+                continue;
             v.sign[i] = dp > dm ? 1 : -1;
             v.cue[i] = SideCue::kRays;
         }

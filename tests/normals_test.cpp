@@ -416,5 +416,235 @@ TEST(Normals, BadNeighbourCountIsAnError) {
     EXPECT_EQ(error_of(ps, params), "(no error)");
 }
 
+// ---- orientation: rooms, objects, thin parts, viewpoints -------------------------------------
+
+// Uniform samples of the rectangle corner + u a + v b (u, v in [0, 1]) with normal n.
+void add_rect(PointSet& ps, std::vector<Vec3>& truth, Vec3 corner, Vec3 a, Vec3 b, Vec3 n,
+              size_t count, std::mt19937& rng) {
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    for (size_t i = 0; i < count; ++i) {
+        ps.positions.push_back(corner + a * u(rng) + b * u(rng));
+        truth.push_back(n);
+    }
+}
+
+// A unit-cube room seen from inside: floor, ceiling, four walls (the front z = 0 left open
+// when `open`), true normals facing into the room. About 1500 points a square metre.
+PointSet room(bool open, std::vector<Vec3>& truth, uint32_t seed) {
+    std::mt19937 rng(seed);
+    PointSet ps;
+    const size_t n = 1500;
+    add_rect(ps, truth, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}, n, rng);   // floor
+    add_rect(ps, truth, {0, 1, 0}, {1, 0, 0}, {0, 0, 1}, {0, -1, 0}, n, rng);  // ceiling
+    add_rect(ps, truth, {0, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 0}, n, rng);   // x = 0
+    add_rect(ps, truth, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, {-1, 0, 0}, n, rng);  // x = 1
+    add_rect(ps, truth, {0, 0, 1}, {1, 0, 0}, {0, 1, 0}, {0, 0, -1}, n, rng);  // back
+    if (!open) add_rect(ps, truth, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, n, rng);
+    return ps;
+}
+
+void add_ball(PointSet& ps, std::vector<Vec3>& truth, Vec3 c, float r, size_t n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    for (size_t i = 0; i < n; ++i) {
+        const Vec3 d = random_unit(rng);
+        ps.positions.push_back(c + r * d);
+        truth.push_back(d);
+    }
+}
+
+// Share of points [begin, end) whose normal has the sign of the true one.
+double share_right(const PointSet& ps, const std::vector<Vec3>& truth, size_t begin, size_t end) {
+    size_t right = 0;
+    for (size_t i = begin; i < end; ++i) right += dot(ps.normals[i], truth[i]) > 0;
+    return double(right) / double(end - begin);
+}
+
+TEST(Orientation, OpenRoomScannedFromInsideFacesInward) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 21);
+    estimate_normals(ps);
+    expect_unit_normals(ps);
+    EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
+}
+
+TEST(Orientation, ClosedRoomWithABallFacesIntoTheRoomAndTheBallOutward) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(false, truth, 22);
+    const size_t walls = ps.size();
+    add_ball(ps, truth, {0.5f, 0.3f, 0.5f}, 0.15f, 1500, 23);
+    OrientationReport rep;
+    estimate_normals(ps, {}, "room", &rep);
+    EXPECT_GT(share_right(ps, truth, 0, walls), 0.995);
+    EXPECT_GT(share_right(ps, truth, walls, ps.size()), 0.99);
+    EXPECT_NE(rep.method.find("room"), std::string::npos) << rep.method;
+    EXPECT_GT(rep.by_space, ps.size() / 2);
+}
+
+TEST(Orientation, ObjectStandingInAnOpenRoomFacesOutward) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 24);
+    const size_t walls = ps.size();
+    add_ball(ps, truth, {0.5f, 0.25f, 0.6f}, 0.2f, 2000, 25);
+    estimate_normals(ps);
+    EXPECT_GT(share_right(ps, truth, 0, walls), 0.99);
+    EXPECT_GT(share_right(ps, truth, walls, ps.size()), 0.99);
+}
+
+TEST(Orientation, LoneClosedObjectFacesOutwardByFreeSpace) {
+    std::vector<Vec3> truth;
+    PointSet ps;
+    add_ball(ps, truth, {3, 2, 1}, 0.5f, 6000, 26);
+    OrientationReport rep;
+    estimate_normals(ps, {}, "ball", &rep);
+    EXPECT_EQ(share_right(ps, truth, 0, ps.size()), 1.0);
+    EXPECT_NE(rep.method.find("outward"), std::string::npos) << rep.method;
+    EXPECT_EQ(rep.by_space, ps.size());
+}
+
+TEST(Orientation, ThinPlateInARoomHasBothFacesOutward) {
+    // A 3 mm plate (0.4 x 0.3 m) floating in the room, its faces sampled with a spacing of
+    // about 8 mm: closer than that, so the plane fits mix them.
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 27);
+    const size_t walls = ps.size();
+    std::mt19937 rng(28);
+    add_rect(ps, truth, {0.3f, 0.4f, 0.3f}, {0.4f, 0, 0}, {0, 0, 0.3f}, {0, -1, 0}, 1600, rng);
+    add_rect(ps, truth, {0.3f, 0.403f, 0.3f}, {0.4f, 0, 0}, {0, 0, 0.3f}, {0, 1, 0}, 1600, rng);
+    estimate_normals(ps);
+    EXPECT_GT(share_right(ps, truth, 0, walls), 0.99);
+    EXPECT_GT(share_right(ps, truth, walls, ps.size()), 0.95);
+}
+
+TEST(Orientation, ViewpointOrientsEveryNormalTowardIt) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(false, truth, 29);
+    NormalEstimationParams params;
+    params.orientation = Orientation::kViewpoint;
+    params.viewpoint = {0.5f, 0.5f, 0.5f};
+    OrientationReport rep;
+    estimate_normals(ps, params, "room", &rep);
+    for (size_t i = 0; i < ps.size(); ++i)
+        ASSERT_GT(dot(ps.normals[i], params.viewpoint - ps.positions[i]), 0) << "point " << i;
+    EXPECT_NE(rep.method.find("viewpoint"), std::string::npos);
+    // From outside the room the walls face out instead.
+    params.viewpoint = {0.5f, 0.5f, -3.0f};
+    estimate_normals(ps, params);
+    for (size_t i = 0; i < ps.size(); ++i)
+        ASSERT_GT(dot(ps.normals[i], params.viewpoint - ps.positions[i]), 0) << "point " << i;
+}
+
+TEST(Orientation, InwardAndOutwardFollowTheCentroid) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(false, truth, 30);
+    NormalEstimationParams params;
+    params.orientation = Orientation::kOutward;
+    estimate_normals(ps, params);
+    EXPECT_LT(share_right(ps, truth, 0, ps.size()), 0.005);  // a room's walls all face out
+    params.orientation = Orientation::kInward;
+    orient_normals(ps, params);
+    EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
+}
+
+TEST(Orientation, OrientNormalsKeepsTheAxesAndSetsTheSigns) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 31);
+    std::mt19937 rng(32);
+    ps.normals = truth;
+    for (size_t i = 0; i < ps.size(); ++i)
+        if (rng() % 2) ps.normals[i] = -2.0f * ps.normals[i];  // random signs, not unit length
+    orient_normals(ps);
+    for (size_t i = 0; i < ps.size(); ++i)
+        ASSERT_NEAR(std::fabs(dot(ps.normals[i], truth[i])), i % 1 ? 1.0f : length(ps.normals[i]),
+                    1e-5f);
+    EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
+}
+
+TEST(Orientation, SensorPositionsOrientEachNormal) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(false, truth, 33);
+    ps.normals = truth;
+    std::vector<Vec3> sensors(ps.size());
+    for (size_t i = 0; i < ps.size(); ++i)
+        sensors[i] = ps.positions[i] + (i % 2 ? 1.0f : -1.0f) * truth[i];
+    orient_toward(ps, sensors);
+    for (size_t i = 0; i < ps.size(); ++i)
+        ASSERT_GT(dot(ps.normals[i], sensors[i] - ps.positions[i]), 0) << "point " << i;
+    sensors.pop_back();
+    EXPECT_THROW(orient_toward(ps, sensors, "scan.ply"), Error);
+}
+
+TEST(Orientation, OrientingWithoutNormalsIsAnError) {
+    PointSet ps = sphere({0, 0, 0}, 1.0f, 100, 34);
+    try {
+        orient_normals(ps, {}, "scan.ply");
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_TRUE(starts_with(e.what(), "scan.ply: ")) << e.what();
+    }
+}
+
+TEST(Orientation, ConsistencyCheckSeesRandomSigns) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 35);
+    ps.normals = truth;
+    EXPECT_LT(normal_inconsistency(ps), 0.001);
+    std::mt19937 rng(36);
+    for (Vec3& n : ps.normals)
+        if (rng() % 2) n = -n;
+    EXPECT_GT(normal_inconsistency(ps), 0.3);
+}
+
+// ---- splat radii ---------------------------------------------------------------------------
+
+float median(std::vector<float> v) {
+    std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+    return v[v.size() / 2];
+}
+
+TEST(Radii, UniformPlaneGetsTheDiscOfItsShareOfArea) {
+    // 4000 samples of one square metre: each stands for 1/4000 m^2, a disc of radius 8.9 mm.
+    std::vector<Vec3> truth;
+    std::mt19937 rng(40);
+    PointSet ps;
+    add_rect(ps, truth, {0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}, 4000, rng);
+    ps.normals = truth;
+    estimate_radii(ps);
+    const float r = std::sqrt(1.0f / (kPi * 4000.0f));
+    EXPECT_NEAR(median(ps.radii), r, 0.05f * r);
+}
+
+TEST(Radii, ThinPlateIgnoresItsOtherFace) {
+    // Two faces 3 mm apart, each with 2500 samples on 0.1 m^2 (spacing 6 mm, as the test
+    // scenes): counting the other face as neighbours would halve the area per sample (radii
+    // / sqrt 2).
+    std::vector<Vec3> truth;
+    std::mt19937 rng(41);
+    PointSet ps;
+    add_rect(ps, truth, {0, 0, 0}, {0.4f, 0, 0}, {0, 0.25f, 0}, {0, 0, -1}, 2500, rng);
+    add_rect(ps, truth, {0, 0, 0.003f}, {0.4f, 0, 0}, {0, 0.25f, 0}, {0, 0, 1}, 2500, rng);
+    ps.normals = truth;
+    estimate_radii(ps);
+    const float r = std::sqrt(0.1f / (kPi * 2500.0f));
+    EXPECT_NEAR(median(ps.radii), r, 0.1f * r);
+    // The same with unoriented (all +z) normals: the sign does not matter.
+    for (Vec3& n : ps.normals) n = {0, 0, 1};
+    estimate_radii(ps);
+    EXPECT_NEAR(median(ps.radii), r, 0.1f * r);
+}
+
+TEST(Radii, BadInputIsAnErrorNamingTheSource) {
+    PointSet ps = sphere({0, 0, 0}, 1.0f, 100, 42);
+    try {
+        estimate_radii(ps, {}, "scan.ply");
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_TRUE(starts_with(e.what(), "scan.ply: ")) << e.what();
+    }
+    RadiusEstimationParams bad;
+    bad.k = 40;
+    ps.normals.assign(ps.size(), Vec3{0, 0, 1});
+    EXPECT_THROW(estimate_radii(ps, bad, "scan.ply"), Error);
+}
+
 }  // namespace
 }  // namespace vmap

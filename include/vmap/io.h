@@ -17,13 +17,15 @@ namespace vmap {
 struct ModelData {
     PointSet points;
     std::vector<std::array<uint32_t, 3>> triangles;  // empty for a point cloud
+    std::vector<Vec3> sensors;  // per-point scanner positions (PLY sensor_x/y/z, vp_x/y/z or
+                                // viewpoint_x/y/z), empty when the file has none
 
     Mesh mesh() const { return Mesh{points.positions, triangles}; }
 };
 
 // PLY: ascii, binary_little_endian and binary_big_endian 1.0; element "vertex" with float or
 // double (or any scalar type) x,y,z and optional nx,ny,nz, red/green/blue (or r/g/b,
-// diffuse_red...); element "face" with a list property "vertex_indices" (or "vertex_index");
+// diffuse_red...), radius, sensor_x/y/z (or vp_x/y/z, viewpoint_x/y/z); element "face" with a list property "vertex_indices" (or "vertex_index");
 // other elements and properties are skipped.
 ModelData read_ply(const std::string& path);
 

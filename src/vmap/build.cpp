@@ -20,6 +20,7 @@
 #include "util/progress.h"
 #include "visibility/backend.h"
 #include "visibility/bresenham.h"
+#include "vmap/build_checks.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -293,6 +294,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
                                 params.max_batch_pairs));
 
     BuildStats st;
+    detail::prepare_points(points, st, source);
     VisibilityMap vm;
     vm.octree_params = params.octree;
     vm.visibility_params = vp;
@@ -458,6 +460,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
+    detail::check_facing(st);
     if (stats) *stats = st;
     return vm;
 }

@@ -12,7 +12,11 @@
 #include <string>
 #include <vector>
 
+#include "test_files.h"
 #include "vmap/error.h"
+#include "vmap/io.h"
+#include "vmap/scene.h"
+#include "vmap/vmap.h"
 
 namespace vmap {
 namespace {
@@ -644,6 +648,137 @@ TEST(Radii, BadInputIsAnErrorNamingTheSource) {
     bad.k = 40;
     ps.normals.assign(ps.size(), Vec3{0, 0, 1});
     EXPECT_THROW(estimate_radii(ps, bad, "scan.ply"), Error);
+}
+
+// ---- raw clouds: `vmap build --normals`, sensor fields, build_vmap's checks -------------------
+
+std::string written_room(const test::ScratchDir& dir, bool normals, std::vector<Vec3>& truth) {
+    PointSet ps = room(true, truth, 50);
+    if (normals) ps.normals = truth;
+    const std::string path = dir.path("room.ply");
+    write_ply(path, ps);
+    return path;
+}
+
+TEST(RawCloud, KeepUsesTheFileNormalsAndFlipNegatesThem) {
+    test::ScratchDir dir;
+    std::vector<Vec3> truth;
+    const std::string path = written_room(dir, true, truth);
+    std::vector<std::string> done;
+    PointSet kept = load_point_cloud(path, {}, &done);
+    EXPECT_EQ(kept.normals, truth);
+    EXPECT_EQ(done.size(), 1u);  // only the radii were estimated
+    CloudOptions flip;
+    flip.normals = NormalsMode::kFlip;
+    PointSet flipped = load_point_cloud(path, flip);
+    for (size_t i = 0; i < truth.size(); ++i) ASSERT_EQ(flipped.normals[i], -truth[i]);
+}
+
+TEST(RawCloud, EstimateInwardAndOutwardReplaceTheSigns) {
+    test::ScratchDir dir;
+    std::vector<Vec3> truth;
+    const std::string path = written_room(dir, true, truth);
+    CloudOptions o;
+    o.normals = NormalsMode::kEstimate;
+    std::vector<std::string> done;
+    PointSet est = load_point_cloud(path, o, &done);
+    EXPECT_GT(share_right(est, truth, 0, truth.size()), 0.995);
+    ASSERT_FALSE(done.empty());
+    EXPECT_NE(done[0].find("estimated"), std::string::npos) << done[0];
+    o.normals = NormalsMode::kOutward;
+    EXPECT_LT(share_right(load_point_cloud(path, o), truth, 0, truth.size()), 0.01);
+    o.normals = NormalsMode::kInward;
+    EXPECT_GT(share_right(load_point_cloud(path, o), truth, 0, truth.size()), 0.99);
+    o.normals = NormalsMode::kKeep;
+    o.viewpoint = Vec3{0.5f, 0.5f, -2.0f};  // outside the open side: everything faces out
+    const PointSet seen = load_point_cloud(path, o);
+    for (size_t i = 0; i < truth.size(); ++i)
+        ASSERT_GT(dot(seen.normals[i], *o.viewpoint - seen.positions[i]), 0) << i;
+}
+
+TEST(RawCloud, WithoutNormalsTheyAreEstimatedAndFlipIsAnError) {
+    test::ScratchDir dir;
+    std::vector<Vec3> truth;
+    const std::string path = written_room(dir, false, truth);
+    EXPECT_GT(share_right(load_point_cloud(path), truth, 0, truth.size()), 0.995);
+    CloudOptions flip;
+    flip.normals = NormalsMode::kFlip;
+    try {
+        load_point_cloud(path, flip);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_TRUE(starts_with(e.what(), path + ": --normals flip")) << e.what();
+    }
+}
+
+TEST(RawCloud, PlySensorFieldsOrientEstimatedNormals) {
+    // A plane z = 0 scanned from alternately above and below: estimated normals follow the
+    // sensor of each point, and a file with only some of the three fields is an error.
+    test::ScratchDir dir;
+    std::string ply = "ply\nformat ascii 1.0\nelement vertex 400\nproperty float x\n"
+                      "property float y\nproperty float z\nproperty float vp_x\n"
+                      "property float vp_y\nproperty float vp_z\nend_header\n";
+    for (int i = 0; i < 400; ++i)
+        ply += std::to_string(0.05 * (i % 20)) + " " + std::to_string(0.05 * (i / 20)) + " 0 0.5 " +
+               "0.5 " + (i % 2 ? "1" : "-1") + "\n";
+    const std::string path = dir.write("scan.ply", ply);
+    const PointSet ps = load_point_cloud(path);
+    for (int i = 0; i < 400; ++i) ASSERT_EQ(ps.normals[i].z, i % 2 ? 1.0f : -1.0f) << i;
+    std::string partial = ply;
+    partial.replace(partial.find("property float vp_z\n"), 20, "");
+    const std::string bad = dir.write("partial.ply", partial);
+    EXPECT_THROW(load_point_cloud(bad), Error);
+}
+
+TEST(RawCloud, BuildWithoutRadiiEstimatesThemAndSaysSo) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 51);
+    ps.normals = truth;
+    BuildParams bp;
+    bp.octree.max_height = 4;
+    bp.backend = "cpu";
+    BuildStats st;
+    const VisibilityMap vm = build_vmap(ps, bp, &st, "room");
+    ASSERT_TRUE(vm.points.has_radii());
+    const float r = std::sqrt(5.0f / (kPi * float(ps.size())));  // five unit walls
+    EXPECT_NEAR(median(vm.points.radii), r, 0.1f * r);
+    ASSERT_EQ(st.warnings.size(), 1u);
+    EXPECT_NE(st.warnings[0].find("radii"), std::string::npos) << st.warnings[0];
+}
+
+TEST(RawCloud, BuildWarnsWhenARoomFacesOutward) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 52);
+    for (const Vec3& n : truth) ps.normals.push_back(-n);
+    ps.radii.assign(ps.size(), 0.01f);
+    BuildParams bp;
+    bp.octree.max_height = 4;
+    bp.backend = "cpu";
+    BuildStats st;
+    build_vmap(ps, bp, &st, "room");
+    ASSERT_EQ(st.warnings.size(), 1u);
+    EXPECT_NE(st.warnings[0].find("face each other"), std::string::npos) << st.warnings[0];
+    // Right normals: no warning.
+    ps.normals = truth;
+    build_vmap(ps, bp, &st, "room");
+    EXPECT_TRUE(st.warnings.empty());
+}
+
+TEST(RawCloud, BuildWarnsWhenNormalsLookInconsistent) {
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 53);
+    ps.normals = truth;
+    std::mt19937 rng(54);
+    for (Vec3& n : ps.normals)
+        if (rng() % 3 == 0) n = -n;
+    ps.radii.assign(ps.size(), 0.01f);
+    BuildParams bp;
+    bp.octree.max_height = 4;
+    bp.backend = "cpu";
+    BuildStats st;
+    build_vmap(ps, bp, &st, "room");
+    ASSERT_FALSE(st.warnings.empty());
+    EXPECT_NE(st.warnings[0].find("inconsistent"), std::string::npos) << st.warnings[0];
 }
 
 }  // namespace

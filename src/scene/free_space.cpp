@@ -16,6 +16,7 @@
 #include <limits>
 #include <map>
 #include <numeric>
+#include <optional>
 
 namespace vmap::detail {
 namespace {
@@ -400,10 +401,61 @@ class DiscCaster {
     std::vector<uint32_t> start_, items_;
 };
 
+// The normal axis (sign ignored) that the most sampled normals lie within 10 degrees of, among
+// up to 256 sampled normals that satisfy `usable`; nothing when none does.
+template <class Usable>
+std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usable) {
+    const size_t n = normals.size();
+    const size_t cand_step = std::max<size_t>(1, n / 256), vote_step = std::max<size_t>(1, n / 4096);
+    std::optional<Vec3> best;
+    size_t best_votes = 0;
+    for (size_t c = 0; c < n; c += cand_step) {
+        if (!usable(normals[c])) continue;
+        size_t votes = 0;
+        for (size_t i = 0; i < n; i += vote_step) votes += std::fabs(dot(normals[c], normals[i])) > 0.985f;
+        if (votes > best_votes) {
+            best_votes = votes;
+            best = normals[c];
+        }
+    }
+    if (!best) return best;
+    // The mean of the normals near the winner (signs aligned): a fitted normal is a few degrees
+    // off, and the box must follow a wall to within a fraction of a cell over its length.
+    Vec3 sum{0, 0, 0};
+    for (const Vec3& m : normals) {
+        const float d = dot(m, *best);
+        if (std::fabs(d) > 0.985f) sum += d > 0 ? m : -m;
+    }
+    return sum / length(sum);
+}
+
+// A frame whose axes follow the two most common normal directions: a room's floor and walls. In
+// it the cloud's bounding box hugs a room's walls however the scan was turned, which the rays'
+// "leaves the box at once" relies on. Any frame does for clouds without such directions.
+std::array<Vec3, 3> room_frame(const std::vector<Vec3>& normals) {
+    const std::optional<Vec3> a = dominant_axis(normals, [](Vec3) { return true; });
+    if (!a) return {Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}};
+    const std::optional<Vec3> b0 =
+        dominant_axis(normals, [&](Vec3 c) { return std::fabs(dot(c, *a)) < 0.1f; });
+    Vec3 b = b0 ? *b0 : (std::fabs(a->x) < 0.6f ? Vec3{1, 0, 0} : Vec3{0, 1, 0});
+    b = b - *a * dot(b, *a);
+    b = b / length(b);
+    return {*a, b, cross(*a, b)};
+}
+
+std::vector<Vec3> in_frame(const std::vector<Vec3>& v, const std::array<Vec3, 3>& f) {
+    std::vector<Vec3> out(v.size());
+    for (size_t i = 0; i < v.size(); ++i) out[i] = {dot(v[i], f[0]), dot(v[i], f[1]), dot(v[i], f[2])};
+    return out;
+}
+
 }  // namespace
 
-SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>& world_normals,
                      const std::vector<float>& radii) {
+    const std::array<Vec3, 3> frame = room_frame(world_normals);
+    const std::vector<Vec3> pts = in_frame(world_pts, frame);
+    const std::vector<Vec3> normals = in_frame(world_normals, frame);
     const size_t n = pts.size();
     SideVotes v;
     v.sign.assign(n, 1);

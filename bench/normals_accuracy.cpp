@@ -6,10 +6,11 @@
 // Samples each scene (true normals and radii), strips both, re-estimates them as `vmap build`
 // does for a raw cloud, and prints one table row per scene: the share of the area (points are
 // area-uniform samples) whose estimated normal has the true one's sign, over all points, on the
-// objects (not the room), both also without hidden points (inside a solid or covered: below), and on thin parts (points with a surface of the opposite normal within
-// three splat radii), and the median ratio of estimated to true splat radius on the same sets,
-// beside the old estimate (d_8 / sqrt 8 over all neighbours). --objects-only drops the room (a
-// lone object or several). --write-ply writes the stripped cloud, for `vmap build`.
+// objects (not the room), both also without hidden points (inside a solid or covered: below), and
+// on thin parts (points with a surface of the opposite normal within three splat radii), and the
+// median ratio of estimated to true splat radius on the same sets, beside the old estimate (d_8 /
+// sqrt 8 over all neighbours). --objects-only drops the room (a lone object or several).
+// --write-ply writes the stripped cloud, for `vmap build`.
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
@@ -41,8 +42,7 @@ struct Options {
 };
 
 bool is_room(const std::string& name) {
-    static const std::set<std::string> kRoom{"floor", "back",  "ceiling",
-                                             "left",  "right", "light"};
+    static const std::set<std::string> kRoom{"floor", "back", "ceiling", "left", "right", "light"};
     return kRoom.count(name) > 0;
 }
 
@@ -180,12 +180,14 @@ void run_scene(const std::string& path, const Options& o) {
     }
     const double sn = std::chrono::duration<double>(t1 - t0).count();
     const double sr = std::chrono::duration<double>(t2 - t1).count();
-    fmt::print("| {} | {} | {} | {} | {} | {} | {} | {} / {} | {} / {} | {} / {} | {:.2f} s + {:.2f} s |\n",
-               sc.name + (o.objects_only ? " (objects only)" : ""), truth.size(), all.signs(),
-               exposed.signs(), obj.signs(), exposed_obj.signs(),
-               thn.signs() + fmt::format(" ({})", thn.n), Tally::median(all.ratio),
-               Tally::median(all.old_ratio), Tally::median(obj.ratio), Tally::median(obj.old_ratio),
-               Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
+    fmt::print(
+        "| {} | {} | {} | {} | {} | {} | {} | {} / {} | {} / {} | {} / {} | {:.2f} s + {:.2f} s "
+        "|\n",
+        sc.name + (o.objects_only ? " (objects only)" : ""), truth.size(), all.signs(),
+        exposed.signs(), obj.signs(), exposed_obj.signs(),
+        thn.signs() + fmt::format(" ({})", thn.n), Tally::median(all.ratio),
+        Tally::median(all.old_ratio), Tally::median(obj.ratio), Tally::median(obj.old_ratio),
+        Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
     fmt::print(stderr, "{}: {}; {} by space, {} by rays, {} by neighbours\n", sc.name, rep.method,
                rep.by_space, rep.by_rays, rep.by_neighbours);
 }
@@ -212,10 +214,14 @@ int main(int argc, char** argv) {
             o.write_dir = argv[++i];
         } else if (a == "--orientation" && more) {
             const std::string v = argv[++i];
-            if (v == "auto") o.orientation = Orientation::kAuto;
-            else if (v == "outward") o.orientation = Orientation::kOutward;
-            else if (v == "inward") o.orientation = Orientation::kInward;
-            else return usage();
+            if (v == "auto")
+                o.orientation = Orientation::kAuto;
+            else if (v == "outward")
+                o.orientation = Orientation::kOutward;
+            else if (v == "inward")
+                o.orientation = Orientation::kInward;
+            else
+                return usage();
         } else if (!a.empty() && a[0] == '-') {
             return usage();
         } else {

@@ -733,9 +733,10 @@ TEST(RawCloud, PlySensorFieldsOrientEstimatedNormals) {
     // A plane z = 0 scanned from alternately above and below: estimated normals follow the
     // sensor of each point, and a file with only some of the three fields is an error.
     test::ScratchDir dir;
-    std::string ply = "ply\nformat ascii 1.0\nelement vertex 400\nproperty float x\n"
-                      "property float y\nproperty float z\nproperty float vp_x\n"
-                      "property float vp_y\nproperty float vp_z\nend_header\n";
+    std::string ply =
+        "ply\nformat ascii 1.0\nelement vertex 400\nproperty float x\n"
+        "property float y\nproperty float z\nproperty float vp_x\n"
+        "property float vp_y\nproperty float vp_z\nend_header\n";
     for (int i = 0; i < 400; ++i)
         ply += std::to_string(0.05 * (i % 20)) + " " + std::to_string(0.05 * (i / 20)) + " 0 0.5 " +
                "0.5 " + (i % 2 ? "1" : "-1") + "\n";

@@ -25,8 +25,8 @@ struct ModelData {
 
 // PLY: ascii, binary_little_endian and binary_big_endian 1.0; element "vertex" with float or
 // double (or any scalar type) x,y,z and optional nx,ny,nz, red/green/blue (or r/g/b,
-// diffuse_red...), radius, sensor_x/y/z (or vp_x/y/z, viewpoint_x/y/z); element "face" with a list property "vertex_indices" (or "vertex_index");
-// other elements and properties are skipped.
+// diffuse_red...), radius, sensor_x/y/z (or vp_x/y/z, viewpoint_x/y/z); element "face" with a list
+// property "vertex_indices" (or "vertex_index"); other elements and properties are skipped.
 ModelData read_ply(const std::string& path);
 
 // OFF (and COFF/NOFF headers): vertex count, face count, edge count; polygons fan-triangulated.

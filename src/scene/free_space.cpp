@@ -21,9 +21,9 @@
 namespace vmap::detail {
 namespace {
 
-constexpr int kPad = 3;           // empty cells around the cloud: the outside wraps around it
-constexpr int kMaxCells = 240;    // per axis, so the grid stays below 16 M cells
-constexpr int kProbeSteps = 8;    // half-cell steps: out of the surface layer (1-2 cells)
+constexpr int kPad = 3;              // empty cells around the cloud: the outside wraps around it
+constexpr int kMaxCells = 240;       // per axis, so the grid stays below 16 M cells
+constexpr int kProbeSteps = 8;       // half-cell steps: out of the surface layer (1-2 cells)
 constexpr float kSpacing = 1.7725f;  // sample spacing / splat radius: sqrt(pi)
 
 struct Grid {
@@ -226,8 +226,8 @@ Nesting nest(const std::vector<std::array<int32_t, 2>>& sides, size_t regions, s
 
 // Which parity of nesting depth is free space, and the verdict in words. `faces` counts, per
 // region, the point sides that face it (its surface area, for area-uniform samples).
-int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>& faces,
-                size_t npts, std::string& method) {
+int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>& faces, size_t npts,
+                std::string& method) {
     // Something two levels deep, separated by at least 0.5% of the points, is a room with things
     // in it or a shell around a cavity. Free space is roomy and solids are thin: the depth-1
     // regions are free (a room's air) when their volume per area of surface is larger than that
@@ -406,13 +406,15 @@ class DiscCaster {
 template <class Usable>
 std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usable) {
     const size_t n = normals.size();
-    const size_t cand_step = std::max<size_t>(1, n / 256), vote_step = std::max<size_t>(1, n / 4096);
+    const size_t cand_step = std::max<size_t>(1, n / 256),
+                 vote_step = std::max<size_t>(1, n / 4096);
     std::optional<Vec3> best;
     size_t best_votes = 0;
     for (size_t c = 0; c < n; c += cand_step) {
         if (!usable(normals[c])) continue;
         size_t votes = 0;
-        for (size_t i = 0; i < n; i += vote_step) votes += std::fabs(dot(normals[c], normals[i])) > 0.985f;
+        for (size_t i = 0; i < n; i += vote_step)
+            votes += std::fabs(dot(normals[c], normals[i])) > 0.985f;
         if (votes > best_votes) {
             best_votes = votes;
             best = normals[c];
@@ -445,8 +447,70 @@ std::array<Vec3, 3> room_frame(const std::vector<Vec3>& normals) {
 
 std::vector<Vec3> in_frame(const std::vector<Vec3>& v, const std::array<Vec3, 3>& f) {
     std::vector<Vec3> out(v.size());
-    for (size_t i = 0; i < v.size(); ++i) out[i] = {dot(v[i], f[0]), dot(v[i], f[1]), dot(v[i], f[2])};
+    for (size_t i = 0; i < v.size(); ++i)
+        out[i] = {dot(v[i], f[0]), dot(v[i], f[1]), dot(v[i], f[2])};
     return out;
+}
+
+// Which region each point's two sides face, and which regions are free.
+struct FreeSpace {
+    std::vector<std::array<int32_t, 2>> sides;  // per point: the region along +n, along -n
+    Nesting nesting;
+    int parity = 0;  // regions of this nesting-depth parity are free
+    std::string method;
+
+    int state(int32_t region) const {  // 1 free, 0 solid, -1 unknown
+        if (region < 0 || nesting.level[region] < 0) return -1;
+        return nesting.level[region] % 2 == parity ? 1 : 0;
+    }
+};
+
+FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                     const std::vector<float>& radii, const Grid& g, float r_med) {
+    const Regions regions = flood_fill(g, occupancy(pts, normals, radii, 6 * r_med, g));
+    FreeSpace fs;
+    const size_t n = pts.size();
+    fs.sides.resize(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i)
+            fs.sides[i] = {probe(g, regions, pts[i], normals[i]),
+                           probe(g, regions, pts[i], -normals[i])};
+    });
+    fs.nesting = nest(fs.sides, regions.cells.size(), n);
+    std::vector<uint64_t> faces(regions.cells.size(), 0);
+    for (const auto& sd : fs.sides)
+        for (int32_t region : sd)
+            if (region >= 0) ++faces[region];
+    fs.parity = free_parity(fs.nesting, regions, faces, n, fs.method);
+    return fs;
+}
+
+// The side that the regions make free (+1 along n, -1 against it), or 0 for no verdict.
+// plus, minus: the sides' states (1 free, 0 solid, -1 occupied all along the probe).
+int space_side(int plus, int minus, float box_exit_free_side, float r_med) {
+    if ((plus == 1 && minus == 0) || (minus == 1 && plus == 0)) return plus == 1 ? 1 : -1;
+    // Free on one side, occupied cells all along the other (the inside of a part too thin for
+    // the grid, or a surface close to another): trusted unless the free side is the bounding
+    // box's face itself (a floor under an object standing on it).
+    if ((plus == 1 && minus < 0) || (minus == 1 && plus < 0))
+        return box_exit_free_side > 0.5f * r_med ? (plus == 1 ? 1 : -1) : 0;
+    // Solid on one side, occupied cells all along the other (a narrow gap, as under an object's
+    // belly near the floor): the gap is the free side.
+    if ((plus == 0 && minus < 0) || (minus == 0 && plus < 0)) return plus == 0 ? -1 : 1;
+    return 0;
+}
+
+// The side whose rays travel farther (+1, -1), or 0 without clear evidence.
+int ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med) {
+    // Skips the point's own neighbours' discs, which a ray leaves at once.
+    const float tmin = 0.5f * std::max(radius, 0.25f * r_med);
+    const DiscCaster::Depth p = caster.side_depth(i, n, tmin), m = caster.side_depth(i, -n, tmin);
+    // No surface seen on either side (a lone plane), or a weak preference (less than half as far
+    // again): no evidence, so the point takes its sign from its neighbours.
+    if (p.hits + m.hits == 0 ||
+        std::max(p.mean, m.mean) <= 1.5f * std::min(p.mean, m.mean) + 0.1f * r_med)
+        return 0;
+    return p.mean > m.mean ? 1 : -1;
 }
 
 }  // namespace
@@ -467,67 +531,22 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
         return v;
     }
     const Grid g = make_grid(b, std::max(kSpacing * r_med, max_extent(b) / kMaxCells), kPad);
-    const Regions regions = flood_fill(g, occupancy(pts, normals, radii, 6 * r_med, g));
-
-    std::vector<std::array<int32_t, 2>> sides(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i)
-            sides[i] = {probe(g, regions, pts[i], normals[i]),
-                        probe(g, regions, pts[i], -normals[i])};
-    });
-    const Nesting nesting = nest(sides, regions.cells.size(), n);
-    std::vector<uint64_t> faces(regions.cells.size(), 0);
-    for (const auto& sd : sides)
-        for (int32_t region : sd)
-            if (region >= 0) ++faces[region];
-    const int parity = free_parity(nesting, regions, faces, n, v.method);
-    auto state = [&](int32_t region) {  // 1 free, 0 solid, -1 unknown
-        if (region < 0 || nesting.level[region] < 0) return -1;
-        return nesting.level[region] % 2 == parity ? 1 : 0;
-    };
-
+    const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
+    v.method = fs.method;
     const DiscCaster caster(pts, normals, radii, b, r_med, 2 * g.h);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const auto& range) {
         for (size_t i = range.begin(); i < range.end(); ++i) {
-            const int plus = state(sides[i][0]), minus = state(sides[i][1]);
-            // One side free and the other solid or unknown (no empty cell near: the inside of a
-            // part too thin for the grid, or an object resting on a surface).
-            // Skips the point's own neighbours' discs, which a ray leaves at once.
-            const float tmin = 0.5f * std::max(radii[i], 0.25f * r_med);
-            auto depth = [&](float side) {
-                return caster.side_depth(uint32_t(i), normals[i] * side, tmin);
-            };
-            if ((plus == 1 && minus == 0) || (minus == 1 && plus == 0)) {
-                v.sign[i] = plus == 1 ? 1 : -1;
-                v.cue[i] = SideCue::kSpace;
-                continue;
+            const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
+            const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
+            int side = space_side(plus, minus, caster.box_exit(pts[i], free_n), r_med);
+            SideCue cue = SideCue::kSpace;
+            if (side == 0) {
+                side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);
+                cue = SideCue::kRays;
             }
-            // Free on one side, occupied cells all along the other (the inside of a part too
-            // thin for the grid, or a surface close to another): trusted unless the free side
-            // is the bounding box's face itself (a floor under an object standing on it).
-            if ((plus == 1 && minus < 0) || (minus == 1 && plus < 0)) {
-                const float side = plus == 1 ? 1.0f : -1.0f;
-                if (caster.box_exit(pts[i], normals[i] * side) > 0.5f * r_med) {
-                    v.sign[i] = int8_t(side);
-                    v.cue[i] = SideCue::kSpace;
-                    continue;
-                }
-            }
-            // Solid on one side, occupied cells all along the other (a narrow gap, as under an
-            // object's belly near the floor): the gap is the free side.
-            if ((plus == 0 && minus < 0) || (minus == 0 && plus < 0)) {
-                v.sign[i] = plus == 0 ? -1 : 1;
-                v.cue[i] = SideCue::kSpace;
-                continue;
-            }
-            const DiscCaster::Depth p = depth(1), m = depth(-1);
-            const float dp = p.mean, dm = m.mean;
-            // No surface seen on either side (a lone plane), or a weak preference (less than half
-            // as far again): no evidence, so the point takes its sign from its neighbours.
-            if (p.hits + m.hits == 0 || std::max(dp, dm) <= 1.5f * std::min(dp, dm) + 0.1f * r_med)
-                continue;
-            v.sign[i] = dp > dm ? 1 : -1;
-            v.cue[i] = SideCue::kRays;
+            if (side == 0) continue;
+            v.sign[i] = int8_t(side);
+            v.cue[i] = cue;
         }
     });
     return v;

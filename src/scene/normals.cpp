@@ -548,10 +548,9 @@ void check_cloud(const std::vector<Vec3>& pts, size_t k, const char* source) {
                     std::to_string(n));
     }
     if (k < kMinK || k > kMaxK) {
-        throw Error(prefix(source) +
-                    "normal estimation: k (neighbours per plane fit) must be in [" +
-                    std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " +
-                    std::to_string(k));
+        throw Error(
+            prefix(source) + "normal estimation: k (neighbours per plane fit) must be in [" +
+            std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " + std::to_string(k));
     }
     if (n > size_t(std::numeric_limits<uint32_t>::max())) {
         throw Error(prefix(source) + "normal estimation supports at most " +

@@ -60,7 +60,8 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
                 if (kept.size() == params.k) break;
             }
             // Too few on the same side (an isolated speck, a sliver): count every neighbour.
-            const std::vector<float>& use = kept.size() >= std::min<size_t>(3, params.k) ? kept : all;
+            const std::vector<float>& use =
+                kept.size() >= std::min<size_t>(3, params.k) ? kept : all;
             const size_t m = std::min(use.size(), params.k);
             points.radii[i] = m > 0 ? radius_from(use, m) : 0.0f;
         }
@@ -87,8 +88,8 @@ double normal_inconsistency(const PointSet& points, size_t k) {
                 const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
                 for (size_t j = 0; j < got; ++j) {
                     const uint32_t o = idx[j];
-                    if (o == i || !detail::same_surface(pts[i], points.normals[i], pts[o],
-                                                        points.normals[o]))
+                    if (o == i ||
+                        !detail::same_surface(pts[i], points.normals[i], pts[o], points.normals[o]))
                         continue;
                     ++acc.pairs;
                     acc.opposed += dot(points.normals[i], points.normals[o]) < 0;
@@ -96,7 +97,9 @@ double normal_inconsistency(const PointSet& points, size_t k) {
             }
             return acc;
         },
-        [](Count a, Count b) { return Count{a.pairs + b.pairs, a.opposed + b.opposed}; });
+        [](Count a, Count b) {
+            return Count{a.pairs + b.pairs, a.opposed + b.opposed};
+        });
     return c.pairs ? double(c.opposed) / double(c.pairs) : 0.0;
 }
 

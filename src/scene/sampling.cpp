@@ -81,8 +81,8 @@ PointSet sample_scene(const Scene& scene) {
 namespace {
 
 // Normals for a raw cloud per options; returns what was done, in words.
-std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors,
-                             const CloudOptions& o, const std::string& path) {
+std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, const CloudOptions& o,
+                             const std::string& path) {
     const bool had = ps.has_normals();
     if (o.normals == NormalsMode::kFlip) {
         if (!had)
@@ -100,8 +100,8 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors,
         np.viewpoint = *o.viewpoint;
     }
     const bool estimate = !had || o.normals == NormalsMode::kEstimate;
-    const bool sensed = estimate && !o.viewpoint && !sensors.empty() &&
-                        np.orientation == Orientation::kAuto;
+    const bool sensed =
+        estimate && !o.viewpoint && !sensors.empty() && np.orientation == Orientation::kAuto;
     if (sensed) np.orientation = Orientation::kOutward;  // replaced by the sensors below
     if (!estimate && o.normals == NormalsMode::kKeep && !o.viewpoint) return "";
     OrientationReport rep;
@@ -114,17 +114,15 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors,
         orient_toward(ps, sensors, path.c_str());
         rep.method = "toward the file's per-point sensor positions";
     }
-    std::string line = fmt::format("normals: {} ({}), oriented {}",
-                                   estimate ? "estimated from 12 nearest neighbours"
-                                            : "the file's axes",
-                                   estimate && had ? "the file's replaced" : "plane fits",
-                                   rep.method);
+    std::string line =
+        fmt::format("normals: {} ({}), oriented {}",
+                    estimate ? "estimated from 12 nearest neighbours" : "the file's axes",
+                    estimate && had ? "the file's replaced" : "plane fits", rep.method);
     if (!sensed && rep.by_space + rep.by_rays > 0)
         line += fmt::format(
             "; {} points by free space, {} by rays ({} of them then by their neighbours), {} "
             "from their neighbours",
-            rep.by_space, rep.by_rays, rep.by_neighbours,
-            ps.size() - rep.by_space - rep.by_rays);
+            rep.by_space, rep.by_rays, rep.by_neighbours, ps.size() - rep.by_space - rep.by_rays);
     return line;
 }
 

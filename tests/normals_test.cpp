@@ -489,6 +489,33 @@ TEST(Orientation, TurnedRoomStillFacesInward) {
     EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
 }
 
+TEST(Orientation, RoomResultDoesNotDependOnThreadCount) {
+    // An open room with a ball: the voxel regions, the rays and the neighbour votes all run.
+    std::vector<Vec3> truth;
+    PointSet base = room(true, truth, 38);
+    add_ball(base, truth, {0.5f, 0.25f, 0.6f}, 0.2f, 2000, 39);
+    std::vector<Vec3> first;
+    for (const int threads : {1, 8}) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+        tbb::task_arena arena(threads);
+        PointSet ps = base;
+        arena.execute([&] {
+            estimate_normals(ps);
+            estimate_radii(ps);
+        });
+        if (first.empty()) {
+            first = ps.normals;
+            first.insert(first.end(), ps.radii.size(), Vec3{});
+            for (size_t i = 0; i < ps.radii.size(); ++i) first[ps.size() + i].x = ps.radii[i];
+            continue;
+        }
+        for (size_t i = 0; i < ps.size(); ++i) {
+            ASSERT_EQ(ps.normals[i], first[i]) << "point " << i;
+            ASSERT_EQ(ps.radii[i], first[ps.size() + i].x) << "point " << i;
+        }
+    }
+}
+
 TEST(Orientation, ClosedRoomWithABallFacesIntoTheRoomAndTheBallOutward) {
     std::vector<Vec3> truth;
     PointSet ps = room(false, truth, 22);

@@ -74,11 +74,26 @@ struct BuildOptions {
     std::string output;
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
+    std::string normals = "keep";
+    std::vector<float> viewpoint;
     bool count_links = false;
     bool as_points = false;
     bool json = false;
     BuildParams params;
 };
+
+CloudOptions cloud_options(const BuildOptions& o) {
+    CloudOptions c;
+    const std::pair<const char*, NormalsMode> modes[] = {{"keep", NormalsMode::kKeep},
+                                                         {"flip", NormalsMode::kFlip},
+                                                         {"inward", NormalsMode::kInward},
+                                                         {"outward", NormalsMode::kOutward},
+                                                         {"estimate", NormalsMode::kEstimate}};
+    for (const auto& [name, mode] : modes)
+        if (o.normals == name) c.normals = mode;
+    if (o.viewpoint.size() == 3) c.viewpoint = Vec3{o.viewpoint[0], o.viewpoint[1], o.viewpoint[2]};
+    return c;
+}
 
 // The input's points and a description of it: a scene or mesh file is sampled (scene options
 // apply), a point cloud is read as it is.
@@ -87,7 +102,10 @@ PointSet load_input(BuildOptions& o, std::string& what) {
         if (o.points || o.seed)
             throw Error("--points/--seed apply to scene and mesh files, not point clouds");
         what = fmt::format("point cloud {}", o.input);
-        return load_point_cloud(o.input);
+        std::vector<std::string> done;
+        PointSet pts = load_point_cloud(o.input, cloud_options(o), &done);
+        for (const std::string& line : done) fmt::print(stderr, "vmap build: {}\n", line);
+        return pts;
     }
     Scene sc = load_scene(o.input);
     cli::print_notes(sc.notes);
@@ -144,6 +162,7 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
                     {"links", st.seconds_links},
                     {"save", save_s}};
     j["peak_device_bytes"] = st.peak_device_bytes;
+    j["warnings"] = st.warnings;
     j["output"] = o.count_links ? nlohmann::json(nullptr) : nlohmann::json(o.output);
     return j;
 }
@@ -210,6 +229,7 @@ int run_build(BuildOptions& o) {
     BuildStats st;
     const size_t npts = pts.size();
     VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
+    for (const std::string& w : st.warnings) fmt::print(stderr, "vmap build: warning: {}\n", w);
     const auto ts = std::chrono::steady_clock::now();
     if (!o.count_links) save_vmap(o.output, vm);
     const double save_s =
@@ -324,6 +344,18 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
         ->capture_default_str();
 
+    build
+        ->add_option("--normals", bo.normals,
+                     "Point clouds: keep (the file's normals; estimated if it has none), flip, "
+                     "inward or outward (from the centroid), estimate (even if the file has "
+                     "them)")
+        ->check(CLI::IsMember({"keep", "flip", "inward", "outward", "estimate"}))
+        ->capture_default_str();
+    build
+        ->add_option("--viewpoint", bo.viewpoint,
+                     "Point clouds: orient every normal toward this point X,Y,Z (the scanner)")
+        ->delimiter(',')
+        ->expected(3);
     build->add_flag("--count-links", bo.count_links,
                     "Count the links without keeping them and write no file: sizes a V-map "
                     "too large for memory");
@@ -376,6 +408,13 @@ int main(int argc, char** argv) {
     } catch (const CLI::ParseError& e) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
+    }
+    const bool sampled = bo.input.empty() || cli::sampled_input(bo.input, bo.as_points);
+    if (*build && sampled && (bo.normals != "keep" || !bo.viewpoint.empty())) {
+        fmt::print(stderr,
+                   "vmap build: --normals/--viewpoint apply to point clouds, not to scene or "
+                   "mesh files (their normals come from the meshes)\n");
+        return 2;
     }
     if (*build && (bo.points || bo.seed) && !bo.input.empty() &&
         !cli::sampled_input(bo.input, bo.as_points)) {

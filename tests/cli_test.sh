@@ -263,7 +263,39 @@ if expect_ok "build a point cloud" build sphere.ply --max-height 4 -o sphere.vma
 then
     expect_stdout "build of a cloud prints its point count" '^points: +400$'
     expect_stdout "build of a cloud says what it wrote" '^wrote: +sphere\.vmap$'
+    if grep -q '^vmap build: normals: estimated' err.txt && grep -q '^vmap build: splat radii' err.txt
+    then
+        ok "build of a cloud says what it estimated"
+    else
+        fail "build of a cloud does not say what it estimated"
+        show build sphere.ply
+    fi
 fi
+# Seen from outside, a lone sphere's points never face each other: the build warns.
+if expect_ok "build a cloud with --normals outward" \
+    build sphere.ply --normals outward --max-height 4 -o out.vmap --backend cpu; then
+    if grep -q '^vmap build: warning: only .* of leaf pairs face each other' err.txt; then
+        ok "build warns when almost no leaf pairs face"
+    else
+        fail "no warning for a cloud whose points never face each other"
+        show build sphere.ply --normals outward
+    fi
+fi
+if expect_ok "build a cloud with --viewpoint" \
+    build sphere.ply --viewpoint 0,0,0 --max-height 4 -o in.vmap --backend cpu; then
+    if grep -q 'toward the viewpoint (0, 0, 0)' err.txt && ! grep -q 'warning' err.txt; then
+        ok "--viewpoint orients toward it, and the inside faces itself"
+    else
+        fail "--viewpoint 0,0,0 not reported, or a warning"
+        show build sphere.ply --viewpoint 0,0,0
+    fi
+fi
+expect_input_error "--normals flip on a cloud without normals" sphere.ply \
+    build sphere.ply --normals flip --max-height 4 -o flip.vmap
+expect_no_file "a failed --normals flip writes nothing" flip.vmap
+expect_usage_error "--normals with an unknown mode" build sphere.ply --normals sideways
+expect_usage_error "--viewpoint with two numbers" build sphere.ply --viewpoint 1,2
+expect_usage_error "--normals on a scene file" build "$SCENE" --normals flip
 
 # ---- help ------------------------------------------------------------------------------------
 

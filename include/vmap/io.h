@@ -32,15 +32,18 @@ struct ModelData {
     // What the file held that vmap read but does not use, one short line each ("fields
     // intensity, curvature ignored"), for the tool to print: nothing is dropped silently.
     std::vector<std::string> notes;
+    std::vector<Vec3> sensors;  // per-point scanner positions (PLY sensor_x/y/z, vp_x/y/z or
+                                // viewpoint_x/y/z), empty when the file has none
 
     Mesh mesh() const { return Mesh{points.positions, triangles}; }
 };
 
 // PLY: ascii, binary_little_endian and binary_big_endian 1.0; element "vertex" with float or
 // double (or any scalar type) x,y,z and optional nx,ny,nz (or PCL's normal_x,normal_y,normal_z),
-// red/green/blue (or r/g/b, diffuse_red...), radius, and emission_r,emission_g,emission_b
-// (emitted radiosity, W/m^2 per channel, for `vmap gi`); element "face" with a list property
-// "vertex_indices" (or "vertex_index"); other elements and properties are skipped (and noted).
+// red/green/blue (or r/g/b, diffuse_red...), radius, emission_r,emission_g,emission_b
+// (emitted radiosity, W/m^2 per channel, for `vmap gi`) and sensor_x/y/z (or vp_x/y/z,
+// viewpoint_x/y/z); element "face" with a list property "vertex_indices" (or "vertex_index");
+// other elements and properties are skipped (and noted).
 ModelData read_ply(const std::string& path);
 
 // OFF (and COFF/NOFF headers): vertex count, face count, edge count; polygons fan-triangulated.

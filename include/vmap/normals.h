@@ -1,23 +1,75 @@
-// Normal estimation for raw point clouds (no normals in the file).
+// Normals and splat radii for raw point clouds: estimation, orientation, and a sanity check.
 #pragma once
 
 #include <cstddef>
+#include <string>
+#include <vector>
 
 #include "vmap/mesh.h"
 
 namespace vmap {
 
+// How the signs of normals are chosen (docs/design.md, "Raw clouds: orientation").
+enum class Orientation {
+    kAuto,       // free space decides: the side of each surface that faces the free space
+                 // (flood-filled voxels, nesting rule), rays where both sides are free
+    kViewpoint,  // toward NormalEstimationParams::viewpoint (the scanner's position)
+    kInward,     // toward the cloud's centroid
+    kOutward,    // away from the cloud's centroid
+};
+
 struct NormalEstimationParams {
     size_t k = 12;  // neighbours for the local plane fit (PCA)
+    Orientation orientation = Orientation::kAuto;
+    Vec3 viewpoint{};  // for Orientation::kViewpoint
+};
+
+// What orientation did, for the build's report.
+struct OrientationReport {
+    std::string method;        // in words, e.g. "free space (room: walls face inward)"
+    size_t by_space = 0;       // points whose side the voxel topology decided
+    size_t by_rays = 0;        // points decided by casting rays (both sides free or unknown)
+    size_t by_neighbours = 0;  // ray-decided points flipped to agree with their surface
 };
 
 // Fills points.normals: the local plane of the k nearest neighbours (nanoflann k-d tree) gives
-// each normal, then normals are oriented consistently by propagation along a minimum spanning
-// tree of the neighbour graph (Hoppe et al. 1992), each connected component seeded by its point
-// farthest from the cloud's centre with its normal pointing away from that centre.
+// each normal, then orient_normals chooses the signs. Existing normals are replaced.
 // Throws vmap::Error (naming `source`) when it cannot: fewer than 3 points, all points collinear
 // or coincident, or non-finite coordinates.
 void estimate_normals(PointSet& points, const NormalEstimationParams& params = {},
-                      const char* source = "point cloud");
+                      const char* source = "point cloud", OrientationReport* report = nullptr);
+
+// Chooses the sign of every existing normal (points.normals must be set; their axes are kept)
+// by params.orientation. kAuto needs splat radii for its rays and estimates them into a copy
+// when points.radii is empty. Throws vmap::Error naming `source` for missing normals.
+void orient_normals(PointSet& points, const NormalEstimationParams& params = {},
+                    const char* source = "point cloud", OrientationReport* report = nullptr);
+
+// Orients every normal toward one viewpoint (e.g. a PCD VIEWPOINT or the scanner's origin):
+// n . (viewpoint - p) >= 0 afterwards.
+void orient_toward(PointSet& points, Vec3 viewpoint);
+
+// Orients normal i toward sensors[i] (per-point sensor positions, e.g. PLY sensor_x/y/z).
+// Throws vmap::Error naming `source` when the sizes differ.
+void orient_toward(PointSet& points, const std::vector<Vec3>& sensors,
+                   const char* source = "point cloud");
+
+struct RadiusEstimationParams {
+    size_t k = 8;            // same-surface neighbours the density is read from
+    size_t candidates = 32;  // nearest neighbours searched for them
+};
+
+// Fills points.radii with splat radii (scene units): the radius of the disc of area 1 / density,
+// the density counted over the k nearest neighbours on the same surface side, i.e. those near
+// the point's tangent plane and with a normal of the same axis, so that the other face of a
+// thin plate does not count. Needs points.normals (their signs do not matter). Throws
+// vmap::Error naming `source` for missing normals or fewer than 2 points.
+void estimate_radii(PointSet& points, const RadiusEstimationParams& params = {},
+                    const char* source = "point cloud");
+
+// The fraction of neighbouring point pairs on one smooth surface (near each other's tangent
+// plane, normals within ~35 degrees of one axis) whose normals point to opposite sides: about 0
+// for consistent normals. Needs normals; 0 for fewer than 2 points.
+double normal_inconsistency(const PointSet& points, size_t k = 8);
 
 }  // namespace vmap

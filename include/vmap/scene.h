@@ -93,10 +93,27 @@ bool is_scene_input(const std::string& path, bool as_points = false);
 inline constexpr uint32_t kNoSurface = 0xffffffffu;
 PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
 
-// Reads a raw point cloud (PLY or OFF; faces ignored). Estimates normals when the file has none
-// (k nearest neighbours), sets splat radii from the neighbour spacing when absent, and albedo 0.8
-// when there are no colours.
-PointSet load_point_cloud(const std::string& path);
+// What to do with a raw cloud's normals (`vmap build --normals`).
+enum class NormalsMode {
+    kKeep,      // the file's normals (estimated when it has none)
+    kFlip,      // the file's normals, negated (an error when it has none)
+    kInward,    // the file's (or estimated) normal axes, each toward the cloud's centroid
+    kOutward,   // ... each away from the centroid
+    kEstimate,  // estimated from the positions even when the file has normals
+};
+
+struct CloudOptions {
+    NormalsMode normals = NormalsMode::kKeep;
+    std::optional<Vec3> viewpoint;  // orient every normal toward it (the scanner's position)
+};
+
+// Reads a raw point cloud (PLY or OFF; faces ignored) and completes it: normals per
+// options.normals (estimated ones oriented toward options.viewpoint when given, else toward the
+// file's per-point sensor positions when it has them, else by free space: vmap/normals.h),
+// splat radii from same-surface neighbours when absent (estimate_radii), albedo 0.8 when there
+// are no colours. `done`, when given, receives one line per thing estimated or changed.
+PointSet load_point_cloud(const std::string& path, const CloudOptions& options = {},
+                          std::vector<std::string>* done = nullptr);
 
 // The built-in default scene (the README's first command): scenes/cornell-bunny.json.
 std::string default_scene_path();

@@ -60,6 +60,9 @@ struct BuildStats {
     WorkCounters work;
     std::string backend;  // which backend ran, in words
     std::string note;     // e.g. why the requested backend was not used
+    // What looked wrong with the input, one sentence each: radii estimated because none were
+    // given, normals inconsistent, almost no leaf pairs facing (src/vmap/build_checks.h).
+    std::vector<std::string> warnings;
     double seconds_octree = 0;
     double seconds_visibility = 0;  // leaf pairs and link extraction
     double seconds_total = 0;
@@ -107,7 +110,9 @@ class VisibilityMap {
     std::vector<uint32_t> visible_set(uint32_t i) const;
 };
 
-// Builds the octree over `points` (which need normals) and the V-map. Throws vmap::Error naming
+// Builds the octree over `points` (which need normals) and the V-map. Points without splat radii
+// get them from estimate_radii (vmap/normals.h); that, normals that look inconsistent, and
+// almost no facing leaf pairs are reported in stats->warnings. Throws vmap::Error naming
 // `source` for bad input or parameters (messages name the BuildParams field), or for backend
 // "cuda" without a usable GPU; vmap::Cancelled when the progress callback returned false.
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,

@@ -95,6 +95,9 @@ enum Role : uint8_t {
     kEmissionR,
     kEmissionG,
     kEmissionB,
+    kSensorX,  // per-point sensor (scanner) position, for orienting estimated normals
+    kSensorY,
+    kSensorZ,
     kIndices,
     kRoleCount
 };
@@ -165,6 +168,15 @@ Role vertex_role(std::string_view name) {
         {"emission_r", kEmissionR},
         {"emission_g", kEmissionG},
         {"emission_b", kEmissionB},
+        {"sensor_x", kSensorX},
+        {"sensor_y", kSensorY},
+        {"sensor_z", kSensorZ},
+        {"vp_x", kSensorX},
+        {"vp_y", kSensorY},
+        {"vp_z", kSensorZ},
+        {"viewpoint_x", kSensorX},
+        {"viewpoint_y", kSensorY},
+        {"viewpoint_z", kSensorZ},
     };
     for (const auto& [n, role] : kNames) {
         if (n == name) return role;
@@ -211,6 +223,7 @@ void assign_roles(const std::string& path, Header& header) {
             all_or_none(kNx, "normal (nx, ny, nz)");
             all_or_none(kRed, "colour (red, green, blue)");
             all_or_none(kEmissionR, "emission (emission_r, emission_g, emission_b)");
+            all_or_none(kSensorX, "sensor position (sensor_x, sensor_y, sensor_z)");
         } else if (element.name == "face") {
             if (seen_face) fail(path, "header: more than one 'face' element");
             seen_face = true;
@@ -634,7 +647,8 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
         if (element.properties.empty()) continue;
         const bool is_vertex = element.name == "vertex";
         const bool is_face = element.name == "face";
-        bool has_normals = false, has_colors = false, has_radii = false, has_emission = false;
+        bool has_normals = false, has_colors = false, has_radii = false, has_emission = false,
+             has_sensors = false;
         float range[3] = {1, 1, 1};
         if (is_vertex) {
             for (const Property& p : element.properties) {
@@ -642,6 +656,7 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
                 has_colors |= p.role == kRed;
                 has_radii |= p.role == kRadius;
                 has_emission |= p.role == kEmissionR;
+                has_sensors |= p.role == kSensorX;
                 if (p.role >= kRed && p.role <= kBlue) range[p.role - kRed] = colour_range(p.type);
             }
             points.positions.reserve(element.count);
@@ -698,6 +713,15 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
                              v[kGreen], ", ", v[kBlue], ")");
                     }
                     points.colors.push_back(c);
+                }
+                if (has_sensors) {
+                    const Vec3 q{static_cast<float>(v[kSensorX]), static_cast<float>(v[kSensorY]),
+                                 static_cast<float>(v[kSensorZ])};
+                    if (!is_finite(q)) {
+                        fail(path, source.where(), ": non-finite sensor position (", v[kSensorX],
+                             ", ", v[kSensorY], ", ", v[kSensorZ], ")");
+                    }
+                    out.sensors.push_back(q);
                 }
                 if (has_radii) {
                     const float r = static_cast<float>(v[kRadius]);

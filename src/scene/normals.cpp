@@ -6,6 +6,7 @@
 
 #include "vmap/normals.h"
 
+#include <fmt/format.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -14,13 +15,14 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
-#include <nanoflann.hpp>
 #include <numeric>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "geom/morton.h"
+#include "scene/cloud_knn.h"
+#include "scene/free_space.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -114,25 +116,6 @@ Eigen3 symmetric_eigen(const double m[3][3]) {
     return e;
 }
 
-// nanoflann's dataset interface over the positions, read in place.
-struct CloudAdaptor {
-    const std::vector<Vec3>& pts;
-
-    size_t kdtree_get_point_count() const { return pts.size(); }
-    float kdtree_get_pt(uint32_t i, size_t dim) const {
-        const Vec3& p = pts[i];
-        return dim == 0 ? p.x : (dim == 1 ? p.y : p.z);
-    }
-    template <class Bbox>
-    bool kdtree_get_bbox(Bbox&) const {
-        return false;
-    }
-};
-
-using KdTree =
-    nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>,
-                                        CloudAdaptor, 3, uint32_t>;
-
 std::string prefix(const char* source) {
     return std::string(source ? source : "point cloud") + ": ";
 }
@@ -225,16 +208,18 @@ std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* i
     return Vec3{float(v.x), float(v.y), float(v.z)};
 }
 
-LocalFits fit_local_planes(const std::vector<Vec3>& pts, size_t k) {
+// The k nearest neighbours of every point and, when `fit` is set, the plane through them
+// (otherwise fits.normals is left to the caller).
+LocalFits fit_local_planes(const std::vector<Vec3>& pts, size_t k, bool fit = true) {
     const size_t n = pts.size();
     LocalFits fits;
     const size_t kk = fits.k = std::min(k, n);
     fits.neighbours.resize(n * kk);
-    fits.normals.resize(n);
+    if (fit) fits.normals.resize(n);
     fits.degenerate.assign(n, 0);
 
-    const CloudAdaptor adaptor{pts};
-    const KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const detail::CloudAdaptor adaptor{pts};
+    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
 
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
         std::vector<float> dist2(kk);
@@ -244,6 +229,7 @@ LocalFits fit_local_planes(const std::vector<Vec3>& pts, size_t k) {
             const size_t found = tree.knnSearch(query, kk, nb, dist2.data());
             // The tree holds n >= kk points so it always finds kk; fill defensively regardless.
             for (size_t j = found; j < kk; ++j) nb[j] = uint32_t(i);
+            if (!fit) continue;
 
             const std::optional<Vec3> normal = plane_normal(pts, nb, kk);
             fits.degenerate[i] = !normal;
@@ -362,12 +348,53 @@ class PointHeap {
     std::vector<uint32_t> slot_;  // where each point is in items_, or kAbsent
 };
 
-// Orients the normals in place: Prim's algorithm over each connected component, from the
-// component's point farthest from the centroid (where "outward" is least ambiguous), flipping
-// each newly reached normal to agree with the one it was reached from.
-void orient(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
-            const std::vector<uint8_t>& degenerate, std::vector<Vec3>& normals) {
+// Edge weight for propagation: 1 - |cos| between the normals, and more (used last) for a pair
+// that is not on one surface side, such as the two faces of a plate thinner than the spacing.
+float edge_weight(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                  const std::vector<uint8_t>& degenerate, uint32_t a, uint32_t b) {
+    if (degenerate[a] || degenerate[b]) return kDegenerateEdgeWeight;
+    const float w = 1.0f - std::fabs(dot(normals[a], normals[b]));
+    return detail::same_surface(pts[a], normals[a], pts[b], normals[b]) ? w : w + 1.0f;
+}
+
+// Orients the normals that `fixed` leaves free, in place: Prim's algorithm over the neighbour
+// graph (Hoppe et al. 1992) grown from every fixed point at once, flipping each newly reached
+// normal to agree with the one it was reached from. A component without a fixed point starts
+// from its point farthest from the centroid (where "outward" is least ambiguous), pointing away.
+void propagate(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
+               const std::vector<uint8_t>& degenerate, const std::vector<uint8_t>& fixed,
+               std::vector<Vec3>& normals) {
     const size_t n = pts.size();
+    std::vector<uint8_t> in_tree(n, 0);
+    std::vector<uint32_t> parent(n);
+    PointHeap heap(n);
+
+    auto reach = [&](uint32_t v) {
+        in_tree[v] = 1;
+        for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
+            const uint32_t u = g.adjacent[e];
+            if (!in_tree[u] && heap.push_or_lower(u, edge_weight(pts, normals, degenerate, v, u)))
+                parent[u] = v;
+        }
+    };
+    auto grow = [&]() {
+        while (!heap.empty()) {
+            const uint32_t v = heap.pop();
+            const Vec3 from = normals[parent[v]];
+            if (degenerate[v]) {
+                normals[v] = from;
+            } else if (dot(normals[v], from) < 0) {
+                normals[v] = -normals[v];
+            }
+            reach(v);
+        }
+    };
+    // All fixed points join the tree before any is expanded, so none is queued to be re-signed.
+    for (uint32_t v = 0; v < n; ++v) in_tree[v] = fixed[v] && !degenerate[v];
+    for (uint32_t v = 0; v < n; ++v)
+        if (in_tree[v]) reach(v);
+    grow();
+
     std::vector<double> far2(n);
     for (size_t i = 0; i < n; ++i) {
         const Dvec d = to_d(pts[i]) - centroid;
@@ -378,24 +405,6 @@ void orient(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
     std::sort(by_distance.begin(), by_distance.end(), [&](uint32_t a, uint32_t b) {
         return far2[a] > far2[b] || (far2[a] == far2[b] && a < b);
     });
-
-    auto weight = [&](uint32_t a, uint32_t b) {
-        if (degenerate[a] || degenerate[b]) return kDegenerateEdgeWeight;
-        return 1.0f - std::fabs(dot(normals[a], normals[b]));
-    };
-
-    std::vector<uint8_t> in_tree(n, 0);
-    std::vector<uint32_t> parent(n);
-    PointHeap heap(n);
-
-    auto reach = [&](uint32_t v) {
-        in_tree[v] = 1;
-        for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
-            const uint32_t u = g.adjacent[e];
-            if (!in_tree[u] && heap.push_or_lower(u, weight(v, u))) parent[u] = v;
-        }
-    };
-
     // Every point farther out than the first unvisited one lies in a component already
     // finished, so that point is the farthest of its own component.
     for (const uint32_t root : by_distance) {
@@ -410,17 +419,40 @@ void orient(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
             normals[root] = -normals[root];
         }
         reach(root);
-        while (!heap.empty()) {
-            const uint32_t v = heap.pop();
-            const Vec3 from = normals[parent[v]];
-            if (degenerate[v]) {
-                normals[v] = from;
-            } else if (dot(normals[v], from) < 0) {
-                normals[v] = -normals[v];
-            }
-            reach(v);
-        }
+        grow();
     }
+}
+
+// A ray-decided sign that most of its same-surface neighbours contradict is a local mistake
+// (a surface a few millimetres from another, seen by rays as the near side): it takes theirs.
+// Space-decided neighbours count twice, undecided ones not at all. Computed on a snapshot, so
+// the result does not depend on visiting order.
+size_t agree_with_neighbours(const std::vector<Vec3>& pts, const LocalFits& fits,
+                             const detail::SideVotes& votes, std::vector<Vec3>& normals) {
+    const size_t n = pts.size(), k = fits.k;
+    std::vector<uint8_t> flip(n, 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            if (votes.cue[i] != detail::SideCue::kRays || fits.degenerate[i]) continue;
+            float agree = 0, disagree = 0;
+            for (size_t j = 0; j < k; ++j) {
+                const uint32_t o = fits.neighbours[i * k + j];
+                if (o == i || fits.degenerate[o] || votes.cue[o] == detail::SideCue::kNone)
+                    continue;
+                if (!detail::same_surface(pts[i], normals[i], pts[o], normals[o])) continue;
+                const float w = votes.cue[o] == detail::SideCue::kSpace ? 2.0f : 1.0f;
+                (dot(normals[i], normals[o]) > 0 ? agree : disagree) += w;
+            }
+            flip[i] = disagree > 2 * agree;
+        }
+    });
+    size_t flipped = 0;
+    for (size_t i = 0; i < n; ++i)
+        if (flip[i]) {
+            normals[i] = -normals[i];
+            ++flipped;
+        }
+    return flipped;
 }
 
 // Point indices in Morton (Z-curve) order. Working on the points in this order keeps
@@ -454,20 +486,71 @@ std::vector<uint32_t> spatial_order(const std::vector<Vec3>& pts) {
     return order;
 }
 
-}  // namespace
+Vec3 unit_or(Vec3 v, Vec3 fallback) {
+    const float len = length(v);
+    return len > 0 && std::isfinite(len) ? v / len : fallback;
+}
 
-void estimate_normals(PointSet& points, const NormalEstimationParams& params, const char* source) {
-    const std::vector<Vec3>& pts = points.positions;
+// Signs of fits.normals (points in spatial order) by params.orientation, reported in words.
+void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
+                 std::vector<float> radii, const NormalEstimationParams& params,
+                 OrientationReport& rep) {
+    const size_t n = pts.size();
+    std::vector<uint8_t> fixed(n, 0);
+    std::vector<Vec3>& normals = fits.normals;
+    const Vec3 c{float(centroid.x), float(centroid.y), float(centroid.z)};
+    auto fix_toward = [&](size_t i, Vec3 target) {
+        if (fits.degenerate[i]) return;
+        if (dot(normals[i], target - pts[i]) < 0) normals[i] = -normals[i];
+        fixed[i] = 1;
+    };
+    const Vec3 vp = params.viewpoint;
+    switch (params.orientation) {
+        case Orientation::kViewpoint:
+            for (size_t i = 0; i < n; ++i) fix_toward(i, vp);
+            rep.method = fmt::format("toward the viewpoint ({}, {}, {})", vp.x, vp.y, vp.z);
+            break;
+        case Orientation::kInward:
+            for (size_t i = 0; i < n; ++i) fix_toward(i, c);
+            rep.method = "toward the centroid (inward)";
+            break;
+        case Orientation::kOutward:
+            for (size_t i = 0; i < n; ++i) fix_toward(i, 2.0f * pts[i] - c);
+            rep.method = "away from the centroid (outward)";
+            break;
+        case Orientation::kAuto: {
+            if (radii.empty()) {
+                PointSet tmp;
+                tmp.positions = pts;
+                tmp.normals = normals;
+                estimate_radii(tmp);
+                radii = std::move(tmp.radii);
+            }
+            const detail::SideVotes votes = detail::vote_sides(pts, normals, radii);
+            for (size_t i = 0; i < n; ++i) {
+                if (fits.degenerate[i] || votes.cue[i] == detail::SideCue::kNone) continue;
+                if (votes.sign[i] < 0) normals[i] = -normals[i];
+                fixed[i] = 1;
+                ++(votes.cue[i] == detail::SideCue::kSpace ? rep.by_space : rep.by_rays);
+            }
+            rep.by_neighbours = agree_with_neighbours(pts, fits, votes, normals);
+            rep.method = votes.method;
+            break;
+        }
+    }
+    propagate(pts, centroid, symmetrise(fits, n), fits.degenerate, fixed, normals);
+}
+
+void check_cloud(const std::vector<Vec3>& pts, size_t k, const char* source) {
     const size_t n = pts.size();
     if (n < 3) {
         throw Error(prefix(source) + "normal estimation needs at least 3 points, got " +
                     std::to_string(n));
     }
-    if (params.k < kMinK || params.k > kMaxK) {
-        throw Error(prefix(source) +
-                    "normal estimation: k (neighbours per plane fit) must be in [" +
-                    std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " +
-                    std::to_string(params.k));
+    if (k < kMinK || k > kMaxK) {
+        throw Error(
+            prefix(source) + "normal estimation: k (neighbours per plane fit) must be in [" +
+            std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " + std::to_string(k));
     }
     if (n > size_t(std::numeric_limits<uint32_t>::max())) {
         throw Error(prefix(source) + "normal estimation supports at most " +
@@ -480,19 +563,80 @@ void estimate_normals(PointSet& points, const NormalEstimationParams& params, co
                         " has a non-finite coordinate; cannot estimate normals");
         }
     }
+}
+
+template <class T>
+std::vector<T> permuted(const std::vector<T>& v, const std::vector<uint32_t>& order) {
+    std::vector<T> out;
+    if (v.empty()) return out;
+    out.resize(order.size());
+    for (size_t r = 0; r < order.size(); ++r) out[r] = v[order[r]];
+    return out;
+}
+
+}  // namespace
+
+void estimate_normals(PointSet& points, const NormalEstimationParams& params, const char* source,
+                      OrientationReport* report) {
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    check_cloud(pts, params.k, source);
     const Dvec centroid = centroid_of(pts);
     check_not_degenerate(pts, centroid, source);
 
     const std::vector<uint32_t> order = spatial_order(pts);
-    std::vector<Vec3> sorted(n);
-    for (size_t r = 0; r < n; ++r) sorted[r] = pts[order[r]];
-
+    const std::vector<Vec3> sorted = permuted(pts, order);
     LocalFits fits = fit_local_planes(sorted, params.k);
-    const Graph graph = symmetrise(fits, n);
-    orient(sorted, centroid, graph, fits.degenerate, fits.normals);
-
+    OrientationReport rep;
+    orient_fits(sorted, centroid, fits, permuted(points.radii, order), params, rep);
     points.normals.resize(n);
     for (size_t r = 0; r < n; ++r) points.normals[order[r]] = fits.normals[r];
+    if (report) *report = rep;
+}
+
+void orient_normals(PointSet& points, const NormalEstimationParams& params, const char* source,
+                    OrientationReport* report) {
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    if (points.normals.size() != n) {
+        throw Error(prefix(source) + "orienting normals needs one per point (" +
+                    std::to_string(points.normals.size()) + " for " + std::to_string(n) +
+                    " points)");
+    }
+    check_cloud(pts, params.k, source);
+    const std::vector<uint32_t> order = spatial_order(pts);
+    const std::vector<Vec3> sorted = permuted(pts, order);
+    LocalFits fits = fit_local_planes(sorted, params.k, false);
+    fits.normals = permuted(points.normals, order);
+    for (size_t r = 0; r < n; ++r) {
+        const float len = length(fits.normals[r]);
+        fits.degenerate[r] = !(len > 0 && std::isfinite(len));
+        fits.normals[r] = unit_or(fits.normals[r], Vec3{0, 0, 1});
+    }
+    OrientationReport rep;
+    orient_fits(sorted, centroid_of(pts), fits, permuted(points.radii, order), params, rep);
+    for (size_t r = 0; r < n; ++r) {
+        Vec3& out = points.normals[order[r]];
+        out = fits.degenerate[r] ? fits.normals[r] : (dot(out, fits.normals[r]) < 0 ? -out : out);
+    }
+    if (report) *report = rep;
+}
+
+void orient_toward(PointSet& points, Vec3 viewpoint) {
+    for (size_t i = 0; i < points.normals.size() && i < points.size(); ++i)
+        if (dot(points.normals[i], viewpoint - points.positions[i]) < 0)
+            points.normals[i] = -points.normals[i];
+}
+
+void orient_toward(PointSet& points, const std::vector<Vec3>& sensors, const char* source) {
+    if (sensors.size() != points.size() || points.normals.size() != points.size()) {
+        throw Error(prefix(source) + std::to_string(sensors.size()) + " sensor positions and " +
+                    std::to_string(points.normals.size()) + " normals for " +
+                    std::to_string(points.size()) + " points");
+    }
+    for (size_t i = 0; i < points.size(); ++i)
+        if (dot(points.normals[i], sensors[i] - points.positions[i]) < 0)
+            points.normals[i] = -points.normals[i];
 }
 
 }  // namespace vmap

@@ -4,7 +4,6 @@
 
 #include <algorithm>
 #include <cmath>
-#include <nanoflann.hpp>
 
 #include "vmap/error.h"
 #include "vmap/io.h"
@@ -112,46 +111,70 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
 }
 
 namespace {
-struct CloudAdaptor {
-    const std::vector<Vec3>& p;
-    size_t kdtree_get_point_count() const { return p.size(); }
-    float kdtree_get_pt(size_t i, size_t d) const {
-        return d == 0 ? p[i].x : d == 1 ? p[i].y : p[i].z;
+
+// Normals for a raw cloud per options; returns what was done, in words.
+std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, const CloudOptions& o,
+                             const std::string& path) {
+    const bool had = ps.has_normals();
+    if (o.normals == NormalsMode::kFlip) {
+        if (!had)
+            throw Error(fmt::format("{}: --normals flip: the file has no normals to flip", path));
+        for (Vec3& n : ps.normals) n = -n;
+        if (o.viewpoint) orient_toward(ps, *o.viewpoint);
+        return o.viewpoint ? "normals: the file's, flipped, then toward the viewpoint"
+                           : "normals: the file's, flipped";
     }
-    template <class B>
-    bool kdtree_get_bbox(B&) const {
-        return false;
+    NormalEstimationParams np;
+    if (o.normals == NormalsMode::kInward) np.orientation = Orientation::kInward;
+    if (o.normals == NormalsMode::kOutward) np.orientation = Orientation::kOutward;
+    if (o.viewpoint) {
+        np.orientation = Orientation::kViewpoint;
+        np.viewpoint = *o.viewpoint;
     }
-};
+    const bool estimate = !had || o.normals == NormalsMode::kEstimate;
+    const bool sensed =
+        estimate && !o.viewpoint && !sensors.empty() && np.orientation == Orientation::kAuto;
+    if (sensed) np.orientation = Orientation::kOutward;  // replaced by the sensors below
+    if (!estimate && o.normals == NormalsMode::kKeep && !o.viewpoint) return "";
+    OrientationReport rep;
+    if (estimate) {
+        estimate_normals(ps, np, path.c_str(), &rep);
+    } else {
+        orient_normals(ps, np, path.c_str(), &rep);
+    }
+    if (sensed) {
+        orient_toward(ps, sensors, path.c_str());
+        rep.method = "toward the file's per-point sensor positions";
+    }
+    std::string line =
+        fmt::format("normals: {} ({}), oriented {}",
+                    estimate ? "estimated from 12 nearest neighbours" : "the file's axes",
+                    estimate && had ? "the file's replaced" : "plane fits", rep.method);
+    if (!sensed && rep.by_space + rep.by_rays > 0)
+        line += fmt::format(
+            "; {} points by free space, {} by rays ({} of them then by their neighbours), {} "
+            "from their neighbours",
+            rep.by_space, rep.by_rays, rep.by_neighbours, ps.size() - rep.by_space - rep.by_rays);
+    return line;
+}
+
 }  // namespace
 
-PointSet load_point_cloud(const std::string& path) {
+PointSet load_point_cloud(const std::string& path, const CloudOptions& options,
+                          std::vector<std::string>* done) {
     ModelData md = read_model(path);
     for (const std::string& note : md.notes) fmt::print(stderr, "note:       {}\n", note);
     PointSet ps = std::move(md.points);
     if (ps.size() == 0) throw Error(fmt::format("{}: the point cloud is empty", path));
-    if (!ps.has_normals()) estimate_normals(ps, {}, path.c_str());
+    std::vector<std::string> lines;
+    const std::string normals = complete_normals(ps, md.sensors, options, path);
+    if (!normals.empty()) lines.push_back(normals);
     if (!ps.has_colors()) ps.colors.assign(ps.size(), Vec3{0.8f, 0.8f, 0.8f});
     if (!ps.has_radii()) {
-        // Splat radius from the local spacing: the disc that holds k neighbours' share of area,
-        // r = d_k / sqrt(k) for d_k the distance to the k-th nearest neighbour.
-        using Tree =
-            nanoflann::KDTreeSingleIndexAdaptor<nanoflann::L2_Simple_Adaptor<float, CloudAdaptor>,
-                                                CloudAdaptor, 3, uint32_t>;
-        CloudAdaptor ad{ps.positions};
-        Tree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-        tree.buildIndex();
-        const size_t k = std::min<size_t>(8, ps.size());
-        ps.radii.resize(ps.size());
-        tbb::parallel_for(size_t(0), ps.size(), [&](size_t i) {
-            std::vector<uint32_t> idx(k + 1);
-            std::vector<float> d2(k + 1);
-            const float q[3] = {ps.positions[i].x, ps.positions[i].y, ps.positions[i].z};
-            const size_t got = tree.knnSearch(q, k + 1, idx.data(), d2.data());
-            const float dk = got > 1 ? std::sqrt(d2[got - 1]) : 0.f;
-            ps.radii[i] = got > 1 ? dk / std::sqrt(float(got - 1)) : 0.f;
-        });
+        estimate_radii(ps, {}, path.c_str());
+        lines.push_back("splat radii: estimated from the spacing of 8 same-surface neighbours");
     }
+    if (done) *done = std::move(lines);
     return ps;
 }
 

@@ -21,6 +21,7 @@
 #include "util/progress.h"
 #include "visibility/backend.h"
 #include "visibility/bresenham.h"
+#include "vmap/build_checks.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -294,6 +295,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
                                 params.max_batch_pairs));
 
     BuildStats st;
+    detail::prepare_points(points, st, source);
     VisibilityMap vm;
     vm.octree_params = params.octree;
     vm.visibility_params = vp;
@@ -467,6 +469,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
+    detail::check_facing(st);
     if (stats) *stats = st;
     return vm;
 }

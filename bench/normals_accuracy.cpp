@@ -1,0 +1,244 @@
+// normals_accuracy: how well raw-cloud normals and splat radii are recovered.
+//
+//   normals_accuracy [--objects-only] [--points N] [--orientation auto|outward|inward]
+//                    [--write-ply DIR] SCENE.json...
+//
+// Samples each scene (true normals and radii), strips both, re-estimates them as `vmap build`
+// does for a raw cloud, and prints one table row per scene: the share of the area (points are
+// area-uniform samples) whose estimated normal has the true one's sign, over all points, on the
+// objects (not the room), both also without hidden points (inside a solid or covered: below), and
+// on thin parts (points with a surface of the opposite normal within three splat radii), and the
+// median ratio of estimated to true splat radius on the same sets, beside the old estimate (d_8 /
+// sqrt 8 over all neighbours). --objects-only drops the room (a lone object or several).
+// --write-ply writes the stripped cloud, for `vmap build`.
+#include <fmt/format.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <nanoflann.hpp>
+#include <set>
+#include <string>
+#include <vector>
+
+#include "scene/cloud_knn.h"
+#include "vmap/error.h"
+#include "vmap/io.h"
+#include "vmap/normals.h"
+#include "vmap/scene.h"
+
+namespace {
+
+using namespace vmap;
+
+struct Options {
+    bool objects_only = false;
+    uint64_t points = 0;
+    Orientation orientation = Orientation::kAuto;
+    std::string write_dir;
+    std::vector<std::string> scenes;
+};
+
+bool is_room(const std::string& name) {
+    static const std::set<std::string> kRoom{"floor", "back", "ceiling", "left", "right", "light"};
+    return kRoom.count(name) > 0;
+}
+
+// Which surface each sample came from: the same sampling with the surface index as albedo.
+std::vector<uint32_t> surface_of(Scene sc) {
+    for (uint32_t s = 0; s < sc.surfaces.size(); ++s) sc.surfaces[s].albedo = {float(s), 0, 0};
+    const PointSet ps = sample_scene(sc);
+    std::vector<uint32_t> out(ps.size());
+    for (size_t i = 0; i < ps.size(); ++i) out[i] = uint32_t(ps.colors[i].x);
+    return out;
+}
+
+// Points with a sample of the same surface with (nearly) opposite true normal within three
+// splat radii: both faces of a plate or shell thinner than that.
+std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_t>& surf) {
+    const detail::CloudAdaptor ad{truth.positions};
+    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    std::vector<uint8_t> thin(truth.size(), 0);
+    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+        const Vec3 p = truth.positions[i];
+        const float r = 3 * truth.radii[i];
+        uint32_t idx[48];
+        float d2[48];
+        const float q[3] = {p.x, p.y, p.z};
+        const size_t got = tree.knnSearch(q, 48, idx, d2);
+        for (size_t j = 0; j < got; ++j)
+            if (d2[j] <= r * r && surf[idx[j]] == surf[i] &&
+                dot(truth.normals[idx[j]], truth.normals[i]) < -0.5f)
+                thin[i] = 1;
+    });
+    return thin;
+}
+
+// Points hidden in any case: inside a solid (the first sample disc along the true normal, among
+// the 64 nearest, shows its back) or covered (that disc lies closer than the point's splat
+// radius, as an object's flat base covers the floor it stands on). Their sign is arbitrary, so
+// the table also scores the area without them.
+std::vector<uint8_t> buried(const PointSet& truth) {
+    const detail::CloudAdaptor ad{truth.positions};
+    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    std::vector<uint8_t> out(truth.size(), 0);
+    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+        const Vec3 p = truth.positions[i], d = truth.normals[i];
+        uint32_t idx[64];
+        float d2[64];
+        const float q[3] = {p.x, p.y, p.z};
+        const size_t got = tree.knnSearch(q, 64, idx, d2);
+        float best = 1e30f;
+        bool back = false;
+        for (size_t j = 0; j < got; ++j) {
+            const uint32_t o = idx[j];
+            const Vec3 n = truth.normals[o];
+            const float den = dot(n, d);
+            if (o == i || std::fabs(den) < 1e-6f) continue;
+            const float t = dot(n, truth.positions[o] - p) / den;
+            if (!(t > 1e-5f && t < best)) continue;
+            const Vec3 h = p + d * t - truth.positions[o];
+            if (length2(h) > truth.radii[o] * truth.radii[o]) continue;
+            best = t;
+            back = den > 0;
+        }
+        out[i] = back || best < truth.radii[i];
+    });
+    return out;
+}
+
+// d_8 / sqrt(8) over all neighbours: the radii raw clouds got before estimate_radii.
+std::vector<float> old_radii(const std::vector<Vec3>& pts) {
+    const detail::CloudAdaptor ad{pts};
+    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    std::vector<float> r(pts.size());
+    tbb::parallel_for(size_t(0), pts.size(), [&](size_t i) {
+        uint32_t idx[9];
+        float d2[9];
+        const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
+        const size_t got = tree.knnSearch(q, 9, idx, d2);
+        r[i] = got > 1 ? std::sqrt(d2[got - 1]) / std::sqrt(float(got - 1)) : 0.f;
+    });
+    return r;
+}
+
+struct Tally {
+    uint64_t n = 0, right = 0;
+    std::vector<float> ratio, old_ratio;
+
+    void add(bool ok, float r, float old) {
+        ++n;
+        right += ok;
+        ratio.push_back(r);
+        old_ratio.push_back(old);
+    }
+    std::string signs() const {
+        return n ? fmt::format("{:.2f}%", 100.0 * double(right) / double(n)) : "-";
+    }
+    static std::string median(std::vector<float> v) {
+        if (v.empty()) return "-";
+        std::nth_element(v.begin(), v.begin() + v.size() / 2, v.end());
+        return fmt::format("{:.3f}", v[v.size() / 2]);
+    }
+};
+
+void run_scene(const std::string& path, const Options& o) {
+    Scene sc = load_scene(path);
+    if (o.objects_only)
+        std::erase_if(sc.surfaces, [](const SceneSurface& s) { return is_room(s.name); });
+    if (o.points) sc.points = o.points;
+    const PointSet truth = sample_scene(sc);
+    const std::vector<uint32_t> surf = surface_of(sc);
+    const std::vector<uint8_t> thin = thin_parts(truth, surf);
+    const std::vector<uint8_t> inside = buried(truth);
+
+    PointSet raw;
+    raw.positions = truth.positions;
+    if (!o.write_dir.empty())
+        write_ply(o.write_dir + "/" + sc.name + (o.objects_only ? "-objects" : "") + ".ply", raw);
+    const auto t0 = std::chrono::steady_clock::now();
+    NormalEstimationParams np;
+    np.orientation = o.orientation;
+    OrientationReport rep;
+    estimate_normals(raw, np, path.c_str(), &rep);
+    const auto t1 = std::chrono::steady_clock::now();
+    estimate_radii(raw);
+    const auto t2 = std::chrono::steady_clock::now();
+    const std::vector<float> old = old_radii(raw.positions);
+
+    Tally all, obj, thn, exposed, exposed_obj;
+    for (size_t i = 0; i < truth.size(); ++i) {
+        const bool ok = dot(raw.normals[i], truth.normals[i]) > 0;
+        const float r = raw.radii[i] / truth.radii[i], ro = old[i] / truth.radii[i];
+        all.add(ok, r, ro);
+        if (!is_room(sc.surfaces[surf[i]].name)) obj.add(ok, r, ro);
+        if (thin[i]) thn.add(ok, r, ro);
+        if (!inside[i]) exposed.add(ok, r, ro);
+        if (!inside[i] && !is_room(sc.surfaces[surf[i]].name)) exposed_obj.add(ok, r, ro);
+    }
+    const double sn = std::chrono::duration<double>(t1 - t0).count();
+    const double sr = std::chrono::duration<double>(t2 - t1).count();
+    fmt::print(
+        "| {} | {} | {} | {} | {} | {} | {} | {} / {} | {} / {} | {} / {} | {:.2f} s + {:.2f} s "
+        "|\n",
+        sc.name + (o.objects_only ? " (objects only)" : ""), truth.size(), all.signs(),
+        exposed.signs(), obj.signs(), exposed_obj.signs(),
+        thn.signs() + fmt::format(" ({})", thn.n), Tally::median(all.ratio),
+        Tally::median(all.old_ratio), Tally::median(obj.ratio), Tally::median(obj.old_ratio),
+        Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
+    fmt::print(stderr, "{}: {}; {} by space, {} by rays, {} by neighbours\n", sc.name, rep.method,
+               rep.by_space, rep.by_rays, rep.by_neighbours);
+}
+
+int usage() {
+    fmt::print(stderr,
+               "usage: normals_accuracy [--objects-only] [--points N] "
+               "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n");
+    return 2;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        const std::string a = argv[i];
+        const bool more = i + 1 < argc;
+        if (a == "--objects-only") {
+            o.objects_only = true;
+        } else if (a == "--points" && more) {
+            o.points = std::stoull(argv[++i]);
+        } else if (a == "--write-ply" && more) {
+            o.write_dir = argv[++i];
+        } else if (a == "--orientation" && more) {
+            const std::string v = argv[++i];
+            if (v == "auto")
+                o.orientation = Orientation::kAuto;
+            else if (v == "outward")
+                o.orientation = Orientation::kOutward;
+            else if (v == "inward")
+                o.orientation = Orientation::kInward;
+            else
+                return usage();
+        } else if (!a.empty() && a[0] == '-') {
+            return usage();
+        } else {
+            o.scenes.push_back(a);
+        }
+    }
+    if (o.scenes.empty()) return usage();
+    fmt::print(
+        "| cloud | points | signs right (area) | not hidden | on objects | objects, not hidden | "
+        "on thin parts (points) | radius ratio, new / old | on objects | on thin parts | time: "
+        "normals + radii |\n"
+        "|---|---|---|---|---|---|---|---|---|---|---|\n");
+    try {
+        for (const std::string& s : o.scenes) run_scene(s, o);
+    } catch (const vmap::Error& e) {
+        fmt::print(stderr, "normals_accuracy: error: {}\n", e.what());
+        return 1;
+    }
+    return 0;
+}

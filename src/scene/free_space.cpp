@@ -1,0 +1,555 @@
+// Free space on either side of a surface point: voxel regions and their nesting, then rays.
+// Everything parallel writes only its own point's slots; the flood fill and the region graph are
+// serial, so the result does not depend on the number of threads.
+
+#include "scene/free_space.h"
+
+#include <fmt/format.h>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <array>
+#include <atomic>
+#include <cmath>
+#include <deque>
+#include <limits>
+#include <map>
+#include <numeric>
+#include <optional>
+
+namespace vmap::detail {
+namespace {
+
+constexpr int kPad = 3;              // empty cells around the cloud: the outside wraps around it
+constexpr int kMaxCells = 240;       // per axis, so the grid stays below 16 M cells
+constexpr int kProbeSteps = 8;       // half-cell steps: out of the surface layer (1-2 cells)
+constexpr float kSpacing = 1.7725f;  // sample spacing / splat radius: sqrt(pi)
+
+struct Grid {
+    Vec3 lo;
+    float h = 1;
+    std::array<int, 3> n{};
+
+    size_t size() const { return size_t(n[0]) * n[1] * n[2]; }
+    size_t at(int x, int y, int z) const { return (size_t(z) * n[1] + y) * n[0] + x; }
+    // The cell holding p, or false when p is outside the grid.
+    bool cell(Vec3 p, std::array<int, 3>& c) const {
+        const float v[3] = {p.x - lo.x, p.y - lo.y, p.z - lo.z};
+        for (int a = 0; a < 3; ++a) {
+            const float f = std::floor(v[a] / h);
+            if (!(f >= 0 && f < float(n[a]))) return false;
+            c[a] = int(f);
+        }
+        return true;
+    }
+};
+
+struct Bounds {
+    Vec3 lo, hi;
+};
+
+Bounds bounds_of(const std::vector<Vec3>& pts) {
+    Bounds b{pts[0], pts[0]};
+    for (const Vec3& p : pts) {
+        b.lo = {std::min(b.lo.x, p.x), std::min(b.lo.y, p.y), std::min(b.lo.z, p.z)};
+        b.hi = {std::max(b.hi.x, p.x), std::max(b.hi.y, p.y), std::max(b.hi.z, p.z)};
+    }
+    return b;
+}
+
+float max_extent(const Bounds& b) {
+    return std::max({b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z});
+}
+
+float median_radius(const std::vector<float>& radii) {
+    std::vector<float> r;
+    for (float x : radii)
+        if (x > 0) r.push_back(x);
+    if (r.empty()) return 0;
+    std::nth_element(r.begin(), r.begin() + r.size() / 2, r.end());
+    return r[r.size() / 2];
+}
+
+Grid make_grid(const Bounds& b, float h, int pad) {
+    Grid g;
+    g.h = h;
+    g.lo = {b.lo.x - pad * h, b.lo.y - pad * h, b.lo.z - pad * h};
+    const float ext[3] = {b.hi.x - b.lo.x, b.hi.y - b.lo.y, b.hi.z - b.lo.z};
+    for (int a = 0; a < 3; ++a) g.n[a] = int(std::ceil(ext[a] / h)) + 1 + 2 * pad;
+    return g;
+}
+
+// Cells that the points' discs (three splat radii) pass through: a cell is marked when the
+// disc's plane cuts the cube (|n . (c - p)| <= h/2 (|nx| + |ny| + |nz|)) within the disc's
+// reach of the point (plus half a cell). A cell stays empty only if no sample lies within about
+// 3.9 splat radii of it along the surface: for random (Poisson) samples, 15 expected, so a hole
+// that would let the flood fill through a closed surface is a 3e-7 event per cell (at two radii
+// it was 2e-4: several leaks per surface of 20000 cells). The layer stays one to two cells
+// thick, so thin parts keep their insides.
+std::vector<uint8_t> occupancy(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                               const std::vector<float>& radii, float cap, const Grid& g) {
+    std::vector<uint8_t> occ(g.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1024), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            const Vec3 p = pts[i], n = normals[i];
+            const float r = std::min(3 * radii[i], cap);
+            const float slab = 0.5f * g.h * (std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z));
+            const float reach2 = (r + 0.5f * g.h) * (r + 0.5f * g.h);
+            int lo[3], hi[3];
+            const float pc[3] = {p.x - g.lo.x, p.y - g.lo.y, p.z - g.lo.z};
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::max(0, int(std::floor((pc[a] - r) / g.h)));
+                hi[a] = std::min(g.n[a] - 1, int(std::floor((pc[a] + r) / g.h)));
+            }
+            for (int z = lo[2]; z <= hi[2]; ++z)
+                for (int y = lo[1]; y <= hi[1]; ++y)
+                    for (int x = lo[0]; x <= hi[0]; ++x) {
+                        const Vec3 c{g.lo.x + (float(x) + 0.5f) * g.h,
+                                     g.lo.y + (float(y) + 0.5f) * g.h,
+                                     g.lo.z + (float(z) + 0.5f) * g.h};
+                        const Vec3 d = c - p;
+                        const float off = dot(n, d);
+                        if (std::fabs(off) > slab || length2(d) - off * off > reach2) continue;
+                        // Threads may mark one cell at once; each writes 1, so any order gives
+                        // the same.
+                        std::atomic_ref<uint8_t>(occ[g.at(x, y, z)])
+                            .store(1, std::memory_order_relaxed);
+                    }
+        }
+    });
+    return occ;
+}
+
+struct Regions {
+    std::vector<int32_t> label;   // per cell: region, or -1 where occupied
+    std::vector<uint64_t> cells;  // per region: its volume in cells inside the cloud's bounding
+                                  // box (the padding excluded); region 0 is the outside
+};
+
+// 6-connected flood fill of the empty cells, starting from a corner (empty: the grid is padded).
+Regions flood_fill(const Grid& g, const std::vector<uint8_t>& occ) {
+    auto inside = [&](int x, int y, int z) {
+        return x >= kPad && y >= kPad && z >= kPad && x < g.n[0] - kPad && y < g.n[1] - kPad &&
+               z < g.n[2] - kPad;
+    };
+    Regions r;
+    r.label.assign(g.size(), -2);
+    std::deque<std::array<int, 3>> queue;
+    auto fill = [&](int x0, int y0, int z0, int32_t id) {
+        uint64_t count = 0;
+        r.label[g.at(x0, y0, z0)] = id;
+        queue.push_back({x0, y0, z0});
+        while (!queue.empty()) {
+            const auto [x, y, z] = queue.front();
+            queue.pop_front();
+            count += inside(x, y, z);
+            const int nb[6][3] = {{x - 1, y, z}, {x + 1, y, z}, {x, y - 1, z},
+                                  {x, y + 1, z}, {x, y, z - 1}, {x, y, z + 1}};
+            for (const auto& c : nb) {
+                if (c[0] < 0 || c[1] < 0 || c[2] < 0 || c[0] >= g.n[0] || c[1] >= g.n[1] ||
+                    c[2] >= g.n[2])
+                    continue;
+                int32_t& l = r.label[g.at(c[0], c[1], c[2])];
+                if (l != -2 || occ[g.at(c[0], c[1], c[2])]) continue;
+                l = id;
+                queue.push_back({c[0], c[1], c[2]});
+            }
+        }
+        r.cells.push_back(count);
+    };
+    fill(0, 0, 0, 0);
+    for (int z = 0; z < g.n[2]; ++z)
+        for (int y = 0; y < g.n[1]; ++y)
+            for (int x = 0; x < g.n[0]; ++x) {
+                const size_t i = g.at(x, y, z);
+                if (occ[i]) {
+                    r.label[i] = -1;
+                } else if (r.label[i] == -2) {
+                    fill(x, y, z, int32_t(r.cells.size()));
+                }
+            }
+    return r;
+}
+
+// The region first reached stepping from p along d (half a cell at a time), 0 (the outside)
+// when the walk leaves the grid, -1 when it stays in occupied cells.
+int32_t probe(const Grid& g, const Regions& r, Vec3 p, Vec3 d) {
+    std::array<int, 3> c;
+    for (int s = 1; s <= kProbeSteps; ++s) {
+        if (!g.cell(p + d * (0.5f * g.h * float(s)), c)) return 0;
+        const int32_t l = r.label[g.at(c[0], c[1], c[2])];
+        if (l >= 0) return l;
+    }
+    return -1;
+}
+
+// Nesting depth of each region from the outside (breadth first over region pairs that enough
+// points separate; -1 unreached), and the points separating depth 1 from depth 2.
+struct Nesting {
+    std::vector<int> level;
+    uint64_t deep_points = 0;
+};
+
+Nesting nest(const std::vector<std::array<int32_t, 2>>& sides, size_t regions, size_t npts) {
+    std::map<std::pair<int32_t, int32_t>, uint64_t> weight;
+    for (const auto& s : sides)
+        if (s[0] >= 0 && s[1] >= 0 && s[0] != s[1])
+            ++weight[{std::min(s[0], s[1]), std::max(s[0], s[1])}];
+    // A link that only a handful of points make is a leak or a bubble, not a surface.
+    const uint64_t min_weight = std::max<uint64_t>(3, npts / 2000);
+    std::vector<std::vector<int32_t>> adj(regions);
+    for (const auto& [pair, w] : weight) {
+        if (w < min_weight) continue;
+        adj[pair.first].push_back(pair.second);
+        adj[pair.second].push_back(pair.first);
+    }
+    Nesting n;
+    n.level.assign(regions, -1);
+    n.level[0] = 0;
+    std::deque<int32_t> queue{0};
+    while (!queue.empty()) {
+        const int32_t a = queue.front();
+        queue.pop_front();
+        for (int32_t b : adj[a])
+            if (n.level[b] < 0) {
+                n.level[b] = n.level[a] + 1;
+                queue.push_back(b);
+            }
+    }
+    for (const auto& [pair, w] : weight) {
+        const int la = n.level[pair.first], lb = n.level[pair.second];
+        if (w >= min_weight && std::min(la, lb) == 1 && std::max(la, lb) == 2) n.deep_points += w;
+    }
+    return n;
+}
+
+// Which parity of nesting depth is free space, and the verdict in words. `faces` counts, per
+// region, the point sides that face it (its surface area, for area-uniform samples).
+int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>& faces, size_t npts,
+                std::string& method) {
+    // Something two levels deep, separated by at least 0.5% of the points, is a room with things
+    // in it or a shell around a cavity. Free space is roomy and solids are thin: the depth-1
+    // regions are free (a room's air) when their volume per area of surface is larger than that
+    // of the depth-2 regions (the things in it); otherwise (a shell's solid around a larger
+    // cavity) the outside and the cavities are. Without anything that deep, a lone object: its
+    // outside is free.
+    double vol[3] = {}, area[3] = {};
+    for (size_t i = 0; i < n.level.size(); ++i) {
+        if (n.level[i] == 1 || n.level[i] == 2) {
+            vol[n.level[i]] += double(r.cells[i]);
+            area[n.level[i]] += double(faces[i]);
+        }
+    }
+    const bool deep = n.deep_points * 200 >= npts && area[1] > 0 && area[2] > 0;
+    if (deep && vol[1] / area[1] > vol[2] / area[2]) {
+        method = "free space: an enclosure with things inside (room: walls face inward)";
+        return 1;
+    }
+    method = deep ? "free space: shells around cavities (surfaces face the outside and cavities)"
+                  : "free space: the outside (objects face outward)";
+    return 0;
+}
+
+// Splat discs in a uniform grid of cells, for first-hit rays.
+class DiscCaster {
+  public:
+    DiscCaster(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+               const std::vector<float>& radii, const Bounds& b, float r_med, float immediate)
+        : pts_(pts), normals_(normals), box_(b), immediate_(immediate), far_(8 * max_extent(b)) {
+        // Discs twice the splat radius: samples' discs of one radius cover a surface only once
+        // on average (gaps where rays would slip through); doubled, gaps are about 2%.
+        const float cap = 4 * r_med;
+        rad_.resize(pts.size());
+        for (size_t i = 0; i < pts.size(); ++i) rad_[i] = std::min(2 * radii[i], cap);
+        grid_ = make_grid(b, std::max(2 * cap, max_extent(b) / kMaxCells), 1);
+        fill();
+    }
+
+    // Mean distance rays from point i travel into the hemisphere of `side` before meeting
+    // another disc. A ray that meets none escapes into unbounded free space (it counts as
+    // travelling far), unless it leaves the bounding box at once: the outer side of a room's
+    // wall, which lies on the box, sees nothing.
+    struct Depth {
+        float mean = 0;  // over the rays
+        int hits = 0;    // rays that met a disc
+    };
+    Depth side_depth(uint32_t i, Vec3 side, float tmin) const {
+        Vec3 u = std::fabs(side.x) < 0.6f ? Vec3{1, 0, 0} : Vec3{0, 1, 0};
+        u = cross(side, u);
+        u = u / length(u);
+        const Vec3 v = cross(side, u);
+        // The axis and a ring of six at 40 degrees, the ring turned per point (golden angle)
+        // so neighbouring points do not sample the same directions.
+        const float ring = 0.6428f, axial = 0.7660f, turn = 2.39996f * float(i % 1024);
+        Depth out;
+        auto add = [&](Vec3 d) {
+            const float t = travel(i, d, tmin);
+            out.mean += t >= 0 ? t : escape(i, d);
+            out.hits += t >= 0;
+        };
+        add(side);
+        for (int k = 0; k < 6; ++k) {
+            const float a = turn + 1.0472f * float(k);
+            add(side * axial + u * (ring * std::cos(a)) + v * (ring * std::sin(a)));
+        }
+        out.mean /= 7;
+        return out;
+    }
+
+    // Distance from o along d to the cloud's bounding box.
+    float box_exit(Vec3 o, Vec3 d) const {
+        float t = std::numeric_limits<float>::max();
+        const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+        const float lo[3] = {box_.lo.x, box_.lo.y, box_.lo.z};
+        const float hi[3] = {box_.hi.x, box_.hi.y, box_.hi.z};
+        for (int a = 0; a < 3; ++a) {
+            if (dd[a] > 0) t = std::min(t, (hi[a] - oo[a]) / dd[a]);
+            if (dd[a] < 0) t = std::min(t, (lo[a] - oo[a]) / dd[a]);
+        }
+        return std::max(t, 0.0f);
+    }
+
+  private:
+    void fill() {
+        const size_t cells = grid_.size();
+        start_.assign(cells + 1, 0);
+        auto each_cell = [&](size_t i, auto&& f) {
+            const Vec3 p = pts_[i];
+            const float r = rad_[i];
+            std::array<int, 3> a{}, b{};
+            if (!grid_.cell(p - Vec3{r, r, r}, a) || !grid_.cell(p + Vec3{r, r, r}, b)) {
+                grid_.cell(p, a);
+                b = a;
+            }
+            for (int z = a[2]; z <= b[2]; ++z)
+                for (int y = a[1]; y <= b[1]; ++y)
+                    for (int x = a[0]; x <= b[0]; ++x) f(grid_.at(x, y, z));
+        };
+        for (size_t i = 0; i < pts_.size(); ++i) each_cell(i, [&](size_t c) { ++start_[c + 1]; });
+        std::partial_sum(start_.begin(), start_.end(), start_.begin());
+        items_.resize(start_[cells]);
+        std::vector<uint32_t> next(start_.begin(), start_.end() - 1);
+        for (size_t i = 0; i < pts_.size(); ++i)
+            each_cell(i, [&](size_t c) { items_[next[c]++] = uint32_t(i); });
+    }
+
+    // The nearest disc crossing in cell c beyond tmin and before best. A disc whose centre lies
+    // behind the point's tangent plane (seen from the ray's side) and within the disc's reach is
+    // a neighbour on a curve poking into the hemisphere, not something the point sees: on a
+    // tight curve (a tube a few radii thick) such discs would stop the rays on its outer side.
+    // The other face of a thin plate lies in front of the plane and stays.
+    float hit_in_cell(size_t c, uint32_t self, Vec3 o, Vec3 d, float tmin, float best) const {
+        const Vec3 own = dot(normals_[self], d) >= 0 ? normals_[self] : -normals_[self];
+        for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) {
+            const uint32_t j = items_[k];
+            if (j == self) continue;
+            const Vec3 to = pts_[j] - o;
+            const float off = dot(own, to), dist2 = length2(to);
+            if (off < 0 && dist2 < 4 * rad_[j] * rad_[j]) continue;
+            const Vec3 n = normals_[j];
+            const float den = dot(n, d);
+            if (std::fabs(den) < 1e-6f) continue;
+            const float t = dot(n, to) / den;
+            if (!(t > tmin && t < best)) continue;
+            if (length2(o + d * t - pts_[j]) <= rad_[j] * rad_[j]) best = t;
+        }
+        return best;
+    }
+
+    // How far an escaping ray counts as travelling.
+    float escape(uint32_t self, Vec3 d) const {
+        const float t_box = box_exit(pts_[self], d);
+        return t_box > immediate_ ? far_ : t_box;
+    }
+
+    // Distance to the first disc along the ray (3D DDA over the cells), or -1 if none.
+    float travel(uint32_t self, Vec3 d, float tmin) const {
+        const Vec3 o = pts_[self];
+        std::array<int, 3> c;
+        if (!grid_.cell(o, c)) return -1;
+        const float oo[3] = {o.x - grid_.lo.x, o.y - grid_.lo.y, o.z - grid_.lo.z};
+        const float dd[3] = {d.x, d.y, d.z};
+        int step[3];
+        float t_next[3], t_delta[3];
+        for (int a = 0; a < 3; ++a) {
+            step[a] = dd[a] > 0 ? 1 : -1;
+            const float inv = std::fabs(dd[a]) > 1e-12f ? 1.0f / std::fabs(dd[a]) : 1e30f;
+            const float edge = dd[a] > 0 ? float(c[a] + 1) * grid_.h : float(c[a]) * grid_.h;
+            t_next[a] = std::fabs(edge - oo[a]) * inv;
+            t_delta[a] = grid_.h * inv;
+        }
+        float best = std::numeric_limits<float>::max();
+        for (;;) {
+            best = hit_in_cell(grid_.at(c[0], c[1], c[2]), self, o, d, tmin, best);
+            const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2)
+                                                : (t_next[1] < t_next[2] ? 1 : 2);
+            if (best <= t_next[a]) return best;
+            c[a] += step[a];
+            if (c[a] < 0 || c[a] >= grid_.n[a])
+                return best < std::numeric_limits<float>::max() ? best : -1;
+            t_next[a] += t_delta[a];
+        }
+    }
+
+    const std::vector<Vec3>& pts_;
+    const std::vector<Vec3>& normals_;
+    Bounds box_;
+    float immediate_, far_;
+    std::vector<float> rad_;
+    Grid grid_;
+    std::vector<uint32_t> start_, items_;
+};
+
+// The normal axis (sign ignored) that the most sampled normals lie within 10 degrees of, among
+// up to 256 sampled normals that satisfy `usable`; nothing when none does.
+template <class Usable>
+std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usable) {
+    const size_t n = normals.size();
+    const size_t cand_step = std::max<size_t>(1, n / 256),
+                 vote_step = std::max<size_t>(1, n / 4096);
+    std::optional<Vec3> best;
+    size_t best_votes = 0;
+    for (size_t c = 0; c < n; c += cand_step) {
+        if (!usable(normals[c])) continue;
+        size_t votes = 0;
+        for (size_t i = 0; i < n; i += vote_step)
+            votes += std::fabs(dot(normals[c], normals[i])) > 0.985f;
+        if (votes > best_votes) {
+            best_votes = votes;
+            best = normals[c];
+        }
+    }
+    if (!best) return best;
+    // The mean of the normals near the winner (signs aligned): a fitted normal is a few degrees
+    // off, and the box must follow a wall to within a fraction of a cell over its length.
+    Vec3 sum{0, 0, 0};
+    for (const Vec3& m : normals) {
+        const float d = dot(m, *best);
+        if (std::fabs(d) > 0.985f) sum += d > 0 ? m : -m;
+    }
+    return sum / length(sum);
+}
+
+// A frame whose axes follow the two most common normal directions: a room's floor and walls. In
+// it the cloud's bounding box hugs a room's walls however the scan was turned, which the rays'
+// "leaves the box at once" relies on. Any frame does for clouds without such directions.
+std::array<Vec3, 3> room_frame(const std::vector<Vec3>& normals) {
+    const std::optional<Vec3> a = dominant_axis(normals, [](Vec3) { return true; });
+    if (!a) return {Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}};
+    const std::optional<Vec3> b0 =
+        dominant_axis(normals, [&](Vec3 c) { return std::fabs(dot(c, *a)) < 0.1f; });
+    Vec3 b = b0 ? *b0 : (std::fabs(a->x) < 0.6f ? Vec3{1, 0, 0} : Vec3{0, 1, 0});
+    b = b - *a * dot(b, *a);
+    b = b / length(b);
+    return {*a, b, cross(*a, b)};
+}
+
+std::vector<Vec3> in_frame(const std::vector<Vec3>& v, const std::array<Vec3, 3>& f) {
+    std::vector<Vec3> out(v.size());
+    for (size_t i = 0; i < v.size(); ++i)
+        out[i] = {dot(v[i], f[0]), dot(v[i], f[1]), dot(v[i], f[2])};
+    return out;
+}
+
+// Which region each point's two sides face, and which regions are free.
+struct FreeSpace {
+    std::vector<std::array<int32_t, 2>> sides;  // per point: the region along +n, along -n
+    Nesting nesting;
+    int parity = 0;  // regions of this nesting-depth parity are free
+    std::string method;
+
+    int state(int32_t region) const {  // 1 free, 0 solid, -1 unknown
+        if (region < 0 || nesting.level[region] < 0) return -1;
+        return nesting.level[region] % 2 == parity ? 1 : 0;
+    }
+};
+
+FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                     const std::vector<float>& radii, const Grid& g, float r_med) {
+    const Regions regions = flood_fill(g, occupancy(pts, normals, radii, 6 * r_med, g));
+    FreeSpace fs;
+    const size_t n = pts.size();
+    fs.sides.resize(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i)
+            fs.sides[i] = {probe(g, regions, pts[i], normals[i]),
+                           probe(g, regions, pts[i], -normals[i])};
+    });
+    fs.nesting = nest(fs.sides, regions.cells.size(), n);
+    std::vector<uint64_t> faces(regions.cells.size(), 0);
+    for (const auto& sd : fs.sides)
+        for (int32_t region : sd)
+            if (region >= 0) ++faces[region];
+    fs.parity = free_parity(fs.nesting, regions, faces, n, fs.method);
+    return fs;
+}
+
+// The side that the regions make free (+1 along n, -1 against it), or 0 for no verdict.
+// plus, minus: the sides' states (1 free, 0 solid, -1 occupied all along the probe).
+int space_side(int plus, int minus, float box_exit_free_side, float r_med) {
+    if ((plus == 1 && minus == 0) || (minus == 1 && plus == 0)) return plus == 1 ? 1 : -1;
+    // Free on one side, occupied cells all along the other (the inside of a part too thin for
+    // the grid, or a surface close to another): trusted unless the free side is the bounding
+    // box's face itself (a floor under an object standing on it).
+    if ((plus == 1 && minus < 0) || (minus == 1 && plus < 0))
+        return box_exit_free_side > 0.5f * r_med ? (plus == 1 ? 1 : -1) : 0;
+    // Solid on one side, occupied cells all along the other (a narrow gap, as under an object's
+    // belly near the floor): the gap is the free side.
+    if ((plus == 0 && minus < 0) || (minus == 0 && plus < 0)) return plus == 0 ? -1 : 1;
+    return 0;
+}
+
+// The side whose rays travel farther (+1, -1), or 0 without clear evidence.
+int ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med) {
+    // Skips the point's own neighbours' discs, which a ray leaves at once.
+    const float tmin = 0.5f * std::max(radius, 0.25f * r_med);
+    const DiscCaster::Depth p = caster.side_depth(i, n, tmin), m = caster.side_depth(i, -n, tmin);
+    // No surface seen on either side (a lone plane), or a weak preference (less than half as far
+    // again): no evidence, so the point takes its sign from its neighbours.
+    if (p.hits + m.hits == 0 ||
+        std::max(p.mean, m.mean) <= 1.5f * std::min(p.mean, m.mean) + 0.1f * r_med)
+        return 0;
+    return p.mean > m.mean ? 1 : -1;
+}
+
+}  // namespace
+
+SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>& world_normals,
+                     const std::vector<float>& radii) {
+    const std::array<Vec3, 3> frame = room_frame(world_normals);
+    const std::vector<Vec3> pts = in_frame(world_pts, frame);
+    const std::vector<Vec3> normals = in_frame(world_normals, frame);
+    const size_t n = pts.size();
+    SideVotes v;
+    v.sign.assign(n, 1);
+    v.cue.assign(n, SideCue::kNone);
+    const float r_med = median_radius(radii);
+    const Bounds b = bounds_of(pts);
+    if (n < 3 || !(r_med > 0) || !(max_extent(b) > 0)) {
+        v.method = "no free-space cue (no extent or no radii)";
+        return v;
+    }
+    const Grid g = make_grid(b, std::max(kSpacing * r_med, max_extent(b) / kMaxCells), kPad);
+    const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
+    v.method = fs.method;
+    const DiscCaster caster(pts, normals, radii, b, r_med, 2 * g.h);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const auto& range) {
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
+            const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
+            int side = space_side(plus, minus, caster.box_exit(pts[i], free_n), r_med);
+            SideCue cue = SideCue::kSpace;
+            if (side == 0) {
+                side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);
+                cue = SideCue::kRays;
+            }
+            if (side == 0) continue;
+            v.sign[i] = int8_t(side);
+            v.cue[i] = cue;
+        }
+    });
+    return v;
+}
+
+}  // namespace vmap::detail

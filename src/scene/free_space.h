@@ -1,0 +1,45 @@
+// Which side of each surface point is free space: the cue behind the default orientation
+// (docs/design.md, "Raw clouds: orientation").
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "vmap/vec.h"
+
+namespace vmap::detail {
+
+enum class SideCue : uint8_t {
+    kNone,   // no preference found: the sign comes from the neighbours
+    kSpace,  // one side lies in free space, the other in solid (voxel topology)
+    kRays,   // both sides free (or unknown): the side that sees surface farther away
+};
+
+struct SideVotes {
+    std::vector<int8_t> sign;  // +1: the normal as given points to the free side; -1: flip it
+    std::vector<SideCue> cue;
+    std::string method;  // the free-space verdict, in words
+};
+
+// For points with unoriented normals and splat radii (all of one length, radii > 0 somewhere),
+// in the frame of the two most common normal axes (a room's floor and walls):
+// 1. voxelise the points' discs (cell = one sample spacing; each disc marks the cells its plane
+//    cuts), flood-fill the empty cells into regions, the one touching the padded border being
+//    the outside;
+// 2. probe both sides of every point for the region it faces and link the two regions;
+// 3. number the regions by nesting depth from the outside (breadth first over those links):
+//    regions of one parity are free, the other solid. If regions lie two deep, depth 1 is free
+//    when its volume per face point is larger than depth 2's (a room's air around things; else
+//    a shell around a cavity); otherwise (a lone object, an open room) the outside is free;
+// 4. a point with one side free and the other solid takes the free side (also free against
+//    occupied cells, unless the free side is the bounding box's face, and solid against
+//    occupied cells: a narrow gap);
+// 5. otherwise cast rays into each hemisphere against the points' discs: the side whose rays
+//    travel clearly farther before meeting surface is free (a ray that escapes travels without
+//    end, unless it leaves the bounding box at once: a room's walls lie on the box and see
+//    nothing outside it). No surface seen, or no clear margin: no vote.
+SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                     const std::vector<float>& radii);
+
+}  // namespace vmap::detail

@@ -1,0 +1,38 @@
+// Input checks around build_vmap (src/vmap/build_checks.h).
+#include "vmap/build_checks.h"
+
+#include <fmt/format.h>
+
+#include "vmap/normals.h"
+
+namespace vmap::detail {
+
+void prepare_points(PointSet& points, BuildStats& stats, const std::string& source) {
+    const size_t n = points.size();
+    if (n < 2 || points.normals.size() != n) return;
+    if (!points.has_radii()) {
+        estimate_radii(points, {}, source.c_str());
+        stats.warnings.push_back(
+            "no splat radii given: estimated from the spacing of same-surface neighbours");
+    }
+    const double opposed = normal_inconsistency(points);
+    if (opposed > kInconsistent) {
+        stats.warnings.push_back(fmt::format(
+            "normals look inconsistent: {:.1f}% of neighbouring points on one surface have "
+            "opposite normals (consistent normals give about 0%); re-estimate them (vmap build "
+            "--normals estimate) or give the scanner position (--viewpoint)",
+            100.0 * opposed));
+    }
+}
+
+void check_facing(BuildStats& stats) {
+    const WorkCounters& w = stats.work;
+    if (w.pairs == 0 || double(w.facing_pairs) >= kFewFacing * double(w.pairs)) return;
+    stats.warnings.push_back(fmt::format(
+        "only {:.2f}% of leaf pairs face each other: the normals probably point away from the "
+        "scene (a room's walls facing out?); try --normals flip, --normals inward or "
+        "--viewpoint",
+        100.0 * double(w.facing_pairs) / double(w.pairs)));
+}
+
+}  // namespace vmap::detail

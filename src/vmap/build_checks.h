@@ -1,0 +1,24 @@
+// What build_vmap checks and fills in about its input points before and after the build:
+// missing splat radii, normals that look inconsistent, and leaf pairs that almost never face.
+#pragma once
+
+#include <string>
+
+#include "vmap/vmap.h"
+
+namespace vmap::detail {
+
+// Below this share of facing leaf pairs the normals most likely point away from the scene.
+constexpr double kFewFacing = 0.02;
+// Above this share of neighbouring same-surface pairs with opposite normals, the normals look
+// inconsistent (correct ones give about 0; independent random signs give 0.5).
+constexpr double kInconsistent = 0.05;
+
+// Estimates radii when points have none (estimate_radii) and checks the normals' consistency;
+// records both in stats.warnings. Points without normals are left to the octree to reject.
+void prepare_points(PointSet& points, BuildStats& stats, const std::string& source);
+
+// Adds a warning when fewer than kFewFacing of the leaf pairs face each other.
+void check_facing(BuildStats& stats);
+
+}  // namespace vmap::detail

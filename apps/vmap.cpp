@@ -66,6 +66,22 @@ void print_params(const VisibilityMap& vm) {
                v.facing_tol, v.parallel_tol);
 }
 
+// Leaf pairs walked against all, and the node pairs per octree level.
+void print_construction(const BuildStats& st) {
+    fmt::print("construction: {}: {} of {} leaf pairs walked ({:.1f}%), {} node pairs tested\n",
+               st.construction, st.leaf_pairs_walked, st.leaf_pairs,
+               100.0 * st.leaf_pairs_walked / std::max<uint64_t>(1, st.leaf_pairs),
+               st.node_pairs_tested);
+    if (st.construction != "nodes") return;
+    fmt::print("  level node-pairs     tested    visible  invisible      split     walked\n");
+    for (size_t l = 0; l < st.levels.size(); ++l) {
+        const ConstructionLevel& c = st.levels[l];
+        if (c.pairs == 0) continue;
+        fmt::print("  {:5d} {:10d} {:10d} {:10d} {:10d} {:10d} {:10d}\n", l, c.pairs, c.tested,
+                   c.visible, c.invisible, c.split, c.walked);
+    }
+}
+
 struct BuildOptions {
     std::string input;
     std::string output;
@@ -123,6 +139,7 @@ int run_build(BuildOptions& o) {
         "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
         double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
         double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
+    print_construction(st);
     if (o.count_links)
         fmt::print("links:      {} counted, not kept (as link ends they would take {:.2f} GiB)\n",
                    st.links, st.links * 8 / 1073741824.0);
@@ -134,7 +151,7 @@ int run_build(BuildOptions& o) {
         "time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
         st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
     fmt::print(
-        "            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+        "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
         "link arrays {:.3f} s; saving {:.3f} s\n",
         st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
     fmt::print(
@@ -225,6 +242,17 @@ int main(int argc, char** argv) {
         ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
         ->capture_default_str();
 
+    build
+        ->add_option("--construction", bo.params.construction,
+                     "nodes (decide node pairs whole where bounds prove it) or leaf-pairs (walk "
+                     "every leaf pair: the oracle; the same V-map)")
+        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+        ->capture_default_str();
+    build
+        ->add_option("--walk-pairs", bo.params.walk_pairs,
+                     "Undecided node pairs of at most this many leaf pairs are walked, not split "
+                     "(0: the backend's choice)")
+        ->capture_default_str();
     build->add_flag("--count-links", bo.count_links,
                     "Count the links without keeping them and write no file: sizes a V-map "
                     "too large for memory");

@@ -1,0 +1,268 @@
+// Node-pair decisions for V-map construction: for a node pair (A, B) (A before B in preorder, so
+// every leaf pair under it is oriented from a leaf of A to a leaf of B, as the builder walks it),
+// decide without walking a leaf pair that
+//   - every leaf pair under A x B passes leaf_pair_visible (all visible: one link), or
+//   - none does (none visible: nothing), or
+//   - neither can be shown (undecided: the builder splits the pair or walks its leaf pairs).
+// Both decisions are proofs about the float predicate of leaf_pair.h AS EVALUATED (rounding
+// included), so the V-map is the one the leaf-pair path builds, byte for byte. The bounds are
+// computed in double from the float inputs; the float predicate's own rounding is covered by an
+// absolute margin E (NodePairContext::margin), derived below. Shared by the CPU and CUDA drivers.
+//
+// Why E = 1e-5 M suffices, M >= |any coordinate of a centroid, disc or box| (u = 2^-24, vectors
+// as floats, "exact" = real arithmetic on those floats):
+//  (e1) d = fl(q - p) differs from q - p by <= u|q - p| <= 2uM a component. A float dot product
+//       n . v of a unit-length float normal with such a vector differs from the exact n . (q - p)
+//       by <= 14uM (component errors of v, three products and two sums).
+//  (e2) Facing, dot(n, d) > facing_tol * len with len = sqrtf(length2(d)): the float sides differ
+//       from n . (q - p) and tol |q - p| by <= 14uM and <= 10uM. So exact n.(q-p) - tol|q-p| > E
+//       makes the float test true, and < -E makes it false.
+//  (e3) Occluder x (centroid c, normal n, Delta) with t = fl(num / nd), num = fl(n . fl(c - p)),
+//       nd = fl(n . d): if the float test accepts x, the exact point y = p + t (q - p) (t the
+//       float value, eps < t < fl(1 - eps)) satisfies |n . (y - c)| <= |t||n.(q-p) - nd| +
+//       |t nd - num| + |num - n.(c-p)| <= 14uM + 4uM + 14uM (it lies within 32uM of x's plane),
+//       and fl(p + d t) lies within 9uM of y, so |y - c| <= Delta (1 + 3u) + 10uM. Such a y lies
+//       in x's content box (its disc's box) grown by 45uM + 3u Delta < E (Delta < 3M), plus the
+//       box's own shortfall: octree.cpp reaches Delta sqrt(1 - n_i^2) along axis i with the
+//       float normal, whose length is 1 +- 2u, where the unit normal needs sqrt(1 - n_i^2/|n|^2);
+//       the two differ by at most Delta sqrt(1e-6) (NodeBounds::pad). For a flagged x (no
+//       plane) the same holds with the sphere of radius Delta, which the box holds.
+//  (e4) So x is no actual occluder when (i) no exact segment point with t in [eps, fl(1-eps)]
+//       comes within E of x's box (the shaft test), or (ii) every such point is farther than E
+//       from x's plane (plane-side test), or (iii) the float t cannot lie in (eps, 1 - eps): with
+//       |n.(c-p)| <= h and |n.(q-p)| >= D > E, |t| <= (h + E)/(D - E)(1 + u); for x on B's side,
+//       n.(c-p) = n.(q-p) - n.(q-c) and |1 - t| <= h/D + 2.5 E/(D - E) + 2u with |n.(q-c)| <= h.
+//       Both are below eps when (h + 3E)/(D - E) + 1e-6 < eps (the flat test below).
+// Doubles carry relative errors near 1e-16, far inside E.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "visibility/leaf_pair.h"
+
+namespace vmap::detail {
+
+// Per node, over the leaves below it (computed by node_bounds()).
+struct NodeBounds {
+    Vec3 clo, chi;      // box of the leaf centroids (each centroid exactly inside)
+    Vec3 axis;          // normal cone axis; the two bounds below hold for this float vector
+    float chord = 0;    // >= |n_x - axis| for every leaf x below with a normal
+    float s_lo = 0;     // <= axis . c_x for every leaf centroid c_x below (exact real product)
+    float s_hi = 0;     // >= axis . c_x
+    float pad = 0;      // >= 1e-3 Delta_x for every leaf x below (the box shortfall, e3)
+    int32_t flat = 0;   // leaves below with a normal
+    int32_t ndeg = 0;   // leaves below flagged kLeafNormalDegenerate
+};
+
+// The bounds of every node of `t` (parallel over nodes).
+std::vector<NodeBounds> node_bounds(const Octree& t);
+
+enum class PairDecision : uint8_t { kUndecided = 0, kAllVisible = 1, kNoneVisible = 2 };
+
+// What the node tests read: the walk array, the bounds, the predicate's parameters.
+struct NodePairContext {
+    OctreeView tree;
+    const NodeBounds* nb = nullptr;
+    const int32_t* skip = nullptr;  // per node: end of its subtree (preorder)
+    VisibilityParams vp;
+    double margin = 0;  // E above; 0 disables every decision (all undecided)
+};
+
+// E for a tree whose root content box is `root`, or 0 where the analysis does not hold (float
+// products that could overflow or lose precision to underflow).
+inline double node_pair_margin(const Box& root) {
+    double m = 0;
+    for (float v : {root.lo.x, root.lo.y, root.lo.z, root.hi.x, root.hi.y, root.hi.z})
+        m = fabs(double(v)) > m ? fabs(double(v)) : m;
+    if (!(m > 1e-10 && m < 1e15)) return 0;
+    return 1e-5 * m;
+}
+
+struct D3 {
+    double x = 0, y = 0, z = 0;
+};
+VMAP_HD D3 d3(Vec3 v) { return {double(v.x), double(v.y), double(v.z)}; }
+VMAP_HD double dot3(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+VMAP_HD double norm3(D3 a) { return sqrt(dot3(a, a)); }
+VMAP_HD double min_d(double a, double b) { return a < b ? a : b; }
+VMAP_HD double max_d(double a, double b) { return a > b ? a : b; }
+
+// Box of differences q - p, q in [blo, bhi], p in [alo, ahi].
+struct DiffBox {
+    D3 lo, hi;
+};
+VMAP_HD DiffBox diff_box(const NodeBounds& A, const NodeBounds& B) {
+    return {{double(B.clo.x) - A.chi.x, double(B.clo.y) - A.chi.y, double(B.clo.z) - A.chi.z},
+            {double(B.chi.x) - A.clo.x, double(B.chi.y) - A.clo.y, double(B.chi.z) - A.clo.z}};
+}
+VMAP_HD D3 corner(const DiffBox& b, int k) {
+    return {(k & 1) ? b.hi.x : b.lo.x, (k & 2) ? b.hi.y : b.lo.y, (k & 4) ? b.hi.z : b.lo.z};
+}
+// min over y in the box of n . y - k |y|, k >= 0: a concave function, so the minimum is at a
+// corner.
+VMAP_HD double min_lin_minus_norm(const DiffBox& b, D3 n, double k) {
+    double m = 1e300;
+    for (int c = 0; c < 8; ++c) {
+        const D3 y = corner(b, c);
+        m = min_d(m, dot3(n, y) - k * norm3(y));
+    }
+    return m;
+}
+// Smallest |y| over the box.
+VMAP_HD double min_norm(const DiffBox& b) {
+    auto gap = [](double lo, double hi) { return lo > 0 ? lo : (hi < 0 ? -hi : 0.0); };
+    const D3 g{gap(b.lo.x, b.hi.x), gap(b.lo.y, b.hi.y), gap(b.lo.z, b.hi.z)};
+    return norm3(g);
+}
+// max over y in the box of n . y + k |y| for any real k (an upper bound when k < 0).
+VMAP_HD double max_lin_plus_norm(const DiffBox& b, D3 n, double k) {
+    double m = -1e300;
+    for (int c = 0; c < 8; ++c) {
+        const D3 y = corner(b, c);
+        m = max_d(m, dot3(n, y) + (k > 0 ? k * norm3(y) : 0.0));
+    }
+    return k > 0 ? m : m + k * min_norm(b);
+}
+
+// Does every leaf with a normal under node X (axis s * X.axis) face every difference y in the
+// box, i.e. n_x . y - tol |y| > E (e2)? Leaves without a normal face everything.
+VMAP_HD bool all_face(const NodeBounds& X, double s, const DiffBox& b, double tol, double E) {
+    if (X.flat == 0) return true;
+    const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
+    return min_lin_minus_norm(b, n, double(X.chord) + tol) > E;
+}
+// Does no leaf under X face any y in the box (n_x . y - tol |y| < -E; X has no flagged leaf)?
+VMAP_HD bool none_face(const NodeBounds& X, double s, const DiffBox& b, double tol, double E) {
+    if (X.ndeg > 0 || X.flat == 0) return false;
+    const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
+    return max_lin_plus_norm(b, n, double(X.chord) - tol) < -E;
+}
+
+// (e4 iii) for the leaves with a normal under X, X = A (s = 1) or X = B (s = -1): their planes
+// are crossed only at t < eps (A) or t > 1 - eps (B) by every segment from A's centroids to B's.
+VMAP_HD bool flat_end(const NodeBounds& X, double s, const DiffBox& b, double eps, double E) {
+    if (X.flat == 0) return false;
+    const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
+    const D3 diag{double(X.chi.x) - X.clo.x, double(X.chi.y) - X.clo.y,
+                  double(X.chi.z) - X.clo.z};
+    const double h = (double(X.s_hi) - X.s_lo) + double(X.chord) * norm3(diag);
+    const double D = min_lin_minus_norm(b, n, double(X.chord));
+    return D > 2 * E && (h + 3 * E) / (D - E) + 1e-6 < eps;
+}
+
+// The swept set of the segments from A's centroid box to B's at t in [t0, t1]: the union over t
+// of the boxes (1 - t) [alo, ahi] + t [blo, bhi].
+struct Shaft {
+    D3 alo, ahi, blo, bhi;
+    double t0, t1;
+};
+// Does the shaft meet box [lo - g, hi + g]? Per axis the moving box overlaps it for t in an
+// interval bounded by two linear inequalities v0 + s t <= 0; the test is exact up to double
+// rounding (far inside g).
+VMAP_HD bool shaft_meets_box(const Shaft& s, Vec3 lo, Vec3 hi, double g) {
+    double tmin = s.t0, tmax = s.t1;
+    const double al[3] = {s.alo.x, s.alo.y, s.alo.z}, ah[3] = {s.ahi.x, s.ahi.y, s.ahi.z};
+    const double bl[3] = {s.blo.x, s.blo.y, s.blo.z}, bh[3] = {s.bhi.x, s.bhi.y, s.bhi.z};
+    const double xl[3] = {lo.x - g, lo.y - g, lo.z - g}, xh[3] = {hi.x + g, hi.y + g, hi.z + g};
+    for (int i = 0; i < 3; ++i) {
+        // lower face al + t (bl - al) <= xh, upper face ah + t (bh - ah) >= xl
+        const double v0[2] = {al[i] - xh[i], xl[i] - ah[i]};
+        const double sl[2] = {bl[i] - al[i], ah[i] - bh[i]};
+        for (int k = 0; k < 2; ++k) {
+            if (sl[k] > 0)
+                tmax = min_d(tmax, -v0[k] / sl[k]);
+            else if (sl[k] < 0)
+                tmin = max_d(tmin, -v0[k] / sl[k]);
+            else if (v0[k] > 0)
+                return false;
+        }
+    }
+    return tmin <= tmax;
+}
+
+// (e4 ii) Is every shaft point farther than E from the plane of every leaf under X (X has no
+// flagged leaf)? n_x . (y - c_x) = axis . y - axis . c_x + (n_x - axis) . (y - c_x).
+VMAP_HD bool shaft_clear_of_planes(const Shaft& s, const NodeBounds& X, double E) {
+    if (X.ndeg > 0 || X.flat == 0) return false;
+    const D3 n = d3(X.axis);
+    auto support = [&](D3 lo, D3 hi, double sign) {  // max of sign * n . y over the box
+        const double v[3] = {n.x * sign, n.y * sign, n.z * sign};
+        const double l[3] = {lo.x, lo.y, lo.z}, h[3] = {hi.x, hi.y, hi.z};
+        double r = 0;
+        for (int i = 0; i < 3; ++i) r += max_d(v[i] * l[i], v[i] * h[i]);
+        return r;
+    };
+    // n . y over the shaft is linear in t on each box's support: extreme at t0 or t1.
+    double lo = 1e300, hi = -1e300;
+    for (double t : {s.t0, s.t1}) {
+        const double mn = (1 - t) * -support(s.alo, s.ahi, -1) + t * -support(s.blo, s.bhi, -1);
+        const double mx = (1 - t) * support(s.alo, s.ahi, 1) + t * support(s.blo, s.bhi, 1);
+        lo = min_d(lo, mn);
+        hi = max_d(hi, mx);
+    }
+    // Farthest distance between the shaft's bounding box and X's centroid box.
+    const D3 a{min_d(s.alo.x, s.blo.x), min_d(s.alo.y, s.blo.y), min_d(s.alo.z, s.blo.z)};
+    const D3 b{max_d(s.ahi.x, s.bhi.x), max_d(s.ahi.y, s.bhi.y), max_d(s.ahi.z, s.bhi.z)};
+    const D3 far{max_d(b.x - X.clo.x, X.chi.x - a.x), max_d(b.y - X.clo.y, X.chi.y - a.y),
+                 max_d(b.z - X.clo.z, X.chi.z - a.z)};
+    const double wobble = double(X.chord) * norm3(far);
+    return lo - X.s_hi - wobble > E || hi - X.s_lo + wobble < -E;
+}
+
+// Counts the leaves that may be actual occluders of some segment from A's centroids to B's
+// (e4), stopping at `limit`. Walks the preorder tree like leaf_pair_visible, pruning a subtree
+// when the shaft misses its box, when it lies under A or B with that end flat, or when the shaft
+// clears all its planes. A or B itself, when a leaf, is the pair's own end and never counts.
+template <class Counters>
+VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_t B, bool flat_a,
+                                     bool flat_b, int limit, Counters* wc) {
+    const NodeBounds& na = c.nb[A];
+    const NodeBounds& nbb = c.nb[B];
+    const Shaft s{d3(na.clo), d3(na.chi), d3(nbb.clo), d3(nbb.chi), double(c.vp.eps),
+                  double(1.f - c.vp.eps)};
+    const double E = c.margin;
+    const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
+    int count = 0;
+    int32_t n = 0;
+    while (n < c.tree.num_nodes) {
+        wc->shaft_node_tests++;
+        const WalkNode w = c.tree.walk[n];
+        const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
+        const NodeBounds& x = c.nb[n];
+        if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) || (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
+            (in_b && (b_leaf || (flat_b && x.ndeg == 0))) || shaft_clear_of_planes(s, x, E)) {
+            n = w.skip;
+            continue;
+        }
+        if (w.leaf >= 0 && ++count >= limit) return count;
+        ++n;
+    }
+    return count;
+}
+
+// The decision for node pair (A, B), A before B in preorder (see the top of this file).
+template <class Counters>
+VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32_t B,
+                                      Counters* wc) {
+    if (!(c.margin > 0)) return PairDecision::kUndecided;
+    const NodeBounds& na = c.nb[A];
+    const NodeBounds& nbb = c.nb[B];
+    const DiffBox db = diff_box(na, nbb);
+    const double E = c.margin, tol = c.vp.facing_tol;
+    // Facing fails for every pair when it fails for every leaf of one end.
+    if (none_face(na, 1, db, tol, E) || none_face(nbb, -1, db, tol, E))
+        return PairDecision::kNoneVisible;
+    // All visible: a direction to see along (len > 0 in float: |q - p| > E), every leaf of A
+    // faces every leaf of B and back, and fewer than K leaves may occlude any segment.
+    if (!(min_norm(db) > E)) return PairDecision::kUndecided;
+    if (!all_face(na, 1, db, tol, E) || !all_face(nbb, -1, db, tol, E))
+        return PairDecision::kUndecided;
+    const double eps = c.vp.eps;
+    const bool flat_a = flat_end(na, 1, db, eps, E), flat_b = flat_end(nbb, -1, db, eps, E);
+    if (count_possible_occluders(c, A, B, flat_a, flat_b, c.vp.K, wc) < c.vp.K)
+        return PairDecision::kAllVisible;
+    return PairDecision::kUndecided;
+}
+
+}  // namespace vmap::detail

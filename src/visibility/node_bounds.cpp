@@ -25,6 +25,7 @@ NodeBounds bounds_of(const Octree& t, int32_t n) {
     NodeBounds b;
     const int32_t l0 = t.leaf_begin[n], l1 = t.leaf_end[n];
     double sx = 0, sy = 0, sz = 0;
+    double cs[6][3] = {};
     Vec3 first{0, 0, 1};
     b.clo = b.chi = t.leaves[l0].centroid;
     for (int32_t l = l0; l < l1; ++l) {
@@ -39,6 +40,18 @@ NodeBounds bounds_of(const Octree& t, int32_t n) {
         }
         if (b.flat++ == 0) first = d.normal;
         sx += d.normal.x, sy += d.normal.y, sz += d.normal.z;
+        const int k = cone_of(d.normal);
+        NodeBounds::Cone& cn = b.cone[k];
+        if (!(b.cones >> k & 1)) cn.axis = d.normal, cn.clo = cn.chi = c;  // axis if they cancel
+        b.cones |= 1u << k;
+        cn.clo = {std::fmin(cn.clo.x, c.x), std::fmin(cn.clo.y, c.y), std::fmin(cn.clo.z, c.z)};
+        cn.chi = {std::fmax(cn.chi.x, c.x), std::fmax(cn.chi.y, c.y), std::fmax(cn.chi.z, c.z)};
+        cs[k][0] += d.normal.x, cs[k][1] += d.normal.y, cs[k][2] += d.normal.z;
+    }
+    double cone_chord[6] = {};
+    for (int k = 0; k < 6; ++k) {
+        const double l = std::sqrt(cs[k][0] * cs[k][0] + cs[k][1] * cs[k][1] + cs[k][2] * cs[k][2]);
+        if (l > 1e-3) b.cone[k].axis = {float(cs[k][0] / l), float(cs[k][1] / l), float(cs[k][2] / l)};
     }
     const double len = std::sqrt(sx * sx + sy * sy + sz * sz);
     // Any float vector serves as the axis (the bounds hold for it as stored); the mean normal
@@ -57,7 +70,11 @@ NodeBounds bounds_of(const Octree& t, int32_t n) {
         if (d.flags & kLeafNormalDegenerate) continue;
         const D3 nv = d3(d.normal);
         chord = std::fmax(chord, norm3({nv.x - ax.x, nv.y - ax.y, nv.z - ax.z}));
+        const int k = cone_of(d.normal);
+        const D3 ck = d3(b.cone[k].axis);
+        cone_chord[k] = std::fmax(cone_chord[k], norm3({nv.x - ck.x, nv.y - ck.y, nv.z - ck.z}));
     }
+    for (int k = 0; k < 6; ++k) b.cone[k].chord = round_up(cone_chord[k], 1e-12);
     // Doubles err by a few 1e-16 relative: widen by 1e-12 of the magnitudes before rounding.
     b.chord = round_up(chord, 1e-12);
     b.s_lo = round_down(lo, 1e-12 * scale);

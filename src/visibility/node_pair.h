@@ -32,7 +32,9 @@
 //       from x's plane (plane-side test), or (iii) the float t cannot lie in (eps, 1 - eps): with
 //       |n.(c-p)| <= h and |n.(q-p)| >= D > E, |t| <= (h + E)/(D - E)(1 + u); for x on B's side,
 //       n.(c-p) = n.(q-p) - n.(q-c) and |1 - t| <= h/D + 2.5 E/(D - E) + 2u with |n.(q-c)| <= h.
-//       Both are below eps when (h + 3E)/(D - E) + 1e-6 < eps (the flat test below).
+//       Both are below eps when (h + 3E)/(D - E) + 1e-6 < eps (the flat test below); or (iv)
+//       every shaft point is farther than E from x's disc (within 32uM of the plane and within
+//       Delta + 3u Delta + 10uM of c means within E of the disc).
 // Doubles carry relative errors near 1e-16, far inside E.
 #pragma once
 
@@ -53,7 +55,26 @@ struct NodeBounds {
     float pad = 0;      // >= 1e-3 Delta_x for every leaf x below (the box shortfall, e3)
     int32_t flat = 0;   // leaves below with a normal
     int32_t ndeg = 0;   // leaves below flagged kLeafNormalDegenerate
+    // The same leaves split by the dominant axis and sign of their normal, into up to six
+    // cones (bit k of `cones`: cone k holds a leaf), each with the box of its leaves'
+    // centroids: a node holding two walls of a room has two tight cones where one would span
+    // 90 degrees, each over its own wall. For the facing tests.
+    struct Cone {
+        Vec3 axis;
+        float chord = 0;  // >= |n_x - axis| for the cone's leaves
+        Vec3 clo, chi;    // box of the cone's leaf centroids
+    };
+    Cone cone[6];
+    uint32_t cones = 0;
 };
+
+// The cone a normal falls in: its largest component's axis (0, 1, 2) and sign (+3 if negative).
+VMAP_HD int cone_of(Vec3 n) {
+    const float ax = fabsf(n.x), ay = fabsf(n.y), az = fabsf(n.z);
+    if (ax >= ay && ax >= az) return n.x >= 0 ? 0 : 3;
+    if (ay >= az) return n.y >= 0 ? 1 : 4;
+    return n.z >= 0 ? 2 : 5;
+}
 
 // The bounds of every node of `t` (parallel over nodes).
 std::vector<NodeBounds> node_bounds(const Octree& t);
@@ -109,6 +130,24 @@ VMAP_HD double min_lin_minus_norm(const DiffBox& b, D3 n, double k) {
     }
     return m;
 }
+// The same over the box's corners with their lengths computed once.
+struct Corners {
+    D3 y[8];
+    double len[8];
+};
+VMAP_HD Corners corners_of(const DiffBox& b) {
+    Corners c;
+    for (int k = 0; k < 8; ++k) {
+        c.y[k] = corner(b, k);
+        c.len[k] = norm3(c.y[k]);
+    }
+    return c;
+}
+VMAP_HD double min_lin_minus_norm(const Corners& c, D3 n, double k) {
+    double m = 1e300;
+    for (int i = 0; i < 8; ++i) m = min_d(m, dot3(n, c.y[i]) - k * c.len[i]);
+    return m;
+}
 // Smallest |y| over the box.
 VMAP_HD double min_norm(const DiffBox& b) {
     auto gap = [](double lo, double hi) { return lo > 0 ? lo : (hi < 0 ? -hi : 0.0); };
@@ -125,18 +164,44 @@ VMAP_HD double max_lin_plus_norm(const DiffBox& b, D3 n, double k) {
     return k > 0 ? m : m + k * min_norm(b);
 }
 
-// Does every leaf with a normal under node X (axis s * X.axis) face every difference y in the
-// box, i.e. n_x . y - tol |y| > E (e2)? Leaves without a normal face everything.
-VMAP_HD bool all_face(const NodeBounds& X, double s, const DiffBox& b, double tol, double E) {
-    if (X.flat == 0) return true;
-    const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
-    return min_lin_minus_norm(b, n, double(X.chord) + tol) > E;
+// The differences q - p from cone k of A (s = 1: p in the cone's box, q in B's box) or to cone
+// k of B (s = -1: p in A's box, q in the cone's box).
+VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s, int k) {
+    Vec3 alo = A.clo, ahi = A.chi, blo = B.clo, bhi = B.chi;
+    if (s > 0)
+        alo = A.cone[k].clo, ahi = A.cone[k].chi;
+    else
+        blo = B.cone[k].clo, bhi = B.cone[k].chi;
+    return {{double(blo.x) - ahi.x, double(blo.y) - ahi.y, double(blo.z) - ahi.z},
+            {double(bhi.x) - alo.x, double(bhi.y) - alo.y, double(bhi.z) - alo.z}};
 }
-// Does no leaf under X face any y in the box (n_x . y - tol |y| < -E; X has no flagged leaf)?
-VMAP_HD bool none_face(const NodeBounds& X, double s, const DiffBox& b, double tol, double E) {
+// Does every leaf with a normal under X (X = A with s = 1, X = B with s = -1; direction s n_x)
+// face every leaf at the other end, n_x . y - tol |y| > E (e2)? Cone by cone. Leaves without a
+// normal face everything.
+VMAP_HD bool all_face(const NodeBounds& A, const NodeBounds& B, double s, double tol, double E) {
+    const NodeBounds& X = s > 0 ? A : B;
+    for (int k = 0; k < 6; ++k) {
+        if (!(X.cones >> k & 1)) continue;
+        const Vec3 a = X.cone[k].axis;
+        const Corners c = corners_of(cone_diff_box(A, B, s, k));
+        if (!(min_lin_minus_norm(c, D3{s * a.x, s * a.y, s * a.z}, X.cone[k].chord + tol) > E))
+            return false;
+    }
+    return true;
+}
+// Does no leaf under X face any leaf at the other end (n_x . y - tol |y| < -E, cone by cone;
+// X has no flagged leaf)?
+VMAP_HD bool none_face(const NodeBounds& A, const NodeBounds& B, double s, double tol, double E) {
+    const NodeBounds& X = s > 0 ? A : B;
     if (X.ndeg > 0 || X.flat == 0) return false;
-    const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
-    return max_lin_plus_norm(b, n, double(X.chord) - tol) < -E;
+    for (int k = 0; k < 6; ++k) {
+        if (!(X.cones >> k & 1)) continue;
+        const Vec3 a = X.cone[k].axis;
+        const DiffBox b = cone_diff_box(A, B, s, k);
+        if (!(max_lin_plus_norm(b, D3{s * a.x, s * a.y, s * a.z}, X.cone[k].chord - tol) < -E))
+            return false;
+    }
+    return true;
 }
 
 // (e4 iii) for the leaves with a normal under X, X = A (s = 1) or X = B (s = -1): their planes
@@ -210,6 +275,46 @@ VMAP_HD bool shaft_clear_of_planes(const Shaft& s, const NodeBounds& X, double E
     return lo - X.s_hi - wobble > E || hi - X.s_lo + wobble < -E;
 }
 
+// (e4 iv) Is every shaft point farther than E from leaf x's disc (its ball when flagged)? The
+// shaft lies within w = max(rA, rB) of its central segment y(t) = p0 + t d0 (at the same t), and
+// for a point of that segment: plane distance = alpha |t - t*| (t* where it crosses the plane),
+// in-plane distance from c >= Q0 - beta |t - t*| (Q0 at t*), so its distance to the disc is at
+// least max(alpha s, Q - beta s), s = |t - t*|, Q = Q0 - Delta; minimised over s >= the distance
+// from t* to [t0, t1].
+VMAP_HD bool shaft_clear_of_disc(const Shaft& s, const LeafDisc& x, double E) {
+    const D3 p0{(s.alo.x + s.ahi.x) / 2, (s.alo.y + s.ahi.y) / 2, (s.alo.z + s.ahi.z) / 2};
+    const D3 q0{(s.blo.x + s.bhi.x) / 2, (s.blo.y + s.bhi.y) / 2, (s.blo.z + s.bhi.z) / 2};
+    const D3 d0{q0.x - p0.x, q0.y - p0.y, q0.z - p0.z};
+    const D3 ra{s.ahi.x - p0.x, s.ahi.y - p0.y, s.ahi.z - p0.z};
+    const D3 rb{s.bhi.x - q0.x, s.bhi.y - q0.y, s.bhi.z - q0.z};
+    const double w = max_d(norm3(ra), norm3(rb)) * (1 + 1e-12);
+    const D3 c = d3(x.centroid), v{p0.x - c.x, p0.y - c.y, p0.z - c.z};
+    const double delta = double(x.delta);
+    if (x.flags & kLeafNormalDegenerate) {  // distance from c to the segment, minus Delta
+        const double dd = dot3(d0, d0);
+        double t = dd > 0 ? -dot3(v, d0) / dd : s.t0;
+        t = min_d(max_d(t, s.t0), s.t1);
+        const D3 y{v.x + d0.x * t, v.y + d0.y * t, v.z + d0.z * t};
+        return norm3(y) * (1 - 1e-12) - delta - w > E;
+    }
+    const double nl = norm3(d3(x.normal));
+    if (!(nl > 0)) return false;
+    const D3 n{x.normal.x / nl, x.normal.y / nl, x.normal.z / nl};
+    const double nd = dot3(n, d0), nv = dot3(n, v);
+    const double alpha = fabs(nd);
+    const double beta = sqrt(max_d(0.0, dot3(d0, d0) - nd * nd));
+    if (!(alpha > 1e-9 * norm3(d0))) return fabs(nv) * (1 - 1e-12) - w > E;
+    const double ts = -nv / nd;
+    const D3 ys{v.x + d0.x * ts, v.y + d0.y * ts, v.z + d0.z * ts};  // y(t*) - c, in the plane
+    const double q = norm3(ys) - delta;
+    const double smin = ts < s.t0 ? s.t0 - ts : (ts > s.t1 ? ts - s.t1 : 0.0);
+    double lb = alpha * smin;
+    if (q - beta * smin > lb) {  // the minimum of the max lies beyond smin, where both meet
+        lb = alpha * q / (alpha + beta);
+    }
+    return lb * (1 - 1e-9) - w > E;
+}
+
 // Counts the leaves that may be actual occluders of some segment from A's centroids to B's
 // (e4), stopping at `limit`. Walks the preorder tree like leaf_pair_visible, pruning a subtree
 // when the shaft misses its box, when it lies under A or B with that end flat, or when the shaft
@@ -235,7 +340,8 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
             n = w.skip;
             continue;
         }
-        if (w.leaf >= 0 && ++count >= limit) return count;
+        if (w.leaf >= 0 && !shaft_clear_of_disc(s, c.tree.leaves[w.leaf], E) && ++count >= limit)
+            return count;
         ++n;
     }
     return count;
@@ -251,12 +357,12 @@ VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32
     const DiffBox db = diff_box(na, nbb);
     const double E = c.margin, tol = c.vp.facing_tol;
     // Facing fails for every pair when it fails for every leaf of one end.
-    if (none_face(na, 1, db, tol, E) || none_face(nbb, -1, db, tol, E))
+    if (none_face(na, nbb, 1, tol, E) || none_face(na, nbb, -1, tol, E))
         return PairDecision::kNoneVisible;
     // All visible: a direction to see along (len > 0 in float: |q - p| > E), every leaf of A
     // faces every leaf of B and back, and fewer than K leaves may occlude any segment.
     if (!(min_norm(db) > E)) return PairDecision::kUndecided;
-    if (!all_face(na, 1, db, tol, E) || !all_face(nbb, -1, db, tol, E))
+    if (!all_face(na, nbb, 1, tol, E) || !all_face(na, nbb, -1, tol, E))
         return PairDecision::kUndecided;
     const double eps = c.vp.eps;
     const bool flat_a = flat_end(na, 1, db, eps, E), flat_b = flat_end(nbb, -1, db, eps, E);

@@ -292,6 +292,9 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     benchc->add_option("--points", bo2.points, "Override every scene's point count");
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
+    benchc->add_option("--construction", bo2.construction, "nodes or leaf-pairs (as for build)")
+        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+        ->capture_default_str();
 
     auto* validate = cli::add_validate_command(app);
 

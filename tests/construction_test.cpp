@@ -199,8 +199,9 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
         const Octree& t = vm.octree;
         const auto m = test::brute_matrix(vm);
         const auto nb = detail::node_bounds(t);
-        const detail::NodePairContext c{t.view(), nb.data(), t.skip.data(), vm.visibility_params,
-                                        detail::node_pair_margin(t.boxes[0])};
+        const detail::NodePairContext c{t.view(),     nb.nodes.data(),
+                                        nb.cones.data(), t.skip.data(),
+                                        vm.visibility_params, detail::node_pair_margin(t.boxes[0])};
         struct {
             uint64_t shaft_node_tests = 0;
         } wc;

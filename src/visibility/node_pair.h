@@ -55,29 +55,33 @@ struct NodeBounds {
     float pad = 0;      // >= 1e-3 Delta_x for every leaf x below (the box shortfall, e3)
     int32_t flat = 0;   // leaves below with a normal
     int32_t ndeg = 0;   // leaves below flagged kLeafNormalDegenerate
-    // The same leaves split by the dominant axis and sign of their normal, into up to six
-    // cones (bit k of `cones`: cone k holds a leaf), each with the box of its leaves'
-    // centroids: a node holding two walls of a room has two tight cones where one would span
-    // 90 degrees, each over its own wall. For the facing tests.
-    struct Cone {
-        Vec3 axis;
-        float chord = 0;  // >= |n_x - axis| for the cone's leaves
-        Vec3 clo, chi;    // box of the cone's leaf centroids
-    };
-    Cone cone[6];
-    uint32_t cones = 0;
+    // The same leaves binned by the direction of their normal (cone_of: 26 bins, the faces,
+    // edges and corners of a cube), each bin a cone with the box of its leaves' centroids, in
+    // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count): a node holding two walls of a
+    // room and the leaves along their edge has three tight cones where one would span 90
+    // degrees, each over its own part. For the facing tests.
+    uint32_t cone_begin = 0, cone_count = 0;
 };
 
-// The cone a normal falls in: its largest component's axis (0, 1, 2) and sign (+3 if negative).
+struct NormalCone {
+    Vec3 axis;
+    float chord = 0;  // >= |n_x - axis| for the cone's leaves
+    Vec3 clo, chi;    // box of the cone's leaf centroids
+};
+
+struct NodeBoundsSet {
+    std::vector<NodeBounds> nodes;
+    std::vector<NormalCone> cones;
+};
+
+// The bin of a normal: each component below -0.38, between, or above 0.38 (sin 22.5 degrees).
 VMAP_HD int cone_of(Vec3 n) {
-    const float ax = fabsf(n.x), ay = fabsf(n.y), az = fabsf(n.z);
-    if (ax >= ay && ax >= az) return n.x >= 0 ? 0 : 3;
-    if (ay >= az) return n.y >= 0 ? 1 : 4;
-    return n.z >= 0 ? 2 : 5;
+    auto t = [](float v) { return v < -0.38f ? 0 : (v > 0.38f ? 2 : 1); };
+    return t(n.x) + 3 * t(n.y) + 9 * t(n.z);
 }
 
 // The bounds of every node of `t` (parallel over nodes).
-std::vector<NodeBounds> node_bounds(const Octree& t);
+NodeBoundsSet node_bounds(const Octree& t);
 
 enum class PairDecision : uint8_t { kUndecided = 0, kAllVisible = 1, kNoneVisible = 2 };
 
@@ -85,6 +89,7 @@ enum class PairDecision : uint8_t { kUndecided = 0, kAllVisible = 1, kNoneVisibl
 struct NodePairContext {
     OctreeView tree;
     const NodeBounds* nb = nullptr;
+    const NormalCone* cones = nullptr;
     const int32_t* skip = nullptr;  // per node: end of its subtree (preorder)
     VisibilityParams vp;
     double margin = 0;  // E above; 0 disables every decision (all undecided)
@@ -164,42 +169,42 @@ VMAP_HD double max_lin_plus_norm(const DiffBox& b, D3 n, double k) {
     return k > 0 ? m : m + k * min_norm(b);
 }
 
-// The differences q - p from cone k of A (s = 1: p in the cone's box, q in B's box) or to cone
-// k of B (s = -1: p in A's box, q in the cone's box).
-VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s, int k) {
+// The differences q - p from a cone of A (s = 1: p in the cone's box, q in B's box) or to a
+// cone of B (s = -1: p in A's box, q in the cone's box).
+VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s,
+                              const NormalCone& k) {
     Vec3 alo = A.clo, ahi = A.chi, blo = B.clo, bhi = B.chi;
     if (s > 0)
-        alo = A.cone[k].clo, ahi = A.cone[k].chi;
+        alo = k.clo, ahi = k.chi;
     else
-        blo = B.cone[k].clo, bhi = B.cone[k].chi;
+        blo = k.clo, bhi = k.chi;
     return {{double(blo.x) - ahi.x, double(blo.y) - ahi.y, double(blo.z) - ahi.z},
             {double(bhi.x) - alo.x, double(bhi.y) - alo.y, double(bhi.z) - alo.z}};
 }
 // Does every leaf with a normal under X (X = A with s = 1, X = B with s = -1; direction s n_x)
 // face every leaf at the other end, n_x . y - tol |y| > E (e2)? Cone by cone. Leaves without a
 // normal face everything.
-VMAP_HD bool all_face(const NodeBounds& A, const NodeBounds& B, double s, double tol, double E) {
+VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B,
+                      double s, double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
-    for (int k = 0; k < 6; ++k) {
-        if (!(X.cones >> k & 1)) continue;
-        const Vec3 a = X.cone[k].axis;
+    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
+        const NormalCone& k = cones[i];
         const Corners c = corners_of(cone_diff_box(A, B, s, k));
-        if (!(min_lin_minus_norm(c, D3{s * a.x, s * a.y, s * a.z}, X.cone[k].chord + tol) > E))
-            return false;
+        const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
+        if (!(min_lin_minus_norm(c, n, k.chord + tol) > E)) return false;
     }
     return true;
 }
 // Does no leaf under X face any leaf at the other end (n_x . y - tol |y| < -E, cone by cone;
 // X has no flagged leaf)?
-VMAP_HD bool none_face(const NodeBounds& A, const NodeBounds& B, double s, double tol, double E) {
+VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B,
+                       double s, double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
     if (X.ndeg > 0 || X.flat == 0) return false;
-    for (int k = 0; k < 6; ++k) {
-        if (!(X.cones >> k & 1)) continue;
-        const Vec3 a = X.cone[k].axis;
-        const DiffBox b = cone_diff_box(A, B, s, k);
-        if (!(max_lin_plus_norm(b, D3{s * a.x, s * a.y, s * a.z}, X.cone[k].chord - tol) < -E))
-            return false;
+    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
+        const NormalCone& k = cones[i];
+        const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
+        if (!(max_lin_plus_norm(cone_diff_box(A, B, s, k), n, k.chord - tol) < -E)) return false;
     }
     return true;
 }
@@ -357,12 +362,12 @@ VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32
     const DiffBox db = diff_box(na, nbb);
     const double E = c.margin, tol = c.vp.facing_tol;
     // Facing fails for every pair when it fails for every leaf of one end.
-    if (none_face(na, nbb, 1, tol, E) || none_face(na, nbb, -1, tol, E))
+    if (none_face(c.cones, na, nbb, 1, tol, E) || none_face(c.cones, na, nbb, -1, tol, E))
         return PairDecision::kNoneVisible;
     // All visible: a direction to see along (len > 0 in float: |q - p| > E), every leaf of A
     // faces every leaf of B and back, and fewer than K leaves may occlude any segment.
     if (!(min_norm(db) > E)) return PairDecision::kUndecided;
-    if (!all_face(na, nbb, 1, tol, E) || !all_face(na, nbb, -1, tol, E))
+    if (!all_face(c.cones, na, nbb, 1, tol, E) || !all_face(c.cones, na, nbb, -1, tol, E))
         return PairDecision::kUndecided;
     const double eps = c.vp.eps;
     const bool flat_a = flat_end(na, 1, db, eps, E), flat_b = flat_end(nbb, -1, db, eps, E);

@@ -560,9 +560,9 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
     const bool nodes = params.construction == "nodes" && params.occluders == "spheres";
     st.construction = nodes ? "nodes" : "leaf-pairs";
-    const std::vector<detail::NodeBounds> nb = nodes ? detail::node_bounds(t) : std::vector<detail::NodeBounds>{};
-    const detail::NodePairContext ctx{t.view(), nb.data(), t.skip.data(), vp,
-                                      detail::node_pair_margin(t.boxes[0])};
+    const detail::NodeBoundsSet nb = nodes ? detail::node_bounds(t) : detail::NodeBoundsSet{};
+    const detail::NodePairContext ctx{t.view(), nb.nodes.data(), nb.cones.data(), t.skip.data(),
+                                      vp, detail::node_pair_margin(t.boxes[0])};
     const bool gpu = st.backend.rfind("cuda", 0) == 0;
     const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 64);
     Planner plan{t, nodes ? &ctx : nullptr, std::max<uint64_t>(1, params.max_batch_pairs / 16),

@@ -68,10 +68,12 @@ void print_params(const VisibilityMap& vm) {
 
 // Leaf pairs walked against all, and the node pairs per octree level.
 void print_construction(const BuildStats& st) {
-    fmt::print("construction: {}: {} of {} leaf pairs walked ({:.1f}%), {} node pairs tested\n",
-               st.construction, st.leaf_pairs_walked, st.leaf_pairs,
-               100.0 * st.leaf_pairs_walked / std::max<uint64_t>(1, st.leaf_pairs),
-               st.node_pairs_tested);
+    fmt::print(
+        "construction: {}: {} of {} leaf pairs walked ({:.1f}%), {} node pairs tested ({:.1f} "
+        "tree nodes each)\n",
+        st.construction, st.leaf_pairs_walked, st.leaf_pairs,
+        100.0 * st.leaf_pairs_walked / std::max<uint64_t>(1, st.leaf_pairs), st.node_pairs_tested,
+        double(st.shaft_node_tests) / std::max<uint64_t>(1, st.node_pairs_tested));
     if (st.construction != "nodes") return;
     fmt::print("  level node-pairs     tested    visible  invisible      split     walked\n");
     for (size_t l = 0; l < st.levels.size(); ++l) {
@@ -151,7 +153,8 @@ int run_build(BuildOptions& o) {
         "time:       {:.3f} s total (octree {:.3f} s, visibility + links {:.3f} s in {} batches)\n",
         st.seconds_total, st.seconds_octree, st.seconds_visibility, st.batches);
     fmt::print(
-        "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+        "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction "
+        "{:.3f} s, "
         "link arrays {:.3f} s; saving {:.3f} s\n",
         st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
     fmt::print(

@@ -179,8 +179,8 @@ int run(const Options& o) {
                 r.cpu_pair_rate =
                     sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
                 // The GPU run, when there was one, says how many leaf pairs are walked.
-                const uint64_t pairs = r.gpu_done ? r.walked
-                                                  : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+                const uint64_t pairs =
+                    r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
                 const double est = pairs / r.cpu_pair_rate;
                 if (est * o.runs <= o.cpu_budget_s) {
                     for (int k = 0; k < o.runs; ++k) {
@@ -234,7 +234,8 @@ int run(const Options& o) {
         "{}\n\n",
         cores, device, o.runs, o.leaf_points, o.construction, git_commit(), date);
     md +=
-        "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | CPU s "
+        "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | "
+        "CPU s "
         "| GPU s | speedup | "
         "GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s "
         "| "
@@ -252,14 +253,15 @@ int run(const Options& o) {
         const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
         const double kern = stat(r.kernel).median;
         md += fmt::format(
-            "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | "
+            "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | "
+            "{} | "
             "{:.1f} | {} | "
             "{} | "
             "{} |\n",
             r.scene, r.points, r.height, r.leaves, double(r.pairs),
             100.0 * r.walked / std::max<uint64_t>(1, r.pairs), double(r.node_pairs_tested),
-            double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated), fmt_time(r.gpu, r.gpu_done, false),
-            speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
+            double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
+            fmt_time(r.gpu, r.gpu_done, false), speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
             r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
             r.gpu_done ? fmt::format("{:.3g}", r.pairs / std::max(1e-9, kern)) : "-",
             r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / cores) : "-", ntp,
@@ -267,13 +269,13 @@ int run(const Options& o) {
             o.save ? fmt::format("{:.3g}", r.save.median) : "-",
             r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
         csv += fmt::format(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{"
+            "}\n",
             r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.walked,
-            r.node_pairs_tested, r.links, r.cpu.median,
-            r.cpu.lo, r.cpu.hi, int(r.cpu_estimated), r.gpu.median, r.gpu.lo, r.gpu.hi,
-            r.gpu_done ? r.pairs / r.gpu.median : 0, kern, r.cpu_pair_rate / cores,
-            r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests, r.save.median,
-            r.device_bytes, cores, device, git_commit(), date);
+            r.node_pairs_tested, r.links, r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated),
+            r.gpu.median, r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0, kern,
+            r.cpu_pair_rate / cores, r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests,
+            r.save.median, r.device_bytes, cores, device, git_commit(), date);
     }
     md +=
         "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "

@@ -44,19 +44,18 @@ class SameVmapOnScenes : public ::testing::TestWithParam<SceneCase> {};
 
 TEST_P(SameVmapOnScenes, NodePathMatchesLeafPairPath) {
     const SceneCase c = GetParam();
-    const std::string file = c.scene[0] == '.' ? test::oracle_path(c.scene + 2)
-                                               : test::scene_path(c.scene);
+    const std::string file =
+        c.scene[0] == '.' ? test::oracle_path(c.scene + 2) : test::scene_path(c.scene);
     BuildStats st;
-    expect_same_vmap(test::sample(file, 1000, 2), test::cpu_params(c.height, c.leaf_points),
-                     file, &st);
+    expect_same_vmap(test::sample(file, 1000, 2), test::cpu_params(c.height, c.leaf_points), file,
+                     &st);
     EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "some node pair should be decided";
 }
 
 std::vector<SceneCase> scene_cases() {
     std::vector<SceneCase> v;
-    for (const char* s : {"cornell-bunny", "cornell-dragon", "cornell-empty",
-                          "cornell-two-models", "./room-with-block.json",
-                          "./room-with-raised-block.json"})
+    for (const char* s : {"cornell-bunny", "cornell-dragon", "cornell-empty", "cornell-two-models",
+                          "./room-with-block.json", "./room-with-raised-block.json"})
         for (auto [h, lp] : {std::pair{5, 1}, {7, 4}, {9, 8}, {12, 2}}) v.push_back({s, h, lp});
     return v;
 }
@@ -132,11 +131,11 @@ struct Gen {
     }
     void room(float s, int k) {  // five walls, normals inward, open at z = 0
         const Vec3 ex{s, 0, 0}, ey{0, s, 0}, ez{0, 0, s};
-        plate({0, 0, 0}, ez, ex, k, false, 0);          // floor, +y
-        plate(ey, ex, ez, k, false, 0);                 // ceiling, -y
-        plate({0, 0, 0}, ey, ez, k, false, 0);          // x = 0 wall, +x
-        plate(ex, ez, ey, k, false, 0);                 // x = s wall, -x
-        plate(ez, ey, ex, k, false, 0);                 // back wall, -z
+        plate({0, 0, 0}, ez, ex, k, false, 0);  // floor, +y
+        plate(ey, ex, ez, k, false, 0);         // ceiling, -y
+        plate({0, 0, 0}, ey, ez, k, false, 0);  // x = 0 wall, +x
+        plate(ex, ez, ey, k, false, 0);         // x = s wall, -x
+        plate(ez, ey, ex, k, false, 0);         // back wall, -z
     }
 };
 
@@ -148,15 +147,22 @@ PointSet random_scene(uint64_t seed) {
     for (int o = 0; o < objects; ++o) {
         const Vec3 c{g.unit(0.2f, 0.8f), g.unit(0.1f, 0.8f), g.unit(0.2f, 0.8f)};
         switch (g.rng() % 5) {
-            case 0: g.box(c, {g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f)}, 20);
+            case 0:
+                g.box(c, {g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f)}, 20);
                 break;
-            case 1: g.sphere(c, g.unit(0.05f, 0.2f), 60, false); break;
+            case 1:
+                g.sphere(c, g.unit(0.05f, 0.2f), 60, false);
+                break;
             case 2:  // a thin wall with points on both sides (gap 0: flagged leaves)
                 g.plate(c, {g.unit(0.1f, 0.5f), 0, 0}, {0, g.unit(0.1f, 0.5f), g.unit(-0.1f, 0.1f)},
                         40, true, g.rng() % 2 ? 0.f : 0.002f);
                 break;
-            case 3: g.triangles(c, 0.15f, 6, 8); break;
-            default: g.sphere(c, g.unit(0.1f, 0.3f), 60, true); break;
+            case 3:
+                g.triangles(c, 0.15f, 6, 8);
+                break;
+            default:
+                g.sphere(c, g.unit(0.1f, 0.3f), 60, true);
+                break;
         }
     }
     // Some scenes far from the origin or at other scales (the margins scale with coordinates).
@@ -199,9 +205,9 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
         const Octree& t = vm.octree;
         const auto m = test::brute_matrix(vm);
         const auto nb = detail::node_bounds(t);
-        const detail::NodePairContext c{t.view(),     nb.nodes.data(),
-                                        nb.cones.data(), t.skip.data(),
-                                        vm.visibility_params, detail::node_pair_margin(t.boxes[0])};
+        const detail::NodePairContext c{
+            t.view(),      nb.nodes.data(),      nb.cones.data(),
+            t.skip.data(), vm.visibility_params, detail::node_pair_margin(t.boxes[0])};
         struct {
             uint64_t shaft_node_tests = 0;
         } wc;

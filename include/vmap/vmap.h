@@ -89,8 +89,8 @@ struct BuildStats {
     uint64_t leaf_pairs = 0;         // all unordered leaf pairs
     uint64_t leaf_pairs_walked = 0;  // of them, walked by the leaf-pair predicate
     uint64_t node_pairs_tested = 0;
-    uint64_t shaft_node_tests = 0;   // tree nodes tested against node-pair shafts
-    double seconds_decide = 0;       // node bounds and node-pair tests
+    uint64_t shaft_node_tests = 0;          // tree nodes tested against node-pair shafts
+    double seconds_decide = 0;              // node bounds and node-pair tests
     std::vector<ConstructionLevel> levels;  // indexed by octree level
     // Per leaf: leaf pairs it takes part in that were walked (for `vmap render --mode decided`).
     std::vector<uint64_t> leaf_walked;

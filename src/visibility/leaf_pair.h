@@ -141,8 +141,7 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
 // tests it as an occluder. True when that makes the K-th actual occluder (the pair is hidden).
 template <bool kCount, class Counters>
 VMAP_HD bool occluder_reached(const OctreeView& t, const PairSegment& s, int32_t leaf, int32_t a,
-                              int32_t b, const VisibilityParams& vp, int& occluders,
-                              Counters* wc) {
+                              int32_t b, const VisibilityParams& vp, int& occluders, Counters* wc) {
     if (leaf < 0 || leaf == a || leaf == b) return false;
     if (kCount) wc->occluder_tests++;
     return is_actual_occluder(s.p, s.d, s.len, t.leaves[leaf], vp) && ++occluders >= vp.K;

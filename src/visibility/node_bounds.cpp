@@ -62,8 +62,8 @@ NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones)
     b.axis = mean_axis(sx, sy, sz, b.flat, first);
     for (int k = 0; k < 27; ++k)
         if (bin_at[k] >= 0)
-            bin[k].axis = mean_axis(bin_sum[3 * k], bin_sum[3 * k + 1], bin_sum[3 * k + 2], 1,
-                                    bin[k].axis);
+            bin[k].axis =
+                mean_axis(bin_sum[3 * k], bin_sum[3 * k + 1], bin_sum[3 * k + 2], 1, bin[k].axis);
     const D3 ax = d3(b.axis);
     double chord = 0, lo = INFINITY, hi = -INFINITY, scale = 0;
     std::array<double, 27> bin_chord{};
@@ -73,8 +73,8 @@ NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones)
         const double s = dot3(ax, c);
         lo = std::fmin(lo, s);
         hi = std::fmax(hi, s);
-        scale = std::fmax(scale, std::fabs(ax.x * c.x) + std::fabs(ax.y * c.y) +
-                                     std::fabs(ax.z * c.z));
+        scale =
+            std::fmax(scale, std::fabs(ax.x * c.x) + std::fabs(ax.y * c.y) + std::fabs(ax.z * c.z));
         if (d.flags & kLeafNormalDegenerate) continue;
         const D3 nv = d3(d.normal);
         chord = std::fmax(chord, norm3({nv.x - ax.x, nv.y - ax.y, nv.z - ax.z}));

@@ -47,14 +47,14 @@ namespace vmap::detail {
 
 // Per node, over the leaves below it (computed by node_bounds()).
 struct NodeBounds {
-    Vec3 clo, chi;      // box of the leaf centroids (each centroid exactly inside)
-    Vec3 axis;          // normal cone axis; the two bounds below hold for this float vector
-    float chord = 0;    // >= |n_x - axis| for every leaf x below with a normal
-    float s_lo = 0;     // <= axis . c_x for every leaf centroid c_x below (exact real product)
-    float s_hi = 0;     // >= axis . c_x
-    float pad = 0;      // >= 1e-3 Delta_x for every leaf x below (the box shortfall, e3)
-    int32_t flat = 0;   // leaves below with a normal
-    int32_t ndeg = 0;   // leaves below flagged kLeafNormalDegenerate
+    Vec3 clo, chi;     // box of the leaf centroids (each centroid exactly inside)
+    Vec3 axis;         // normal cone axis; the two bounds below hold for this float vector
+    float chord = 0;   // >= |n_x - axis| for every leaf x below with a normal
+    float s_lo = 0;    // <= axis . c_x for every leaf centroid c_x below (exact real product)
+    float s_hi = 0;    // >= axis . c_x
+    float pad = 0;     // >= 1e-3 Delta_x for every leaf x below (the box shortfall, e3)
+    int32_t flat = 0;  // leaves below with a normal
+    int32_t ndeg = 0;  // leaves below flagged kLeafNormalDegenerate
     // The same leaves binned by the direction of their normal (cone_of: 26 bins, the faces,
     // edges and corners of a cube), each bin a cone with the box of its leaves' centroids, in
     // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count): a node holding two walls of a
@@ -184,8 +184,8 @@ VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s
 // Does every leaf with a normal under X (X = A with s = 1, X = B with s = -1; direction s n_x)
 // face every leaf at the other end, n_x . y - tol |y| > E (e2)? Cone by cone. Leaves without a
 // normal face everything.
-VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B,
-                      double s, double tol, double E) {
+VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B, double s,
+                      double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
     for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
         const NormalCone& k = cones[i];
@@ -197,8 +197,8 @@ VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBo
 }
 // Does no leaf under X face any leaf at the other end (n_x . y - tol |y| < -E, cone by cone;
 // X has no flagged leaf)?
-VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B,
-                       double s, double tol, double E) {
+VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B, double s,
+                       double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
     if (X.ndeg > 0 || X.flat == 0) return false;
     for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
@@ -214,41 +214,52 @@ VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeB
 VMAP_HD bool flat_end(const NodeBounds& X, double s, const DiffBox& b, double eps, double E) {
     if (X.flat == 0) return false;
     const D3 n{s * X.axis.x, s * X.axis.y, s * X.axis.z};
-    const D3 diag{double(X.chi.x) - X.clo.x, double(X.chi.y) - X.clo.y,
-                  double(X.chi.z) - X.clo.z};
+    const D3 diag{double(X.chi.x) - X.clo.x, double(X.chi.y) - X.clo.y, double(X.chi.z) - X.clo.z};
     const double h = (double(X.s_hi) - X.s_lo) + double(X.chord) * norm3(diag);
     const double D = min_lin_minus_norm(b, n, double(X.chord));
     return D > 2 * E && (h + 3 * E) / (D - E) + 1e-6 < eps;
 }
 
 // The swept set of the segments from A's centroid box to B's at t in [t0, t1]: the union over t
-// of the boxes (1 - t) [alo, ahi] + t [blo, bhi].
+// of the boxes (1 - t) [alo, ahi] + t [blo, bhi]. Per axis and face, the face moves linearly in
+// t: lower face al + t (bl - al), upper face ah + t (bh - ah); their slopes' reciprocals are kept
+// (0 for a face that does not move).
 struct Shaft {
     D3 alo, ahi, blo, bhi;
     double t0, t1;
+    double inv_lo[3], inv_hi[3];
 };
+VMAP_HD Shaft make_shaft(Vec3 alo, Vec3 ahi, Vec3 blo, Vec3 bhi, double t0, double t1) {
+    Shaft s{d3(alo), d3(ahi), d3(blo), d3(bhi), t0, t1, {0, 0, 0}, {0, 0, 0}};
+    const double al[3] = {s.alo.x, s.alo.y, s.alo.z}, ah[3] = {s.ahi.x, s.ahi.y, s.ahi.z};
+    const double bl[3] = {s.blo.x, s.blo.y, s.blo.z}, bh[3] = {s.bhi.x, s.bhi.y, s.bhi.z};
+    for (int i = 0; i < 3; ++i) {
+        s.inv_lo[i] = bl[i] != al[i] ? 1.0 / (bl[i] - al[i]) : 0.0;
+        s.inv_hi[i] = bh[i] != ah[i] ? 1.0 / (ah[i] - bh[i]) : 0.0;
+    }
+    return s;
+}
 // Does the shaft meet box [lo - g, hi + g]? Per axis the moving box overlaps it for t in an
-// interval bounded by two linear inequalities v0 + s t <= 0; the test is exact up to double
-// rounding (far inside g).
+// interval bounded by two linear inequalities v0 + sl t <= 0 (lower face al + t (bl - al) <= xh,
+// upper face ah + t (bh - ah) >= xl); the test is exact up to double rounding (far inside g).
 VMAP_HD bool shaft_meets_box(const Shaft& s, Vec3 lo, Vec3 hi, double g) {
     double tmin = s.t0, tmax = s.t1;
     const double al[3] = {s.alo.x, s.alo.y, s.alo.z}, ah[3] = {s.ahi.x, s.ahi.y, s.ahi.z};
-    const double bl[3] = {s.blo.x, s.blo.y, s.blo.z}, bh[3] = {s.bhi.x, s.bhi.y, s.bhi.z};
     const double xl[3] = {lo.x - g, lo.y - g, lo.z - g}, xh[3] = {hi.x + g, hi.y + g, hi.z + g};
     for (int i = 0; i < 3; ++i) {
-        // lower face al + t (bl - al) <= xh, upper face ah + t (bh - ah) >= xl
         const double v0[2] = {al[i] - xh[i], xl[i] - ah[i]};
-        const double sl[2] = {bl[i] - al[i], ah[i] - bh[i]};
+        const double inv[2] = {s.inv_lo[i], s.inv_hi[i]};
         for (int k = 0; k < 2; ++k) {
-            if (sl[k] > 0)
-                tmax = min_d(tmax, -v0[k] / sl[k]);
-            else if (sl[k] < 0)
-                tmin = max_d(tmin, -v0[k] / sl[k]);
+            if (inv[k] > 0)
+                tmax = min_d(tmax, -v0[k] * inv[k]);
+            else if (inv[k] < 0)
+                tmin = max_d(tmin, -v0[k] * inv[k]);
             else if (v0[k] > 0)
                 return false;
         }
+        if (tmin > tmax) return false;
     }
-    return tmin <= tmax;
+    return true;
 }
 
 // (e4 ii) Is every shaft point farther than E from the plane of every leaf under X (X has no
@@ -329,8 +340,8 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
                                      bool flat_b, int limit, Counters* wc) {
     const NodeBounds& na = c.nb[A];
     const NodeBounds& nbb = c.nb[B];
-    const Shaft s{d3(na.clo), d3(na.chi), d3(nbb.clo), d3(nbb.chi), double(c.vp.eps),
-                  double(1.f - c.vp.eps)};
+    const Shaft s =
+        make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
     const double E = c.margin;
     const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
     int count = 0;
@@ -340,7 +351,8 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
         const WalkNode w = c.tree.walk[n];
         const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
         const NodeBounds& x = c.nb[n];
-        if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) || (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
+        if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
+            (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
             (in_b && (b_leaf || (flat_b && x.ndeg == 0))) || shaft_clear_of_planes(s, x, E)) {
             n = w.skip;
             continue;

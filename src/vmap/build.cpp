@@ -58,6 +58,8 @@ struct NodeCounters {
 // level's pairs (a prefix sum places each pair's children together, in order, so the plan does
 // not depend on the thread count).
 struct Planner {
+    // Pairs with fewer leaf pairs are walked untested: a node-pair test costs a few walks.
+    static constexpr uint64_t kMinTestPairs = 2;
     const Octree& t;
     const detail::NodePairContext* ctx;  // nullptr: no node tests (leaf-pairs)
     uint64_t max_job_pairs, walk_pairs;
@@ -77,7 +79,8 @@ struct Planner {
         const int32_t a = entries[e].a, b = entries[e].b;
         auto put = [&](int32_t x, int32_t y) { *out++ = Entry{x, y, e}; };
         if (!t.is_leaf(a) && !t.is_leaf(b)) {
-            t.for_each_child(a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { put(ca, cb); }); });
+            t.for_each_child(
+                a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { put(ca, cb); }); });
         } else if (t.is_leaf(a)) {
             t.for_each_child(b, [&](int32_t cb) { put(a, cb); });
         } else {
@@ -88,7 +91,7 @@ struct Planner {
     Kind classify(const Entry& e, ConstructionLevel& lv, NodeCounters& nc) const {
         const uint64_t area = size(e.a) * size(e.b);
         lv.pairs++;
-        if (!ctx || area < 2) return area <= max_job_pairs ? Kind::kJob : Kind::kSplit;
+        if (!ctx || area < kMinTestPairs) return area <= max_job_pairs ? Kind::kJob : Kind::kSplit;
         lv.tested++;
         const detail::PairDecision d = detail::decide_node_pair(*ctx, e.a, e.b, &nc);
         if (d == detail::PairDecision::kAllVisible) return Kind::kFull;
@@ -145,7 +148,8 @@ struct Planner {
             throw Error(fmt::format("{} node pairs to resolve: more than 2^32", next));
         entries.resize(next);
         tbb::parallel_for(begin, end, [&](size_t i) {
-            if (entries[i].kind == Kind::kSplit) put_kids(int32_t(i), &entries[entries[i].kids_begin]);
+            if (entries[i].kind == Kind::kSplit)
+                put_kids(int32_t(i), &entries[entries[i].kids_begin]);
         });
         return next;
     }
@@ -371,7 +375,10 @@ struct Walked {
     uint64_t counted_links = 0;  // when the links are not kept
 
     Walked(const Octree& tree, size_t jobs, const BuildParams& p)
-        : t(tree), params(p), leafy(tree.num_nodes(), 1), arrays(tree.num_nodes()),
+        : t(tree),
+          params(p),
+          leafy(tree.num_nodes(), 1),
+          arrays(tree.num_nodes()),
           job_full(jobs, 0) {
         tbb::parallel_for(int32_t(0), t.num_nodes(), [&](int32_t n) {
             if (!t.is_leaf(n)) t.for_each_child(n, [&](int32_t c) { leafy[n] &= t.is_leaf(c); });
@@ -452,9 +459,9 @@ void check_params(const BuildParams& params, const std::string& source) {
             fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)",
                         source, params.occluders));
     if (params.construction != "nodes" && params.construction != "leaf-pairs")
-        throw Error(fmt::format(
-            "{}: --construction: unknown method '{}' (expected nodes or leaf-pairs)", source,
-            params.construction));
+        throw Error(
+            fmt::format("{}: --construction: unknown method '{}' (expected nodes or leaf-pairs)",
+                        source, params.construction));
     if (params.max_batch_pairs < 1024)
         throw Error(fmt::format("{}: batch of {} pairs is too small (>= 1024)", source,
                                 params.max_batch_pairs));
@@ -534,6 +541,41 @@ std::vector<Link> settle_links(const std::vector<Entry>& entries,
     return links;
 }
 
+// The node pairs: decided at node level where the construction allows it, the rest as jobs.
+Planner plan_pairs(const Octree& t, const BuildParams& params, BuildStats& st) {
+    const VisibilityParams& vp = params.visibility;
+    // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
+    const bool nodes = params.construction == "nodes" && params.occluders == "spheres";
+    st.construction = nodes ? "nodes" : "leaf-pairs";
+    const detail::NodeBoundsSet nb = nodes ? detail::node_bounds(t) : detail::NodeBoundsSet{};
+    const detail::NodePairContext ctx{t.view(),
+                                      nb.nodes.data(),
+                                      nb.cones.data(),
+                                      t.skip.data(),
+                                      vp,
+                                      detail::node_pair_margin(t.boxes[0])};
+    const bool gpu = st.backend.rfind("cuda", 0) == 0;
+    const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 64);
+    Planner plan{t,
+                 nodes ? &ctx : nullptr,
+                 std::max<uint64_t>(1, params.max_batch_pairs / 16),
+                 walk_pairs,
+                 {},
+                 {},
+                 {}};
+    plan.run(sibling_pairs(t));
+    plan.ctx = nullptr;  // ctx and nb end here
+    st.levels = plan.levels;
+    for (const ConstructionLevel& l : plan.levels) {
+        st.node_pairs_tested += l.tested;
+        st.leaf_pairs_walked += l.leaf_pairs_walked;
+    }
+    st.shaft_node_tests = plan.shaft_node_tests;
+    st.leaf_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+    st.leaf_walked = walked_per_leaf(t, plan.jobs);
+    return plan;
+}
+
 }  // namespace
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
@@ -557,25 +599,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     std::unique_ptr<detail::Backend> backend = pick_backend(params, &note);
     st.backend = backend->name();
     st.note = note;
-    // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
-    const bool nodes = params.construction == "nodes" && params.occluders == "spheres";
-    st.construction = nodes ? "nodes" : "leaf-pairs";
-    const detail::NodeBoundsSet nb = nodes ? detail::node_bounds(t) : detail::NodeBoundsSet{};
-    const detail::NodePairContext ctx{t.view(), nb.nodes.data(), nb.cones.data(), t.skip.data(),
-                                      vp, detail::node_pair_margin(t.boxes[0])};
-    const bool gpu = st.backend.rfind("cuda", 0) == 0;
-    const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 64);
-    Planner plan{t, nodes ? &ctx : nullptr, std::max<uint64_t>(1, params.max_batch_pairs / 16),
-                 walk_pairs, {}, {}, {}};
-    plan.run(sibling_pairs(t));
-    st.levels = plan.levels;
-    for (const ConstructionLevel& l : plan.levels) {
-        st.node_pairs_tested += l.tested;
-        st.leaf_pairs_walked += l.leaf_pairs_walked;
-    }
-    st.shaft_node_tests = plan.shaft_node_tests;
-    st.leaf_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
-    st.leaf_walked = walked_per_leaf(t, plan.jobs);
+    Planner plan = plan_pairs(t, params, st);
     st.seconds_decide = st.seconds_plan = seconds_since(t1);
 
     // Words per batch: a batch's rows are padded to 32 bits, so allow for that.

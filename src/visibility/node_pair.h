@@ -38,6 +38,7 @@
 // Doubles carry relative errors near 1e-16, far inside E.
 #pragma once
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -331,20 +332,21 @@ VMAP_HD bool shaft_clear_of_disc(const Shaft& s, const LeafDisc& x, double E) {
     return lb * (1 - 1e-9) - w > E;
 }
 
-// Counts the leaves that may be actual occluders of some segment from A's centroids to B's
-// (e4), stopping at `limit`. Walks the preorder tree like leaf_pair_visible, pruning a subtree
-// when the shaft misses its box, when it lies under A or B with that end flat, or when the shaft
-// clears all its planes. A or B itself, when a leaf, is the pair's own end and never counts.
-template <class Counters>
-VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_t B, bool flat_a,
-                                     bool flat_b, int limit, Counters* wc) {
+// Walks the tree nodes that may hold an actual occluder of some segment from A's centroids to
+// B's (e4), like leaf_pair_visible walks the preorder array, pruning a subtree when the shaft
+// misses its box, when it lies under A or B with that end flat, or when the shaft clears all its
+// planes, and a leaf when the shaft clears its disc. A or B itself, when a leaf, is the pair's
+// own end and never entered. Calls enter(n) for each node entered, in preorder; a false return
+// stops the walk. Counts the nodes tested into wc->shaft_node_tests.
+template <class Counters, class Enter>
+VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool flat_a, bool flat_b,
+                        Counters* wc, Enter&& enter) {
     const NodeBounds& na = c.nb[A];
     const NodeBounds& nbb = c.nb[B];
     const Shaft s =
         make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
     const double E = c.margin;
     const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
-    int count = 0;
     int32_t n = 0;
     while (n < c.tree.num_nodes) {
         wc->shaft_node_tests++;
@@ -353,15 +355,60 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
         const NodeBounds& x = c.nb[n];
         if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
             (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
-            (in_b && (b_leaf || (flat_b && x.ndeg == 0))) || shaft_clear_of_planes(s, x, E)) {
+            (in_b && (b_leaf || (flat_b && x.ndeg == 0))) || shaft_clear_of_planes(s, x, E) ||
+            (w.leaf >= 0 && shaft_clear_of_disc(s, c.tree.leaves[w.leaf], E))) {
             n = w.skip;
             continue;
         }
-        if (w.leaf >= 0 && !shaft_clear_of_disc(s, c.tree.leaves[w.leaf], E) && ++count >= limit)
-            return count;
+        if (!enter(n)) return;
         ++n;
     }
+}
+
+// Whether each end is flat for the other (flat_end), for walk_shaft.
+VMAP_HD void flat_ends(const NodePairContext& c, int32_t A, int32_t B, bool* fa, bool* fb) {
+    const DiffBox db = diff_box(c.nb[A], c.nb[B]);
+    *fa = flat_end(c.nb[A], 1, db, c.vp.eps, c.margin);
+    *fb = flat_end(c.nb[B], -1, db, c.vp.eps, c.margin);
+}
+
+// The leaves that may be actual occluders of some segment from A's centroids to B's, counted up
+// to `limit`.
+template <class Counters>
+VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_t B, int limit,
+                                     Counters* wc) {
+    bool flat_a, flat_b;
+    flat_ends(c, A, B, &flat_a, &flat_b);
+    int count = 0;
+    walk_shaft(c, A, B, flat_a, flat_b, wc,
+               [&](int32_t n) { return !(c.tree.walk[n].leaf >= 0 && ++count >= limit); });
     return count;
+}
+
+// The part of the walk array the leaf pairs under (A, B) can need: the nodes walk_shaft enters,
+// in preorder with skips remapped to this list (an ancestor-closed top of the tree: a node is
+// entered only when its parent was). Walking it instead of the whole array counts the same
+// actual occluders: every actual occluder of a segment under (A, B), and each of its ancestors,
+// is entered (walk_shaft prunes only what holds none, e4), and a node of the list is reached
+// exactly when the full walk reaches it (the same float box tests on the same ancestors). So
+// the answers are those of the full walk, byte for byte; the work counted is less. `orig` is
+// scratch.
+inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
+                             std::vector<WalkNode>& out, std::vector<int32_t>& orig) {
+    out.clear();
+    orig.clear();
+    bool flat_a, flat_b;
+    flat_ends(c, A, B, &flat_a, &flat_b);
+    struct {
+        uint64_t shaft_node_tests = 0;
+    } wc;
+    walk_shaft(c, A, B, flat_a, flat_b, &wc, [&](int32_t n) {
+        out.push_back(c.tree.walk[n]);
+        orig.push_back(n);
+        return true;
+    });
+    for (WalkNode& w : out)
+        w.skip = int32_t(std::lower_bound(orig.begin(), orig.end(), w.skip) - orig.begin());
 }
 
 // The decision for node pair (A, B), A before B in preorder (see the top of this file).
@@ -381,10 +428,7 @@ VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32
     if (!(min_norm(db) > E)) return PairDecision::kUndecided;
     if (!all_face(c.cones, na, nbb, 1, tol, E) || !all_face(c.cones, na, nbb, -1, tol, E))
         return PairDecision::kUndecided;
-    const double eps = c.vp.eps;
-    const bool flat_a = flat_end(na, 1, db, eps, E), flat_b = flat_end(nbb, -1, db, eps, E);
-    if (count_possible_occluders(c, A, B, flat_a, flat_b, c.vp.K, wc) < c.vp.K)
-        return PairDecision::kAllVisible;
+    if (count_possible_occluders(c, A, B, c.vp.K, wc) < c.vp.K) return PairDecision::kAllVisible;
     return PairDecision::kUndecided;
 }
 

@@ -541,30 +541,35 @@ std::vector<Link> settle_links(const std::vector<Entry>& entries,
     return links;
 }
 
-// The node pairs: decided at node level where the construction allows it, the rest as jobs.
-Planner plan_pairs(const Octree& t, const BuildParams& params, BuildStats& st) {
-    const VisibilityParams& vp = params.visibility;
+// Node bounds and the context of the node tests, when the construction decides node pairs.
+struct NodeTests {
+    bool on = false;
+    detail::NodeBoundsSet nb;
+    detail::NodePairContext ctx;
+};
+void prepare_node_tests(const Octree& t, const BuildParams& params, NodeTests& nt) {
     // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
-    const bool nodes = params.construction == "nodes" && params.occluders == "spheres";
-    st.construction = nodes ? "nodes" : "leaf-pairs";
-    const detail::NodeBoundsSet nb = nodes ? detail::node_bounds(t) : detail::NodeBoundsSet{};
-    const detail::NodePairContext ctx{t.view(),
-                                      nb.nodes.data(),
-                                      nb.cones.data(),
-                                      t.skip.data(),
-                                      vp,
-                                      detail::node_pair_margin(t.boxes[0])};
+    nt.on = params.construction == "nodes" && params.occluders == "spheres";
+    if (!nt.on) return;
+    nt.nb = detail::node_bounds(t);
+    nt.ctx = {t.view(),      nt.nb.nodes.data(), nt.nb.cones.data(),
+              t.skip.data(), params.visibility,  detail::node_pair_margin(t.boxes[0])};
+}
+
+// The node pairs: decided at node level where the construction allows it, the rest as jobs.
+Planner plan_pairs(const Octree& t, const BuildParams& params, const NodeTests& nt,
+                   BuildStats& st) {
+    st.construction = nt.on ? "nodes" : "leaf-pairs";
     const bool gpu = st.backend.rfind("cuda", 0) == 0;
-    const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 64);
+    const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 4096);
     Planner plan{t,
-                 nodes ? &ctx : nullptr,
+                 nt.on ? &nt.ctx : nullptr,
                  std::max<uint64_t>(1, params.max_batch_pairs / 16),
                  walk_pairs,
                  {},
                  {},
                  {}};
     plan.run(sibling_pairs(t));
-    plan.ctx = nullptr;  // ctx and nb end here
     st.levels = plan.levels;
     for (const ConstructionLevel& l : plan.levels) {
         st.node_pairs_tested += l.tested;
@@ -599,7 +604,9 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     std::unique_ptr<detail::Backend> backend = pick_backend(params, &note);
     st.backend = backend->name();
     st.note = note;
-    Planner plan = plan_pairs(t, params, st);
+    NodeTests nt;
+    prepare_node_tests(t, params, nt);
+    Planner plan = plan_pairs(t, params, nt, st);
     st.seconds_decide = st.seconds_plan = seconds_since(t1);
 
     // Words per batch: a batch's rows are padded to 32 bits, so allow for that.
@@ -609,6 +616,7 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
         max_job_words = std::max(max_job_words, detail::job_words(j));
     const uint64_t batch_words = std::max(max_words, max_job_words);
     backend->prepare(t, vp, batch_words);
+    backend->set_node_context(nt.on ? &nt.ctx : nullptr);
     const std::vector<Batch> batches = make_batches(plan.jobs, batch_words);
 
     Walked walked(t, plan.jobs.size(), params);

@@ -184,7 +184,7 @@ TEST(Construction, RandomScenesGiveTheLeafPairVmap) {
         bp.visibility.K = 1 + int(r() % 3);
         bp.visibility.eps = std::array<float, 4>{0.f, 0.001f, 0.01f, 0.05f}[r() % 4];
         bp.visibility.facing_tol = std::array<float, 3>{0.f, 0.005f, 0.05f}[r() % 3];
-        bp.walk_pairs = std::array<uint64_t, 3>{1, 16, 256}[r() % 3];
+        bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
         BuildStats st;
         expect_same_vmap(ps, bp, "seed " + std::to_string(seed), &st);
         if (HasFailure()) return;

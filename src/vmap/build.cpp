@@ -96,7 +96,7 @@ struct Planner {
         const detail::PairDecision d = detail::decide_node_pair(*ctx, e.a, e.b, &nc);
         if (d == detail::PairDecision::kAllVisible) return Kind::kFull;
         if (d == detail::PairDecision::kNoneVisible) return Kind::kEmpty;
-        return area <= walk_pairs ? Kind::kJob : Kind::kSplit;
+        return area <= std::min(walk_pairs, max_job_pairs) ? Kind::kJob : Kind::kSplit;
     }
 
     // Classifies entries [begin, end) and appends their children; returns the new end.

@@ -7,6 +7,9 @@
 //   visible   paper Fig. 9: points visible from an eye point purple, the eye cyan, the rest
 //             dimmed; the V-map is the .vmap given, or built on the fly (scene/cloud)
 //   heights   paper Fig. 11: `visible` for the V-maps built at each of --heights, side by side
+//   decided   where V-map construction stays undecided: each point coloured by the share of its
+//             leaf's leaf pairs that were walked (dark blue: all decided at node level; yellow:
+//             all walked); builds the V-map
 // --ply writes the same colours (without the camera-dependent shading) as a coloured PLY.
 #include <fmt/format.h>
 
@@ -81,7 +84,8 @@ Camera make_camera(const RenderArgs& a, const Source& s) {
     return cam;
 }
 
-VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> height) {
+VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> height,
+                       BuildStats* stats = nullptr) {
     BuildParams bp;
     if (s.octree) bp.octree = *s.octree;
     if (a.max_height) bp.octree.max_height = *a.max_height;
@@ -94,7 +98,21 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",
                bp.octree.max_height, vm.octree.height(), vm.num_links(), st.seconds_total,
                st.backend);
+    if (stats) *stats = std::move(st);
     return vm;
+}
+
+// Per input point: the share of its leaf's pairs that were walked, dark blue (0) to yellow (1).
+std::vector<Vec3> decided_colors(const VisibilityMap& vm, const BuildStats& st) {
+    const Octree& t = vm.octree;
+    const double others = std::max(1, t.num_leaves() - 1);
+    std::vector<Vec3> c(vm.points.size());
+    for (size_t i = 0; i < c.size(); ++i) {
+        const int32_t leaf = t.leaf_of_point(vm.inverse[i]);
+        const float f = float(st.leaf_walked[leaf] / others);
+        c[i] = Vec3{0.05f, 0.05f, 0.35f} * (1 - f) + Vec3{1.f, 0.85f, 0.1f} * f;
+    }
+    return c;
 }
 
 uint32_t pick_eye(const RenderArgs& a, const Source& s) {
@@ -188,6 +206,17 @@ int run_render(RenderArgs& a) {
                    eye, s.points.positions[eye].x, s.points.positions[eye].y,
                    s.points.positions[eye].z, set.size(), s.points.size());
         if (!a.ply.empty()) write_colored_ply(a.ply, s.points, visible_colors(*s.vm, eye));
+    } else if (a.mode == "decided") {
+        BuildStats st;
+        const VisibilityMap vm = build_at(a, s, std::nullopt, &st);
+        const std::vector<Vec3> colors = decided_colors(vm, st);
+        a.opt.shade = false;
+        img = render_points(s.points, colors, cam, a.opt);
+        fmt::print("decided:    {} of {} leaf pairs walked ({:.1f}%), construction {}\n",
+                   st.leaf_pairs_walked, st.leaf_pairs,
+                   100.0 * st.leaf_pairs_walked / std::max<uint64_t>(1, st.leaf_pairs),
+                   st.construction);
+        if (!a.ply.empty()) write_colored_ply(a.ply, s.points, colors);
     } else {  // heights
         const uint32_t eye = pick_eye(a, s);
         std::vector<Image> panels;
@@ -229,8 +258,9 @@ Command add_render_command(CLI::App& app) {
     c->add_option("-o,--output", a->output, "PNG file (default: <input name>-<mode>.png)");
     c->add_option("--mode", a->mode,
                   "albedo | shaded | visible (Fig. 9) | heights (Fig. 11: visible at each of "
-                  "--heights, side by side)")
-        ->check(CLI::IsMember({"albedo", "shaded", "visible", "heights"}))
+                  "--heights, side by side) | decided (leaf pairs walked per leaf in building "
+                  "the V-map)")
+        ->check(CLI::IsMember({"albedo", "shaded", "visible", "heights", "decided"}))
         ->capture_default_str();
     c->add_option("--ply", a->ply,
                   "Also write the points with the mode's colours as a PLY (heights: one file per "

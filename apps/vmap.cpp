@@ -69,6 +69,24 @@ void print_params(const VisibilityMap& vm) {
                v.facing_tol, v.parallel_tol);
 }
 
+// Leaf pairs walked against all, and the node pairs per octree level.
+void print_construction(const BuildStats& st) {
+    fmt::print(
+        "construction: {}: {} of {} leaf pairs walked ({:.1f}%), {} node pairs tested ({:.1f} "
+        "tree nodes each)\n",
+        st.construction, st.leaf_pairs_walked, st.leaf_pairs,
+        100.0 * st.leaf_pairs_walked / std::max<uint64_t>(1, st.leaf_pairs), st.node_pairs_tested,
+        double(st.shaft_node_tests) / std::max<uint64_t>(1, st.node_pairs_tested));
+    if (st.construction != "nodes") return;
+    fmt::print("  level node-pairs     tested    visible  invisible      split     walked\n");
+    for (size_t l = 0; l < st.levels.size(); ++l) {
+        const ConstructionLevel& c = st.levels[l];
+        if (c.pairs == 0) continue;
+        fmt::print("  {:5d} {:10d} {:10d} {:10d} {:10d} {:10d} {:10d}\n", l, c.pairs, c.tested,
+                   c.visible, c.invisible, c.split, c.walked);
+    }
+}
+
 struct BuildOptions {
     std::string input;
     std::string output;
@@ -144,7 +162,10 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
     j["points"] = npts;
     j["backend"] = st.backend;
     j["note"] = st.note;
-    j["leaf_pairs"] = w.pairs;
+    j["construction"] = st.construction;
+    j["leaf_pairs"] = st.leaf_pairs ? st.leaf_pairs : w.pairs;
+    j["leaf_pairs_walked"] = w.pairs;
+    j["node_pairs_tested"] = st.node_pairs_tested;
     j["facing_pairs"] = w.facing_pairs;
     j["visible_pairs"] = w.visible_pairs;
     j["node_tests"] = w.node_tests;
@@ -177,7 +198,8 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double s
     fmt::print("time:       octree {:.3f} s, visibility + links {:.3f} s in {} batches\n",
                st.seconds_octree, st.seconds_visibility, st.batches);
     fmt::print(
-        "            plan {:.3f} s, waiting on backend {:.3f} s, link extraction {:.3f} s, "
+        "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction "
+        "{:.3f} s, "
         "link arrays {:.3f} s; saving {:.3f} s\n",
         st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
@@ -202,6 +224,7 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
     fmt::print("leaf pairs: {} tested, {} facing ({:.1f}%), {} visible ({:.1f}%)\n", w.pairs,
                w.facing_pairs, 100.0 * w.facing_pairs / std::max<uint64_t>(1, w.pairs),
                w.visible_pairs, 100.0 * w.visible_pairs / std::max<uint64_t>(1, w.pairs));
+    print_construction(st);
     if (o.count_links)
         fmt::print("links:      {} counted, not kept (as link ends they would take {:.2f} GiB)\n",
                    st.links, st.links * 8 / 1073741824.0);
@@ -356,6 +379,17 @@ int main(int argc, char** argv) {
                      "Point clouds: orient every normal toward this point X,Y,Z (the scanner)")
         ->delimiter(',')
         ->expected(3);
+    build
+        ->add_option("--construction", bo.params.construction,
+                     "nodes (decide node pairs whole where bounds prove it) or leaf-pairs (walk "
+                     "every leaf pair: the oracle; the same V-map)")
+        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+        ->capture_default_str();
+    build
+        ->add_option("--walk-pairs", bo.params.walk_pairs,
+                     "Undecided node pairs of at most this many leaf pairs are walked, not split "
+                     "(0: the backend's choice)")
+        ->capture_default_str();
     build->add_flag("--count-links", bo.count_links,
                     "Count the links without keeping them and write no file: sizes a V-map "
                     "too large for memory");
@@ -400,6 +434,9 @@ int main(int argc, char** argv) {
         ->capture_default_str();
     benchc->add_option("--points", bo2.points, "Override every scene's point count");
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
+    benchc->add_option("--construction", bo2.construction, "nodes or leaf-pairs (as for build)")
+        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+        ->capture_default_str();
 
     auto* validate = cli::add_validate_command(app);
 

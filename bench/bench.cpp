@@ -45,6 +45,7 @@ struct Row {
     int height = 0, leaf_points = 0;
     int32_t leaves = 0;
     uint64_t pairs = 0, links = 0;
+    uint64_t walked = 0, node_pairs_tested = 0;  // leaf pairs walked; node-pair tests
     WorkCounters work;
     Stat cpu, gpu, save;
     bool cpu_done = false, cpu_estimated = false, gpu_done = false;
@@ -130,6 +131,7 @@ int run(const Options& o) {
             r.leaf_points = o.leaf_points;
             BuildParams bp;
             bp.octree = {h, o.leaf_points};
+            bp.construction = o.construction;
             if (tty) fmt::print(stderr, "\r\033[Kbench: {} height {}", sc.name, h);
             std::vector<double> gpu_t, cpu_t, save_t;
             double non_pair = 0;
@@ -147,6 +149,8 @@ int run(const Options& o) {
                     r.gpu_wait = st.seconds_wait;
                     r.kernel.push_back(st.seconds_backend);
                     r.work = st.work;
+                    r.walked = st.leaf_pairs_walked;
+                    r.node_pairs_tested = st.node_pairs_tested;
                     r.device_bytes = st.peak_device_bytes;
                     r.leaves = vm.octree.num_leaves();
                     r.links = vm.num_links();
@@ -168,7 +172,9 @@ int run(const Options& o) {
                 const Octree t = Octree::build(copy, bp.octree, order, "bench");
                 r.cpu_pair_rate =
                     sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
-                const uint64_t pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+                // The GPU run, when there was one, says how many leaf pairs are walked.
+                const uint64_t pairs =
+                    r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
                 const double est = pairs / r.cpu_pair_rate;
                 if (est * o.runs <= o.cpu_budget_s) {
                     for (int k = 0; k < o.runs; ++k) {
@@ -177,6 +183,8 @@ int run(const Options& o) {
                         cpu_t.push_back(st.seconds_total);
                         if (!r.gpu_done) {
                             r.work = st.work;
+                            r.walked = st.leaf_pairs_walked;
+                            r.node_pairs_tested = st.node_pairs_tested;
                             r.leaves = vm.octree.num_leaves();
                             r.links = vm.num_links();
                             non_pair = st.seconds_total - st.seconds_wait;
@@ -216,16 +224,20 @@ int run(const Options& o) {
     }
     std::string md;
     md += fmt::format(
-        "vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, commit {}, {}\n\n", cores,
-        device, o.runs, o.leaf_points, git_commit(), date);
+        "vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, construction {}, commit {}, "
+        "{}\n\n",
+        cores, device, o.runs, o.leaf_points, o.construction, git_commit(), date);
     md +=
-        "| scene | points | height | leaves | leaf pairs | links | CPU s | GPU s | speedup | "
+        "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | "
+        "CPU s "
+        "| GPU s | speedup | "
         "GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s "
         "| "
         "save s | device MiB |\n";
-    md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     std::string csv =
-        "scene,points,height,leaf_points,leaves,leaf_pairs,links,cpu_s,cpu_s_min,cpu_s_max,"
+        "scene,points,height,leaf_points,leaves,leaf_pairs,leaf_pairs_walked,node_pairs_tested,"
+        "links,cpu_s,cpu_s_min,cpu_s_max,"
         "cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,gpu_kernel_s,cpu_pairs_s_core,facing_"
         "pairs,"
         "node_tests,occluder_tests,save_s,device_bytes,cpu_threads,device,commit,date\n";
@@ -235,12 +247,15 @@ int run(const Options& o) {
         const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
         const double kern = stat(r.kernel).median;
         md += fmt::format(
-            "| {} | {} | {} | {} | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | {:.1f} | {} | "
+            "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | "
+            "{} | "
+            "{:.1f} | {} | "
             "{} | "
             "{} |\n",
-            r.scene, r.points, r.height, r.leaves, double(r.pairs), double(r.links),
-            fmt_time(r.cpu, r.cpu_done, r.cpu_estimated), fmt_time(r.gpu, r.gpu_done, false),
-            speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
+            r.scene, r.points, r.height, r.leaves, double(r.pairs),
+            100.0 * r.walked / std::max<uint64_t>(1, r.pairs), double(r.node_pairs_tested),
+            double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
+            fmt_time(r.gpu, r.gpu_done, false), speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
             r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
             r.gpu_done ? fmt::format("{:.3g}", r.pairs / std::max(1e-9, kern)) : "-",
             r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / cores) : "-", ntp,
@@ -248,18 +263,20 @@ int run(const Options& o) {
             o.save ? fmt::format("{:.3g}", r.save.median) : "-",
             r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
         csv += fmt::format(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
-            r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.links, r.cpu.median,
-            r.cpu.lo, r.cpu.hi, int(r.cpu_estimated), r.gpu.median, r.gpu.lo, r.gpu.hi,
-            r.gpu_done ? r.pairs / r.gpu.median : 0, kern, r.cpu_pair_rate / cores,
-            r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests, r.save.median,
-            r.device_bytes, cores, device, git_commit(), date);
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{"
+            "}\n",
+            r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.walked,
+            r.node_pairs_tested, r.links, r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated),
+            r.gpu.median, r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0, kern,
+            r.cpu_pair_rate / cores, r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests,
+            r.save.median, r.device_bytes, cores, device, git_commit(), date);
     }
     md +=
         "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "
         "\"save s\" adds writing the .vmap. \"est.\": CPU leaf-pair rate measured on a sample "
         "of the matrix (blocks of 8 rows x 32 columns), scaled to all pairs, plus the host work "
-        "of the GPU build. Pairs/s count every "
+        "of the GPU build. \"walked\": the share of leaf pairs the leaf-pair predicate walked "
+        "(the rest decided at node level). Pairs/s count every "
         "unordered leaf pair, including those the facing test settles; \"GPU pairs/s\" is end to "
         "end (octree, "
         "visibility, links), \"GPU kernel pairs/s\" the leaf-pair kernel alone (CUDA events).\n";

@@ -16,9 +16,10 @@ struct Options {
     std::vector<std::string> backends;  // empty: cpu, and cuda when a device is present
     double cpu_budget_s = 60;  // a full CPU run longer than this (estimated) is sampled instead
     uint64_t cpu_sample_pairs = 4000000;
-    uint64_t points = 0;  // 0: each scene's own count
-    bool save = true;     // time writing the .vmap too (end to end)
-    std::string out_dir;  // bench.md and bench.csv here when set
+    uint64_t points = 0;                 // 0: each scene's own count
+    bool save = true;                    // time writing the .vmap too (end to end)
+    std::string out_dir;                 // bench.md and bench.csv here when set
+    std::string construction = "nodes";  // nodes | leaf-pairs (BuildParams::construction)
 };
 
 // Runs the sweep, prints the Markdown table to stdout, writes files. Returns 0.

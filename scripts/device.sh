@@ -9,6 +9,11 @@
 #        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
 #        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
 #        embree    vmap validate --time-embree (Embree rays vs the leaf-pair kernel, all cores)
+#        construction  issue 15's targets: cornell-dragon h10 at CONS_LEAF_POINTS (default 8 4 1),
+#                  CONS_RUNS runs each (default 3), end to end with the saved file; for the
+#                  leaf_points in CONS_ORACLE also once with --construction leaf-pairs, and the
+#                  two files compared; growth over CONS_POINTS (lp 1, h 12, --count-links);
+#                  the 1.1M-point --count-links run when CONS_BIG=1
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #      Logs and tables go to $OUT.
 set -euo pipefail
@@ -70,7 +75,7 @@ if [[ "$cmd" == run ]]; then
                     grep -E "PASSED|FAILED|SKIPPED \]" "$OUT/$t.log" | tail -6
                 done
                 # The other kernel variants claim the same answers: check them too.
-                for v in ${GPU_VARIANTS:-lane prefetch}; do
+                for v in ${GPU_VARIANTS:-lane}; do
                     VMAP_CUDA_VARIANT=$v "$bin/gpu_test" --gtest_filter='*GpuMatchesCpu*:*Rect*' \
                         > "$OUT/gpu_test-$v.log" 2>&1 || { rc=1; echo "FAILED gpu_test ($v)"; }
                     echo "variant $v: $(grep -E "PASSED|FAILED" "$OUT/gpu_test-$v.log" | tail -1)"
@@ -97,6 +102,9 @@ if [[ "$cmd" == run ]]; then
                     scenes/cornell-dragon.json --time-embree --heights 8 --runs 5 \
                     --embree-pairs 2000000 > "$OUT/embree.md" 2> "$OUT/embree.err" || rc=1
                 tail -20 "$OUT/embree.md" ;;
+            construction-test)
+                "$bin/construction_test" > "$OUT/construction_test.log" 2>&1 || { rc=1; echo "FAILED construction_test"; }
+                tail -3 "$OUT/construction_test.log" ;;
             cpu)
                 for t in "$bin"/*_test; do
                     [[ "$(basename "$t")" == gpu_test ]] && continue
@@ -108,6 +116,36 @@ if [[ "$cmd" == run ]]; then
                         --max-height 10 --leaf-points "$lp" 2>&1 | tee "$OUT/dragon-lp$lp.log" | head -13
                     rm -f /tmp/dragon.vmap
                 done ;;
+            construction)
+                cons() {  # name, then vmap build arguments: one log per run, wall seconds too
+                    local name=$1; shift
+                    for r in $(seq "${CONS_RUNS:-3}"); do
+                        local t0; t0=$(date +%s.%N)
+                        "$bin/vmap" build "$@" > "$OUT/cons-$name-$r.log" 2>&1 || { rc=1; echo "FAILED $name"; }
+                        echo "wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{print b - a}')" >> "$OUT/cons-$name-$r.log"
+                        grep -E "^construction|^time:|^wall|^device" "$OUT/cons-$name-$r.log" | tr '\n' ' '
+                        echo " [$name $r]"
+                    done
+                }
+                for lp in ${CONS_LEAF_POINTS:-8 4 1}; do
+                    cons "lp$lp" scenes/cornell-dragon.json --backend cuda --max-height 10 \
+                        --leaf-points "$lp" -o /tmp/cons.vmap
+                    if [[ " ${CONS_ORACLE:-} " == *" $lp "* ]]; then
+                        CONS_RUNS=1 cons "lp$lp-oracle" scenes/cornell-dragon.json --backend cuda --max-height 10 \
+                            --leaf-points "$lp" -o /tmp/cons-o.vmap --construction leaf-pairs
+                        cmp /tmp/cons.vmap /tmp/cons-o.vmap && echo "lp$lp: byte-identical" || rc=1
+                        rm -f /tmp/cons-o.vmap
+                    fi
+                    rm -f /tmp/cons.vmap
+                done
+                for n in ${CONS_POINTS:-}; do
+                    cons "n$n" scenes/cornell-dragon.json --backend cuda --max-height 12 \
+                        --leaf-points 1 --points "$n" --count-links
+                done
+                if [[ "${CONS_BIG:-0}" == 1 ]]; then
+                    CONS_RUNS=1 cons big scenes/cornell-dragon.json --backend cuda --max-height 12 \
+                        --leaf-points 1 --points 1100000 --count-links
+                fi ;;
             ab)
                 for v in ${VARIANTS:-packet lane}; do
                     echo "variant $v"

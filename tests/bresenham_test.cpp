@@ -107,14 +107,14 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
         std::set<int32_t> brute;
         for (int32_t l = 0; l < L; ++l)
             if (l != a && l != b &&
-                detail::counts_as_occluder(f.t.leaves[a], f.t.leaves[b], p, d, len,
+                detail::counts_as_occluder(detail::pair_segment(f.t.leaves[a], f.t.leaves[b], vp),
                                            f.t.leaves[l], vp))
                 brute.insert(l);
         std::set<int32_t> found;
         uint64_t cells = 0;
         g.for_each_leaf(p, q, vp.eps * 0.999f, 1 - vp.eps * 0.999f, a, b, &cells, [&](int32_t l) {
-            if (detail::counts_as_occluder(f.t.leaves[a], f.t.leaves[b], p, d, len, f.t.leaves[l],
-                                           vp))
+            if (detail::counts_as_occluder(detail::pair_segment(f.t.leaves[a], f.t.leaves[b], vp),
+                                           f.t.leaves[l], vp))
                 found.insert(l);
             return true;
         });

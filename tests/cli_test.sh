@@ -176,7 +176,7 @@ if expect_ok "build -q" -q build "$SCENE" --points 1000 --max-height 4 -o q.vmap
     if [ -s out.txt ] || [ -s err.txt ]; then fail "build -q printed something"; else ok "build -q is silent"; fi
 fi
 if expect_ok "build -v" build "$SCENE" --points 1000 --max-height 4 -o v.vmap --backend cpu -v; then
-    expect_stdout "build -v has the timing breakdown" '^ +plan [0-9.]+ s, waiting on backend'
+    expect_stdout "build -v has the timing breakdown" '^ +plan and node tests [0-9.]+ s, waiting on backend'
     expect_stdout "build -v has the links per level" '^ +level +nodes +leaves +links$'
 fi
 if grep -q 'waiting on backend' <("$VMAP" build "$SCENE" --points 1000 --max-height 4 -o d.vmap \
@@ -405,6 +405,17 @@ if [ "$(png_size heights.png | cut -d' ' -f1)" -gt 120 ] 2>/dev/null; then
 else
     fail "heights.png is not wider than two panels"
 fi
+if expect_ok "render --mode decided" render "$SCENE" --points 1500 --mode decided --size 40x40 \
+    -o decided.png --backend cpu; then
+    expect_stdout "decided says how many leaf pairs were walked" '^decided: +[0-9]+ of [0-9]+ leaf pairs walked'
+fi
+expect_ok "build --construction leaf-pairs" build "$SCENE" --points 1500 --construction leaf-pairs \
+    -o pairs.vmap --backend cpu
+expect_ok "build --construction nodes" build "$SCENE" --points 1500 -o nodes.vmap --backend cpu
+expect_stdout "build reports the leaf pairs walked" '^construction: nodes: [0-9]+ of [0-9]+ leaf pairs walked'
+if cmp -s pairs.vmap nodes.vmap; then ok "both constructions write the same file"; else
+    fail "pairs.vmap and nodes.vmap differ"; fi
+expect_usage_error "--construction unknown" build "$SCENE" --construction magic -o never.vmap
 # A degenerate camera fails before any V-map is built (stdout stays empty: no "built:" line).
 expect_input_error "render heights with eye == target" "eye and target coincide" render "$SCENE" \
     --points 1500 --mode heights --heights 3,4 --eye-pos 0.27,0,0.2 --eye 1,1,1 --target 1,1,1 \

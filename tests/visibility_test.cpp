@@ -101,7 +101,7 @@ struct EndPlanes : ::testing::Test {
         ASSERT_TRUE(detail::leaves_face(a, b, d, length(d), vp));
     }
     bool counts(const LeafDisc& x) {
-        return detail::counts_as_occluder(a, b, a.centroid, d, length(d), x, vp);
+        return detail::counts_as_occluder(detail::pair_segment(a, b, vp), x, vp);
     }
 };
 
@@ -152,7 +152,7 @@ bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
     int occ = 0;
     for (int32_t l = 0; l < t.num_leaves; ++l)
         if (l != a && l != b &&
-            detail::counts_as_occluder(la, lb, la.centroid, d, len, t.leaves[l], vp))
+            detail::counts_as_occluder(detail::pair_segment(la, lb, vp), t.leaves[l], vp))
             ++occ;
     return occ < vp.K;
 }

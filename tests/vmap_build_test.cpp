@@ -116,7 +116,9 @@ TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
     VisibilityMap vm = build_vmap(test::sample(c.file(), c.points, 3),
                                   test::cpu_params(c.height, c.leaf_points), &st);
     const int32_t L = vm.octree.num_leaves();
-    EXPECT_EQ(st.work.pairs, uint64_t(L) * (L - 1) / 2) << "each unordered pair once";
+    EXPECT_EQ(st.leaf_pairs, uint64_t(L) * (L - 1) / 2);
+    EXPECT_EQ(st.work.pairs, st.leaf_pairs_walked) << "each walked pair once";
+    EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "node-level decisions";
     std::set<int> levels;
     for (int32_t l : vm.octree.leaf_node) levels.insert(vm.octree.level[l]);
     EXPECT_GE(levels.size(), 2u) << "the case should have leaves at mixed depths";

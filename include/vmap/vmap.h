@@ -54,6 +54,27 @@ struct BuildParams {
     // false: extract and count the links but keep none (BuildStats::links; the map then has no
     // links). Sizes a V-map too large for host memory, and times the GPU on it.
     bool keep_links = true;
+    // nodes: node pairs decided at node level where the bounds of visibility/node_pair.h prove
+    // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
+    // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte).
+    std::string construction = "nodes";
+    // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
+    // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
+    // columns of a row at once).
+    uint64_t walk_pairs = 0;
+};
+
+// Node pairs of the construction at one octree level (the deeper level of the pair's nodes).
+struct ConstructionLevel {
+    uint64_t pairs = 0;      // node pairs met (sibling pairs and the child pairs of splits)
+    uint64_t tested = 0;     // of them, tested at node level
+    uint64_t visible = 0;    // decided all visible (one link, no leaf pair walked)
+    uint64_t invisible = 0;  // decided none visible
+    uint64_t split = 0;      // undecided, split into child pairs
+    uint64_t walked = 0;     // undecided (or too small to test), leaf pairs walked
+    uint64_t leaf_pairs_decided = 0;  // leaf pairs under the decided ones
+    uint64_t leaf_pairs_visible = 0;  // ... of them under the ones decided all visible
+    uint64_t leaf_pairs_walked = 0;
 };
 
 struct BuildStats {
@@ -74,6 +95,15 @@ struct BuildStats {
     uint64_t links = 0;          // links of the V-map (also when they were not kept)
     uint64_t batches = 0;
     uint64_t peak_device_bytes = 0;
+    std::string construction;        // nodes | leaf-pairs
+    uint64_t leaf_pairs = 0;         // all unordered leaf pairs
+    uint64_t leaf_pairs_walked = 0;  // of them, walked by the leaf-pair predicate
+    uint64_t node_pairs_tested = 0;
+    uint64_t shaft_node_tests = 0;          // tree nodes tested against node-pair shafts
+    double seconds_decide = 0;              // node bounds and node-pair tests
+    std::vector<ConstructionLevel> levels;  // indexed by octree level
+    // Per leaf: leaf pairs it takes part in that were walked (for `vmap render --mode decided`).
+    std::vector<uint64_t> leaf_walked;
 };
 
 // Visibility of one point pair, from the V-map.

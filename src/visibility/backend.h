@@ -14,6 +14,8 @@
 
 namespace vmap::detail {
 
+struct NodePairContext;  // visibility/node_pair.h
+
 // One rectangle: leaves [row0, row0 + rows) (under node a) by [col0, col0 + cols) (under
 // node b, after a in preorder, so every leaf pair in it has row < col). Bit (r, c) is at word
 // word_offset + r * row_words(cols) + c / 32, bit c % 32 (rows padded to whole 32-bit words).
@@ -44,6 +46,9 @@ class Backend {
     virtual double busy_seconds() const = 0;
     // Peak device memory the backend held, bytes (0 for the CPU).
     virtual uint64_t peak_device_bytes() const { return 0; }
+    // Node bounds of the build (construction "nodes"), valid until the last wait; a backend may
+    // use them to restrict each job's walk to its shaft (same answers). Called after prepare.
+    virtual void set_node_context(const NodePairContext*) {}
     // Leaf pairs per second to expect, for the estimate reported before the work starts (0:
     // no idea).
     virtual double expected_pairs_per_second() const { return 0; }

@@ -45,22 +45,17 @@ int32_t LeafGrid::lookup(uint32_t x, uint32_t y, uint32_t z, int* lvl) const {
 
 bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
                                  const VisibilityParams& vp, WorkCounters* wc) {
-    const LeafDisc la = t.leaves[a], lb = t.leaves[b];
-    const Vec3 p = la.centroid;
-    const Vec3 d = lb.centroid - p;
-    const float len = sqrtf(length2(d));
-    if (!(len > 0.f)) return false;
-    if (!leaves_face(la, lb, d, len, vp)) return false;
+    const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
+    if (!s.faces) return false;
     wc->facing_pairs++;
     // Only crossings with eps < t < 1 - eps count (counts_as_occluder), so only that part of
     // the segment is walked, a little wider for rounding (as leaf_pair_visible does).
     int occluders = 0;
     return g.for_each_leaf(
-        p, lb.centroid, vp.eps * 0.999f, 1.f - vp.eps * 0.999f, a, b, &wc->cells_stepped,
+        s.p, s.q, vp.eps * 0.999f, 1.f - vp.eps * 0.999f, a, b, &wc->cells_stepped,
         [&](int32_t l) {
             wc->occluder_tests++;
-            return !(counts_as_occluder(la, lb, p, d, len, t.leaves[l], vp) &&
-                     ++occluders >= vp.K);
+            return !(counts_as_occluder(s, t.leaves[l], vp) && ++occluders >= vp.K);
         });
 }
 

@@ -3,10 +3,14 @@
 // 32 consecutive columns of one row (neighbouring segments, so the walks share cache lines),
 // indexed across jobs by a prefix sum. Derived supplies
 //   bool visible(int32_t a, int32_t b, WorkCounters* wc) const;
+// and may supply, to evaluate a job's pairs with state prepared once per job and thread,
+//   struct JobState; void begin_job(const PairJob&, JobState&) const;
+//   bool visible(JobState&, int32_t a, int32_t b, WorkCounters* wc) const;
 #pragma once
 
 #include <tbb/blocked_range.h>
 #include <tbb/combinable.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -29,16 +33,27 @@ class HostBackend : public Backend {
         std::vector<uint64_t> first(jobs.size() + 1, 0);
         for (size_t i = 0; i < jobs.size(); ++i) first[i + 1] = first[i] + job_words(jobs[i]);
         tbb::combinable<WorkCounters> counters;
+        constexpr bool kJobState = requires { typename Derived::JobState; };
+        struct State {
+            int64_t job = -1;
+            decltype(state_type<Derived>()) state;
+        };
+        tbb::enumerable_thread_specific<State> states;
         tbb::parallel_for(
             tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
                 if (progress_ && progress_->cancelled()) return;
                 WorkCounters& wc = counters.local();
                 uint64_t range_pairs = 0;
+                State& st = states.local();
+                st.job = -1;
                 size_t j =
                     std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
                 for (uint64_t item = range.begin(); item < range.end(); ++item) {
                     while (item >= first[j + 1]) ++j;
                     const PairJob& job = jobs[j];
+                    if constexpr (kJobState) {
+                        if (st.job != int64_t(j)) self.begin_job(job, st.state), st.job = j;
+                    }
                     const uint64_t rw = row_words(job.cols);
                     const uint64_t local = item - first[j];
                     const int32_t r = static_cast<int32_t>(local / rw);
@@ -46,8 +61,14 @@ class HostBackend : public Backend {
                     const int32_t c1 = std::min(job.cols, c0 + 32);
                     const int32_t a = job.row0 + r;
                     uint32_t word = 0;
-                    for (int32_t c = c0; c < c1; ++c)
-                        if (self.visible(a, job.col0 + c, &wc)) word |= 1u << (c - c0);
+                    for (int32_t c = c0; c < c1; ++c) {
+                        bool vis;
+                        if constexpr (kJobState)
+                            vis = self.visible(st.state, a, job.col0 + c, &wc);
+                        else
+                            vis = self.visible(a, job.col0 + c, &wc);
+                        if (vis) word |= 1u << (c - c0);
+                    }
                     wc.pairs += c1 - c0;
                     range_pairs += c1 - c0;
                     wc.visible_pairs += __builtin_popcount(word);
@@ -76,6 +97,15 @@ class HostBackend : public Backend {
     }
 
   private:
+    struct NoState {};
+    template <class D>
+    static auto state_type() {
+        if constexpr (requires { typename D::JobState; })
+            return typename D::JobState{};
+        else
+            return NoState{};
+    }
+
     double busy_ = 0;
     std::vector<uint32_t> buf_[2];
     WorkCounters pending_[2];

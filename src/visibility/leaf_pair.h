@@ -82,27 +82,6 @@ VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
     return length2(hit - x.centroid) <= x.delta * x.delta;
 }
 
-// Can leaf x stand between the ends at all? The segment lies in front of the tangent plane of
-// each end leaf (the facing test), so a surface wholly behind one of those planes cannot cut
-// it. A leaf whose centroid lies behind an end's plane is, in practice, a neighbour on a
-// surface curving away from that end: on a convex patch the tangent disc of radius Delta pokes
-// out past the surface it stands for, into the segment's first or last stretch, and it used to
-// hide half the pairs that leave a curved object at a shallow angle (docs/validation.md,
-// "Where people look"). The rule needs no scale: it compares centroids with planes. An end
-// without a usable normal (flagged) has no plane and culls nothing.
-VMAP_HD bool in_front_of_ends(const LeafDisc& a, const LeafDisc& b, const LeafDisc& x) {
-    const bool fa = (a.flags & kLeafNormalDegenerate) || dot(a.normal, x.centroid - a.centroid) > 0.f;
-    const bool fb = (b.flags & kLeafNormalDegenerate) || dot(b.normal, x.centroid - b.centroid) > 0.f;
-    return fa && fb;
-}
-
-// Leaf x is one of the K occluders of the segment between leaves a and b (p = a's centroid,
-// d = b's centroid - p, len = |d|).
-VMAP_HD bool counts_as_occluder(const LeafDisc& a, const LeafDisc& b, Vec3 p, Vec3 d, float len,
-                                const LeafDisc& x, const VisibilityParams& vp) {
-    return in_front_of_ends(a, b, x) && is_actual_occluder(p, d, len, x, vp);
-}
-
 // Facing test: n_a . d > tol |d| and n_b . (-d) > tol |d|. A leaf whose normals cancel out has
 // no side, so it faces everything.
 VMAP_HD bool leaves_face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len,
@@ -130,58 +109,99 @@ VMAP_HD WalkNode load_walk(const WalkNode* w) {
 #endif
 }
 
+// The part of a leaf pair's walk that does not depend on the tree: the segment pq (p the
+// centroid of the first leaf), the facing test, and the sub-segment the walk tests boxes with.
+// An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside the
+// node's content box; so only the part of pq with t in [t0, t1] (a little wider than
+// (eps, 1 - eps), for rounding) needs to meet the boxes. This skips the dense surface around
+// both ends. DEVIATION from paper §5.2: the walk prunes with each node's tight box of its points
+// and discs, not its sphere. Both bound every occluder disc, so the same occluders are found
+// (tests/visibility_test.cpp checks against no pruning at all); the box of a planar wall patch
+// is flat, its sphere is not, and after the box test the sphere test rejected almost nothing
+// (docs/gpu-notes.md).
+struct PairSegment {
+    Vec3 p, d;
+    float len;
+    bool faces;  // a direction to see along (len > 0) and the two leaves face each other
+    SlabRay ray;
+    // The ends' tangent planes (in_front_of_ends): b's centroid q, the normals, and whether
+    // each end has a plane at all (a flagged leaf has none).
+    Vec3 q, na, nb;
+    bool plane_a, plane_b;
+};
+VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
+                                 const VisibilityParams& vp) {
+    PairSegment s;
+    s.p = la.centroid;
+    s.d = lb.centroid - s.p;
+    s.len = sqrtf(length2(s.d));
+    // Coincident centroids: no direction to see along.
+    s.faces = s.len > 0.f && leaves_face(la, lb, s.d, s.len, vp);
+    s.ray = slab_ray(s.p, s.d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
+    s.q = lb.centroid;
+    s.na = la.normal;
+    s.nb = lb.normal;
+    s.plane_a = !(la.flags & kLeafNormalDegenerate);
+    s.plane_b = !(lb.flags & kLeafNormalDegenerate);
+    return s;
+}
+
+// Can leaf x stand between the ends at all? The segment lies in front of the tangent plane of
+// each end leaf (the facing test), so a surface wholly behind one of those planes cannot cut
+// it. A leaf whose centroid lies behind an end's plane is, in practice, a neighbour on a
+// surface curving away from that end: on a convex patch the tangent disc of radius Delta pokes
+// out past the surface it stands for, into the segment's first or last stretch, and it used to
+// hide half the pairs that leave a curved object at a shallow angle (docs/validation.md,
+// "Where people look"). The rule needs no scale: it compares centroids with planes. An end
+// without a usable normal (flagged) has no plane and culls nothing.
+VMAP_HD bool in_front_of_ends(const PairSegment& s, const LeafDisc& x) {
+    const bool fa = !s.plane_a || dot(s.na, x.centroid - s.p) > 0.f;
+    const bool fb = !s.plane_b || dot(s.nb, x.centroid - s.q) > 0.f;
+    return fa && fb;
+}
+
+// Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that
+// stands in front of both ends.
+VMAP_HD bool counts_as_occluder(const PairSegment& s, const LeafDisc& x,
+                                const VisibilityParams& vp) {
+    return in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp);
+}
+
+
+
+// A node reached by the walk (its box meets the segment): when it is a leaf other than a and b,
+// tests it as an occluder. True when that makes the K-th actual occluder (the pair is hidden).
+template <bool kCount, class Counters>
+VMAP_HD bool occluder_reached(const OctreeView& t, const PairSegment& s, int32_t leaf, int32_t a,
+                              int32_t b, const VisibilityParams& vp, int& occluders, Counters* wc) {
+    if (leaf < 0 || leaf == a || leaf == b) return false;
+    if (kCount) wc->occluder_tests++;
+    return counts_as_occluder(s, t.leaves[leaf], vp) && ++occluders >= vp.K;
+}
+
 // Visibility of leaves a != b. Potential occluders are the leaves reached by descending from
 // the root into every node whose bounds meet segment pq (stackless walk over the preorder
 // skip links), other than a and b; K actual occluders make the pair invisible (any-hit: stop at
-// the K-th). kCount selects whether work is counted into `wc`; kPrefetch whether the successor
-// node is loaded ahead (pays on the GPU, where the walk waits on dependent loads).
-// Counters is WorkCounters, or any struct with the same fields (the GPU keeps 32-bit ones in
-// registers).
-template <bool kCount, bool kPrefetch = false, class Counters = WorkCounters>
+// the K-th). kCount selects whether work is counted into `wc`. Counters is WorkCounters, or any
+// struct with the same fields (the GPU keeps 32-bit ones in registers). The GPU's packet walk
+// (cuda_backend.cu) is this walk for 32 pairs at once, from the same pieces.
+template <bool kCount, class Counters = WorkCounters>
 VMAP_HD bool leaf_pair_visible(const OctreeView& t, int32_t a, int32_t b,
                                const VisibilityParams& vp, Counters* wc) {
-    const LeafDisc la = t.leaves[a], lb = t.leaves[b];
-    const Vec3 p = la.centroid;
-    const Vec3 d = lb.centroid - p;
-    const float dd = length2(d);
-    const float len = sqrtf(dd);
-    if (!(len > 0.f)) return false;  // coincident centroids: no direction to see along
-    if (!leaves_face(la, lb, d, len, vp)) return false;
+    const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
+    if (!s.faces) return false;
     if (kCount) wc->facing_pairs++;
-    // An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside
-    // the node's content box; so only the part of pq with t in [t0, t1] (a little wider than
-    // (eps, 1 - eps), for rounding) needs to meet the boxes. This skips the dense surface
-    // around both ends. DEVIATION from paper §5.2: the walk prunes with each node's tight box
-    // of its points and discs, not its sphere. Both bound every occluder disc, so the same
-    // occluders are found (tests/visibility_test.cpp checks against no pruning at all); the
-    // box of a planar wall patch is flat, its sphere is not, and after the box test the sphere
-    // test rejected almost nothing (docs/gpu-notes.md).
-    const SlabRay ray = slab_ray(p, d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
     int occluders = 0;
     int32_t n = 0;
-    WalkNode w = load_walk(t.walk);
     while (n < t.num_nodes) {
         if (kCount) wc->node_tests++;
-        // The successor if this node is entered, loaded while this one is tested (on the GPU
-        // the walk is bound by the latency of these dependent loads).
-        WalkNode next;
-        if (kPrefetch) next = load_walk(t.walk + (n + 1 < t.num_nodes ? n + 1 : n));
-        if (!slab_meets_box(ray, Box{w.lo, w.hi}, 0.f)) {
+        const WalkNode w = load_walk(t.walk + n);
+        if (!slab_meets_box(s.ray, Box{w.lo, w.hi}, 0.f)) {
             n = w.skip;
-            if (n < t.num_nodes) w = load_walk(t.walk + n);
             continue;
         }
-        const int32_t l = w.leaf;
-        if (l >= 0 && l != a && l != b) {
-            if (kCount) wc->occluder_tests++;
-            if (counts_as_occluder(la, lb, p, d, len, t.leaves[l], vp) && ++occluders >= vp.K)
-                return false;
-        }
+        if (occluder_reached<kCount>(t, s, w.leaf, a, b, vp, occluders, wc)) return false;
         ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
-        if (kPrefetch)
-            w = next;
-        else if (n < t.num_nodes)
-            w = load_walk(t.walk + n);
     }
     return true;
 }

@@ -3,14 +3,17 @@
 // Every unordered leaf pair (a, b) lies in exactly one "sibling rectangle": leaves(A) x leaves(B)
 // for the two distinct children A, B of the lowest common ancestor of a and b. Since leaves are in
 // depth-first order, each such rectangle is contiguous in the leaf-by-leaf matrix. The builder
-// lists those rectangles (splitting any larger than a job into sub-rectangles of child pairs),
-// has a backend evaluate them in batches into bit-packed tables (the paper's LVS), and extracts
-// links from each table on the host while the backend works on the next batch.
+// starts from those sibling pairs and, level by level, decides node pairs whole where the bounds
+// of visibility/node_pair.h prove all or none of their leaf pairs visible (construction "nodes";
+// "leaf-pairs" decides nothing, the oracle), splits the undecided ones into child pairs, and
+// hands the rest as rectangles to a backend, which evaluates them in batches into bit-packed
+// tables (the paper's LVS); links are extracted from each table on the host while the backend
+// works on the next batch.
 #include <fmt/format.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
+#include <tbb/parallel_sort.h>
 
 #include <algorithm>
 #include <array>
@@ -21,6 +24,7 @@
 #include "util/progress.h"
 #include "visibility/backend.h"
 #include "visibility/bresenham.h"
+#include "visibility/node_pair.h"
 #include "vmap/build_checks.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
@@ -36,52 +40,133 @@ double seconds_since(Clock::time_point t0) {
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// A node pair to resolve: either one job (a rectangle evaluated whole) or split into the pairs
-// of its children (kids), when its rectangle is larger than a job may be.
+// One node pair of the construction: decided at node level (full: all its leaf pairs visible;
+// empty: none), split into the pairs of its children, or walked as one job (a rectangle).
+enum class Kind : uint8_t { kFull, kEmpty, kSplit, kJob };
 struct Entry {
     int32_t a, b;
-    int32_t job = -1;
-    uint32_t kids_begin = 0, kids_end = 0;
+    int32_t parent;
+    int32_t job = -1;                       // kJob: its index in Plan::jobs
+    uint32_t kids_begin = 0, kids_end = 0;  // kSplit: its children in Plan::entries
+    Kind kind = Kind::kJob;
 };
 
-struct Planner {
-    const Octree& t;
-    uint64_t max_job_pairs;
-    std::vector<Entry> entries;
-    std::vector<int32_t> kids;
-    std::vector<PairJob> jobs;
+struct NodeCounters {
+    uint64_t shaft_node_tests = 0;
+};
 
-    uint64_t area(int32_t a, int32_t b) const {
-        return uint64_t(t.leaf_end[a] - t.leaf_begin[a]) *
-               uint64_t(t.leaf_end[b] - t.leaf_begin[b]);
+// The frontier of node pairs, level by level of the split (breadth first): every pair of a
+// level is classified in parallel, then the undecided ones large enough are split into the next
+// level's pairs (a prefix sum places each pair's children together, in order, so the plan does
+// not depend on the thread count).
+struct Planner {
+    // Pairs with fewer leaf pairs are walked untested: a node-pair test costs a few walks.
+    static constexpr uint64_t kMinTestPairs = 2;
+    const Octree& t;
+    const detail::NodePairContext* ctx;  // nullptr: no node tests (leaf-pairs)
+    uint64_t max_job_pairs, walk_pairs;
+    std::vector<Entry> entries;
+    std::vector<PairJob> jobs;
+    std::vector<ConstructionLevel> levels;
+    uint64_t shaft_node_tests = 0;
+
+    uint64_t size(int32_t n) const { return uint64_t(t.leaf_end[n] - t.leaf_begin[n]); }
+    uint32_t num_kids(int32_t a, int32_t b) const {
+        uint32_t ka = 0, kb = 0;
+        t.for_each_child(a, [&](int32_t) { ++ka; });
+        t.for_each_child(b, [&](int32_t) { ++kb; });
+        return (ka ? ka : 1) * (kb ? kb : 1);
+    }
+    void put_kids(int32_t e, Entry* out) const {
+        const int32_t a = entries[e].a, b = entries[e].b;
+        auto put = [&](int32_t x, int32_t y) { *out++ = Entry{x, y, e}; };
+        if (!t.is_leaf(a) && !t.is_leaf(b)) {
+            t.for_each_child(
+                a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { put(ca, cb); }); });
+        } else if (t.is_leaf(a)) {
+            t.for_each_child(b, [&](int32_t cb) { put(a, cb); });
+        } else {
+            t.for_each_child(a, [&](int32_t ca) { put(ca, b); });
+        }
     }
 
-    int32_t expand(int32_t a, int32_t b) {
-        const int32_t e = static_cast<int32_t>(entries.size());
-        entries.push_back({a, b});
-        if (area(a, b) <= max_job_pairs) {
-            PairJob j;
-            j.a = a, j.b = b;
-            j.row0 = t.leaf_begin[a], j.rows = t.leaf_end[a] - t.leaf_begin[a];
-            j.col0 = t.leaf_begin[b], j.cols = t.leaf_end[b] - t.leaf_begin[b];
-            entries[e].job = static_cast<int32_t>(jobs.size());
-            jobs.push_back(j);
-            return e;
+    Kind classify(const Entry& e, ConstructionLevel& lv, NodeCounters& nc) const {
+        const uint64_t area = size(e.a) * size(e.b);
+        lv.pairs++;
+        if (!ctx || area < kMinTestPairs) return area <= max_job_pairs ? Kind::kJob : Kind::kSplit;
+        lv.tested++;
+        const detail::PairDecision d = detail::decide_node_pair(*ctx, e.a, e.b, &nc);
+        if (d == detail::PairDecision::kAllVisible) return Kind::kFull;
+        if (d == detail::PairDecision::kNoneVisible) return Kind::kEmpty;
+        return area <= std::min(walk_pairs, max_job_pairs) ? Kind::kJob : Kind::kSplit;
+    }
+
+    // Classifies entries [begin, end) and appends their children; returns the new end.
+    size_t level(size_t begin, size_t end) {
+        tbb::enumerable_thread_specific<std::vector<ConstructionLevel>> lvs(levels.size());
+        tbb::enumerable_thread_specific<NodeCounters> ncs;
+        tbb::parallel_for(tbb::blocked_range<size_t>(begin, end, 64), [&](const auto& r) {
+            auto& lv = lvs.local();
+            auto& nc = ncs.local();
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                Entry& e = entries[i];
+                ConstructionLevel& l = lv[std::max(t.level[e.a], t.level[e.b])];
+                e.kind = classify(e, l, nc);
+                const uint64_t area = size(e.a) * size(e.b);
+                if (e.kind == Kind::kFull)
+                    l.visible++, l.leaf_pairs_decided += area, l.leaf_pairs_visible += area;
+                if (e.kind == Kind::kEmpty) l.invisible++, l.leaf_pairs_decided += area;
+                if (e.kind == Kind::kSplit) l.split++;
+                if (e.kind == Kind::kJob) l.walked++, l.leaf_pairs_walked += area;
+            }
+        });
+        for (auto& lv : lvs)
+            for (size_t k = 0; k < levels.size(); ++k) {
+                ConstructionLevel& o = levels[k];
+                const ConstructionLevel& x = lv[k];
+                o.pairs += x.pairs, o.tested += x.tested, o.visible += x.visible;
+                o.invisible += x.invisible, o.split += x.split, o.walked += x.walked;
+                o.leaf_pairs_decided += x.leaf_pairs_decided;
+                o.leaf_pairs_visible += x.leaf_pairs_visible;
+                o.leaf_pairs_walked += x.leaf_pairs_walked;
+            }
+        for (auto& nc : ncs) shaft_node_tests += nc.shaft_node_tests;
+        // Children and jobs, placed by prefix sums in entry order.
+        size_t next = end;
+        for (size_t i = begin; i < end; ++i) {
+            Entry& e = entries[i];
+            if (e.kind == Kind::kJob) {
+                PairJob j;
+                j.a = e.a, j.b = e.b;
+                j.row0 = t.leaf_begin[e.a], j.rows = int32_t(size(e.a));
+                j.col0 = t.leaf_begin[e.b], j.cols = int32_t(size(e.b));
+                e.job = int32_t(jobs.size());
+                jobs.push_back(j);
+            } else if (e.kind == Kind::kSplit) {
+                e.kids_begin = uint32_t(next);
+                next += num_kids(e.a, e.b);
+                e.kids_end = uint32_t(next);
+            }
         }
-        std::vector<int32_t> mine;
-        if (!t.is_leaf(a) && !t.is_leaf(b)) {
-            t.for_each_child(a, [&](int32_t ca) {
-                t.for_each_child(b, [&](int32_t cb) { mine.push_back(expand(ca, cb)); });
-            });
-        } else if (t.is_leaf(a)) {
-            t.for_each_child(b, [&](int32_t cb) { mine.push_back(expand(a, cb)); });
-        } else {
-            t.for_each_child(a, [&](int32_t ca) { mine.push_back(expand(ca, b)); });
+        if (next > UINT32_MAX)
+            throw Error(fmt::format("{} node pairs to resolve: more than 2^32", next));
+        entries.resize(next);
+        tbb::parallel_for(begin, end, [&](size_t i) {
+            if (entries[i].kind == Kind::kSplit)
+                put_kids(int32_t(i), &entries[entries[i].kids_begin]);
+        });
+        return next;
+    }
+
+    void run(const std::vector<std::pair<int32_t, int32_t>>& roots) {
+        levels.assign(size_t(t.height()) + 1, {});
+        for (auto [a, b] : roots) entries.push_back(Entry{a, b, -1});
+        size_t begin = 0, end = entries.size();
+        while (begin < end) {
+            const size_t next = level(begin, end);
+            begin = end;
+            end = next;
         }
-        entries[e].kids_begin = static_cast<uint32_t>(kids.size());
-        kids.insert(kids.end(), mine.begin(), mine.end());
-        entries[e].kids_end = static_cast<uint32_t>(kids.size());
-        return e;
     }
 };
 
@@ -272,9 +357,104 @@ void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs
     la.finish(vm, one);
 }
 
-VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildStats* stats,
-                             const std::string& source) {
-    const auto t0 = Clock::now();
+namespace {
+
+struct Batch {
+    size_t begin, end;
+    uint64_t words;
+};
+
+// The walked part: batches of jobs through the backend, double buffered (paper §6.2): while
+// the backend evaluates batch i + 1, the host extracts links from batch i. Links stay in the
+// blocks the extraction wrote them to (no copies). A fully visible job makes no link during
+// extraction: whether its link stands or is replaced by one at its parents' level is settled
+// after the last batch.
+struct Walked {
+    const Octree& t;
+    const BuildParams& params;
+    std::vector<uint8_t> leafy;  // per node: a leaf, or every child is a leaf
+    std::vector<std::vector<Link>> pieces;
+    LinkArrays arrays;
+    std::vector<uint8_t> job_full;
+    uint64_t counted_links = 0;  // when the links are not kept
+
+    Walked(const Octree& tree, size_t jobs, const BuildParams& p)
+        : t(tree),
+          params(p),
+          leafy(tree.num_nodes(), 1),
+          arrays(tree.num_nodes()),
+          job_full(jobs, 0) {
+        tbb::parallel_for(int32_t(0), t.num_nodes(), [&](int32_t n) {
+            if (!t.is_leaf(n)) t.for_each_child(n, [&](int32_t c) { leafy[n] &= t.is_leaf(c); });
+        });
+    }
+
+    // Extracts one batch's jobs in parallel (large partial pairs split further into tasks),
+    // each thread into its own sink, and counts the new link ends.
+    void extract(const std::vector<PairJob>& jobs, const Batch& b, const uint32_t* bits,
+                 Sinks& sinks) {
+        tbb::parallel_for(b.begin, b.end, [&](size_t j) {
+            const PairJob& job = jobs[j];
+            job_full[j] = Extractor{t, leafy, job, bits + job.word_offset, sinks}.run();
+        });
+        const size_t first_piece = pieces.size();
+        for (LinkSink& sk : sinks) {
+            for (auto& blk : sk.blocks) pieces.push_back(std::move(blk));
+            sk.blocks.clear();
+        }
+        if (params.keep_links) {
+            std::vector<std::span<const Link>> fresh;
+            for (size_t c = first_piece; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
+            arrays.count(fresh);
+        } else {
+            for (size_t c = first_piece; c < pieces.size(); ++c) counted_links += pieces[c].size();
+            pieces.resize(first_piece);
+        }
+    }
+
+    void run(detail::Backend& backend, const std::vector<PairJob>& jobs,
+             const std::vector<Batch>& batches, BuildStats& st) {
+        Sinks sinks;
+        // The first report says the job's size and an estimate before the work starts.
+        const double rate = backend.expected_pairs_per_second();
+        const uint64_t total = st.leaf_pairs_walked;
+        detail::Progress progress("leaf pairs", total, &params.progress, st.backend, st.note,
+                                  rate > 0 ? double(total) / rate : 0.0);
+        backend.set_progress(&progress);
+        uint64_t done_pairs = 0;
+        auto submit = [&](size_t i) {
+            const Batch& b = batches[i];
+            backend.submit(std::span<const PairJob>(jobs.data() + b.begin, b.end - b.begin),
+                           b.words, int(i % 2));
+        };
+        if (!batches.empty()) {
+            const auto tw = Clock::now();
+            submit(0);
+            st.seconds_wait += seconds_since(tw);
+        }
+        for (size_t i = 0; i < batches.size(); ++i) {
+            const auto tw = Clock::now();
+            if (i + 1 < batches.size()) submit(i + 1);
+            const uint32_t* bits = backend.wait(int(i % 2), st.work);
+            st.seconds_wait += seconds_since(tw);
+            const auto te = Clock::now();
+            extract(jobs, batches[i], bits, sinks);
+            for (size_t k = batches[i].begin; k < batches[i].end; ++k)
+                done_pairs += uint64_t(jobs[k].rows) * jobs[k].cols;
+            progress.set(done_pairs);
+            progress.throw_if_cancelled();
+            st.seconds_extract += seconds_since(te);
+        }
+        backend.set_progress(nullptr);
+        progress.finish();
+    }
+};
+
+}  // namespace
+
+namespace {
+
+void check_params(const BuildParams& params, const std::string& source) {
     const VisibilityParams& vp = params.visibility;
     if (vp.K < 1 || vp.K > 1000)
         throw Error(fmt::format("{}: K {} out of range (1..1000)", source, vp.K));
@@ -290,10 +470,142 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
         throw Error(
             fmt::format("{}: occluders: unknown search '{}' (expected spheres or bresenham)",
                         source, params.occluders));
+    if (params.construction != "nodes" && params.construction != "leaf-pairs")
+        throw Error(
+            fmt::format("{}: construction: unknown method '{}' (expected nodes or leaf-pairs)",
+                        source, params.construction));
     if (params.max_batch_pairs < 1024)
         throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
                                 params.max_batch_pairs));
+}
 
+std::unique_ptr<detail::Backend> pick_backend(const BuildParams& params, std::string* note,
+                                              const std::string& source) {
+    if (params.occluders != "bresenham") return detail::make_backend(params.backend, note);
+    if (params.backend == "cuda")
+        throw Error(
+            fmt::format("{}: backend cuda: the GPU does occluders spheres only "
+                        "(bresenham runs on the CPU; use backend auto or cpu)",
+                        source));
+    if (params.backend != "auto" && params.backend != "cpu")
+        detail::make_backend(params.backend, note);  // throws for an unknown name
+    return detail::make_bresenham_backend();
+}
+
+// The sibling pairs: every unordered pair of distinct children of every internal node.
+std::vector<std::pair<int32_t, int32_t>> sibling_pairs(const Octree& t) {
+    std::vector<std::pair<int32_t, int32_t>> roots;
+    for (int32_t n = 0; n < t.num_nodes(); ++n) {
+        if (t.is_leaf(n)) continue;
+        std::vector<int32_t> ch;
+        t.for_each_child(n, [&](int32_t c) { ch.push_back(c); });
+        for (size_t i = 0; i < ch.size(); ++i)
+            for (size_t j = i + 1; j < ch.size(); ++j) roots.emplace_back(ch[i], ch[j]);
+    }
+    return roots;
+}
+
+// Consecutive jobs up to batch_words each; sets the jobs' word offsets.
+std::vector<Batch> make_batches(std::vector<PairJob>& jobs, uint64_t batch_words) {
+    std::vector<Batch> batches;
+    for (size_t j = 0; j < jobs.size();) {
+        Batch b{j, j, 0};
+        while (b.end < jobs.size() &&
+               (b.end == b.begin || b.words + detail::job_words(jobs[b.end]) <= batch_words)) {
+            jobs[b.end].word_offset = b.words;
+            b.words += detail::job_words(jobs[b.end]);
+            ++b.end;
+        }
+        batches.push_back(b);
+        j = b.end;
+    }
+    return batches;
+}
+
+// Per leaf: the walked leaf pairs it takes part in (a difference array over the jobs' ranges).
+std::vector<uint64_t> walked_per_leaf(const Octree& t, const std::vector<PairJob>& jobs) {
+    std::vector<int64_t> diff(size_t(t.num_leaves()) + 1, 0);
+    for (const PairJob& j : jobs) {
+        diff[j.row0] += j.cols, diff[j.row0 + j.rows] -= j.cols;
+        diff[j.col0] += j.rows, diff[j.col0 + j.cols] -= j.rows;
+    }
+    std::vector<uint64_t> out(t.num_leaves());
+    int64_t run = 0;
+    for (int32_t l = 0; l < t.num_leaves(); ++l) out[l] = uint64_t(run += diff[l]);
+    return out;
+}
+
+// Links at the highest level where all is visible: an entry is full when decided so, when its
+// job's table is all set, or when all its children are full (deepest level first); it makes a
+// link when full and its parent is not.
+std::vector<Link> settle_links(const std::vector<Entry>& entries,
+                               const std::vector<uint8_t>& job_full) {
+    std::vector<uint8_t> full(entries.size(), 0);
+    for (size_t i = entries.size(); i-- > 0;) {
+        const Entry& e = entries[i];
+        bool f = e.kind == Kind::kFull || (e.kind == Kind::kJob && job_full[e.job]);
+        if (e.kind == Kind::kSplit) {
+            f = true;
+            for (uint32_t k = e.kids_begin; k < e.kids_end && f; ++k) f = full[k];
+        }
+        full[i] = f;
+    }
+    std::vector<Link> links;
+    for (size_t i = 0; i < entries.size(); ++i)
+        if (full[i] && (entries[i].parent < 0 || !full[entries[i].parent]))
+            links.emplace_back(entries[i].a, entries[i].b);
+    return links;
+}
+
+// Node bounds and the context of the node tests, when the construction decides node pairs.
+struct NodeTests {
+    bool on = false;
+    detail::NodeBoundsSet nb;
+    detail::NodePairContext ctx;
+};
+void prepare_node_tests(const Octree& t, const BuildParams& params, NodeTests& nt) {
+    // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
+    nt.on = params.construction == "nodes" && params.occluders == "spheres";
+    if (!nt.on) return;
+    nt.nb = detail::node_bounds(t);
+    nt.ctx = {t.view(),      nt.nb.nodes.data(), nt.nb.cones.data(),
+              t.skip.data(), params.visibility,  detail::node_pair_margin(t.boxes[0])};
+}
+
+// The node pairs: decided at node level where the construction allows it, the rest as jobs.
+Planner plan_pairs(const Octree& t, const BuildParams& params, const NodeTests& nt,
+                   BuildStats& st) {
+    st.construction = nt.on ? "nodes" : "leaf-pairs";
+    const bool gpu = st.backend.rfind("cuda", 0) == 0;
+    const uint64_t walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 4096);
+    Planner plan{t,
+                 nt.on ? &nt.ctx : nullptr,
+                 std::max<uint64_t>(1, params.max_batch_pairs / 16),
+                 walk_pairs,
+                 {},
+                 {},
+                 {}};
+    plan.run(sibling_pairs(t));
+    st.levels = plan.levels;
+    for (const ConstructionLevel& l : plan.levels) {
+        st.node_pairs_tested += l.tested;
+        st.leaf_pairs_walked += l.leaf_pairs_walked;
+    }
+    st.shaft_node_tests = plan.shaft_node_tests;
+    st.leaf_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+    st.leaf_walked = walked_per_leaf(t, plan.jobs);
+    return plan;
+}
+
+}  // namespace
+
+namespace {
+
+VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildStats* stats,
+                             const std::string& source) {
+    const auto t0 = Clock::now();
+    check_params(params, source);
+    const VisibilityParams& vp = params.visibility;
     BuildStats st;
     detail::prepare_points(points, st, source);
     VisibilityMap vm;
@@ -307,33 +619,15 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
 
     const auto t1 = Clock::now();
     const Octree& t = vm.octree;
-    Planner plan{t, std::max<uint64_t>(1, params.max_batch_pairs / 16), {}, {}, {}};
-    std::vector<int32_t> roots;
-    for (int32_t n = 0; n < t.num_nodes(); ++n) {
-        if (t.is_leaf(n)) continue;
-        std::vector<int32_t> ch;
-        t.for_each_child(n, [&](int32_t c) { ch.push_back(c); });
-        for (size_t i = 0; i < ch.size(); ++i)
-            for (size_t j = i + 1; j < ch.size(); ++j) roots.push_back(plan.expand(ch[i], ch[j]));
-    }
-
-    st.seconds_plan = seconds_since(t1);
     std::string note;
-    std::unique_ptr<detail::Backend> backend;
-    if (params.occluders == "bresenham") {
-        if (params.backend == "cuda")
-            throw Error(
-                fmt::format("{}: backend cuda: the GPU does occluders spheres only "
-                            "(bresenham runs on the CPU; use backend auto or cpu)",
-                            source));
-        if (params.backend != "auto" && params.backend != "cpu")
-            detail::make_backend(params.backend, &note);  // throws for an unknown name
-        backend = detail::make_bresenham_backend();
-    } else {
-        backend = detail::make_backend(params.backend, &note);
-    }
+    std::unique_ptr<detail::Backend> backend = pick_backend(params, &note, source);
     st.backend = backend->name();
     st.note = note;
+    NodeTests nt;
+    prepare_node_tests(t, params, nt);
+    Planner plan = plan_pairs(t, params, nt, st);
+    st.seconds_decide = st.seconds_plan = seconds_since(t1);
+
     // Words per batch: a batch's rows are padded to 32 bits, so allow for that.
     const uint64_t max_words = params.max_batch_pairs / 32 + 1;
     uint64_t max_job_words = 0;
@@ -341,138 +635,39 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
         max_job_words = std::max(max_job_words, detail::job_words(j));
     const uint64_t batch_words = std::max(max_words, max_job_words);
     backend->prepare(t, vp, batch_words);
+    backend->set_node_context(nt.on ? &nt.ctx : nullptr);
+    const std::vector<Batch> batches = make_batches(plan.jobs, batch_words);
 
-    // Batches: consecutive jobs up to batch_words.
-    struct Batch {
-        size_t begin, end;
-        uint64_t words;
-    };
-    std::vector<Batch> batches;
-    for (size_t j = 0; j < plan.jobs.size();) {
-        Batch b{j, j, 0};
-        while (b.end < plan.jobs.size() &&
-               (b.end == b.begin || b.words + detail::job_words(plan.jobs[b.end]) <= batch_words)) {
-            plan.jobs[b.end].word_offset = b.words;
-            b.words += detail::job_words(plan.jobs[b.end]);
-            ++b.end;
-        }
-        batches.push_back(b);
-        j = b.end;
-    }
-
-    // Nodes whose split reaches leaves at once (a leaf, or all children leaves).
-    std::vector<uint8_t> leafy(t.num_nodes(), 1);
-    tbb::parallel_for(int32_t(0), t.num_nodes(), [&](int32_t n) {
-        if (!t.is_leaf(n)) t.for_each_child(n, [&](int32_t c) { leafy[n] &= t.is_leaf(c); });
-    });
-
-    // Links stay in the blocks the extraction wrote them to (no copies). A fully visible job
-    // makes no link during extraction: whether its link stands or is replaced by one at its
-    // parents' level is settled after the last batch.
-    std::vector<std::vector<Link>> pieces;
-    LinkArrays arrays(t.num_nodes());
-    std::vector<uint8_t> job_full(plan.jobs.size(), 0);
-    Sinks sinks;
-    const uint64_t total_pairs = uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
-    const double rate = backend->expected_pairs_per_second();
-    detail::Progress progress("leaf pairs", total_pairs, &params.progress, st.backend, note,
-                              rate > 0 ? double(total_pairs) / rate : 0.0);
-    backend->set_progress(&progress);
-    uint64_t done_pairs = 0;
-    uint64_t counted_links = 0;  // when the links are not kept
-
-    auto submit = [&](size_t i) {
-        const Batch& b = batches[i];
-        backend->submit(std::span<const PairJob>(plan.jobs.data() + b.begin, b.end - b.begin),
-                        b.words, int(i % 2));
-    };
-    if (!batches.empty()) {
-        const auto tw = Clock::now();
-        submit(0);
-        st.seconds_wait += seconds_since(tw);
-    }
-    for (size_t i = 0; i < batches.size(); ++i) {
-        auto tw = Clock::now();
-        if (i + 1 < batches.size()) submit(i + 1);
-        const uint32_t* bits = backend->wait(int(i % 2), st.work);
-        st.seconds_wait += seconds_since(tw);
-        const auto te = Clock::now();
-        const Batch& b = batches[i];
-        // Extract the batch's jobs in parallel (large partial pairs split further into tasks),
-        // each thread into its own sink.
-        tbb::parallel_for(b.begin, b.end, [&](size_t j) {
-            const PairJob& job = plan.jobs[j];
-            job_full[j] = Extractor{t, leafy, job, bits + job.word_offset, sinks}.run();
-        });
-        const size_t first_piece = pieces.size();
-        for (LinkSink& sk : sinks) {
-            for (auto& blk : sk.blocks) pieces.push_back(std::move(blk));
-            sk.blocks.clear();
-        }
-        // Count this batch's link ends now, while the backend evaluates the next batch.
-        if (params.keep_links) {
-            std::vector<std::span<const Link>> fresh;
-            for (size_t c = first_piece; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
-            arrays.count(fresh);
-        } else {
-            for (size_t c = first_piece; c < pieces.size(); ++c) counted_links += pieces[c].size();
-            pieces.resize(first_piece);
-        }
-        for (size_t k = b.begin; k < b.end; ++k)
-            done_pairs += uint64_t(plan.jobs[k].rows) * plan.jobs[k].cols;
-        progress.set(done_pairs);
-        progress.throw_if_cancelled();
-        st.seconds_extract += seconds_since(te);
-    }
-    progress.finish();
+    Walked walked(t, plan.jobs.size(), params);
+    walked.run(*backend, plan.jobs, batches, st);
     st.batches = batches.size();
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();
     const auto tl = Clock::now();
 
-    // The fully visible pairs: an entry whose every part is fully visible makes one link at its
-    // own level, and its parts none.
-    std::vector<int8_t> full(plan.entries.size(), -1);
-    auto is_full = [&](auto&& self, int32_t e) -> bool {
-        if (full[e] >= 0) return full[e];
-        const Entry& en = plan.entries[e];
-        bool f = true;
-        if (en.job >= 0)
-            f = job_full[en.job];
-        else
-            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k)
-                f = self(self, plan.kids[k]) && f;
-        full[e] = f;
-        return f;
-    };
-    std::vector<Link> merged;
-    auto settle = [&](auto&& self, int32_t e) -> void {
-        const Entry& en = plan.entries[e];
-        if (is_full(is_full, e)) {
-            merged.emplace_back(en.a, en.b);
-        } else if (en.job < 0) {
-            for (uint32_t k = en.kids_begin; k < en.kids_end; ++k) self(self, plan.kids[k]);
-        }
-    };
-    for (int32_t r : roots) settle(settle, r);
+    // The links of full entries (decided at node level, or full tables) go straight into the
+    // arrays with the links extracted from the tables.
+    const std::vector<Link> merged = settle_links(plan.entries, walked.job_full);
     if (params.keep_links) {
-        arrays.count({std::span<const Link>(merged)});
+        walked.arrays.count({std::span<const Link>(merged)});
         std::vector<std::span<const Link>> spans;
-        for (const auto& p : pieces) spans.emplace_back(p);
+        for (const auto& p : walked.pieces) spans.emplace_back(p);
         spans.emplace_back(merged);
-        arrays.finish(vm, spans);
+        walked.arrays.finish(vm, spans);
         st.links = vm.num_links();
     } else {
         vm.link_offsets.clear();  // has_links() is false: queries and save refuse the map
-        st.links = counted_links + merged.size();
+        st.links = walked.counted_links + merged.size();
     }
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
     detail::check_facing(st);
-    if (stats) *stats = st;
+    if (stats) *stats = std::move(st);
     return vm;
 }
+
+}  // namespace
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
                          const std::string& source) {

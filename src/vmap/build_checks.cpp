@@ -26,13 +26,17 @@ void prepare_points(PointSet& points, BuildStats& stats, const std::string& sour
 }
 
 void check_facing(BuildStats& stats) {
+    // Facing leaf pairs of all: those walked that faced, and those decided all visible at node
+    // level (which face by the proof); pairs decided none visible did not.
     const WorkCounters& w = stats.work;
-    if (w.pairs == 0 || double(w.facing_pairs) >= kFewFacing * double(w.pairs)) return;
+    uint64_t facing = w.facing_pairs, all = std::max(stats.leaf_pairs, w.pairs);
+    for (const ConstructionLevel& l : stats.levels) facing += l.leaf_pairs_visible;
+    if (all == 0 || double(facing) >= kFewFacing * double(all)) return;
     stats.warnings.push_back(fmt::format(
         "only {:.2f}% of leaf pairs face each other: the normals probably point away from the "
         "scene (a room's walls facing out?); try --normals flip, --normals inward or "
         "--viewpoint",
-        100.0 * double(w.facing_pairs) / double(w.pairs)));
+        100.0 * double(facing) / double(all)));
 }
 
 }  // namespace vmap::detail

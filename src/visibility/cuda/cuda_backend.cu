@@ -4,7 +4,9 @@
 // Work decomposition: an item is one 32-bit word of a job's table, i.e. one row leaf a against
 // 32 consecutive column leaves. One warp evaluates one item, a lane per column; a ballot packs
 // the 32 answers and lane 0 stores the word. Neighbouring lanes walk nearly the same segment, so
-// the warp walks the tree once for all 32 (leaf_pairs_packet_kernel, the default since v7).
+// the warp walks the tree once for all 32 (leaf_pairs_packet_kernel, the default). The per-lane
+// walk of leaf_pair.h (leaf_pairs_kernel, VMAP_CUDA_VARIANT=lane) is kept as the on-device
+// oracle: the GPU tests check that both give the same bits and counts.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -73,8 +75,8 @@ __device__ inline void flush_counters(const SmallCounters& wc, int lane, DeviceC
     }
 }
 
-template <bool kPrefetch, int kMinBlocks>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
+// One lane, one pair: leaf_pair_visible as the CPU runs it.
+__global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                       const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_items,
                       uint32_t* __restrict__ bits, DeviceCounters* counters) {
@@ -87,7 +89,7 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
         const int32_t c = at.col0 + lane;
         bool vis = false;
         if (c < at.job.cols) {
-            vis = leaf_pair_visible<true, kPrefetch>(t, at.row, at.job.col0 + c, vp, &wc);
+            vis = leaf_pair_visible<true>(t, at.row, at.job.col0 + c, vp, &wc);
             wc.pairs++;
         }
         const uint32_t word = __ballot_sync(0xffffffffu, vis);
@@ -99,14 +101,14 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
     flush_counters(wc, lane, counters);
 }
 
-// The same predicate, walked by the warp as a packet (variant "packet"). The 32 lanes hold one
-// row leaf a against 32 neighbouring column leaves, so their segments form a thin fan. The warp
-// walks the preorder tree once, entering a node when any lane's own walk would enter it; node and
-// leaf records are then warp-uniform loads (one broadcast instead of 32 gathers). Each lane tests
-// only the nodes on its own path (n >= resume: it has not skipped past the node's subtree), so it
-// makes exactly the tests, counts and answer of leaf_pair_visible.
-template <int kMinBlocks>
-__global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
+// The same walk for the warp as a packet. The 32 lanes hold one row leaf a against 32
+// neighbouring column leaves, so their segments form a thin fan. The warp walks the preorder
+// tree once, entering a node when any lane's own walk would enter it; node and leaf records are
+// then warp-uniform loads (one broadcast instead of 32 gathers). Each lane tests only the nodes
+// on its own path (n >= resume: it has not skipped past the node's subtree), so it makes exactly
+// the tests, counts and answer of leaf_pair_visible, from the same pieces (pair_segment,
+// slab_meets_box, occluder_reached).
+__global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                              const uint64_t* __restrict__ first, int32_t num_jobs,
                              uint64_t num_items, uint32_t* __restrict__ bits,
@@ -121,14 +123,10 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
         const int32_t c = at.col0 + lane;
         const bool in = c < at.job.cols;
         const int32_t b = in ? at.job.col0 + c : a;
-        const LeafDisc la = t.leaves[a], lb = t.leaves[b];
-        const Vec3 p = la.centroid;
-        const Vec3 d = lb.centroid - p;
-        const float len = sqrtf(length2(d));
-        bool vis = in && len > 0.f && leaves_face(la, lb, d, len, vp);
+        const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
+        bool vis = in && s.faces;
         wc.pairs += in;
         wc.facing_pairs += vis;
-        const SlabRay ray = slab_ray(p, d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
         int occluders = 0;
         int32_t resume = 0;  // this lane's own walk skipped everything below this index
         int32_t n = 0;
@@ -137,15 +135,10 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32, kMinBlocks)
             bool hit = false;
             if (vis && n >= resume) {
                 wc.node_tests++;
-                hit = slab_meets_box(ray, Box{w.lo, w.hi}, 0.f);
+                hit = slab_meets_box(s.ray, Box{w.lo, w.hi}, 0.f);
                 if (!hit) resume = w.skip;
             }
-            if (hit && w.leaf >= 0 && w.leaf != a && w.leaf != b) {
-                wc.occluder_tests++;
-                if (counts_as_occluder(la, lb, p, d, len, t.leaves[w.leaf], vp) &&
-                    ++occluders >= vp.K)
-                    vis = false;
-            }
+            if (hit && occluder_reached<true>(t, s, w.leaf, a, b, vp, occluders, &wc)) vis = false;
             n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
         }
         const uint32_t word = __ballot_sync(0xffffffffu, vis);
@@ -213,10 +206,9 @@ class CudaBackend final : public Backend {
   private:
     void init() {
         if (const char* v = getenv("VMAP_CUDA_VARIANT")) variant_ = v;
-        if (!variant_.empty() && variant_ != "packet" && variant_ != "lane" &&
-            variant_ != "prefetch" && variant_ != "occ5" && variant_ != "occ6")
+        if (!variant_.empty() && variant_ != "packet" && variant_ != "lane")
             throw Error("VMAP_CUDA_VARIANT: unknown kernel variant '" + variant_ +
-                        "' (packet, lane, prefetch, occ5, occ6)");
+                        "' (packet or lane)");
         VMAP_CUDA_CHECK(cudaSetDevice(device_));
         VMAP_CUDA_CHECK(cudaGetDeviceProperties(&prop_, device_));
         for (auto& s : slots_) {
@@ -284,24 +276,17 @@ class CudaBackend final : public Backend {
             const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks =
                 int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
-            // VMAP_CUDA_VARIANT selects a kernel variant for A/B timing (same answers): the
-            // default "packet" (warp-uniform walk), "lane" (a walk per lane), "prefetch" (lane,
-            // successor loads ahead), "occ5"/"occ6" (lane, register caps for occupancy).
+            // VMAP_CUDA_VARIANT=lane runs the per-lane walk (the on-device oracle; same answers)
+            // instead of the default packet walk.
             auto launch = [&](auto kernel) {
                 kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr,
                                                           int32_t(nj), items, sl.d_bits.ptr,
                                                           sl.d_counters.ptr);
             };
-            if (variant_.empty() || variant_ == "packet")
-                launch(leaf_pairs_packet_kernel<1>);
-            else if (variant_ == "prefetch")
-                launch(leaf_pairs_kernel<true, 1>);
-            else if (variant_ == "occ5")
-                launch(leaf_pairs_kernel<false, 5>);
-            else if (variant_ == "occ6")
-                launch(leaf_pairs_kernel<false, 6>);
-            else  // "lane": each lane walks its own pair (v1-v6)
-                launch(leaf_pairs_kernel<false, 1>);
+            if (variant_ == "lane")
+                launch(leaf_pairs_kernel);
+            else
+                launch(leaf_pairs_packet_kernel);
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));

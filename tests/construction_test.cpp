@@ -1,0 +1,245 @@
+// Output-sensitive construction (visibility/node_pair.h): the node path must give the V-map of
+// the leaf-pair path byte for byte, and each node-level decision must agree with a brute-force
+// walk of every leaf pair under it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <random>
+
+#include "test_files.h"
+#include "test_util.h"
+#include "visibility/node_pair.h"
+
+namespace vmap {
+namespace {
+
+void expect_same_vmap(const PointSet& ps, BuildParams bp, const std::string& what,
+                      BuildStats* nodes_stats = nullptr) {
+    bp.construction = "leaf-pairs";
+    BuildStats ls, ns;
+    const VisibilityMap ref = build_vmap(ps, bp, &ls);
+    bp.construction = "nodes";
+    const VisibilityMap got = build_vmap(ps, bp, &ns);
+    ASSERT_EQ(ns.construction, "nodes");
+    EXPECT_EQ(ls.leaf_pairs_walked, ls.leaf_pairs) << what;
+    EXPECT_EQ(ns.work.pairs, ns.leaf_pairs_walked) << what;
+    EXPECT_EQ(got.link_offsets, ref.link_offsets) << what;
+    EXPECT_EQ(got.link_targets, ref.link_targets) << what;
+    uint64_t decided = 0, walked = 0;
+    for (const ConstructionLevel& l : ns.levels) {
+        decided += l.leaf_pairs_decided;
+        walked += l.leaf_pairs_walked;
+        EXPECT_EQ(l.pairs, l.visible + l.invisible + l.split + l.walked) << what;
+    }
+    EXPECT_EQ(decided + walked, ns.leaf_pairs) << what << ": every leaf pair decided or walked";
+    if (nodes_stats) *nodes_stats = ns;
+}
+
+struct SceneCase {
+    const char* scene;
+    int height, leaf_points;
+};
+
+class SameVmapOnScenes : public ::testing::TestWithParam<SceneCase> {};
+
+TEST_P(SameVmapOnScenes, NodePathMatchesLeafPairPath) {
+    const SceneCase c = GetParam();
+    const std::string file =
+        c.scene[0] == '.' ? test::oracle_path(c.scene + 2) : test::scene_path(c.scene);
+    BuildStats st;
+    expect_same_vmap(test::sample(file, 1000, 2), test::cpu_params(c.height, c.leaf_points), file,
+                     &st);
+    EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "some node pair should be decided";
+}
+
+std::vector<SceneCase> scene_cases() {
+    std::vector<SceneCase> v;
+    for (const char* s : {"cornell-bunny", "cornell-dragon", "cornell-empty", "cornell-two-models",
+                          "./room-with-block.json", "./room-with-raised-block.json"})
+        for (auto [h, lp] : {std::pair{5, 1}, {7, 4}, {9, 8}, {12, 2}}) v.push_back({s, h, lp});
+    return v;
+}
+
+INSTANTIATE_TEST_SUITE_P(Shipped, SameVmapOnScenes, ::testing::ValuesIn(scene_cases()),
+                         [](const ::testing::TestParamInfo<SceneCase>& i) {
+                             std::string n = i.param.scene;
+                             for (char& ch : n)
+                                 if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
+                             return n + "_h" + std::to_string(i.param.height) + "_lp" +
+                                    std::to_string(i.param.leaf_points);
+                         });
+
+TEST(Construction, SavedFilesAreByteIdentical) {
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 5);
+    BuildParams bp = test::cpu_params(8, 4);
+    test::ScratchDir dir;
+    bp.construction = "leaf-pairs";
+    save_vmap(dir.path("a.vmap"), build_vmap(ps, bp));
+    bp.construction = "nodes";
+    save_vmap(dir.path("b.vmap"), build_vmap(ps, bp));
+    EXPECT_EQ(test::slurp(dir.path("a.vmap")), test::slurp(dir.path("b.vmap")));
+}
+
+// ---- random scenes ----
+
+struct Gen {
+    std::mt19937_64 rng;
+    PointSet ps;
+    float unit(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(rng); }
+    void add(Vec3 p, Vec3 n, float r) {
+        ps.positions.push_back(p);
+        ps.normals.push_back(n);
+        ps.radii.push_back(r);
+    }
+    // A rectangle at o spanned by u, v (normal n), k points; both sides when two_sided.
+    void plate(Vec3 o, Vec3 u, Vec3 v, int k, bool two_sided, float gap) {
+        Vec3 n = cross(u, v);
+        n = n / length(n);
+        const float r = std::sqrt(length(cross(u, v)) / (3.14159f * k));
+        for (int i = 0; i < k; ++i) {
+            const Vec3 p = o + u * unit(0, 1) + v * unit(0, 1);
+            add(p, n, r);
+            if (two_sided) add(p - n * gap, -n, r);
+        }
+    }
+    void box(Vec3 lo, Vec3 s, int k) {
+        const Vec3 ex{s.x, 0, 0}, ey{0, s.y, 0}, ez{0, 0, s.z};
+        plate(lo, ey, ex, k, false, 0);  // bottom, normal -z
+        plate(lo + ez, ex, ey, k, false, 0);
+        plate(lo, ex, ez, k, false, 0);  // normal -y
+        plate(lo + ey, ez, ex, k, false, 0);
+        plate(lo, ez, ey, k, false, 0);  // normal -x
+        plate(lo + ex, ey, ez, k, false, 0);
+    }
+    void sphere(Vec3 c, float rad, int k, bool inward) {
+        const float r = rad * std::sqrt(4.f / k);
+        for (int i = 0; i < k; ++i) {
+            Vec3 n{unit(-1, 1), unit(-1, 1), unit(-1, 1)};
+            if (length(n) < 1e-3f) continue;
+            n = n / length(n);
+            add(c + n * rad, inward ? -n : n, r);
+        }
+    }
+    void triangles(Vec3 c, float size, int tris, int k) {  // a random triangle soup
+        for (int t = 0; t < tris; ++t) {
+            const Vec3 a = c + Vec3{unit(-1, 1), unit(-1, 1), unit(-1, 1)} * size;
+            const Vec3 u = Vec3{unit(-1, 1), unit(-1, 1), unit(-1, 1)} * (size * 0.5f);
+            const Vec3 v = Vec3{unit(-1, 1), unit(-1, 1), unit(-1, 1)} * (size * 0.5f);
+            if (length(cross(u, v)) < 1e-4f * size * size) continue;
+            plate(a, u, v, k, unit(0, 1) < 0.3f, 0);
+        }
+    }
+    void room(float s, int k) {  // five walls, normals inward, open at z = 0
+        const Vec3 ex{s, 0, 0}, ey{0, s, 0}, ez{0, 0, s};
+        plate({0, 0, 0}, ez, ex, k, false, 0);  // floor, +y
+        plate(ey, ex, ez, k, false, 0);         // ceiling, -y
+        plate({0, 0, 0}, ey, ez, k, false, 0);  // x = 0 wall, +x
+        plate(ex, ez, ey, k, false, 0);         // x = s wall, -x
+        plate(ez, ey, ex, k, false, 0);         // back wall, -z
+    }
+};
+
+PointSet random_scene(uint64_t seed) {
+    Gen g{std::mt19937_64(seed), {}};
+    const bool room = seed % 3 != 0;
+    if (room) g.room(1.f, 30 + int(seed % 5) * 10);
+    const int objects = 1 + int(g.rng() % 4);
+    for (int o = 0; o < objects; ++o) {
+        const Vec3 c{g.unit(0.2f, 0.8f), g.unit(0.1f, 0.8f), g.unit(0.2f, 0.8f)};
+        switch (g.rng() % 5) {
+            case 0:
+                g.box(c, {g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f), g.unit(0.05f, 0.3f)}, 20);
+                break;
+            case 1:
+                g.sphere(c, g.unit(0.05f, 0.2f), 60, false);
+                break;
+            case 2:  // a thin wall with points on both sides (gap 0: flagged leaves)
+                g.plate(c, {g.unit(0.1f, 0.5f), 0, 0}, {0, g.unit(0.1f, 0.5f), g.unit(-0.1f, 0.1f)},
+                        40, true, g.rng() % 2 ? 0.f : 0.002f);
+                break;
+            case 3:
+                g.triangles(c, 0.15f, 6, 8);
+                break;
+            default:
+                g.sphere(c, g.unit(0.1f, 0.3f), 60, true);
+                break;
+        }
+    }
+    // Some scenes far from the origin or at other scales (the margins scale with coordinates).
+    const float scale = seed % 7 == 0 ? 1e3f : (seed % 11 == 0 ? 1e-3f : 1.f);
+    const Vec3 shift = seed % 5 == 0 ? Vec3{20, -7, 3} : Vec3{0, 0, 0};
+    for (size_t i = 0; i < g.ps.size(); ++i) {
+        g.ps.positions[i] = (g.ps.positions[i] + shift) * scale;
+        g.ps.radii[i] *= scale;
+    }
+    return g.ps;
+}
+
+TEST(Construction, RandomScenesGiveTheLeafPairVmap) {
+    uint64_t decided_scenes = 0;
+    for (uint64_t seed = 1; seed <= 220; ++seed) {
+        const PointSet ps = random_scene(seed);
+        std::mt19937_64 r(seed * 7919);
+        BuildParams bp = test::cpu_params(3 + int(r() % 7), 1 + int(r() % 6));
+        bp.visibility.K = 1 + int(r() % 3);
+        bp.visibility.eps = std::array<float, 4>{0.f, 0.001f, 0.01f, 0.05f}[r() % 4];
+        bp.visibility.facing_tol = std::array<float, 3>{0.f, 0.005f, 0.05f}[r() % 3];
+        bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
+        BuildStats st;
+        expect_same_vmap(ps, bp, "seed " + std::to_string(seed), &st);
+        if (HasFailure()) return;
+        decided_scenes += st.leaf_pairs_walked < st.leaf_pairs;
+    }
+    EXPECT_GT(decided_scenes, 150u) << "the node tests should decide something in most scenes";
+}
+
+// Every node pair of disjoint subtrees, not only those the builder meets: a decision must hold
+// for each leaf pair under it.
+TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
+    uint64_t all = 0, none = 0;
+    for (uint64_t seed = 300; seed < 320; ++seed) {
+        const PointSet ps = random_scene(seed);
+        BuildParams bp = test::cpu_params(4 + int(seed % 4), 2 + int(seed % 3));
+        bp.construction = "leaf-pairs";
+        const VisibilityMap vm = build_vmap(ps, bp);
+        const Octree& t = vm.octree;
+        const auto m = test::brute_matrix(vm);
+        const auto nb = detail::node_bounds(t);
+        const detail::NodePairContext c{
+            t.view(),      nb.nodes.data(),      nb.cones.data(),
+            t.skip.data(), vm.visibility_params, detail::node_pair_margin(t.boxes[0])};
+        struct {
+            uint64_t shaft_node_tests = 0;
+        } wc;
+        const int32_t L = t.num_leaves();
+        for (int32_t a = 0; a < t.num_nodes(); ++a)
+            for (int32_t b = t.skip[a]; b < t.num_nodes(); b += 1 + int32_t(seed % 3)) {
+                const auto d = detail::decide_node_pair(c, a, b, &wc);
+                if (d == detail::PairDecision::kUndecided) continue;
+                const bool want = d == detail::PairDecision::kAllVisible;
+                (want ? all : none)++;
+                for (int32_t x = t.leaf_begin[a]; x < t.leaf_end[a]; ++x)
+                    for (int32_t y = t.leaf_begin[b]; y < t.leaf_end[b]; ++y)
+                        ASSERT_EQ(bool(m[size_t(x) * L + y]), want)
+                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
+                            << ", " << y;
+            }
+    }
+    EXPECT_GT(all, 1000u);
+    EXPECT_GT(none, 1000u);
+}
+
+TEST(Construction, UnknownMethodIsRejected) {
+    const PointSet ps = test::sample(test::scene_path("cornell-empty"), 300, 1);
+    BuildParams bp = test::cpu_params(5, 4);
+    bp.construction = "magic";
+    try {
+        build_vmap(ps, bp, nullptr, "scene.json");
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("construction"), std::string::npos) << e.what();
+    }
+}
+
+}  // namespace
+}  // namespace vmap

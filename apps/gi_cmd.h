@@ -4,6 +4,12 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <optional>
+#include <string>
+
+#include "vmap/gi.h"
+#include "vmap/gi_reference.h"
+#include "vmap/render.h"
 
 namespace vmap::cli {
 
@@ -17,6 +23,33 @@ struct GiCommands {
 };
 
 GiCommands add_gi_commands(CLI::App& app);
+
+// The options of `vmap gi`.
+struct GiOptions {
+    std::string input;
+    std::string image, ply, pfm;
+    std::optional<uint64_t> points, seed;
+    std::optional<int> max_height, leaf_points;
+    GiParams gi;
+    std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
+    double tolerance = 1e-3;     // converged: the last bounce added less than this of the power
+    int max_bounces = 200;
+    bool final_gather = true;
+    float gather_theta = 2.0f;
+    float exposure = 0;
+    std::string scene, eye, target, up, size = "800x800";
+    std::optional<float> fov;
+    RenderOptions render;
+    bool compare = false;
+    // --reference
+    bool reference = false, brute = true;
+    size_t ref_points = 1000;
+    ReferenceParams ref;
+    std::string ref_out;
+};
+
+// apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
+int run_gi_reference(GiOptions& o);
 
 // bench/gi_bench.cpp: declares `bench-gi` on `app`, returns the subcommand and its runner.
 std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app);

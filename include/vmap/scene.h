@@ -57,8 +57,12 @@ Scene load_scene(const std::string& path);
 
 // Area-weighted, seeded sampling of every surface into points with the triangle's normal, the
 // surface's albedo and emission, and a splat radius sqrt(area / (pi * points)). The same seed
-// gives the same points on every machine and thread count.
-PointSet sample_scene(const Scene& scene);
+// gives the same points on every machine and thread count. The points of an emitting surface
+// emit exactly its power (sum of disc area x emission = surface area x emission): the binomial
+// count of its points would miss it by a few percent, so their emission is scaled by the
+// surface's area over their discs'. surface_of (if given) receives each point's surface index
+// (into scene.surfaces).
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
 
 // Reads a raw point cloud (PLY or OFF; faces ignored). Estimates normals when the file has none
 // (k nearest neighbours), sets splat radii from the neighbour spacing when absent, and albedo 0.8

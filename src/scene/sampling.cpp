@@ -29,11 +29,27 @@ struct Tri {
     Vec3 a, b, c, n;
 };
 
+// Each emitting surface's points share its power: k points of disc area a on a surface of area
+// S with emission E emit k a E, which the binomial count k makes differ from S E by a few
+// percent; scaling their emission by S / (k a) makes the points emit exactly the surface's power.
+void match_emitted_power(const std::vector<double>& area, const std::vector<uint32_t>& surface_of,
+                         PointSet& ps) {
+    std::vector<uint64_t> count(area.size(), 0);
+    for (uint32_t s : surface_of) count[s]++;
+    const double disc = M_PI * double(ps.radii[0]) * ps.radii[0];
+    for (size_t i = 0; i < ps.size(); ++i) {
+        const uint32_t s = surface_of[i];
+        if (ps.emission[i] == Vec3{}) continue;
+        ps.emission[i] = ps.emission[i] * float(area[s] / (double(count[s]) * disc));
+    }
+}
+
 }  // namespace
 
-PointSet sample_scene(const Scene& scene) {
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     std::vector<Tri> tris;
     std::vector<double> cdf;
+    std::vector<double> surface_area(scene.surfaces.size(), 0.0);
     double area = 0;
     for (uint32_t s = 0; s < scene.surfaces.size(); ++s) {
         const Mesh& m = scene.surfaces[s].mesh;
@@ -45,6 +61,7 @@ PointSet sample_scene(const Scene& scene) {
             if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
             tris.push_back({s, a, b, c, x / float(2 * ar)});
             area += ar;
+            surface_area[s] += ar;
             cdf.push_back(area);
         }
     }
@@ -56,6 +73,7 @@ PointSet sample_scene(const Scene& scene) {
     ps.normals.resize(n);
     ps.colors.resize(n);
     ps.emission.resize(n);
+    std::vector<uint32_t> surf(n);
     // Each sample stands for an equal share of the area: a disc of that area.
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
@@ -75,7 +93,10 @@ PointSet sample_scene(const Scene& scene) {
         ps.normals[i] = t.n;
         ps.colors[i] = scene.surfaces[t.surface].albedo;
         ps.emission[i] = scene.surfaces[t.surface].emission;
+        surf[i] = t.surface;
     });
+    match_emitted_power(surface_area, surf, ps);
+    if (surface_of) *surface_of = std::move(surf);
     return ps;
 }
 

@@ -44,12 +44,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         camera = sc.camera;
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
-        BuildParams bp;
-        if (sc.octree) bp.octree = *sc.octree;
-        if (o.max_height) bp.octree.max_height = *o.max_height;
-        if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-        bp.backend = o.gi.backend;
-        bp.progress = detail::stderr_is_terminal();
+        const BuildParams bp = gi_build_params(sc.octree, o);
         BuildStats st;
         VisibilityMap vm = build_vmap(sample_scene(sc), bp, &st, o.input);
         build_s = seconds_since(t0);
@@ -57,9 +52,9 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                            st.backend, build_s);
         return vm;
     }
-    if (o.points || o.seed || o.max_height || o.leaf_points)
+    if (o.points || o.seed || o.max_height || o.leaf_points || o.K != 2 || o.eps != 0.05f)
         throw Error(fmt::format(
-            "{}: --points/--seed/--max-height/--leaf-points apply to scene files (.json)",
+            "{}: --points/--seed/--max-height/--leaf-points/-K/--eps apply to scene files (.json)",
             o.input));
     VisibilityMap vm = load_vmap(o.input);
     if (!o.scene.empty()) camera = load_scene(o.scene).camera;
@@ -279,6 +274,18 @@ int run_gi(GiOptions& o) {
 
 }  // namespace
 
+BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o) {
+    BuildParams bp;
+    if (scene_octree) bp.octree = *scene_octree;
+    if (o.max_height) bp.octree.max_height = *o.max_height;
+    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    bp.visibility.K = o.K;
+    bp.visibility.eps = o.eps;
+    bp.backend = o.gi.backend;
+    bp.progress = detail::stderr_is_terminal();
+    return bp;
+}
+
 GiCommands add_gi_commands(CLI::App& app) {
     auto o = std::make_shared<GiOptions>();
     GiCommands c;
@@ -350,6 +357,14 @@ GiCommands add_gi_commands(CLI::App& app) {
         ->check(CLI::Range(1, 21));
     gi->add_option("--leaf-points", o->leaf_points, "Override the scene's octree leaf_points")
         ->check(CLI::Range(1, 1000000));
+    gi->add_option("-K", o->K, "V-map built here: actual occluders that hide a leaf pair")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    gi->add_option("--eps", o->eps,
+                   "V-map built here: an occluder's plane must cut the segment at t in (eps, "
+                   "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
+        ->check(CLI::Range(0.0f, 0.49f))
+        ->capture_default_str();
     gi->add_flag("--compare-brute", o->compare,
                  "Also run the brute-force gather (every visible point pair) and print the "
                  "relative RMS difference per bounce (small scenes)");
@@ -373,6 +388,11 @@ GiCommands add_gi_commands(CLI::App& app) {
                    "Reference: write the sample points, the reference with its standard errors "
                    "and each method's values (CSV)");
     gi->add_flag("!--no-brute", o->brute, "Reference: leave out the brute-force gather");
+    gi->add_option("--ref-picture-samples", o->ref_picture_samples,
+                   "Reference with -o: paths per point for the side-by-side picture (reference "
+                   "| vmap gi | error) at every point")
+        ->check(CLI::Range(2u, 1000000u))
+        ->capture_default_str();
     c.run_gi = [o] { return run_gi(*o); };
     auto [bench, run_bench] = add_gi_bench_command(app);
     c.bench = bench;

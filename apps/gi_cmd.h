@@ -10,6 +10,7 @@
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"
 #include "vmap/render.h"
+#include "vmap/vmap.h"
 
 namespace vmap::cli {
 
@@ -30,6 +31,10 @@ struct GiOptions {
     std::string image, ply, pfm;
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
+    // The predicate for a V-map built here (docs/gi.md "The V-map for the GI"): the GI weighs
+    // pairs by form factor, so near pairs, which the default eps hides too often, count most.
+    int K = 2;
+    float eps = 0.05f;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power
@@ -44,9 +49,14 @@ struct GiOptions {
     // --reference
     bool reference = false, brute = true;
     size_t ref_points = 1000;
+    uint32_t ref_picture_samples = 128;
     ReferenceParams ref;
     std::string ref_out;
 };
+
+// The build parameters of the V-map `vmap gi` makes from a scene file: the scene's octree
+// defaults and the options above.
+BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o);
 
 // apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
 int run_gi_reference(GiOptions& o);

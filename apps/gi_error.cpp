@@ -17,6 +17,7 @@
 #include "vmap/error.h"
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"
+#include "vmap/render.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
 
@@ -120,6 +121,7 @@ struct Method {
 
 struct Solved {
     std::vector<Method> methods;
+    std::vector<Vec3> all_points;  // the default GI at every point, converged (for -o)
     int converged_bounces = 0;
     double seconds_setup = 0, seconds_bounces = 0, seconds_gather = 0;
 };
@@ -127,7 +129,7 @@ struct Solved {
 // The default V-map GI (k - 1 hierarchical bounces, then the final gather) and the hierarchical
 // solution alone, at bounce counts 1..K and converged.
 Solved solve_vmap(const VisibilityMap& vm, const GiOptions& o, const std::vector<uint32_t>& idx,
-                  int K) {
+                  int K, bool all_points) {
     Solved s;
     RadiositySolver solver(vm, o.gi);
     s.seconds_setup = solver.stats().seconds_setup;
@@ -154,6 +156,7 @@ Solved solve_vmap(const VisibilityMap& vm, const GiOptions& o, const std::vector
     }
     hier.at.push_back(subset(solver.radiosity(), idx));
     gather();
+    if (all_points) s.all_points = solver.final_gather(o.gather_theta);
     s.methods = {fg, hier};
     return s;
 }
@@ -220,30 +223,100 @@ void write_csv(const std::string& path, const Scene& sc, const VisibilityMap& vm
     std::filesystem::rename(tmp, path);
 }
 
+// The scene, its points' surfaces and the V-map: built from the scene, or a saved V-map of it
+// (--scene; its points must be the scene's samples, checked point by point).
+VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t>& surf) {
+    const bool saved = !ends_with_ci(o.input, ".json");
+    if (saved && o.scene.empty())
+        throw Error(fmt::format("{}: --reference needs the scene file (.json, or --scene for a "
+                                ".vmap): the reference traces the scene's triangles",
+                                o.input));
+    sc = load_scene(saved ? o.scene : o.input);
+    if (o.points) sc.points = *o.points;
+    if (o.seed) sc.seed = *o.seed;
+    const auto t0 = Clock::now();
+    PointSet ps = sample_scene(sc, &surf);
+    if (saved) {
+        if (o.K != 2 || o.eps != 0.05f)
+            throw Error(fmt::format("{}: -K/--eps apply to a V-map built from a scene file",
+                                    o.input));
+        VisibilityMap vm = load_vmap(o.input);
+        bool same = vm.points.size() == ps.size();
+        for (size_t k = 0; same && k < vm.points.size(); ++k)
+            same = vm.points.positions[k] == ps.positions[vm.order[k]];
+        if (!same)
+            throw Error(fmt::format("{}: points: not the samples of {} (points {}, seed {})",
+                                    o.input, o.scene, sc.points, sc.seed));
+        fmt::print(
+            "scene:      {} ({}): {} points, V-map {} (K {}, eps {}, {} links) loaded in {:.2f} s\n",
+            sc.name, o.scene, vm.points.size(), o.input, vm.visibility_params.K,
+            vm.visibility_params.eps, vm.num_links(), seconds_since(t0));
+        return vm;
+    }
+    const BuildParams bp = gi_build_params(sc.octree, o);
+    VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.input);
+    fmt::print("scene:      {} ({}): {} points, V-map (K {}, eps {}) {} links in {:.2f} s\n",
+               sc.name, o.input, vm.points.size(), o.K, o.eps, vm.num_links(), seconds_since(t0));
+    return vm;
+}
+
+// Error heat map colour for a relative error e: black (0) through red (25%) to yellow (50%
+// and more).
+Vec3 heat(float e) {
+    const float u = std::clamp(e / 0.5f, 0.0f, 1.0f);
+    return u < 0.5f ? Vec3{2 * u, 0, 0} : Vec3{1, 2 * u - 1, 0};
+}
+
+// -o with --reference: reference | vmap gi | error heat map at every point (the reference with
+// --ref-picture-samples paths per point), one camera and one exposure.
+void side_by_side_picture(const Scene& sc, const VisibilityMap& vm,
+                          const std::vector<uint32_t>& surf, const std::vector<Vec3>& gi,
+                          GiOptions& o) {
+    std::vector<ReferencePoint> at(vm.points.size());
+    for (size_t k = 0; k < at.size(); ++k) {
+        const SceneSurface& s = sc.surfaces[surf[vm.order[k]]];
+        at[k] = {vm.points.positions[k], vm.points.normals[k], s.albedo, s.emission};
+    }
+    ReferenceParams rp = o.ref;
+    rp.samples = o.ref_picture_samples;
+    rp.bounces = 1;
+    rp.progress = detail::stderr_is_terminal();
+    const ReferenceResult ref = path_trace_radiosity(sc.surfaces, at, rp, o.input);
+    const std::vector<Vec3>& r = ref.value.back();
+    const float exposure = o.exposure > 0 ? o.exposure : [&] {
+        std::vector<Vec3> unused;
+        return tone_map(vm, gi, 0.0f, unused);
+    }();
+    const PointSet pts = points_in_input_order(vm);
+    std::vector<Vec3> a(gi.size()), b(gi.size()), e(gi.size());
+    for (size_t k = 0; k < gi.size(); ++k) {
+        const uint32_t i = vm.order[k];
+        a[i] = r[k] * exposure, b[i] = gi[k] * exposure;
+        const float rr = length(r[k]);
+        e[i] = heat(rr > 0 ? length(gi[k] - r[k]) / rr : 0.0f);
+    }
+    Camera cam = sc.camera ? *sc.camera : default_camera(pts);
+    o.render.shade = false;
+    const std::vector<Image> imgs = {render_points(pts, a, cam, o.render),
+                                     render_points(pts, b, cam, o.render),
+                                     render_points(pts, e, cam, o.render)};
+    write_png(o.image, side_by_side(imgs));
+    fmt::print(
+        "wrote:      {} (reference, {} paths per point | vmap gi | relative error, black 0, red "
+        "25%, yellow >= 50%; exposure {}; reference in {:.1f} s)\n",
+        o.image, rp.samples, exposure, ref.seconds);
+}
+
 }  // namespace
 
 int run_gi_reference(GiOptions& o) {
-    if (!ends_with_ci(o.input, ".json"))
-        throw Error(fmt::format("{}: --reference needs a scene file (.json): the reference traces "
-                                "the scene's triangles",
-                                o.input));
     check_output(o.ref_out, "--ref-out");
-    Scene sc = load_scene(o.input);
-    if (o.points) sc.points = *o.points;
-    if (o.seed) sc.seed = *o.seed;
+    check_output(o.image, "-o");
+    const auto [width, height] = parse_size(o.size, "--size");
+    o.render.width = width, o.render.height = height;
+    Scene sc;
     std::vector<uint32_t> surf;
-    const auto t0 = Clock::now();
-    PointSet ps = sample_scene(sc, &surf);
-    BuildParams bp;
-    if (sc.octree) bp.octree = *sc.octree;
-    if (o.max_height) bp.octree.max_height = *o.max_height;
-    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-    bp.backend = o.gi.backend;
-    bp.progress = detail::stderr_is_terminal();
-    const VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.input);
-    fmt::print("scene:      {} ({}): {} points, V-map {} links in {:.2f} s\n", sc.name, o.input,
-               vm.points.size(), vm.num_links(), seconds_since(t0));
-
+    const VisibilityMap vm = reference_vmap(o, sc, surf);
     const Sets sets = choose_points(sc, vm, surf, o.ref_points, o.ref.seed);
     std::vector<ReferencePoint> at;
     for (uint32_t k : sets.points) {
@@ -259,7 +332,7 @@ int run_gi_reference(GiOptions& o) {
         "rays in {:.1f} s\n",
         sets.num_all, sets.points.size() - sets.num_all, rp.samples, rp.seed, double(ref.rays),
         ref.seconds);
-    Solved s = solve_vmap(vm, o, sets.points, K);
+    Solved s = solve_vmap(vm, o, sets.points, K, !o.image.empty());
     fmt::print(
         "vmap gi:    theta {}, final gather theta {}: setup {:.2f} s, {} bounces {:.2f} s "
         "(converged to {}), final gathers at {} points {:.2f} s\n",
@@ -276,6 +349,7 @@ int run_gi_reference(GiOptions& o) {
         write_csv(o.ref_out, sc, vm, surf, sets, ref, s.methods, K);
         fmt::print("wrote:      {}\n", o.ref_out);
     }
+    if (!o.image.empty()) side_by_side_picture(sc, vm, surf, s.all_points, o);
     return 0;
 }
 

@@ -50,7 +50,7 @@ namespace vmap {
 
 struct GiParams {
     int bounces = 3;                         // gather steps after B = E; 1 = direct light only
-    float theta = 4.0f;                      // separation parameter (> 0): larger is finer, slower
+    float theta = 1.0f;                      // separation parameter (> 0): larger is finer, slower
     std::string backend = "auto";            // auto | cpu | cuda
     std::string refine = "blocks";           // blocks | links (see above)
     uint64_t max_interactions = 1ull << 31;  // refuse a refinement larger than this

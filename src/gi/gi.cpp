@@ -307,14 +307,17 @@ struct BlockRefiner {
 struct FinalGather {
     const VisibilityMap& vm;
     const std::vector<NodeGeom>& g;
-    const Vec3* B;  // per element: nodes then points
+    const std::vector<uint8_t>& emits;  // per node: holds an emitting point
+    const Vec3* B;                      // per element: nodes then points
     float theta;
 
     Vec3 from_node(Vec3 x, Vec3 n, float a, int32_t L) const {
         const Octree& t = vm.octree;
         const NodeGeom& gl = g[L];
         const bool leaf = t.is_leaf(L);
-        if (!leaf && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
+        // Emitters are always gathered point by point: the direct light carries the shadows and
+        // most of the power, and the lights are a small share of the points.
+        if (!leaf && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
             length(gl.center - x) > theta * gl.size) {
             const float k = gi_kernel(x, n, a, gl.center, gl.normal, gl.point_area);
             return k > 0 ? B[L] * (k * gl.area) : Vec3{};
@@ -596,7 +599,13 @@ std::vector<Vec3> RadiositySolver::final_gather(float theta,
     if (!(theta > 0) || !std::isfinite(theta))
         throw Error(fmt::format("gi: final gather: theta: {} (must be > 0)", theta));
     if (impl_->device) impl_->device->download_radiosity(impl_->B.data());
-    const FinalGather fg{impl_->vm, impl_->geom, impl_->B.data(), theta};
+    const Impl& m = *impl_;
+    std::vector<uint8_t> emits(m.view.num_nodes, 0);
+    tbb::parallel_for(0, m.view.num_nodes, [&](int32_t n) {
+        for (uint32_t k = m.view.point_begin[n]; k < m.view.point_end[n] && !emits[n]; ++k)
+            emits[n] = !(m.emission[k] == Vec3{});
+    });
+    const FinalGather fg{m.vm, m.geom, emits, m.B.data(), theta};
     const uint32_t P = impl_->view.num_points;
     for (uint32_t i : points)
         if (i >= P) throw Error(fmt::format("gi: final gather: point {} of {}", i, P));

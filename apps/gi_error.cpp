@@ -88,7 +88,7 @@ ErrorStats error_stats(const std::vector<Vec3>& h, const std::vector<Vec3>& r, s
         const double dd = dot(d, d), rr = dot(r[i], r[i]);
         num += dd, den += rr;
         sh += double(h[i].x) + h[i].y + h[i].z, sr += double(r[i].x) + r[i].y + r[i].z;
-        rel.push_back(rr > 0 ? std::sqrt(dd / rr) : (dd > 0 ? 1e9 : 0));
+        rel.push_back(rr > 0 ? std::sqrt(dd / rr) : (dd > 0 ? 1e9 : 0));  // 1e9: infinite
     }
     ErrorStats s;
     if (rel.empty()) return s;
@@ -170,6 +170,10 @@ Method solve_brute(const VisibilityMap& vm, const std::vector<uint32_t>& idx, in
     return m;
 }
 
+// A percentile of relative errors; points the reference leaves dark but the GI lights count as
+// an infinite error.
+std::string p95(double v) { return v >= 1e9 ? "inf" : fmt::format("{:.4f}", v); }
+
 void print_table(const std::vector<Method>& methods, const ReferenceResult& ref, const Sets& sets,
                  int K, int converged) {
     const size_t nA = sets.num_all, nT = sets.points.size();
@@ -181,12 +185,17 @@ void print_table(const std::vector<Method>& methods, const ReferenceResult& ref,
     };
     for (int k = 0; k <= K; ++k) {
         const std::vector<Vec3>& r = ref.value[k];
-        fmt::print("| reference noise | {} | {:.4f} | | | {:.4f} | | |\n", label(k),
-                   noise(ref.std_error[k], r, 0, nA), noise(ref.std_error[k], r, nA, nT));
+        const std::string model_noise =
+            nT > nA ? fmt::format("{:.4f}", noise(ref.std_error[k], r, nA, nT)) : "-";
+        fmt::print("| reference noise | {} | {:.4f} | | | {} | | |\n", label(k),
+                   noise(ref.std_error[k], r, 0, nA), model_noise);
         for (const Method& m : methods) {
             const ErrorStats a = error_stats(m.at[k], r, 0, nA), b = error_stats(m.at[k], r, nA, nT);
-            fmt::print("| {} | {} | {:.4f} | {:.4f} | {:.4f} | {:.4f} | {:.4f} | {:.4f} |\n", m.name,
-                       label(k), a.rms, a.p95, a.ratio, b.rms, b.p95, b.ratio);
+            const std::string model =
+                nT > nA ? fmt::format("{:.4f} | {} | {:.4f}", b.rms, p95(b.p95), b.ratio)
+                        : "- | - | -";
+            fmt::print("| {} | {} | {:.4f} | {} | {:.4f} | {} |\n", m.name, label(k), a.rms,
+                       p95(a.p95), a.ratio, model);
         }
     }
 }

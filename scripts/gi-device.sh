@@ -17,6 +17,7 @@ mkdir -p "$OUT"
 # The binaries carry this checkout's absolute path for scenes and models: recreate it.
 if [[ ! -e /work/main ]]; then mkdir -p /work && ln -s "$root" /work/main; fi
 export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
 mkdir -p models
 for f in .device/models/*.gz; do
     n="models/$(basename "$f" .gz)"

@@ -79,8 +79,7 @@ struct ErrorStats {
 
 // Relative RMS, 95th percentile of |h - r| / |r| and sum(h) / sum(r) (all channels) over
 // entries [b, e).
-ErrorStats error_stats(const std::vector<Vec3>& h, const std::vector<Vec3>& r, size_t b,
-                       size_t e) {
+ErrorStats error_stats(const std::vector<Vec3>& h, const std::vector<Vec3>& r, size_t b, size_t e) {
     double num = 0, den = 0, sh = 0, sr = 0;
     std::vector<double> rel;
     for (size_t i = b; i < e; ++i) {
@@ -190,7 +189,8 @@ void print_table(const std::vector<Method>& methods, const ReferenceResult& ref,
         fmt::print("| reference noise | {} | {:.4f} | | | {} | | |\n", label(k),
                    noise(ref.std_error[k], r, 0, nA), model_noise);
         for (const Method& m : methods) {
-            const ErrorStats a = error_stats(m.at[k], r, 0, nA), b = error_stats(m.at[k], r, nA, nT);
+            const ErrorStats a = error_stats(m.at[k], r, 0, nA),
+                             b = error_stats(m.at[k], r, nA, nT);
             const std::string model =
                 nT > nA ? fmt::format("{:.4f} | {} | {:.4f}", b.rms, p95(b.p95), b.ratio)
                         : "- | - | -";
@@ -237,9 +237,10 @@ void write_csv(const std::string& path, const Scene& sc, const VisibilityMap& vm
 VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t>& surf) {
     const bool saved = !ends_with_ci(o.input, ".json");
     if (saved && o.scene.empty())
-        throw Error(fmt::format("{}: --reference needs the scene file (.json, or --scene for a "
-                                ".vmap): the reference traces the scene's triangles",
-                                o.input));
+        throw Error(
+            fmt::format("{}: --reference needs the scene file (.json, or --scene for a "
+                        ".vmap): the reference traces the scene's triangles",
+                        o.input));
     sc = load_scene(saved ? o.scene : o.input);
     if (o.points) sc.points = *o.points;
     if (o.seed) sc.seed = *o.seed;
@@ -247,8 +248,8 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
         if (o.K != 2 || o.eps != 0.05f)
-            throw Error(fmt::format("{}: -K/--eps apply to a V-map built from a scene file",
-                                    o.input));
+            throw Error(
+                fmt::format("{}: -K/--eps apply to a V-map built from a scene file", o.input));
         VisibilityMap vm = load_vmap(o.input);
         bool same = vm.points.size() == ps.size();
         for (size_t k = 0; same && k < vm.points.size(); ++k)
@@ -257,7 +258,8 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
             throw Error(fmt::format("{}: points: not the samples of {} (points {}, seed {})",
                                     o.input, o.scene, sc.points, sc.seed));
         fmt::print(
-            "scene:      {} ({}): {} points, V-map {} (K {}, eps {}, {} links) loaded in {:.2f} s\n",
+            "scene:      {} ({}): {} points, V-map {} (K {}, eps {}, {} links) loaded in {:.2f} "
+            "s\n",
             sc.name, o.scene, vm.points.size(), o.input, vm.visibility_params.K,
             vm.visibility_params.eps, vm.num_links(), seconds_since(t0));
         return vm;

@@ -76,8 +76,8 @@ TEST(Reference, FurnaceGivesTheGeometricSeriesPerBounce) {
 TEST(Reference, SquareLightMatchesThePointToRectangleFormFactor) {
     // A 0.4 x 0.4 light at height 0.5 facing down over the origin; nothing else.
     const float s = 0.2f, h = 0.5f;
-    std::vector<SceneSurface> surfaces = {quad("light", {-s, h, -s}, {s, h, -s}, {s, h, s},
-                                               {-s, h, s}, Vec3{}, Vec3{10, 5, 1})};
+    std::vector<SceneSurface> surfaces = {
+        quad("light", {-s, h, -s}, {s, h, -s}, {s, h, s}, {-s, h, s}, Vec3{}, Vec3{10, 5, 1})};
     const std::vector<ReferencePoint> at = {{{0, 0, 0}, {0, 1, 0}, {1, 1, 1}, {}}};
     ReferenceParams p;
     p.samples = 20000;
@@ -96,10 +96,10 @@ TEST(Reference, BlockerCastsItsShadow) {
     std::vector<SceneSurface> surfaces = {
         quad("light", {-s, h, -s}, {s, h, -s}, {s, h, s}, {-s, h, s}, Vec3{}, Vec3{10, 10, 10}),
         // A blocker at mid height over x < 0.1, both sides facing (two quads).
-        quad("top", {-1, 0.25f, -1}, {-1, 0.25f, 1}, {0.1f, 0.25f, 1}, {0.1f, 0.25f, -1},
-             Vec3{}, Vec3{}),
-        quad("bottom", {-1, 0.25f, -1}, {0.1f, 0.25f, -1}, {0.1f, 0.25f, 1}, {-1, 0.25f, 1},
-             Vec3{}, Vec3{})};
+        quad("top", {-1, 0.25f, -1}, {-1, 0.25f, 1}, {0.1f, 0.25f, 1}, {0.1f, 0.25f, -1}, Vec3{},
+             Vec3{}),
+        quad("bottom", {-1, 0.25f, -1}, {0.1f, 0.25f, -1}, {0.1f, 0.25f, 1}, {-1, 0.25f, 1}, Vec3{},
+             Vec3{})};
     const std::vector<ReferencePoint> at = {{{-0.5f, 0, 0}, {0, 1, 0}, {1, 1, 1}, {}},
                                             {{0.8f, 0, 0}, {0, 1, 0}, {1, 1, 1}, {}}};
     ReferenceParams p;
@@ -188,8 +188,8 @@ GiParams cpu_gi(float theta) {
 }
 
 TEST(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
-    const VisibilityMap vm =
-        build_vmap(test::sample(test::scene_path("cornell-bunny"), 3000, 1), test::cpu_params(5, 4));
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 3000, 1),
+                                        test::cpu_params(5, 4));
     RadiositySolver s(vm, cpu_gi(1e9f));
     s.bounce();
     const std::vector<Vec3> fg = s.final_gather(1e9f);
@@ -202,8 +202,8 @@ TEST(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
 }
 
 TEST(FinalGather, IsCloseToTheBruteForceAtTheDefaults) {
-    const VisibilityMap vm =
-        build_vmap(test::sample(test::scene_path("cornell-bunny"), 4000, 1), test::cpu_params(6, 4));
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 4000, 1),
+                                        test::cpu_params(6, 4));
     RadiositySolver s(vm, cpu_gi(4));
     s.bounce();
     const std::vector<Vec3> fg = s.final_gather(2.0f);  // the CLI's default --gather-theta

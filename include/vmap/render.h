@@ -48,7 +48,8 @@ struct RenderOptions {
 struct Image {
     int width = 0, height = 0;
     std::vector<uint8_t> rgb;
-    std::vector<Vec3> linear = {};  // linear RGB before clamping and sRGB (RenderOptions::keep_linear)
+    std::vector<Vec3> linear =
+        {};  // linear RGB before clamping and sRGB (RenderOptions::keep_linear)
 
     const uint8_t* pixel(int x, int y) const { return rgb.data() + 3 * (size_t(y) * width + x); }
     uint8_t* pixel(int x, int y) { return rgb.data() + 3 * (size_t(y) * width + x); }

@@ -1,6 +1,4 @@
 // Path-traced reference radiosity (the contract is in include/vmap/gi_reference.h).
-#include "vmap/gi_reference.h"
-
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
@@ -13,6 +11,7 @@
 
 #include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/gi_reference.h"
 #include "vmap/validate.h"
 
 namespace vmap {

@@ -370,7 +370,8 @@ GiCommands add_gi_commands(CLI::App& app) {
                  "relative RMS difference per bounce (small scenes)");
     gi->add_flag("--reference", o->reference,
                  "Measure the GI against a path-traced reference over the scene's triangles "
-                 "(Embree) at sample points and print the error table (scene files only)");
+                 "(Embree) at sample points and print the error table (a scene file, or a .vmap of "
+                 "it with --scene; with -o: the picture reference | vmap gi | error)");
     gi->add_option("--ref-points", o->ref_points,
                    "Reference: this many non-emitting points, and as many model points")
         ->check(CLI::Range(size_t(1), size_t(1000000)))

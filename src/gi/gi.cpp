@@ -300,7 +300,7 @@ struct BlockRefiner {
 // The final gather (per point, from the hierarchical solution): point i gathers from every node
 // the V-map links to its leaf or an ancestor (all of it sees all of that node), at node level
 // (the node's area-weighted mean radiosity, its summed area and mean normal, seen from the
-// point itself) when the node is flat and more than theta times its size away from the point,
+// point itself; a leaf of several points too) when the node is flat and more than theta times its size away from the point,
 // else from its children, down to point to point. The receiver is always the point, so no
 // block of receivers shares one value: the picture has no block grid, and each point's
 // visibility is that of its leaf's links.
@@ -317,7 +317,8 @@ struct FinalGather {
         const bool leaf = t.is_leaf(L);
         // Emitters are always gathered point by point: the direct light carries the shadows and
         // most of the power, and the lights are a small share of the points.
-        if (!leaf && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
+        const bool many = t.point_end[L] - t.point_begin[L] > 1;
+        if (many && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
             length(gl.center - x) > theta * gl.size) {
             const float k = gi_kernel(x, n, a, gl.center, gl.normal, gl.point_area);
             return k > 0 ? B[L] * (k * gl.area) : Vec3{};

@@ -300,10 +300,10 @@ struct BlockRefiner {
 // The final gather (per point, from the hierarchical solution): point i gathers from every node
 // the V-map links to its leaf or an ancestor (all of it sees all of that node), at node level
 // (the node's area-weighted mean radiosity, its summed area and mean normal, seen from the
-// point itself; a leaf of several points too) when the node is flat and more than theta times its size away from the point,
-// else from its children, down to point to point. The receiver is always the point, so no
-// block of receivers shares one value: the picture has no block grid, and each point's
-// visibility is that of its leaf's links.
+// point itself; a leaf of several points too) when the node is flat and more than theta times its
+// size away from the point, else from its children, down to point to point. The receiver is always
+// the point, so no block of receivers shares one value: the picture has no block grid, and each
+// point's visibility is that of its leaf's links.
 struct FinalGather {
     const VisibilityMap& vm;
     const std::vector<NodeGeom>& g;

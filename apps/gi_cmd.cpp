@@ -1,5 +1,5 @@
 // `vmap gi`: diffuse global illumination over the V-map (paper §6.3, include/vmap/gi.h).
-//   vmap gi [SCENE.json | MESH | CLOUD | MAP.vmap] [-o image.png] [--ply lit.ply] [--bounces 3]
+//   vmap gi [SCENE.json | MESH | CLOUD | MAP.vmap] [-o image.png] [--ply lit.ply] [--theta 1]
 // A scene or mesh is sampled and its V-map built on the fly (the scene's octree defaults), a
 // point cloud's V-map built from its points; a .vmap file carries the points' emission, albedo
 // and splat radii itself.
@@ -36,20 +36,6 @@ bool has_suffix_ci(std::string s, const std::string& suf) {
     return s.size() >= suf.size() && s.compare(s.size() - suf.size(), suf.size(), suf) == 0;
 }
 
-struct GiOptions {
-    std::string input;
-    std::string image, ply;
-    std::optional<uint64_t> points, seed;
-    std::optional<int> max_height, leaf_points;
-    GiParams gi;
-    float exposure = 0;
-    std::string scene, eye, target, up, size = "800x800";
-    std::optional<float> fov;
-    RenderOptions render;
-    bool compare = false;
-    bool as_points = false;
-};
-
 // The points that emit; none is an error naming what to add, raised before any V-map is built.
 size_t count_emitters(const PointSet& ps, const std::string& input) {
     size_t emitters = 0;
@@ -61,16 +47,6 @@ size_t count_emitters(const PointSet& ps, const std::string& input) {
             "emission_r, emission_g, emission_b to a PLY cloud (a .vmap keeps its input's)",
             input));
     return emitters;
-}
-
-BuildParams build_params(const GiOptions& o, const std::optional<OctreeParams>& file_octree) {
-    BuildParams bp;
-    if (file_octree) bp.octree = *file_octree;
-    if (o.max_height) bp.octree.max_height = *o.max_height;
-    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-    bp.backend = o.gi.backend;
-    bp.progress = stderr_progress();
-    return bp;
 }
 
 // The V-map of the input: loaded, or built from a scene or mesh (sampled, with the scene's
@@ -88,7 +64,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         BuildStats st;
         PointSet points = sample_scene(sc);
         count_emitters(points, o.input);
-        VisibilityMap vm = build_vmap(std::move(points), build_params(o, sc.octree), &st, o.input);
+        VisibilityMap vm = build_vmap(std::move(points), gi_build_params(sc.octree, o), &st, o.input);
         build_s = seconds_since(t0);
         what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
                            has_suffix_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
@@ -102,16 +78,16 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         PointSet points = load_point_cloud(o.input);
         count_emitters(points, o.input);
         VisibilityMap vm =
-            build_vmap(std::move(points), build_params(o, std::nullopt), &st, o.input);
+            build_vmap(std::move(points), gi_build_params(std::nullopt, o), &st, o.input);
         if (!o.scene.empty()) camera = load_scene(o.scene).camera;
         build_s = seconds_since(t0);
         what = fmt::format("point cloud {}, V-map built on {} in {:.2f} s", o.input, st.backend,
                            build_s);
         return vm;
     }
-    if (o.max_height || o.leaf_points)
+    if (o.max_height || o.leaf_points || o.K != 2 || o.eps != 0.05f)
         throw Error(fmt::format(
-            "{}: --max-height/--leaf-points apply when the V-map is built, not to a .vmap",
+            "{}: --max-height/--leaf-points/-K/--eps apply when the V-map is built, not to a .vmap",
             o.input));
     VisibilityMap vm = load_vmap(o.input);
     if (!o.scene.empty()) camera = load_scene(o.scene).camera;
@@ -120,10 +96,172 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
     return vm;
 }
 
+// --compare-brute: each bounce (and the final gather) against the brute-force gather.
+void compare_brute(const VisibilityMap& vm, const std::vector<std::vector<Vec3>>& hier,
+                   int hier_bounces, bool gather) {
+    std::vector<std::vector<Vec3>> ref;
+    std::vector<double> brute_s;
+    brute_force_radiosity(vm, int(hier.size()), &ref, &brute_s);
+    for (size_t b = 0; b < hier.size(); ++b)
+        fmt::print("compare {:2d}: {}, brute force {:.3f} s, relative RMS vs brute force {:.4f}\n",
+                   b + 1, gather && int(b) == hier_bounces ? "final gather" : "hierarchical",
+                   brute_s[b], relative_rms(hier[b], ref[b]));
+}
+
+// Hierarchical bounces (a fixed number, or until the last one added less than the tolerance of
+// the power), then the final gather; progress and power per bounce on stdout.
+std::vector<Vec3> solve(const VisibilityMap& vm, GiOptions& o) {
+    o.gi.progress = stderr_progress();
+    RadiositySolver solver(vm, o.gi);
+    const GiStats& st0 = solver.stats();
+    if (!st0.note.empty()) fmt::print("note:       {}\n", st0.note);
+    fmt::print("backend:    {}\n", st0.backend);
+    fmt::print(
+        "refinement: {}, theta {}: {} interactions ({} node level, {} point to point), "
+        "setup {:.3f} s\n",
+        o.gi.refine, o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
+        st0.seconds_setup);
+    const bool gather = o.final_gather && (!o.bounces || *o.bounces > 0);
+    const int fixed = o.bounces ? *o.bounces - (gather ? 1 : 0) : -1;
+    const int limit = fixed >= 0 ? fixed : o.max_bounces;
+    std::vector<std::vector<Vec3>> hier;
+    const Vec3 p0 = total_power(vm, solver.radiosity());
+    fmt::print("power:      emitted {:.6g} {:.6g} {:.6g} W\n", p0.x, p0.y, p0.z);
+    double previous = double(p0.x) + p0.y + p0.z;
+    {
+        const ProgressCallback cb = stderr_progress();
+        detail::Progress bar("gi bounces", uint64_t(limit), &cb);
+        for (int b = 0; b < limit; ++b) {
+            solver.bounce();
+            bar.set(uint64_t(b + 1));
+            const auto B = solver.radiosity();
+            if (o.compare) hier.push_back(B);
+            const Vec3 p = total_power(vm, B);
+            const double now = double(p.x) + p.y + p.z;
+            fmt::print("bounce {:2d}:  {:.4f} s, leaving power {:.6g} {:.6g} {:.6g} W\n", b + 1,
+                       solver.stats().seconds_bounce.back(), p.x, p.y, p.z);
+            if (fixed < 0 && now > 0 && std::abs(now - previous) <= o.tolerance * now) {
+                fmt::print("converged:  the last bounce added {:.2g} of the power (tolerance {})\n",
+                           (now - previous) / now, o.tolerance);
+                break;
+            }
+            previous = now;
+        }
+    }
+    std::vector<Vec3> B = solver.radiosity();
+    const int hier_bounces = solver.bounces_done();
+    if (gather) {
+        const auto t0 = Clock::now();
+        B = solver.final_gather(o.gather_theta);
+        const Vec3 p = total_power(vm, B);
+        fmt::print(
+            "gather:     final gather (bounce {}), theta {}: {:.3f} s, leaving power {:.6g} {:.6g} "
+            "{:.6g} W\n",
+            hier_bounces + 1, o.gather_theta, seconds_since(t0), p.x, p.y, p.z);
+        hier.push_back(B);
+    }
+    if (o.compare) compare_brute(vm, hier, hier_bounces, gather);
+    return B;
+}
+
+// Display colours: exposure x radiosity (linear, unclamped; the PNG clamps, the PFM does not).
+std::vector<Vec3> display(const std::vector<Vec3>& B, float exposure) {
+    std::vector<Vec3> c(B.size());
+    for (size_t i = 0; i < B.size(); ++i) c[i] = B[i] * exposure;
+    return c;
+}
+
+float auto_exposure(const VisibilityMap& vm, const std::vector<Vec3>& B) {
+    std::vector<Vec3> unused;
+    return tone_map(vm, B, 0.0f, unused);
+}
+
+// The image as PFM (little-endian float RGB, rows bottom-up), in radiosity units: the linear
+// render divided by the exposure.
+void write_pfm(const std::string& path, const Image& img, float exposure) {
+    const std::string tmp = path + ".tmp";
+    std::FILE* f = std::fopen(tmp.c_str(), "wb");
+    if (!f) throw Error(fmt::format("{}: --pfm: cannot write", path));
+    fmt::print(f, "PF\n{} {}\n-1.0\n", img.width, img.height);
+    std::vector<float> row(size_t(3) * img.width);
+    bool ok = true;
+    for (int y = img.height - 1; y >= 0 && ok; --y) {
+        for (int x = 0; x < img.width; ++x) {
+            const Vec3 c = img.linear[size_t(y) * img.width + x] / exposure;
+            row[3 * x] = c.x, row[3 * x + 1] = c.y, row[3 * x + 2] = c.z;
+        }
+        ok = std::fwrite(row.data(), sizeof(float), row.size(), f) == row.size();
+    }
+    ok = std::fclose(f) == 0 && ok;
+    if (!ok) {
+        std::remove(tmp.c_str());
+        throw Error(fmt::format("{}: --pfm: write failed", path));
+    }
+    std::filesystem::rename(tmp, path);
+}
+
+// Points (input order) with their display colours (uchar sRGB) and linear radiosity as float
+// properties radiosity_r/g/b (W/m^2), binary little-endian.
+void write_lit_ply(const std::string& path, const PointSet& pts, const std::vector<Vec3>& B,
+                   float exposure) {
+    const std::string tmp = path + ".tmp";
+    std::FILE* f = std::fopen(tmp.c_str(), "wb");
+    if (!f) throw Error(fmt::format("{}: --ply: cannot write", path));
+    fmt::print(f,
+               "ply\nformat binary_little_endian 1.0\ncomment vmap gi: display = sRGB(clamp({} x "
+               "radiosity))\nelement vertex {}\nproperty float x\nproperty float y\nproperty "
+               "float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar "
+               "red\nproperty uchar green\nproperty uchar blue\nproperty float radius\nproperty "
+               "float radiosity_r\nproperty float radiosity_g\nproperty float radiosity_b\n"
+               "end_header\n",
+               exposure, pts.size());
+    bool ok = true;
+    for (size_t i = 0; i < pts.size() && ok; ++i) {
+        const Vec3 p = pts.positions[i], n = pts.normals[i], b = B[i];
+        const float head[6] = {p.x, p.y, p.z, n.x, n.y, n.z};
+        const uint8_t rgb[3] = {linear_to_srgb8(b.x * exposure), linear_to_srgb8(b.y * exposure),
+                                linear_to_srgb8(b.z * exposure)};
+        const float tail[4] = {pts.radii[i], b.x, b.y, b.z};
+        ok = std::fwrite(head, sizeof head, 1, f) == 1 && std::fwrite(rgb, 3, 1, f) == 1 &&
+             std::fwrite(tail, sizeof tail, 1, f) == 1;
+    }
+    ok = std::fclose(f) == 0 && ok;
+    if (!ok) {
+        std::remove(tmp.c_str());
+        throw Error(fmt::format("{}: --ply: write failed", path));
+    }
+    std::filesystem::rename(tmp, path);
+}
+
+void write_outputs(const VisibilityMap& vm, const std::vector<Vec3>& B, float exposure,
+                   const Camera& cam, GiOptions& o) {
+    // Back to input order for the outputs.
+    const PointSet out = points_in_input_order(vm);
+    std::vector<Vec3> lit(B.size());
+    for (size_t k = 0; k < B.size(); ++k) lit[vm.order[k]] = B[k];
+    if (!o.image.empty() || !o.pfm.empty()) {
+        const auto t0 = Clock::now();
+        o.render.keep_linear = !o.pfm.empty();
+        const Image img = render_points(out, display(lit, exposure), cam, o.render);
+        if (!o.image.empty()) write_png(o.image, img);
+        if (!o.pfm.empty()) write_pfm(o.pfm, img, exposure);
+        fmt::print("wrote:      {} ({}x{}, rendered in {:.2f} s)\n",
+                   o.image.empty() ? o.pfm : o.image, img.width, img.height, seconds_since(t0));
+        if (!o.image.empty() && !o.pfm.empty())
+            fmt::print("wrote:      {} (linear radiosity, W/m^2)\n", o.pfm);
+    }
+    if (!o.ply.empty()) {
+        write_lit_ply(o.ply, out, lit, exposure);
+        fmt::print("wrote:      {} (display colours and linear radiosity_r/g/b)\n", o.ply);
+    }
+}
+
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
+    if (o.reference) return run_gi_reference(o);
     if (o.image.empty()) o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
     check_output(o.ply, "--ply");
+    check_output(o.pfm, "--pfm");
     check_output(o.image, "-o");
     const auto [width, height] = parse_size(o.size, "--size");
     o.render.width = width, o.render.height = height;
@@ -143,7 +281,7 @@ int run_gi(GiOptions& o) {
     if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
     if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
     if (o.fov) cam.fov_y_deg = *o.fov;
-    if (!o.image.empty())
+    if (!o.image.empty() || !o.pfm.empty())
         check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
     const size_t emitters = count_emitters(ps, o.input);
     if (!ps.has_radii())
@@ -153,68 +291,29 @@ int run_gi(GiOptions& o) {
     fmt::print("input:      {}\n", what);
     fmt::print("points:     {} ({} emitting), {} nodes, {} leaves, {} links\n", ps.size(), emitters,
                vm.octree.num_nodes(), vm.octree.num_leaves(), vm.num_links());
-    RadiositySolver solver(vm, o.gi);
-    const GiStats& st0 = solver.stats();
-    if (!st0.note.empty()) fmt::print("note:       {}\n", st0.note);
-    fmt::print("backend:    {}\n", st0.backend);
+    const std::vector<Vec3> B = solve(vm, o);
+    const float exposure = o.exposure > 0 ? o.exposure : auto_exposure(vm, B);
     fmt::print(
-        "refinement: {}, theta {}: {} interactions ({} node level, {} point to point), "
-        "setup {:.3f} s\n",
-        o.gi.refine, o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
-        st0.seconds_setup);
-    std::vector<std::vector<Vec3>> ref;
-    std::vector<double> brute_s;
-    if (o.compare) brute_force_radiosity(vm, o.gi.bounces, &ref, &brute_s);
-    {
-        const ProgressCallback cb = stderr_progress();
-        detail::Progress bar("gi bounces", uint64_t(o.gi.bounces), &cb);
-        const Vec3 p0 = total_power(vm, solver.radiosity());
-        fmt::print("power:      emitted {:.4g} {:.4g} {:.4g} W\n", p0.x, p0.y, p0.z);
-        for (int b = 0; b < o.gi.bounces; ++b) {
-            solver.bounce();
-            bar.set(uint64_t(b + 1));
-            const auto B = solver.radiosity();
-            const Vec3 p = total_power(vm, B);
-            std::string cmp;
-            if (o.compare)
-                cmp = fmt::format(", brute force {:.3f} s, relative RMS vs brute force {:.4f}",
-                                  brute_s[b], relative_rms(B, ref[b]));
-            fmt::print("bounce {:2d}:  {:.4f} s, leaving power {:.4g} {:.4g} {:.4g} W{}\n", b + 1,
-                       solver.stats().seconds_bounce.back(), p.x, p.y, p.z, cmp);
-        }
-    }
-    const std::vector<Vec3> B = solver.radiosity();
-    std::vector<Vec3> colors;
-    const float exposure = tone_map(vm, B, o.exposure, colors);
-    fmt::print("tone map:   exposure {:.4g} (display = clamp(exposure x radiosity), sRGB)\n",
-               exposure);
-
-    // Back to input order for the outputs.
-    PointSet out = points_in_input_order(vm);
-    std::vector<Vec3> lit(colors.size());
-    for (size_t k = 0; k < colors.size(); ++k) lit[vm.order[k]] = colors[k];
-    if (!o.image.empty()) {
-        const auto t0 = Clock::now();
-        const Image img = render_points(out, lit, cam, o.render);
-        write_png(o.image, img);
-        fmt::print("wrote:      {} ({}x{}, rendered in {:.2f} s)\n", o.image, img.width, img.height,
-                   seconds_since(t0));
-    }
-    if (!o.ply.empty()) {
-        // PLY colours are bytes as they are displayed: sRGB-encode the linear colours.
-        out.colors.resize(lit.size());
-        for (size_t i = 0; i < lit.size(); ++i)
-            out.colors[i] =
-                Vec3{linear_to_srgb8(lit[i].x) / 255.0f, linear_to_srgb8(lit[i].y) / 255.0f,
-                     linear_to_srgb8(lit[i].z) / 255.0f};
-        out.emission.clear();
-        write_ply(o.ply, out);
-        fmt::print("wrote:      {} (lit display colours)\n", o.ply);
-    }
+        "tone map:   exposure {} (display = clamp(exposure x radiosity), sRGB; radiosity in "
+        "W/m^2 per channel)\n",
+        exposure);
+    write_outputs(vm, B, exposure, cam, o);
     return 0;
 }
 
 }  // namespace
+
+BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o) {
+    BuildParams bp;
+    if (scene_octree) bp.octree = *scene_octree;
+    if (o.max_height) bp.octree.max_height = *o.max_height;
+    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    bp.visibility.K = o.K;
+    bp.visibility.eps = o.eps;
+    bp.backend = o.gi.backend;
+    bp.progress = stderr_progress();
+    return bp;
+}
 
 GiCommands add_gi_commands(CLI::App& app) {
     auto o = std::make_shared<GiOptions>();
@@ -226,9 +325,27 @@ GiCommands add_gi_commands(CLI::App& app) {
                    "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
                    "file. Default: scenes/cornell-bunny.json");
     gi->add_option("-o,--output", o->image, "PNG of the lit scene (default: <input name>-gi.png)");
-    gi->add_option("--ply", o->ply, "Write the points with their lit display colours (PLY)");
-    gi->add_option("--bounces", o->gi.bounces, "Gather steps after B = E (1: direct light)")
-        ->check(CLI::Range(0, 10000))
+    gi->add_option("--ply", o->ply,
+                   "Write the points with their display colours and linear radiosity "
+                   "(float radiosity_r/g/b, W/m^2) as PLY");
+    gi->add_option("--pfm", o->pfm, "Write the picture as linear radiosity (PFM, W/m^2)");
+    gi->add_option("--bounces", o->bounces,
+                   "Exactly this many gather steps after B = E, the final gather included (1: "
+                   "direct light). Default: until converged (--tolerance)")
+        ->check(CLI::Range(0, 10000));
+    gi->add_option("--tolerance", o->tolerance,
+                   "Converged when the last bounce added less than this fraction of the power")
+        ->check(CLI::Range(1e-9, 1.0))
+        ->capture_default_str();
+    gi->add_option("--max-bounces", o->max_bounces, "At most this many bounces when converging")
+        ->check(CLI::Range(1, 10000))
+        ->capture_default_str();
+    gi->add_flag("!--no-final-gather", o->final_gather,
+                 "Skip the final per-point gather (the picture then shows the hierarchy's "
+                 "receiver blocks)");
+    gi->add_option("--gather-theta", o->gather_theta,
+                   "Final gather: a node is seen as one source when farther than this x its size")
+        ->check(CLI::PositiveNumber)
         ->capture_default_str();
     gi->add_option("--theta", o->gi.theta,
                    "Separation parameter: node-level transfer when the centres are more than "
@@ -271,9 +388,43 @@ GiCommands add_gi_commands(CLI::App& app) {
         ->check(CLI::Range(1, 21));
     gi->add_option("--leaf-points", o->leaf_points, "Override the scene's octree leaf_points")
         ->check(CLI::Range(1, 1000000));
+    gi->add_option("-K", o->K, "V-map built here: actual occluders that hide a leaf pair")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    gi->add_option("--eps", o->eps,
+                   "V-map built here: an occluder's plane must cut the segment at t in (eps, "
+                   "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
+        ->check(CLI::Range(0.0f, 0.49f))
+        ->capture_default_str();
     gi->add_flag("--compare-brute", o->compare,
                  "Also run the brute-force gather (every visible point pair) and print the "
                  "relative RMS difference per bounce (small scenes)");
+    gi->add_flag("--reference", o->reference,
+                 "Measure the GI against a path-traced reference over the scene's triangles "
+                 "(Embree) at sample points and print the error table (a scene file, or a .vmap of "
+                 "it with --scene; with -o: the picture reference | vmap gi | error)");
+    gi->add_option("--ref-points", o->ref_points,
+                   "Reference: this many non-emitting points, and as many model points")
+        ->check(CLI::Range(size_t(1), size_t(1000000)))
+        ->capture_default_str();
+    gi->add_option("--ref-samples", o->ref.samples, "Reference: paths per point")
+        ->check(CLI::Range(2u, 100000000u))
+        ->capture_default_str();
+    gi->add_option("--ref-seed", o->ref.seed, "Reference: seed (points and paths)")
+        ->capture_default_str();
+    gi->add_option("--ref-bounces", o->ref.bounces,
+                   "Reference: the table shows 1..this many bounces, then converged")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    gi->add_option("--ref-out", o->ref_out,
+                   "Reference: write the sample points, the reference with its standard errors "
+                   "and each method's values (CSV)");
+    gi->add_flag("!--no-brute", o->brute, "Reference: leave out the brute-force gather");
+    gi->add_option("--ref-picture-samples", o->ref_picture_samples,
+                   "Reference with -o: paths per point for the side-by-side picture (reference "
+                   "| vmap gi | error) at every point")
+        ->check(CLI::Range(2u, 1000000u))
+        ->capture_default_str();
     c.run_gi = [o] { return run_gi(*o); };
     auto [bench, run_bench] = add_gi_bench_command(app);
     c.bench = bench;

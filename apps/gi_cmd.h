@@ -4,6 +4,13 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <optional>
+#include <string>
+
+#include "vmap/gi.h"
+#include "vmap/gi_reference.h"
+#include "vmap/render.h"
+#include "vmap/vmap.h"
 
 namespace vmap::cli {
 
@@ -17,6 +24,43 @@ struct GiCommands {
 };
 
 GiCommands add_gi_commands(CLI::App& app);
+
+// The options of `vmap gi`.
+struct GiOptions {
+    std::string input;
+    std::string image, ply, pfm;
+    std::optional<uint64_t> points, seed;
+    std::optional<int> max_height, leaf_points;
+    // The predicate for a V-map built here (docs/gi.md "The V-map for the GI"): the GI weighs
+    // pairs by form factor, so near pairs, which the default eps hides too often, count most.
+    int K = 2;
+    float eps = 0.05f;
+    GiParams gi;
+    std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
+    double tolerance = 1e-3;     // converged: the last bounce added less than this of the power
+    int max_bounces = 200;
+    bool final_gather = true;
+    float gather_theta = 2.0f;
+    float exposure = 0;
+    std::string scene, eye, target, up, size = "800x800";
+    std::optional<float> fov;
+    RenderOptions render;
+    bool compare = false;
+    bool as_points = false;  // a mesh file's vertices as a point cloud (not area-sampled)
+    // --reference
+    bool reference = false, brute = true;
+    size_t ref_points = 1000;
+    uint32_t ref_picture_samples = 128;
+    ReferenceParams ref;
+    std::string ref_out;
+};
+
+// The build parameters of the V-map `vmap gi` makes from a scene file: the scene's octree
+// defaults and the options above.
+BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o);
+
+// apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
+int run_gi_reference(GiOptions& o);
 
 // bench/gi_bench.cpp: declares `bench-gi` on `app`, returns the subcommand and its runner.
 std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app);

@@ -87,7 +87,7 @@ VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
 std::vector<Vec3> gi_colors(const VisibilityMap& vm, const std::string& backend) {
     GiParams gp;
     gp.backend = backend;
-    gp.progress = detail::stderr_is_terminal();
+    gp.progress = cli::stderr_progress();
     GiStats st;
     const auto t0 = std::chrono::steady_clock::now();
     const std::vector<Vec3> B = solve_radiosity(vm, gp, &st);

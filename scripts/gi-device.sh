@@ -6,6 +6,8 @@
 #       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
 #       bench   vmap bench-gi (POINTS, default 5000..80000; BRUTE_MAX, default 40000)
+#       ref     vmap gi --reference on every shipped scene (the error table, docs/gi.md), CSVs,
+#               and the side-by-side picture of cornell-two-models (REF_PICTURE_SAMPLES, 512)
 #   Outputs go to $OUT.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -14,6 +16,7 @@ cd "$root"
 mkdir -p "$OUT"
 # The binaries find scenes and models from their own folder up (vmap::data_dir()).
 export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
+for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
 mkdir -p models
 for f in .device/models/*.gz; do
     n="models/$(basename "$f" .gz)"
@@ -38,8 +41,18 @@ for step in "$@"; do
         bench)
             "$bin/vmap" bench-gi --points "${POINTS:-5000,10000,20000,40000,80000}" \
                 --brute-max "${BRUTE_MAX:-40000}" --runs 3 --out "$OUT" 2>&1 | tail -15 || rc=1 ;;
+        ref)
+            for sc in cornell-empty cornell-bunny cornell-two-models cornell-dragon; do
+                extra=()
+                [[ $sc == cornell-empty || $sc == cornell-bunny ]] || extra=(--no-brute)
+                [[ $sc == cornell-two-models ]] && extra+=(-o "$OUT/gi-reference-$sc.png" \
+                    --size 480x480 --ref-picture-samples "${REF_PICTURE_SAMPLES:-512}")
+                "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 2000 --ref-samples 1024 \
+                    --backend cuda --ref-out "$OUT/ref-$sc.csv" "${extra[@]}" 2>&1 |
+                    tee "$OUT/ref-$sc.log" | grep -E "^(scene|reference|vmap gi|brute)|default" || rc=1
+            done ;;
         *)
-            echo "unknown step $step (gpu, two, bunny, bench)" >&2
+            echo "unknown step $step (gpu, two, bunny, bench, ref)" >&2
             rc=2 ;;
     esac
 done

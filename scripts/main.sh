@@ -3,9 +3,10 @@
 # scene (scenes/cornell-bunny.json) into out/cornell-bunny.vmap, printing its summary, then
 # draws the paper's Fig. 9 from it: the points visible from a point on the floor in front of the
 # bunny in purple (the eye cyan), the bunny's shadow on the back wall not (out/fig9.png). Then
-# global illumination over that V-map (vmap gi): out/cornell-bunny-gi.png and the lit points as a
-# PLY. It also builds the Python module and makes `import vmap` work (scripts/python-path.sh).
-# Extra arguments go to `vmap build` (e.g. --backend cpu, --points 20000).
+# global illumination at its defaults (vmap gi builds its own V-map of the scene, with the
+# occluder eps measured for the GI: docs/gi.md): out/cornell-bunny-gi.png, the lit points as a
+# PLY with linear radiosity. It also builds the Python module and makes `import vmap` work
+# (scripts/python-path.sh). Extra arguments go to `vmap build` (e.g. --backend cpu).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -21,5 +22,4 @@ mkdir -p out
 build/vmap build scenes/cornell-bunny.json -o out/cornell-bunny.vmap "$@"
 build/vmap render out/cornell-bunny.vmap --scene scenes/cornell-bunny.json --mode visible \
     --eye-pos 0.2764,0,0.1 -o out/fig9.png
-build/vmap gi out/cornell-bunny.vmap --scene scenes/cornell-bunny.json \
-    --theta 8 -o out/cornell-bunny-gi.png --ply out/cornell-bunny-gi.ply
+build/vmap gi scenes/cornell-bunny.json -o out/cornell-bunny-gi.png --ply out/cornell-bunny-gi.ply

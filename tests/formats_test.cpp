@@ -693,16 +693,22 @@ TEST(MeshScene, ANullRoomKeepsMeshesWhereTheFileHasThemWithTheirEmission) {
         EXPECT_EQ(ps.normals[400 + i], kN[i]);
         EXPECT_EQ(ps.emission[400 + i], (Vec3{4, 4, 4}));
     }
+    // The emitting surface's points carry its emission, scaled alike so that they emit the
+    // surface's power (sample_scene).
     size_t emitting = 0;
+    Vec3 scaled{};
     for (size_t i = 0; i < 400; ++i) {
         const bool first = ps.positions[i].x < 2;
         emitting += first;
-        EXPECT_EQ(ps.emission[i], (first ? Vec3{1, 2, 3} : Vec3{})) << i;
+        if (first && scaled == Vec3{}) scaled = ps.emission[i];
+        EXPECT_EQ(ps.emission[i], (first ? scaled : Vec3{})) << i;
         if (!first) {
             EXPECT_EQ(ps.colors[i], (Vec3{0.1f, 0.2f, 0.3f})) << i;
         }
     }
     EXPECT_GT(emitting, 0u);
+    EXPECT_NEAR(scaled.y / scaled.x, 2.0, 1e-5);
+    EXPECT_NEAR(scaled.z / scaled.x, 3.0, 1e-5);
     EXPECT_EQ(sc.room_size.x, 6.0f);  // the box of both meshes and the cloud
 }
 

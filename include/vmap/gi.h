@@ -39,6 +39,7 @@
 
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -49,11 +50,11 @@ namespace vmap {
 
 struct GiParams {
     int bounces = 3;                         // gather steps after B = E; 1 = direct light only
-    float theta = 4.0f;                      // separation parameter (> 0): larger is finer, slower
+    float theta = 1.0f;                      // separation parameter (> 0): larger is finer, slower
     std::string backend = "auto";            // auto | cpu | cuda
     std::string refine = "blocks";           // blocks | links (see above)
     uint64_t max_interactions = 1ull << 31;  // refuse a refinement larger than this
-    bool progress = false;                   // progress line on stderr (callers pass isatty(2))
+    ProgressCallback progress;  // refinement progress (vmap/progress.h); false cancels
 };
 
 struct GiStats {
@@ -83,6 +84,14 @@ class RadiositySolver {
     // Radiosity per point (W/m^2 per channel), octree order (vm.points' order).
     std::vector<Vec3> radiosity() const;
     const GiStats& stats() const;
+    // One more bounce, gathered per point from the current solution (no block of receivers
+    // shares a value): point i gathers from every node linked to its leaf or an ancestor, at
+    // node level (the node's mean radiosity, area and mean normal, seen from the point) when
+    // the node is flat and farther than theta x its size from the point, else from its
+    // children, down to points. Returns B = E + rho * gathered for the given points (octree
+    // positions; all points, in octree order, when empty); the solver's state is unchanged. On
+    // all CPU cores. Throws vmap::Error for theta <= 0 or a point out of range.
+    std::vector<Vec3> final_gather(float theta, std::span<const uint32_t> points = {}) const;
     // The interaction list (for tests and tools): elements are the octree nodes, then the points
     // at num_nodes + k; receiver e gathers coef[k] * B[src[k]] for k in [row[e], row[e+1]);
     // area[e] is the element's area.

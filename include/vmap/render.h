@@ -41,12 +41,15 @@ struct RenderOptions {
                                // left over are filled from their neighbours)
     int supersample = 2;       // s x s samples per pixel, 1..4
     Vec3 background{0.02f, 0.02f, 0.025f};  // linear RGB
+    bool keep_linear = false;  // also keep the linear colours, unclamped (Image::linear)
 };
 
 // 8-bit sRGB, rows top-down, 3 bytes per pixel.
 struct Image {
     int width = 0, height = 0;
     std::vector<uint8_t> rgb;
+    std::vector<Vec3> linear =
+        {};  // linear RGB before clamping and sRGB (RenderOptions::keep_linear)
 
     const uint8_t* pixel(int x, int y) const { return rgb.data() + 3 * (size_t(y) * width + x); }
     uint8_t* pixel(int x, int y) { return rgb.data() + 3 * (size_t(y) * width + x); }

@@ -88,8 +88,10 @@ bool is_scene_input(const std::string& path, bool as_points = false);
 // Area-weighted, seeded sampling of every surface into points with the triangle's normal, the
 // surface's albedo and emission (or the per-vertex values, interpolated), and a splat radius
 // sqrt(area / (pi * points)); then the scene's clouds. The same seed gives the same points on
-// every machine and thread count. `surface_of`, when given, receives each point's index into
-// scene.surfaces (kNoSurface for a cloud's points).
+// every machine and thread count. The points of an emitting surface emit exactly its power (the
+// binomial count of its points would miss it by a few percent, so their emission is scaled by
+// the surface's area over their discs'). `surface_of`, when given, receives each point's index
+// into scene.surfaces (kNoSurface for a cloud's points).
 inline constexpr uint32_t kNoSurface = 0xffffffffu;
 PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
 

@@ -164,10 +164,21 @@ class ExactVisibility {
 
     static bool facing(Vec3 a, Vec3 na, Vec3 b, Vec3 nb);
 
+    // The nearest triangle along org + t dir, t in [t0, t1]: the index of its surface in the
+    // list given to the constructor (-1: nothing hit), t, and the triangle's unit normal on the
+    // side its winding makes outward.
+    struct Hit {
+        int32_t surface = -1;
+        float t = 0;
+        Vec3 normal;
+    };
+    Hit intersect(Vec3 org, Vec3 dir, float t0, float t1) const;
+
   private:
     void* device_ = nullptr;  // RTCDevice
     void* scene_ = nullptr;   // RTCScene
     uint64_t triangles_ = 0;
+    std::vector<int32_t> surface_of_geometry_;  // Embree geometry id -> surface index
 };
 
 // ---- the practitioner's alternative: Embree rays for leaf-centroid segments -------------------

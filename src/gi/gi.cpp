@@ -13,10 +13,12 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <mutex>
 #include <numbers>
 
 #include "gi/gi_device.h"
 #include "gi/gi_kernels.h"
+#include "util/progress.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -248,10 +250,15 @@ struct BlockRefiner {
     // The blocks with their visible area products, sorted by key. Deterministic: each link
     // end's entries are reduced in link order, then all are sorted by (key, node) and summed
     // in that order.
-    std::vector<Entry> run() const {
+    std::vector<Entry> run(const ProgressCallback& progress) const {
         const int32_t N = vm.octree.num_nodes();
         std::vector<std::vector<Entry>> per(N);
+        detail::Progress bar("gi refinement", uint64_t(N), &progress);
+        std::mutex bar_mutex;
+        std::atomic<uint64_t> done{0};
         tbb::parallel_for(0, N, [&](int32_t x) {
+            const uint64_t finished = ++done;
+            if (std::unique_lock lock(bar_mutex, std::try_to_lock); lock) bar.set(finished);
             std::vector<Entry> out;
             for (int32_t y : vm.links(x))
                 if (y > x) descend(0, 0, x, y, out);
@@ -290,6 +297,60 @@ struct BlockRefiner {
     }
 };
 
+// The final gather (per point, from the hierarchical solution): point i gathers from every node
+// the V-map links to its leaf or an ancestor (all of it sees all of that node), at node level
+// (the node's area-weighted mean radiosity, its summed area and mean normal, seen from the
+// point itself; a leaf of several points too) when the node is flat and more than theta times its
+// size away from the point, else from its children, down to point to point. The receiver is always
+// the point, so no block of receivers shares one value: the picture has no block grid, and each
+// point's visibility is that of its leaf's links.
+struct FinalGather {
+    const VisibilityMap& vm;
+    const std::vector<NodeGeom>& g;
+    const std::vector<uint8_t>& emits;  // per node: holds an emitting point
+    const Vec3* B;                      // per element: nodes then points
+    float theta;
+
+    Vec3 from_node(Vec3 x, Vec3 n, float a, int32_t L) const {
+        const Octree& t = vm.octree;
+        const NodeGeom& gl = g[L];
+        const bool leaf = t.is_leaf(L);
+        // Emitters are always gathered point by point: the direct light carries the shadows and
+        // most of the power, and the lights are a small share of the points.
+        const bool many = t.point_end[L] - t.point_begin[L] > 1;
+        if (many && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
+            length(gl.center - x) > theta * gl.size) {
+            const float k = gi_kernel(x, n, a, gl.center, gl.normal, gl.point_area);
+            return k > 0 ? B[L] * (k * gl.area) : Vec3{};
+        }
+        Vec3 h{0, 0, 0};
+        if (leaf) {
+            const PointSet& ps = vm.points;
+            const uint64_t base = uint64_t(t.num_nodes());
+            for (uint32_t j = t.point_begin[L]; j < t.point_end[L]; ++j) {
+                const float aj = area_of(ps, j);
+                const float k = gi_kernel(x, n, a, ps.positions[j], ps.normals[j], aj);
+                if (k > 0) h = h + B[base + j] * (k * aj);
+            }
+            return h;
+        }
+        t.for_each_child(L, [&](int32_t c) { h = h + from_node(x, n, a, c); });
+        return h;
+    }
+
+    Vec3 at(uint32_t i) const {
+        const Octree& t = vm.octree;
+        const PointSet& ps = vm.points;
+        const Vec3 x = ps.positions[i], n = ps.normals[i];
+        const float a = area_of(ps, i);
+        Vec3 h{0, 0, 0};
+        for (int32_t A = t.leaf_node[t.leaf_of_point(i)]; A >= 0; A = t.parent[A])
+            for (int32_t L : vm.links(A)) h = h + from_node(x, n, a, L);
+        const Vec3 E = emission_of(ps, i), rho = albedo_of(ps, i);
+        return Vec3{E.x + rho.x * h.x, E.y + rho.y * h.y, E.z + rho.z * h.z};
+    }
+};
+
 std::string cpu_name() {
     return fmt::format("cpu ({} threads)", tbb::this_task_arena::max_concurrency());
 }
@@ -322,6 +383,7 @@ struct RadiositySolver::Impl {
     std::vector<double> node_area;  // for interaction_list()
     std::vector<int32_t> point_leaf;
     std::vector<Vec3> B, G;
+    std::vector<NodeGeom> geom;
     detail::GiView view;
     std::unique_ptr<detail::GiDevice> device;
 
@@ -340,7 +402,7 @@ void RadiositySolver::Impl::setup() {
     const uint32_t P = uint32_t(ps.size());
     const uint64_t num_el = uint64_t(N) + P;
 
-    const std::vector<NodeGeom> geom = node_geometry(vm);
+    geom = node_geometry(vm);
     emission.resize(P), albedo.resize(P), area.resize(P), point_leaf.resize(P);
     tbb::parallel_for(uint32_t(0), P, [&](uint32_t i) {
         emission[i] = emission_of(ps, i);
@@ -363,7 +425,7 @@ void RadiositySolver::Impl::setup() {
     const Refiner ref{vm, geom, params.theta};
     std::vector<BlockRefiner::Entry> blocks;
     const bool by_links = params.refine == "links";
-    if (!by_links) blocks = BlockRefiner{vm, geom, params.theta}.run();
+    if (!by_links) blocks = BlockRefiner{vm, geom, params.theta}.run(params.progress);
     auto element_area = [&](uint32_t e) {
         return e < uint32_t(N) ? double(geom[e].area) : double(area_of(ps, e - uint32_t(N)));
     };
@@ -533,6 +595,30 @@ std::vector<Vec3> RadiositySolver::radiosity() const {
 }
 
 const GiStats& RadiositySolver::stats() const { return impl_->stats; }
+
+std::vector<Vec3> RadiositySolver::final_gather(float theta,
+                                                std::span<const uint32_t> points) const {
+    if (!(theta > 0) || !std::isfinite(theta))
+        throw Error(fmt::format("gi: final gather: theta: {} (must be > 0)", theta));
+    if (impl_->device) impl_->device->download_radiosity(impl_->B.data());
+    const Impl& m = *impl_;
+    std::vector<uint8_t> emits(m.view.num_nodes, 0);
+    tbb::parallel_for(0, m.view.num_nodes, [&](int32_t n) {
+        for (uint32_t k = m.view.point_begin[n]; k < m.view.point_end[n] && !emits[n]; ++k)
+            emits[n] = !(m.emission[k] == Vec3{});
+    });
+    const FinalGather fg{m.vm, m.geom, emits, m.B.data(), theta};
+    const uint32_t P = impl_->view.num_points;
+    for (uint32_t i : points)
+        if (i >= P) throw Error(fmt::format("gi: final gather: point {} of {}", i, P));
+    const size_t n = points.empty() ? P : points.size();
+    std::vector<Vec3> out(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](auto r) {
+        for (size_t k = r.begin(); k < r.end(); ++k)
+            out[k] = fg.at(points.empty() ? uint32_t(k) : points[k]);
+    });
+    return out;
+}
 
 void RadiositySolver::interaction_list(std::vector<uint64_t>& row, std::vector<uint32_t>& src,
                                        std::vector<float>& coef, std::vector<double>& area) const {

@@ -123,6 +123,7 @@ void resolve(Image& img, std::vector<Vec3> mean, std::vector<uint8_t> covered, i
                 const size_t p = size_t(y) * W + x;
                 const float f = float(covered[p]) / float(full);
                 const Vec3 c = mean[p] * f + background * (1 - f);
+                if (!img.linear.empty()) img.linear[p] = c;
                 uint8_t* px = img.pixel(x, y);
                 px[0] = linear_to_srgb8(c.x);
                 px[1] = linear_to_srgb8(c.y);
@@ -266,6 +267,7 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
     img.rgb.assign(size_t(img.width) * img.height * 3, 0);
     const float inv_f = 1.f / fr.fpx;
     // Per output pixel: the mean colour of its covered samples and how many were covered.
+    if (opt.keep_linear) img.linear.assign(size_t(img.width) * img.height, Vec3{});
     std::vector<Vec3> mean(size_t(img.width) * img.height);
     std::vector<uint8_t> covered(size_t(img.width) * img.height, 0);
     std::atomic<uint64_t> fragments{0};

@@ -28,6 +28,21 @@ struct Tri {
     Vec3 a, b, c, n;
 };
 
+// Each emitting surface's points share its power: k points of disc area a on a surface of area
+// S with emission E emit k a E, which the binomial count k makes differ from S E by a few
+// percent; scaling their emission by S / (k a) makes the points emit exactly the surface's power.
+void match_emitted_power(const std::vector<double>& area, const std::vector<uint32_t>& surface_of,
+                         PointSet& ps) {
+    std::vector<uint64_t> count(area.size(), 0);
+    for (uint32_t s : surface_of) count[s]++;
+    const double disc = M_PI * double(ps.radii[0]) * ps.radii[0];
+    for (size_t i = 0; i < surface_of.size(); ++i) {
+        const uint32_t s = surface_of[i];
+        if (ps.emission[i] == Vec3{}) continue;
+        ps.emission[i] = ps.emission[i] * float(area[s] / (double(count[s]) * disc));
+    }
+}
+
 // A per-vertex value at barycentric weights (w0, w1, w2) of triangle t, or `whole` when the
 // surface has none.
 Vec3 at_corner(const std::vector<Vec3>& values, const Mesh& m, uint32_t t, Vec3 whole, double w0,
@@ -54,6 +69,7 @@ void append_clouds(const Scene& scene, PointSet& ps) {
 PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     std::vector<Tri> tris;
     std::vector<double> cdf;
+    std::vector<double> surface_area(scene.surfaces.size(), 0.0);
     double area = 0;
     for (uint32_t s = 0; s < scene.surfaces.size(); ++s) {
         const Mesh& m = scene.surfaces[s].mesh;
@@ -66,6 +82,7 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
             if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
             tris.push_back({s, k, a, b, c, x / float(2 * ar)});
             area += ar;
+            surface_area[s] += ar;
             cdf.push_back(area);
         }
     }
@@ -82,10 +99,10 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     ps.normals.resize(n);
     ps.colors.resize(n);
     ps.emission.resize(n);
+    std::vector<uint32_t> surf(n);
     // Each sample stands for an equal share of the area: a disc of that area.
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
-    if (surface_of) surface_of->resize(n);
     tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) {
         const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
                        r2 = mix(seed + 3 * i + 2);
@@ -103,10 +120,14 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
         const SceneSurface& s = scene.surfaces[t.surface];
         ps.colors[i] = at_corner(s.vertex_colors, s.mesh, t.index, s.albedo, w0, w1, w2);
         ps.emission[i] = at_corner(s.vertex_emission, s.mesh, t.index, s.emission, w0, w1, w2);
-        if (surface_of) (*surface_of)[i] = t.surface;
+        surf[i] = t.surface;
     });
+    match_emitted_power(surface_area, surf, ps);
     append_clouds(scene, ps);
-    if (surface_of) surface_of->resize(ps.size(), kNoSurface);
+    if (surface_of) {
+        *surface_of = std::move(surf);
+        surface_of->resize(ps.size(), kNoSurface);
+    }
     return ps;
 }
 

@@ -66,8 +66,10 @@ ExactVisibility::ExactVisibility(const std::vector<SceneSurface>& surfaces,
                     ix[3 * k + c] = m.triangles[k][c];
                 }
             rtcCommitGeometry(g);
-            rtcAttachGeometry(s, g);
+            const unsigned id = rtcAttachGeometry(s, g);
             rtcReleaseGeometry(g);
+            if (surface_of_geometry_.size() <= id) surface_of_geometry_.resize(id + 1, -1);
+            surface_of_geometry_[id] = int32_t(&surf - surfaces.data());
             triangles_ += m.triangles.size();
         }
         if (triangles_ == 0) throw Error(fmt::format("{}: the scene has no triangles", source));
@@ -100,6 +102,33 @@ bool ExactVisibility::occluded(Vec3 a, Vec3 b, float t0, float t1) const {
     rtcOccluded1(scn(scene_), &ctx, &r);
     // Embree marks a hit by setting tfar to -inf.
     return r.tfar < 0;
+}
+
+ExactVisibility::Hit ExactVisibility::intersect(Vec3 org, Vec3 dir, float t0, float t1) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    rh.ray.org_x = org.x, rh.ray.org_y = org.y, rh.ray.org_z = org.z;
+    rh.ray.dir_x = dir.x, rh.ray.dir_y = dir.y, rh.ray.dir_z = dir.z;
+    rh.ray.tnear = t0;
+    rh.ray.tfar = t1;
+    rh.ray.time = 0;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.id = 0;
+    rh.ray.flags = 0;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(scn(scene_), &ctx, &rh);
+    Hit h;
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID || rh.hit.geomID >= surface_of_geometry_.size())
+        return h;
+    h.surface = surface_of_geometry_[rh.hit.geomID];
+    h.t = rh.ray.tfar;
+    // Embree's Ng is the unnormalised (v1 - v0) x (v2 - v0): the winding's outward side.
+    h.normal = Vec3{rh.hit.Ng_x, rh.hit.Ng_y, rh.hit.Ng_z};
+    const float len = length(h.normal);
+    if (len > 0) h.normal = h.normal / len;
+    return h;
 }
 
 bool ExactVisibility::facing(Vec3 a, Vec3 na, Vec3 b, Vec3 nb) {

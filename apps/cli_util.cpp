@@ -2,12 +2,16 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
+#include <cstdlib>
+#include <limits>
 #include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <sstream>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 
 namespace vmap::cli {
@@ -18,25 +22,46 @@ bool ends_with_ci(std::string s, const std::string& suffix) {
            s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
 }
 
-Vec3 parse_vec3(const std::string& text, const std::string& option) {
-    float v[3];
+namespace {
+
+// "x,y,z" as doubles; throws for anything but three finite numbers.
+std::array<double, 3> parse_triple(const std::string& text, const std::string& option) {
+    std::array<double, 3> v{};
     size_t at = 0;
     for (int k = 0; k < 3; ++k) {
         const size_t end = k < 2 ? text.find(',', at) : text.size();
         if (end == std::string::npos) break;
         const std::string part = text.substr(at, end - at);
-        size_t used = 0;
-        try {
-            v[k] = std::stof(part, &used);
-        } catch (const std::exception&) {
-            used = 0;
-        }
-        if (used == 0 || used != part.size() || !std::isfinite(v[k]))
+        char* stop = nullptr;
+        v[k] = part.empty() || std::isspace(static_cast<unsigned char>(part[0]))
+                   ? NAN
+                   : std::strtod(part.c_str(), &stop);
+        if (stop != part.c_str() + part.size() || !std::isfinite(v[k]))
             throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
         at = end + 1;
-        if (k == 2) return {v[0], v[1], v[2]};
+        if (k == 2) return v;
     }
     throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+}
+
+}  // namespace
+
+Vec3 parse_vec3(const std::string& text, const std::string& option) {
+    const std::array<double, 3> v = parse_triple(text, option);
+    for (double c : v)
+        if (std::fabs(c) > std::numeric_limits<float>::max())
+            throw Error(fmt::format("{}: '{}': {} is beyond the float range (3.4e38)", option,
+                                    text, c));
+    return {float(v[0]), float(v[1]), float(v[2])};
+}
+
+Vec3 parse_direction(const std::string& text, const std::string& option) {
+    const std::array<double, 3> v = parse_triple(text, option);
+    const double big = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
+    if (!(big > 0)) throw Error(fmt::format("{}: '{}': the direction is zero", option, text));
+    const double x = v[0] / big, y = v[1] / big, z = v[2] / big;
+    const double len = std::sqrt(x * x + y * y + z * z);
+    return {float(x / len), float(y / len), float(z / len)};
 }
 
 std::pair<int, int> parse_size(const std::string& text, const std::string& option) {
@@ -49,12 +74,43 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
     return {w, h};
 }
 
-void check_output(const std::string& path, const char* option) {
+void harden_options(CLI::App& app) {
+    const CLI::Validator finite(
+        [](std::string& text) {
+            char* stop = nullptr;
+            const double v = std::strtod(text.c_str(), &stop);
+            if (stop != text.c_str() && !std::isfinite(v))
+                return fmt::format("'{}' is not a finite number", text);
+            return std::string();
+        },
+        "", "finite");
+    const CLI::Validator non_negative(
+        [](std::string& text) {
+            const size_t k = text.find_first_not_of(" \t");
+            if (k != std::string::npos && text[k] == '-')
+                return fmt::format("'{}' is negative; expected a count or a non-negative number",
+                                   text);
+            return std::string();
+        },
+        "", "non-negative");
+    for (CLI::Option* opt : app.get_options()) {
+        const std::string type = opt->get_type_name();
+        // Runs before the option's own range check (CLI11 applies validators in order added),
+        // so "nan" and "-1" never reach a range test that cannot see them.
+        if (type.rfind("FLOAT", 0) == 0) opt->transform(finite);
+        if (type.rfind("UINT", 0) == 0) opt->transform(non_negative);
+    }
+    for (CLI::App* sub : app.get_subcommands({})) harden_options(*sub);
+}
+
+void check_output(const std::string& path, const char* option,
+                  const std::vector<std::string>& inputs) {
     if (path.empty()) return;
-    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-    if (!dir.empty() && !std::filesystem::is_directory(dir))
-        throw Error(
-            fmt::format("{}: {}: the folder {} does not exist", path, option, dir.string()));
+    for (const std::string& in : inputs)
+        if (!in.empty() && io::same_file(path, in))
+            throw UsageError(fmt::format("{}: {}: is the input {}; it would be overwritten", path,
+                                         option, in));
+    io::check_output_path(path, option);
 }
 
 }  // namespace vmap::cli

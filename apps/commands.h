@@ -8,6 +8,7 @@
 #include <optional>
 #include <string>
 
+#include "vmap/error.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
@@ -24,12 +25,29 @@ Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
 // "x,y,z" -> Vec3; throws vmap::Error naming `option` for anything else (or non-finite values).
 Vec3 parse_vec3(const std::string& text, const std::string& option);
 // "WxH" -> (W, H), each 1..16384; throws vmap::Error naming `option`.
+// "dx,dy,dz" -> the unit vector along it (normalised in double, so tiny and huge components
+// work); throws vmap::Error naming `option` for a zero or non-finite direction.
+Vec3 parse_direction(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
+
+// Adds to every numeric option of `app` and its subcommands: floating-point values must be
+// finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to
+// 2^64-1). Call after all options are declared.
+void harden_options(CLI::App& app);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
 
-// Fails early (before any work or output) when an output's folder does not exist; throws
-// vmap::Error naming the file and `option`. An empty path is no output.
-void check_output(const std::string& path, const char* option);
+// A usage error found after parsing (main exits 2 for it, 1 for other vmap::Errors).
+class UsageError : public Error {
+  public:
+    using Error::Error;
+};
+
+// Fails early (before any work or output) unless `path` can be written: its folder exists and
+// is writable, and it is not a folder, FIFO or device (vmap::Error naming the file and
+// `option`); and when it is one of `inputs` (the same file, however spelled), a UsageError. An
+// empty path is no output.
+void check_output(const std::string& path, const char* option,
+                  const std::vector<std::string>& inputs = {});
 
 }  // namespace vmap::cli

@@ -13,6 +13,7 @@
 #include <optional>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
@@ -83,8 +84,10 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
 
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
-    check_output(o.ply, "--ply");
-    check_output(o.image, "-o");
+    io::check_input_path(o.input);
+    if (!o.scene.empty()) io::check_input_path(o.scene);
+    check_output(o.ply, "--ply", {o.input, o.scene, o.image});
+    check_output(o.image, "-o", {o.input, o.scene});
     const auto [width, height] = parse_size(o.size, "--size");
     o.render.width = width, o.render.height = height;
     o.render.shade = false;                          // the light is in the radiosity

@@ -8,6 +8,7 @@
 #include <memory>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/query.h"
@@ -66,8 +67,9 @@ int run_query(const QueryArgs& a) {
     for (const auto& p : a.pair_pos) parse_vec3(p, "--pair-pos");
     if (!a.from_pos.empty()) parse_vec3(a.from_pos, "--from-pos");
     if (!a.ray_pos.empty()) parse_vec3(a.ray_pos, "--ray-pos");
-    const Vec3 dir = a.dir.empty() ? Vec3{} : parse_vec3(a.dir, "--dir");
-    if (!a.dir.empty() && !(length(dir) > 0)) throw Error("--dir: the direction is zero");
+    const Vec3 dir = a.dir.empty() ? Vec3{} : parse_direction(a.dir, "--dir");
+    io::check_input_path(a.path);
+    check_output(a.ply, "--ply", {a.path});
 
     const VisibilityMap vm = load_vmap(a.path);
     if (!a.pair.empty() || !a.pair_pos.empty()) {

@@ -26,6 +26,7 @@
 #include "apps/gi_cmd.h"
 #include "apps/validate_cmd.h"
 #include "bench/bench.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
@@ -77,6 +78,9 @@ struct BuildOptions {
 
 int run_build(BuildOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
+    if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
+    io::check_input_path(o.input);
+    if (!o.count_links) cli::check_output(o.output, "-o", {o.input});
     PointSet pts;
     std::string what;
     std::optional<OctreeParams> file_octree;
@@ -97,7 +101,6 @@ int run_build(BuildOptions& o) {
     if (file_octree) bp.octree = *file_octree;
     if (o.max_height) bp.octree.max_height = *o.max_height;
     if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
-    if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
     bp.progress = detail::stderr_is_terminal();
 
     BuildStats st;
@@ -150,6 +153,7 @@ int run_build(BuildOptions& o) {
 }
 
 int run_info(const std::string& path) {
+    io::check_input_path(path);
     VisibilityMap vm = load_vmap(path);
     fmt::print("file:       {} ({} bytes)\n", path, fs::file_size(path));
     fmt::print("points:     {}\n", vm.points.size());
@@ -157,6 +161,26 @@ int run_info(const std::string& path) {
     fmt::print("links:      {}\n", vm.num_links());
     print_tree_summary(vm);
     return 0;
+}
+
+// The first word that is not an option (nor --threads' value) when it names no subcommand:
+// says so, with the list, and returns true.
+bool report_unknown_command(CLI::App& app, int argc, char** argv) {
+    for (int i = 1; i < argc; ++i) {
+        const std::string w = argv[i];
+        if (w == "--threads") {
+            ++i;
+            continue;
+        }
+        if (w.empty() || w[0] == '-') continue;
+        std::string names;
+        for (const CLI::App* s : app.get_subcommands({}))
+            names += (names.empty() ? "" : ", ") + s->get_name();
+        fmt::print(stderr, "vmap: unknown command '{}' (the commands: {}; see vmap --help)\n", w,
+                   names);
+        return true;
+    }
+    return false;
 }
 
 }  // namespace
@@ -267,9 +291,11 @@ int main(int argc, char** argv) {
 
     auto* validate = cli::add_validate_command(app);
 
+    cli::harden_options(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
+        if (app.get_subcommands().empty() && report_unknown_command(app, argc, argv)) return 2;
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
@@ -295,6 +321,9 @@ int main(int argc, char** argv) {
             if (c->app->parsed()) return c->run();
         if (*validate) return cli::run_validate_command();
         if (gi.selected()) return gi.run();
+    } catch (const cli::UsageError& e) {
+        fmt::print(stderr, "vmap: error: {}\n", e.what());
+        return 2;
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());
         return 1;

@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include "test_files.h"
@@ -391,11 +392,32 @@ TEST_F(VmapFile, SavingOverAnExistingFileReplacesItAndLeavesNoTemporary) {
     EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
     expect_same_map(map(), load_vmap(p));
 
-    // Over a stale temporary from an earlier, interrupted run, too.
-    spit(p + ".tmp", "left over");
+    // A stale temporary of an interrupted run (a process that no longer exists) is removed.
+    spit(dir.path(".map.vmap.999999999.0.0.tmp"), "left over");
     save_vmap(p, map());
     EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
     expect_same_map(map(), load_vmap(p));
+}
+
+// Two saves of different maps to one path at the same time, many times over: the file is
+// always one complete map (with a shared temporary name the loser's bytes went into the
+// winner's file: "checksum mismatch").
+TEST_F(VmapFile, ConcurrentSavesToOnePathLeaveOneCompleteMap) {
+    ScratchDir dir;
+    const std::string p = dir.path("map.vmap");
+    VisibilityMap other = map();
+    other.visibility_params.K = 7;
+    for (int round = 0; round < 6; ++round) {
+        std::thread a([&] { save_vmap(p, map()); });
+        std::thread b([&] { save_vmap(p, other); });
+        a.join();
+        b.join();
+        VisibilityMap back = load_vmap(p);
+        EXPECT_TRUE(back.visibility_params.K == 3 || back.visibility_params.K == 7);
+        back.visibility_params.K = 3;
+        expect_same_map(map(), back);
+    }
+    EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
 }
 
 TEST_F(VmapFile, SavingOntoADirectoryThrowsAndLeavesNoTemporary) {

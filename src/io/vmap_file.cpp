@@ -28,6 +28,7 @@
 #include <fstream>
 #include <type_traits>
 
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -248,10 +249,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     put(uint64_t(w.size));
     put(pieces_hash(w.pieces, w.size));
 
-    // Temporary name, then rename: a failure never leaves half a file under `path`. The pieces
-    // are written in parallel chunks at their offsets (pwrite), which the page cache takes
-    // several times faster than one stream.
-    const std::string tmp = path + ".tmp";
+    // Through an AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at
+    // their offsets, which the page cache takes several times faster than one stream.
     struct Chunk {
         const uint8_t* p;
         size_t n;
@@ -266,34 +265,16 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
             chunks.push_back({pc.p + o, n, at});
             at += off_t(n);
         }
-    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-    if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", tmp, std::strerror(errno)));
+    io::AtomicFile file(path);
     std::atomic<int> err{0};
     tbb::parallel_for(size_t(0), chunks.size(), [&](size_t k) {
-        const Chunk& c = chunks[k];
-        for (size_t done = 0; done < c.n && err.load() == 0;) {
-            const ssize_t got = ::pwrite(fd, c.p + done, c.n - done, c.at + off_t(done));
-            if (got < 0 && errno == EINTR) continue;
-            if (got <= 0) {
-                int zero = 0;
-                err.compare_exchange_strong(zero, got < 0 ? errno : EIO);
-                break;
-            }
-            done += size_t(got);
-        }
+        if (err.load() != 0) return;
+        const int e = file.write_at(chunks[k].p, chunks[k].n, chunks[k].at);
+        int zero = 0;
+        if (e != 0) err.compare_exchange_strong(zero, e);
     });
-    const int close_err = ::close(fd) == 0 ? 0 : errno;
-    std::error_code ec;
-    if (err.load() != 0 || close_err != 0) {
-        std::filesystem::remove(tmp, ec);
-        throw Error(fmt::format("{}: write failed: {}", tmp,
-                                std::strerror(err.load() ? err.load() : close_err)));
-    }
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::filesystem::remove(tmp, ec);
-        throw Error(fmt::format("{}: cannot rename the finished file into place", path));
-    }
+    if (err.load() != 0) file.fail(err.load());
+    file.commit();
 }
 
 VisibilityMap load_vmap(const std::string& path) {

@@ -1,5 +1,6 @@
 // Option parsing shared by the subcommands in apps/ (apps/commands.h).
 #include <fmt/format.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <array>
@@ -13,6 +14,7 @@
 #include "apps/commands.h"
 #include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/octree.h"
 
 namespace vmap::cli {
 
@@ -72,6 +74,33 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
     if (w < 1 || h < 1 || w > 16384 || h > 16384)
         throw Error(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
     return {w, h};
+}
+
+double estimated_leaf_pairs(uint64_t points, const OctreeParams& op) {
+    // Measured: leaves hold about half of leaf_points on average (docs/results.md: the bunny's
+    // 40,000 points at leaf_points 4 make 19,225 leaves); at most 8^max_height of them.
+    const double cells = std::pow(8.0, op.max_height);
+    const double leaves = std::max(1.0, std::min(cells, points / std::max(1.0, 0.5 * op.leaf_points)));
+    return leaves * (leaves - 1) / 2;
+}
+
+void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op) {
+    const double pairs = estimated_leaf_pairs(points, op);
+    const int cores = std::max(1, tbb::this_task_arena::max_concurrency());
+    // Rates from docs/results.md: about 2.5e6 leaf pairs/s per CPU core, 2e9/s on an H100/H200.
+    const double cpu_s = pairs / (2.5e6 * cores), gpu_s = pairs / 2e9;
+    if (cpu_s < 600) return;
+    auto span = [](double s) {
+        return s < 3600 ? fmt::format("{:.0f} min", s / 60)
+               : s < 86400 * 2 ? fmt::format("{:.1f} h", s / 3600)
+                               : fmt::format("{:.0f} days", s / 86400);
+    };
+    fmt::print(stderr,
+               "vmap: warning: {}: {} points at max_height {}, leaf_points {} make about {:.2g} "
+               "leaf pairs: about {} on {} CPU cores ({} on a GPU); lower --points or "
+               "--max-height, or raise --leaf-points, for a shorter run\n",
+               what, points, op.max_height, op.leaf_points, pairs, span(cpu_s), cores,
+               span(gpu_s));
 }
 
 void harden_options(CLI::App& app) {

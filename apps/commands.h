@@ -9,6 +9,7 @@
 #include <string>
 
 #include "vmap/error.h"
+#include "vmap/octree.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
@@ -34,6 +35,12 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to
 // 2^64-1). Call after all options are declared.
 void harden_options(CLI::App& app);
+
+// Leaf pairs a build of `points` points with `op` is expected to test (an estimate), and a
+// warning on stderr with the expected time when that is over ten minutes on this machine's CPU
+// cores: printed before the work starts, so an hours-long job is never a surprise.
+double estimated_leaf_pairs(uint64_t points, const OctreeParams& op);
+void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
 

@@ -64,6 +64,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
         bp.backend = o.gi.backend;
         bp.progress = detail::stderr_is_terminal();
+        warn_if_long(o.input, sc.points, bp.octree);
         BuildStats st;
         VisibilityMap vm = build_vmap(sample_scene(sc), bp, &st, o.input);
         build_s = seconds_since(t0);

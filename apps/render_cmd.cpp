@@ -88,6 +88,7 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
     if (height) bp.octree.max_height = *height;
     bp.backend = a.backend;
     bp.progress = detail::stderr_is_terminal();
+    warn_if_long(a.input, s.points.size(), bp.octree);
     BuildStats st;
     VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",

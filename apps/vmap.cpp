@@ -83,24 +83,28 @@ int run_build(BuildOptions& o) {
     if (!o.count_links) cli::check_output(o.output, "-o", {o.input});
     PointSet pts;
     std::string what;
-    std::optional<OctreeParams> file_octree;
+    BuildParams& bp = o.params;
+    auto set_octree = [&](const std::optional<OctreeParams>& file_octree) {
+        if (file_octree) bp.octree = *file_octree;
+        if (o.max_height) bp.octree.max_height = *o.max_height;
+        if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    };
     if (ends_with_ci(o.input, ".json")) {
         Scene sc = load_scene(o.input);
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
-        file_octree = sc.octree;
+        set_octree(sc.octree);
+        cli::warn_if_long(o.input, sc.points, bp.octree);
         pts = sample_scene(sc);
         what = fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size());
     } else {
         if (o.points || o.seed)
             throw Error("--points/--seed apply to scene files, not point clouds");
         pts = load_point_cloud(o.input);
+        set_octree(std::nullopt);
+        cli::warn_if_long(o.input, pts.size(), bp.octree);
         what = fmt::format("point cloud {}", o.input);
     }
-    BuildParams& bp = o.params;
-    if (file_octree) bp.octree = *file_octree;
-    if (o.max_height) bp.octree.max_height = *o.max_height;
-    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
     bp.progress = detail::stderr_is_terminal();
 
     BuildStats st;

@@ -10,12 +10,14 @@
 #include <filesystem>
 #include <string>
 
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 
 namespace vmap {
 
 ModelData read_model(const std::string& path) {
+    io::check_input_path(path);  // a FIFO would block the reader, a folder fail obscurely
     std::string ext = std::filesystem::path(path).extension().string();
     std::transform(ext.begin(), ext.end(), ext.begin(),
                    [](unsigned char c) { return static_cast<char>(std::tolower(c)); });

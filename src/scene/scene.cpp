@@ -8,6 +8,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "io/atomic_file.h"
+#include "io/json_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 
@@ -20,7 +22,19 @@ using nlohmann::json;
 struct Ctx {
     std::string file;
     [[noreturn]] void fail(const std::string& field, const std::string& what) const {
+        if (field.empty()) throw Error(fmt::format("{}: {}", file, what));
         throw Error(fmt::format("{}: {}: {}", file, field, what));
+    }
+    std::string text(const json& obj, const char* key, const std::string& field,
+                     const std::string& def) const {
+        if (!obj.contains(key)) return def;
+        if (!obj[key].is_string()) fail(field, "expected a string");
+        return obj[key].get<std::string>();
+    }
+    bool boolean(const json& obj, const char* key, const std::string& field, bool def) const {
+        if (!obj.contains(key)) return def;
+        if (!obj[key].is_boolean()) fail(field, "expected true or false");
+        return obj[key].get<bool>();
     }
     double number(const json& j, const std::string& field, double lo, double hi) const {
         if (!j.is_number()) fail(field, "expected a number");
@@ -84,19 +98,12 @@ std::string default_scene_path() {
 
 Scene load_scene(const std::string& path) {
     Ctx cx{path};
-    std::ifstream in(path);
-    if (!in) throw Error(fmt::format("{}: cannot open scene file", path));
-    json j;
-    try {
-        j = json::parse(in, nullptr, true, /*ignore_comments=*/true);
-    } catch (const json::parse_error& e) {
-        throw Error(fmt::format("{}: not valid JSON: {}", path, e.what()));
-    }
+    const json j = io::parse_json_file(path);
     cx.known(j, "",
              {"name", "description", "room", "light", "meshes", "sampling", "octree", "camera"});
     Scene sc;
     sc.path = path;
-    sc.name = j.value("name", fs::path(path).stem().string());
+    sc.name = cx.text(j, "name", "name", fs::path(path).stem().string());
 
     // The Cornell room: published dimensions (552.8 x 548.8 x 559.2 mm) and wall colours.
     const json room = j.value("room", json::object());
@@ -190,7 +197,8 @@ Scene load_scene(const std::string& path) {
         const json& m = meshes[i];
         cx.known(m, f,
                  {"file", "name", "size", "scale", "rotate", "position", "albedo", "flip_normals"});
-        if (!m.contains("file") || !m["file"].is_string()) cx.fail(f + ".file", "missing");
+        if (!m.contains("file")) cx.fail(f + ".file", "missing");
+        if (!m["file"].is_string()) cx.fail(f + ".file", "expected a string");
         const std::string rel = m["file"].get<std::string>();
         const fs::path file = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
         if (!fs::exists(file))
@@ -205,7 +213,7 @@ Scene load_scene(const std::string& path) {
         }
         if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
         SceneSurface s;
-        s.name = m.value("name", fs::path(rel).stem().string());
+        s.name = cx.text(m, "name", f + ".name", fs::path(rel).stem().string());
         s.albedo = m.contains("albedo") ? cx.vec3(m["albedo"], f + ".albedo", 0, 1)
                                         : Vec3{0.75f, 0.75f, 0.8f};
         s.mesh = md.mesh();
@@ -239,7 +247,7 @@ Scene load_scene(const std::string& path) {
         for (Vec3& v : s.mesh.vertices) v = v + shift;
         // Outward normals: a closed mesh wound inside-out has negative signed volume.
         bool flip = signed_volume(s.mesh) < 0;
-        if (m.value("flip_normals", false)) flip = !flip;
+        if (cx.boolean(m, "flip_normals", f + ".flip_normals", false)) flip = !flip;
         if (flip)
             for (auto& t : s.mesh.triangles) std::swap(t[1], t[2]);
         sc.surfaces.push_back(std::move(s));

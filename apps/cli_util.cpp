@@ -1,5 +1,6 @@
 // Option parsing shared by the subcommands in apps/ (apps/commands.h).
 #include <fmt/format.h>
+#include <tbb/global_control.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -39,11 +40,12 @@ std::array<double, 3> parse_triple(const std::string& text, const std::string& o
                    ? NAN
                    : std::strtod(part.c_str(), &stop);
         if (stop != part.c_str() + part.size() || !std::isfinite(v[k]))
-            throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+            throw UsageError(
+                fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
         at = end + 1;
         if (k == 2) return v;
     }
-    throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+    throw UsageError(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
 }
 
 }  // namespace
@@ -52,15 +54,16 @@ Vec3 parse_vec3(const std::string& text, const std::string& option) {
     const std::array<double, 3> v = parse_triple(text, option);
     for (double c : v)
         if (std::fabs(c) > std::numeric_limits<float>::max())
-            throw Error(fmt::format("{}: '{}': {} is beyond the float range (3.4e38)", option,
-                                    text, c));
+            throw UsageError(fmt::format("{}: '{}': {} is beyond the float range (3.4e38)",
+                                         option, text, c));
     return {float(v[0]), float(v[1]), float(v[2])};
 }
 
 Vec3 parse_direction(const std::string& text, const std::string& option) {
     const std::array<double, 3> v = parse_triple(text, option);
     const double big = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
-    if (!(big > 0)) throw Error(fmt::format("{}: '{}': the direction is zero", option, text));
+    if (!(big > 0))
+        throw UsageError(fmt::format("{}: '{}': the direction is zero", option, text));
     const double x = v[0] / big, y = v[1] / big, z = v[2] / big;
     const double len = std::sqrt(x * x + y * y + z * z);
     return {float(x / len), float(y / len), float(z / len)};
@@ -70,9 +73,9 @@ std::pair<int, int> parse_size(const std::string& text, const std::string& optio
     int w = 0, h = 0;
     char x = 0, extra = 0;
     if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
-        throw Error(fmt::format("{}: '{}' is not WxH (e.g. 800x600)", option, text));
+        throw UsageError(fmt::format("{}: '{}' is not WxH (e.g. 800x600)", option, text));
     if (w < 1 || h < 1 || w > 16384 || h > 16384)
-        throw Error(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
+        throw UsageError(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
     return {w, h};
 }
 
@@ -86,18 +89,22 @@ double estimated_leaf_pairs(uint64_t points, const OctreeParams& op) {
 
 void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op) {
     const double pairs = estimated_leaf_pairs(points, op);
-    const int cores = std::max(1, tbb::this_task_arena::max_concurrency());
+    const int cores = std::max<int>(
+        1, std::min<size_t>(tbb::this_task_arena::max_concurrency(),
+                            tbb::global_control::active_value(
+                                tbb::global_control::max_allowed_parallelism)));
     // Rates from docs/results.md: about 2.5e6 leaf pairs/s per CPU core, 2e9/s on an H100/H200.
     const double cpu_s = pairs / (2.5e6 * cores), gpu_s = pairs / 2e9;
     if (cpu_s < 600) return;
     auto span = [](double s) {
-        return s < 3600 ? fmt::format("{:.0f} min", s / 60)
+        return s < 120    ? fmt::format("{:.0f} s", s)
+               : s < 3600 ? fmt::format("{:.0f} min", s / 60)
                : s < 86400 * 2 ? fmt::format("{:.1f} h", s / 3600)
                                : fmt::format("{:.0f} days", s / 86400);
     };
     fmt::print(stderr,
                "vmap: warning: {}: {} points at max_height {}, leaf_points {} make about {:.2g} "
-               "leaf pairs: about {} on {} CPU cores ({} on a GPU); lower --points or "
+               "leaf pairs: about {} on {} CPU core(s) ({} on a GPU); lower --points or "
                "--max-height, or raise --leaf-points, for a shorter run\n",
                what, points, op.max_height, op.leaf_points, pairs, span(cpu_s), cores,
                span(gpu_s));

@@ -14,6 +14,12 @@
 
 namespace vmap::cli {
 
+// A usage error found after parsing (main exits 2 for it, 1 for other vmap::Errors).
+class UsageError : public Error {
+  public:
+    using Error::Error;
+};
+
 struct Command {
     CLI::App* app = nullptr;
     std::function<int()> run;
@@ -23,11 +29,12 @@ Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
 Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
 Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
 
-// "x,y,z" -> Vec3; throws vmap::Error naming `option` for anything else (or non-finite values).
+// Option values (usage errors, exit 2, for a malformed one):
+// "x,y,z" -> Vec3; throws UsageError naming `option` for anything else (or non-finite values).
 Vec3 parse_vec3(const std::string& text, const std::string& option);
-// "WxH" -> (W, H), each 1..16384; throws vmap::Error naming `option`.
+// "WxH" -> (W, H), each 1..16384; throws UsageError naming `option`.
 // "dx,dy,dz" -> the unit vector along it (normalised in double, so tiny and huge components
-// work); throws vmap::Error naming `option` for a zero or non-finite direction.
+// work); throws UsageError naming `option` for a zero or non-finite direction.
 Vec3 parse_direction(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
 
@@ -43,12 +50,6 @@ double estimated_leaf_pairs(uint64_t points, const OctreeParams& op);
 void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
-
-// A usage error found after parsing (main exits 2 for it, 1 for other vmap::Errors).
-class UsageError : public Error {
-  public:
-    using Error::Error;
-};
 
 // Fails early (before any work or output) unless `path` can be written: its folder exists and
 // is writable, and it is not a folder, FIFO or device (vmap::Error naming the file and

@@ -202,7 +202,7 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("--theta", o->gi.theta,
                    "Separation parameter: node-level transfer when the centres are more than "
                    "theta x (sum of the node sizes) apart; larger is finer and slower")
-        ->check(CLI::PositiveNumber)
+        ->check(CLI::Range(1e-3, 1e3))
         ->capture_default_str();
     gi->add_option("--backend", o->gi.backend,
                    "auto (GPU when present), cpu or cuda; for the V-map build and the bounces")

@@ -167,6 +167,13 @@ int run_info(const std::string& path) {
     return 0;
 }
 
+std::string command_names(CLI::App& app) {
+    std::string names;
+    for (const CLI::App* s : app.get_subcommands({}))
+        names += (names.empty() ? "" : ", ") + s->get_name();
+    return names;
+}
+
 // The first word that is not an option (nor --threads' value) when it names no subcommand:
 // says so, with the list, and returns true.
 bool report_unknown_command(CLI::App& app, int argc, char** argv) {
@@ -177,14 +184,17 @@ bool report_unknown_command(CLI::App& app, int argc, char** argv) {
             continue;
         }
         if (w.empty() || w[0] == '-') continue;
-        std::string names;
-        for (const CLI::App* s : app.get_subcommands({}))
-            names += (names.empty() ? "" : ", ") + s->get_name();
+        for (const CLI::App* sub : app.get_subcommands({}))
+            if (sub->check_name(w)) return false;  // a known command: CLI11 says what is wrong
         fmt::print(stderr, "vmap: unknown command '{}' (the commands: {}; see vmap --help)\n", w,
-                   names);
+                   command_names(app));
         return true;
     }
-    return false;
+    for (int i = 1; i < argc; ++i)
+        if (std::string(argv[i]) != "--threads" || ++i == argc) return false;
+    fmt::print(stderr, "vmap: no command given (the commands: {}; see vmap --help)\n",
+               command_names(app));
+    return true;
 }
 
 }  // namespace

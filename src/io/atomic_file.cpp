@@ -159,8 +159,10 @@ bool same_file(const std::string& a, const std::string& b) {
 
 void check_input_path(const std::string& path) {
     struct stat st {};
-    if (::stat(path.c_str(), &st) != 0)
+    if (::stat(path.c_str(), &st) != 0) {
+        if (errno == ENOENT) throw Error(fmt::format("{}: no such file", path));
         throw Error(fmt::format("{}: cannot open: {}", path, std::strerror(errno)));
+    }
     if (S_ISDIR(st.st_mode)) throw Error(fmt::format("{}: is a folder, not a file", path));
     if (!S_ISREG(st.st_mode))
         throw Error(fmt::format("{}: is not a regular file (a FIFO, socket or device)", path));

@@ -341,7 +341,7 @@ expect_usage_error "query --ray without --dir" query x.vmap --ray 3
 expect_usage_error "query --ply without --from" query x.vmap --pair 0 1 --ply nofrom.ply
 expect_no_file "no PLY without --from" nofrom.ply
 expect_usage_error "query --dir 0,0,0" query x.vmap --ray 3 --dir 0,0,0
-expect_input_error "query --from-pos not a position" --from-pos query x.vmap --from-pos 1,2
+expect_usage_error "query --from-pos not a position" query x.vmap --from-pos 1,2
 expect_usage_error "query --pair with --pair-pos" query x.vmap --pair 0 1 --pair-pos 0,0,0 1,1,1
 expect_usage_error "query --from with --from-pos" query x.vmap --from 0 --from-pos 0,0,0
 expect_input_error "query --ray id out of range" x.vmap query x.vmap --ray 3000 --dir 0,1,0
@@ -402,7 +402,7 @@ fi
 if expect_ok "gi renders a PNG" gi x.vmap --bounces 1 --backend cpu -o lit.png --size 64x48; then
     if [ "$(head -c 4 lit.png | tail -c 3)" = "PNG" ]; then ok "lit.png is a PNG"; else fail "lit.png is not a PNG"; fi
 fi
-expect_input_error "gi --size nonsense" nonsense gi x.vmap --size nonsense -o y.png
+expect_usage_error "gi --size nonsense" gi x.vmap --size nonsense -o y.png
 if [ -e y.png ]; then fail "gi --size nonsense wrote y.png"; else ok "no y.png"; fi
 if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 --max-height 5 \
     --bounces 1 --backend cpu --compare-brute; then

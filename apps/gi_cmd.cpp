@@ -100,9 +100,10 @@ int run_gi(GiOptions& o) {
     std::optional<Camera> scene_camera;
     const VisibilityMap vm = input_vmap(o, what, build_s, scene_camera);
     const PointSet& ps = vm.points;
+    PointSet out = points_in_input_order(vm);  // input order and units, for the outputs
     // The camera (the default one frames the points' box, which the order does not change),
     // checked before the solve.
-    Camera cam = scene_camera ? *scene_camera : default_camera(ps);
+    Camera cam = scene_camera ? *scene_camera : default_camera(out);
     if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
     if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
     if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
@@ -158,8 +159,6 @@ int run_gi(GiOptions& o) {
     fmt::print("tone map:   exposure {:.4g} (display = clamp(exposure x radiosity), sRGB)\n",
                exposure);
 
-    // Back to input order for the outputs.
-    PointSet out = points_in_input_order(vm);
     std::vector<Vec3> lit(colors.size());
     for (size_t k = 0; k < colors.size(); ++k) lit[vm.order[k]] = colors[k];
     if (!o.image.empty()) {

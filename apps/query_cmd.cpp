@@ -5,6 +5,7 @@
 // Positions name the surface point nearest them; ids are input point ids.
 #include <fmt/format.h>
 
+#include <cmath>
 #include <memory>
 
 #include "apps/commands.h"
@@ -40,9 +41,10 @@ uint32_t resolve(const VisibilityMap& vm, const std::string& path, const char* i
     if (id) return checked_id(vm, path, id_option, *id);
     const Vec3 p = parse_vec3(pos, pos_option);
     const uint32_t k = nearest_point(vm, p);
-    const Vec3 q = vm.points.positions[vm.inverse[k]];
+    const Vec3 q = vm.octree.to_world(vm.points.positions[vm.inverse[k]]);
     fmt::print("{} {},{},{}: nearest point {} at ({}, {}, {}), {:.3g} away\n", pos_option, p.x, p.y,
-               p.z, k, q.x, q.y, q.z, length(q - p));
+               p.z, k, q.x, q.y, q.z,
+               std::hypot(double(q.x) - p.x, double(q.y) - p.y, double(q.z) - p.z));
     return k;
 }
 
@@ -105,7 +107,7 @@ int run_query(const QueryArgs& a) {
         RayStats st;
         const RayHit h = shoot_ray(vm, i, dir, &st);
         if (h.hit) {
-            const Vec3 q = vm.points.positions[vm.inverse[h.id]];
+            const Vec3 q = vm.octree.to_world(vm.points.positions[vm.inverse[h.id]]);
             fmt::print("ray from {}: hits point {} at distance {} ({}, {}, {})\n", i, h.id,
                        h.distance, q.x, q.y, q.z);
         } else {

@@ -94,6 +94,7 @@ void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
     EXPECT_EQ(s.params.leaf_points, t.params.leaf_points);
     EXPECT_EQ(s.root_min, t.root_min);
     EXPECT_EQ(s.root_size, t.root_size);
+    EXPECT_EQ(s.scale, t.scale);
     EXPECT_EQ(s.num_nodes(), t.num_nodes());
     EXPECT_EQ(s.num_leaves(), t.num_leaves());
     EXPECT_EQ(s.height(), t.height());
@@ -277,7 +278,7 @@ TEST_F(VmapFile, BadMagicIsRejected) {
 TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
-    for (uint32_t version : {0u, 1u, 2u, 4u, 0xffffffffu}) {
+    for (uint32_t version : {0u, 1u, 2u, 3u, 5u, 0xffffffffu}) {
         SCOPED_TRACE(version);
         std::string bytes = whole;
         std::memcpy(bytes.data() + 8, &version, 4);

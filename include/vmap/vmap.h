@@ -74,7 +74,9 @@ class VisibilityMap {
   public:
     OctreeParams octree_params;
     VisibilityParams visibility_params;
-    PointSet points;                // in octree order (normals, colours (albedo), radii)
+    PointSet points;                // in octree order and the octree's frame (positions and
+                                    // radii in input units / octree.scale; render.h's
+                                    // points_in_input_order gives them back in input units)
     std::vector<uint32_t> order;    // octree position -> input index
     std::vector<uint32_t> inverse;  // input index -> octree position
     Octree octree;
@@ -101,8 +103,9 @@ class VisibilityMap {
     std::vector<uint32_t> visible_set(uint32_t i) const;
 };
 
-// Builds the octree over `points` (which need normals) and the V-map. Throws vmap::Error naming
-// `source` for bad input or parameters.
+// Builds the octree over `points` (which need normals) and the V-map, in the frame of the
+// cloud's own size (Octree::build_in_unit_frame), so the map is the same whatever unit the
+// input was written in. Throws vmap::Error naming `source` for bad input or parameters.
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
                          const std::string& source = "points");
 

@@ -10,7 +10,8 @@
 //           [radii], [emission]  (octree order)
 //     ORDR: u32 order[n] (octree position -> input index)
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
-//           include/vmap/octree.h (spheres, boxes, half_size, skip, ...)
+//           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
+//           units per octree unit: points and octree are stored in the octree's frame)
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
 
@@ -20,6 +21,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <atomic>
 #include <cerrno>
 #include <cstring>
@@ -36,8 +38,9 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 3;  // 2: 64-bit link offsets; 3: emission in octree order and
-                                  // the measured Delta rule (a version-2 file is built wrong)
+constexpr uint32_t kVersion = 4;  // 2: 64-bit link offsets; 3: emission in octree order and
+                                  // the measured Delta rule (a version-2 file is built wrong);
+                                  // 4: the octree's frame (scale)
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -230,6 +233,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
         w.vec(t.level);
     w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
     w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
+    w.put(t.scale);
     w.end(s);
     s = w.begin("LINK");
     w.vec(vm.link_offsets);
@@ -367,6 +371,10 @@ VisibilityMap load_vmap(const std::string& path) {
     r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
     r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
     r.vec(t.leaf_splat, nl);
+    t.scale = r.get<double>();
+    int exponent = 0;
+    if (!(t.scale > 0) || !std::isfinite(t.scale) || std::frexp(t.scale, &exponent) != 0.5)
+        r.fail(fmt::format("scale {} is not a power of two", t.scale));
     finish(e);
     // Structure checks, so that even a well-checksummed but inconsistent file cannot make a
     // query index out of bounds.

@@ -5,11 +5,11 @@
 
 #include <algorithm>
 #include <array>
-#include <cstdlib>
-#include <limits>
 #include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <sstream>
 
 #include "apps/commands.h"
@@ -54,16 +54,15 @@ Vec3 parse_vec3(const std::string& text, const std::string& option) {
     const std::array<double, 3> v = parse_triple(text, option);
     for (double c : v)
         if (std::fabs(c) > std::numeric_limits<float>::max())
-            throw UsageError(fmt::format("{}: '{}': {} is beyond the float range (3.4e38)",
-                                         option, text, c));
+            throw UsageError(
+                fmt::format("{}: '{}': {} is beyond the float range (3.4e38)", option, text, c));
     return {float(v[0]), float(v[1]), float(v[2])};
 }
 
 Vec3 parse_direction(const std::string& text, const std::string& option) {
     const std::array<double, 3> v = parse_triple(text, option);
     const double big = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
-    if (!(big > 0))
-        throw UsageError(fmt::format("{}: '{}': the direction is zero", option, text));
+    if (!(big > 0)) throw UsageError(fmt::format("{}: '{}': the direction is zero", option, text));
     const double x = v[0] / big, y = v[1] / big, z = v[2] / big;
     const double len = std::sqrt(x * x + y * y + z * z);
     return {float(x / len), float(y / len), float(z / len)};
@@ -83,22 +82,23 @@ double estimated_leaf_pairs(uint64_t points, const OctreeParams& op) {
     // Measured: leaves hold about half of leaf_points on average (docs/results.md: the bunny's
     // 40,000 points at leaf_points 4 make 19,225 leaves); at most 8^max_height of them.
     const double cells = std::pow(8.0, op.max_height);
-    const double leaves = std::max(1.0, std::min(cells, points / std::max(1.0, 0.5 * op.leaf_points)));
+    const double leaves =
+        std::max(1.0, std::min(cells, points / std::max(1.0, 0.5 * op.leaf_points)));
     return leaves * (leaves - 1) / 2;
 }
 
 void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op) {
     const double pairs = estimated_leaf_pairs(points, op);
     const int cores = std::max<int>(
-        1, std::min<size_t>(tbb::this_task_arena::max_concurrency(),
-                            tbb::global_control::active_value(
-                                tbb::global_control::max_allowed_parallelism)));
+        1, std::min<size_t>(
+               tbb::this_task_arena::max_concurrency(),
+               tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
     // Rates from docs/results.md: about 2.5e6 leaf pairs/s per CPU core, 2e9/s on an H100/H200.
     const double cpu_s = pairs / (2.5e6 * cores), gpu_s = pairs / 2e9;
     if (cpu_s < 600) return;
     auto span = [](double s) {
-        return s < 120    ? fmt::format("{:.0f} s", s)
-               : s < 3600 ? fmt::format("{:.0f} min", s / 60)
+        return s < 120         ? fmt::format("{:.0f} s", s)
+               : s < 3600      ? fmt::format("{:.0f} min", s / 60)
                : s < 86400 * 2 ? fmt::format("{:.1f} h", s / 3600)
                                : fmt::format("{:.0f} days", s / 86400);
     };
@@ -106,8 +106,7 @@ void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& 
                "vmap: warning: {}: {} points at max_height {}, leaf_points {} make about {:.2g} "
                "leaf pairs: about {} on {} CPU core(s) ({} on a GPU); lower --points or "
                "--max-height, or raise --leaf-points, for a shorter run\n",
-               what, points, op.max_height, op.leaf_points, pairs, span(cpu_s), cores,
-               span(gpu_s));
+               what, points, op.max_height, op.leaf_points, pairs, span(cpu_s), cores, span(gpu_s));
 }
 
 void harden_options(CLI::App& app) {
@@ -144,8 +143,8 @@ void check_output(const std::string& path, const char* option,
     if (path.empty()) return;
     for (const std::string& in : inputs)
         if (!in.empty() && io::same_file(path, in))
-            throw UsageError(fmt::format("{}: {}: is the input {}; it would be overwritten", path,
-                                         option, in));
+            throw UsageError(
+                fmt::format("{}: {}: is the input {}; it would be overwritten", path, option, in));
     io::check_output_path(path, option);
 }
 

@@ -175,9 +175,10 @@ int run_bench(BenchOptions& o) {
     fmt::print("{}", md);
     if (!o.out_dir.empty()) {
         std::string csv;
-        csv += "points,leaves,links,interactions,node_interactions,setup_cpu,bounce_cpu,"
-               "bounce_cpu_lo,bounce_cpu_hi,setup_gpu,bounce_gpu,bounce_gpu_lo,bounce_gpu_hi,"
-               "brute_pairs,bounce_brute,bounce_brute_lo,bounce_brute_hi,rms\n";
+        csv +=
+            "points,leaves,links,interactions,node_interactions,setup_cpu,bounce_cpu,"
+            "bounce_cpu_lo,bounce_cpu_hi,setup_gpu,bounce_gpu,bounce_gpu_lo,bounce_gpu_hi,"
+            "brute_pairs,bounce_brute,bounce_brute_lo,bounce_brute_hi,rms\n";
         for (const Row& r : rows)
             csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points,
                                r.leaves, r.links, r.interactions, r.node_interactions,

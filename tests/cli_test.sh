@@ -139,6 +139,17 @@ if expect_ok "build the empty Cornell room" \
 fi
 if [ -s x.vmap ]; then ok "x.vmap exists"; else fail "x.vmap was not written"; fi
 if [ -n "$(temps_of x.vmap)" ]; then fail "build left a temporary behind"; else ok "no temporary of x.vmap"; fi
+
+# Two builds of different maps into one path at once: the file is one of them, whole.
+"$VMAP" build "$SCENE" --points 3000 --max-height 5 -o both.vmap --backend cpu >/dev/null 2>&1 &
+"$VMAP" build "$SCENE" --points 2000 --max-height 4 -o both.vmap --backend cpu >/dev/null 2>&1 &
+wait
+if "$VMAP" info both.vmap >info2.txt 2>&1 && grep -Eq '^points: +(3000|2000)$' info2.txt &&
+    [ -z "$(temps_of both.vmap)" ]; then
+    ok "two builds into one path leave one whole map"
+else
+    fail "two builds into one path: $(head -1 info2.txt)"
+fi
 links=$(sed -nE 's/^links: +([0-9]+).*/\1/p' out.txt)
 
 if expect_ok "info" info x.vmap; then

@@ -146,6 +146,8 @@ void check_output_path(const std::string& path, const std::string& option) {
 
 void make_output_folder(const std::string& dir, const std::string& option) {
     std::error_code ec;
+    if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+        throw Error(fmt::format("{}: {}: is a file, not a folder", option, dir));
     fs::create_directories(dir, ec);
     if (ec)
         throw Error(fmt::format("{}: {}: cannot create the folder: {}", option, dir, ec.message()));

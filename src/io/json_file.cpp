@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <filesystem>
 #include <fstream>
 #include <sstream>
 #include <vector>
@@ -90,6 +91,12 @@ std::string json_error_path(const std::string& text) {
 
 json parse_json_file(const std::string& path) {
     check_input_path(path);
+    std::error_code ec;
+    const auto bytes = std::filesystem::file_size(path, ec);
+    constexpr uintmax_t kMaxBytes = uintmax_t(64) << 20;  // scene files are a few kilobytes
+    if (!ec && bytes > kMaxBytes)
+        throw Error(fmt::format("{}: {} bytes is too large for a scene file (at most 64 MiB)", path,
+                                bytes));
     std::ifstream in(path, std::ios::binary);
     if (!in) throw Error(fmt::format("{}: cannot open", path));
     std::ostringstream buf;

@@ -1,16 +1,23 @@
 // Option parsing shared by the subcommands in apps/ (apps/commands.h).
 #include <fmt/format.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <limits>
 #include <sstream>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/octree.h"
 #include "vmap/scene.h"
 
 namespace vmap::cli {
@@ -33,43 +40,127 @@ void print_notes(const std::vector<std::string>& notes) {
     for (const std::string& note : notes) fmt::print(stderr, "note:       {}\n", note);
 }
 
-Vec3 parse_vec3(const std::string& text, const std::string& option) {
-    float v[3];
+namespace {
+
+// "x,y,z" as doubles; throws for anything but three finite numbers.
+std::array<double, 3> parse_triple(const std::string& text, const std::string& option) {
+    std::array<double, 3> v{};
     size_t at = 0;
     for (int k = 0; k < 3; ++k) {
         const size_t end = k < 2 ? text.find(',', at) : text.size();
         if (end == std::string::npos) break;
         const std::string part = text.substr(at, end - at);
-        size_t used = 0;
-        try {
-            v[k] = std::stof(part, &used);
-        } catch (const std::exception&) {
-            used = 0;
-        }
-        if (used == 0 || used != part.size() || !std::isfinite(v[k]))
-            throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+        char* stop = nullptr;
+        v[k] = part.empty() || std::isspace(static_cast<unsigned char>(part[0]))
+                   ? NAN
+                   : std::strtod(part.c_str(), &stop);
+        if (stop != part.c_str() + part.size() || !std::isfinite(v[k]))
+            throw UsageError(
+                fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
         at = end + 1;
-        if (k == 2) return {v[0], v[1], v[2]};
+        if (k == 2) return v;
     }
-    throw Error(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+    throw UsageError(fmt::format("{}: '{}' is not x,y,z (three finite numbers)", option, text));
+}
+
+}  // namespace
+
+Vec3 parse_vec3(const std::string& text, const std::string& option) {
+    const std::array<double, 3> v = parse_triple(text, option);
+    for (double c : v)
+        if (std::fabs(c) > std::numeric_limits<float>::max())
+            throw UsageError(
+                fmt::format("{}: '{}': {} is beyond the float range (3.4e38)", option, text, c));
+    return {float(v[0]), float(v[1]), float(v[2])};
+}
+
+Vec3 parse_direction(const std::string& text, const std::string& option) {
+    const std::array<double, 3> v = parse_triple(text, option);
+    const double big = std::max({std::fabs(v[0]), std::fabs(v[1]), std::fabs(v[2])});
+    if (!(big > 0)) throw UsageError(fmt::format("{}: '{}': the direction is zero", option, text));
+    const double x = v[0] / big, y = v[1] / big, z = v[2] / big;
+    const double len = std::sqrt(x * x + y * y + z * z);
+    return {float(x / len), float(y / len), float(z / len)};
 }
 
 std::pair<int, int> parse_size(const std::string& text, const std::string& option) {
     int w = 0, h = 0;
     char x = 0, extra = 0;
     if (std::sscanf(text.c_str(), "%d%c%d%c", &w, &x, &h, &extra) != 3 || (x != 'x' && x != 'X'))
-        throw Error(fmt::format("{}: '{}' is not WxH (e.g. 800x600)", option, text));
+        throw UsageError(fmt::format("{}: '{}' is not WxH (e.g. 800x600)", option, text));
     if (w < 1 || h < 1 || w > 16384 || h > 16384)
-        throw Error(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
+        throw UsageError(fmt::format("{}: {}x{} out of range (1..16384 each)", option, w, h));
     return {w, h};
 }
 
-void check_output(const std::string& path, const char* option) {
+double estimated_leaf_pairs(uint64_t points, const OctreeParams& op) {
+    // Measured: leaves hold about half of leaf_points on average (docs/results.md: the bunny's
+    // 40,000 points at leaf_points 4 make 19,225 leaves); at most 8^max_height of them.
+    const double cells = std::pow(8.0, op.max_height);
+    const double leaves =
+        std::max(1.0, std::min(cells, points / std::max(1.0, 0.5 * op.leaf_points)));
+    return leaves * (leaves - 1) / 2;
+}
+
+void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op) {
+    const double pairs = estimated_leaf_pairs(points, op);
+    const int cores = std::max<int>(
+        1, std::min<size_t>(
+               tbb::this_task_arena::max_concurrency(),
+               tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
+    // Rates from docs/results.md: about 2.5e6 leaf pairs/s per CPU core, 2e9/s on an H100/H200.
+    const double cpu_s = pairs / (2.5e6 * cores), gpu_s = pairs / 2e9;
+    if (cpu_s < 600) return;
+    auto span = [](double s) {
+        return s < 120         ? fmt::format("{:.0f} s", s)
+               : s < 3600      ? fmt::format("{:.0f} min", s / 60)
+               : s < 86400 * 2 ? fmt::format("{:.1f} h", s / 3600)
+                               : fmt::format("{:.0f} days", s / 86400);
+    };
+    fmt::print(stderr,
+               "vmap: warning: {}: {} points at max_height {}, leaf_points {} make about {:.2g} "
+               "leaf pairs: about {} on {} CPU core(s) ({} on a GPU); lower --points or "
+               "--max-height, or raise --leaf-points, for a shorter run\n",
+               what, points, op.max_height, op.leaf_points, pairs, span(cpu_s), cores, span(gpu_s));
+}
+
+void harden_options(CLI::App& app) {
+    const CLI::Validator finite(
+        [](std::string& text) {
+            char* stop = nullptr;
+            const double v = std::strtod(text.c_str(), &stop);
+            if (stop != text.c_str() && !std::isfinite(v))
+                return fmt::format("'{}' is not a finite number", text);
+            return std::string();
+        },
+        "", "finite");
+    const CLI::Validator non_negative(
+        [](std::string& text) {
+            const size_t k = text.find_first_not_of(" \t");
+            if (k != std::string::npos && text[k] == '-')
+                return fmt::format("'{}' is negative; expected a count or a non-negative number",
+                                   text);
+            return std::string();
+        },
+        "", "non-negative");
+    for (CLI::Option* opt : app.get_options()) {
+        const std::string type = opt->get_type_name();
+        // transform() puts the check first, so it runs before the option's own range check,
+        // which NaN passes (every comparison with NaN is false) and "-1" wraps around.
+        if (type.rfind("FLOAT", 0) == 0) opt->transform(finite);
+        if (type.rfind("UINT", 0) == 0) opt->transform(non_negative);
+    }
+    for (CLI::App* sub : app.get_subcommands({})) harden_options(*sub);
+}
+
+void check_output(const std::string& path, const char* option,
+                  const std::vector<std::string>& inputs) {
     if (path.empty()) return;
-    const std::filesystem::path dir = std::filesystem::path(path).parent_path();
-    if (!dir.empty() && !std::filesystem::is_directory(dir))
-        throw Error(
-            fmt::format("{}: {}: the folder {} does not exist", path, option, dir.string()));
+    for (const std::string& in : inputs)
+        if (!in.empty() && io::same_file(path, in))
+            throw UsageError(
+                fmt::format("{}: {}: is the input {}; it would be overwritten", path, option, in));
+    io::check_output_path(path, option);
 }
 
 Verbosity& verbosity() {

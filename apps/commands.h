@@ -10,9 +10,17 @@
 #include <vector>
 
 #include "vmap/progress.h"
+#include "vmap/error.h"
+#include "vmap/octree.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
+
+// A usage error found after parsing (main exits 2 for it, 1 for other vmap::Errors).
+class UsageError : public Error {
+  public:
+    using Error::Error;
+};
 
 struct Command {
     CLI::App* app = nullptr;
@@ -24,10 +32,25 @@ Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
 Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
 Command add_view_command(CLI::App& app);         // apps/view_cmd.cpp
 
-// "x,y,z" -> Vec3; throws vmap::Error naming `option` for anything else (or non-finite values).
+// Option values (usage errors, exit 2, for a malformed one):
+// "x,y,z" -> Vec3; throws UsageError naming `option` for anything else (or non-finite values).
 Vec3 parse_vec3(const std::string& text, const std::string& option);
-// "WxH" -> (W, H), each 1..16384; throws vmap::Error naming `option`.
+// "WxH" -> (W, H), each 1..16384; throws UsageError naming `option`.
+// "dx,dy,dz" -> the unit vector along it (normalised in double, so tiny and huge components
+// work); throws UsageError naming `option` for a zero or non-finite direction.
+Vec3 parse_direction(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
+
+// Adds to every numeric option of `app` and its subcommands: floating-point values must be
+// finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to
+// 2^64-1). Call after all options are declared.
+void harden_options(CLI::App& app);
+
+// Leaf pairs a build of `points` points with `op` is expected to test (an estimate), and a
+// warning on stderr with the expected time when that is over ten minutes on this machine's CPU
+// cores: printed before the work starts, so an hours-long job is never a surprise.
+double estimated_leaf_pairs(uint64_t points, const OctreeParams& op);
+void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op);
 
 bool ends_with_ci(std::string s, const std::string& suffix);
 
@@ -51,8 +74,11 @@ std::string format_duration(double seconds);
 // the work starts; then, when stderr is a terminal, a line that moves with percent and ETA.
 ProgressCallback stderr_progress();
 
-// Fails early (before any work or output) when an output's folder does not exist; throws
-// vmap::Error naming the file and `option`. An empty path is no output.
-void check_output(const std::string& path, const char* option);
+// Fails early (before any work or output) unless `path` can be written: its folder exists and
+// is writable, and it is not a folder, FIFO or device (vmap::Error naming the file and
+// `option`); and when it is one of `inputs` (the same file, however spelled), a UsageError. An
+// empty path is no output.
+void check_output(const std::string& path, const char* option,
+                  const std::vector<std::string>& inputs = {});
 
 }  // namespace vmap::cli

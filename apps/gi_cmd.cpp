@@ -14,6 +14,7 @@
 #include <optional>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
@@ -61,6 +62,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         camera = sc.camera;
         if (o.points) sc.points = *o.points;
         if (o.seed) sc.seed = *o.seed;
+        warn_if_long(o.input, sc.points, gi_build_params(sc.octree, o).octree);
         BuildStats st;
         PointSet points = sample_scene(sc);
         count_emitters(points, o.input);
@@ -258,11 +260,13 @@ void write_outputs(const VisibilityMap& vm, const std::vector<Vec3>& B, float ex
 
 int run_gi(GiOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
+    io::check_input_path(o.input);
+    if (!o.scene.empty()) io::check_input_path(o.scene);
     if (o.reference) return run_gi_reference(o);
     if (o.image.empty()) o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
-    check_output(o.ply, "--ply");
-    check_output(o.pfm, "--pfm");
-    check_output(o.image, "-o");
+    check_output(o.ply, "--ply", {o.input, o.scene, o.image});
+    check_output(o.pfm, "--pfm", {o.input, o.scene, o.image, o.ply});
+    check_output(o.image, "-o", {o.input, o.scene});
     const auto [width, height] = parse_size(o.size, "--size");
     o.render.width = width, o.render.height = height;
     o.render.shade = false;                          // the light is in the radiosity
@@ -274,9 +278,10 @@ int run_gi(GiOptions& o) {
     std::optional<Camera> scene_camera;
     const VisibilityMap vm = input_vmap(o, what, build_s, scene_camera);
     const PointSet& ps = vm.points;
+    PointSet out = points_in_input_order(vm);  // input order and units, for the outputs
     // The camera (the default one frames the points' box, which the order does not change),
     // checked before the solve.
-    Camera cam = scene_camera ? *scene_camera : default_camera(ps);
+    Camera cam = scene_camera ? *scene_camera : default_camera(out);
     if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
     if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
     if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
@@ -350,7 +355,7 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("--theta", o->gi.theta,
                    "Separation parameter: node-level transfer when the centres are more than "
                    "theta x (sum of the node sizes) apart; larger is finer and slower")
-        ->check(CLI::PositiveNumber)
+        ->check(CLI::Range(1e-3, 1e3))
         ->capture_default_str();
     gi->add_option("--backend", o->gi.backend,
                    "auto (GPU when present), cpu or cuda; for the V-map build and the bounces")

@@ -8,12 +8,14 @@
 #include <fmt/format.h>
 
 #include <cstdio>
+#include <cmath>
 #include <memory>
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
 #include "apps/query_io.h"
 #include "io/npy.h"
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/query.h"
@@ -51,10 +53,11 @@ uint32_t checked_id(const VisibilityMap& vm, const std::string& path, const char
 uint32_t resolve_pos(const VisibilityMap& vm, const char* pos_option, const std::string& pos) {
     const Vec3 p = parse_vec3(pos, pos_option);
     const uint32_t k = nearest_point(vm, p);
-    const Vec3 q = vm.points.positions[vm.inverse[k]];
+    const Vec3 q = vm.octree.to_world(vm.points.positions[vm.inverse[k]]);
     if (verbosity() != Verbosity::kQuiet)
         fmt::print(stderr, "{} {},{},{}: nearest point {} at ({}, {}, {}), {:.3g} away\n",
-                   pos_option, p.x, p.y, p.z, k, q.x, q.y, q.z, length(q - p));
+                   pos_option, p.x, p.y, p.z, k, q.x, q.y, q.z,
+                   std::hypot(double(q.x) - p.x, double(q.y) - p.y, double(q.z) - p.z));
     return k;
 }
 
@@ -148,7 +151,7 @@ void run_ray(const QueryArgs& a, const VisibilityMap& vm, Vec3 dir, json& js) {
         a.ray ? checked_id(vm, a.path, "--ray", *a.ray) : resolve_pos(vm, "--ray-pos", a.ray_pos);
     RayStats st;
     const RayHit h = shoot_ray(vm, i, dir, &st);
-    const Vec3 q = h.hit ? vm.points.positions[vm.inverse[h.id]] : Vec3{};
+    const Vec3 q = h.hit ? vm.octree.to_world(vm.points.positions[vm.inverse[h.id]]) : Vec3{};
     if (a.json) {
         js["ray"] = {{"from", i},
                      {"hit", h.hit},
@@ -175,10 +178,11 @@ int run_query(const QueryArgs& a) {
     for (const auto& p : a.pair_pos) parse_vec3(p, "--pair-pos");
     if (!a.from_pos.empty()) parse_vec3(a.from_pos, "--from-pos");
     if (!a.ray_pos.empty()) parse_vec3(a.ray_pos, "--ray-pos");
-    const Vec3 dir = a.dir.empty() ? Vec3{} : parse_vec3(a.dir, "--dir");
-    if (!a.dir.empty() && !(length(dir) > 0)) throw Error("--dir: the direction is zero");
-    check_output(a.out, "--out");
-    check_output(a.ply, "--ply");
+    const Vec3 dir = a.dir.empty() ? Vec3{} : parse_direction(a.dir, "--dir");
+    io::check_input_path(a.path);
+    if (!a.pairs.empty() && a.pairs != "-") io::check_input_path(a.pairs);
+    check_output(a.out, "--out", {a.path, a.pairs});
+    check_output(a.ply, "--ply", {a.path, a.pairs, a.out});
 
     const VisibilityMap vm = load_vmap(a.path);
     json js = {{"file", a.path}};

@@ -19,6 +19,7 @@
 #include <memory>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
@@ -93,6 +94,7 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
     if (height) bp.octree.max_height = *height;
     bp.backend = a.backend;
     bp.progress = stderr_progress();
+    warn_if_long(a.input, s.points.size(), bp.octree);
     BuildStats st;
     VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",
@@ -179,12 +181,15 @@ int run_render(RenderArgs& a) {
     a.opt.height = h;
     if (!a.eye_pos.empty()) parse_vec3(a.eye_pos, "--eye-pos");
     if (a.mode == "heights" && a.heights.empty()) throw Error("--heights: give at least one");
+    if (a.input.empty()) a.input = default_scene_path();
+    if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
+    io::check_input_path(a.input);
+    if (!a.scene.empty()) io::check_input_path(a.scene);
+    check_output(a.output, "-o", {a.input, a.scene});
+    check_output(a.ply, "--ply", {a.input, a.scene, a.output});
     Source s = load_source(a);
     const Camera cam = make_camera(a, s);
     check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
-    check_output(a.output, "-o");
-    check_output(a.ply, "--ply");
     a.opt.shade = a.mode != "albedo";
 
     const auto t0 = std::chrono::steady_clock::now();

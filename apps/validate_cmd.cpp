@@ -11,6 +11,7 @@
 #include <fstream>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/validate.h"
@@ -28,26 +29,11 @@ struct Options {
 };
 Options opt;
 
-// Writes to a temporary name and renames, so no half-written file is left behind.
 void write_file(const std::string& path, const std::string& text, const char* what) {
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-        if (!f) throw Error(fmt::format("{}: {}: cannot open for writing", what, path));
-        f << text;
-        f.flush();
-        if (!f) {
-            std::error_code ec;
-            std::filesystem::remove(tmp, ec);
-            throw Error(fmt::format("{}: {}: write failed", what, path));
-        }
-    }
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::error_code ignored;
-        std::filesystem::remove(tmp, ignored);
-        throw Error(fmt::format("{}: {}: {}", what, path, ec.message()));
+    try {
+        io::write_file_atomic(path, text);
+    } catch (const Error& e) {
+        throw Error(fmt::format("{}: {}", what, e.what()));
     }
 }
 
@@ -152,8 +138,9 @@ CLI::App* add_validate_command(CLI::App& app) {
 int run_validate_command() {
     ValidateParams& vp = opt.vp;
     vp.progress = stderr_progress();
-    check_output(opt.json, "--json");
-    check_output(opt.md, "--md");
+    for (const std::string& s : opt.scenes) io::check_input_path(s);
+    check_output(opt.json, "--json", opt.scenes);
+    check_output(opt.md, "--md", opt.scenes);
     if (opt.time_embree && !opt.json.empty())
         throw Error(
             fmt::format("{}: --json: --time-embree writes its table as Markdown only", opt.json));

@@ -28,6 +28,7 @@
 #include "apps/gi_cmd.h"
 #include "apps/validate_cmd.h"
 #include "bench/bench.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
@@ -240,12 +241,14 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
 int run_build(BuildOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
     if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
-    if (!o.count_links) cli::check_output(o.output, "-o");
+    io::check_input_path(o.input);
+    if (!o.count_links) cli::check_output(o.output, "-o", {o.input});
     std::string what;
     PointSet pts = load_input(o, what);
     BuildParams& bp = o.params;
     if (o.max_height) bp.octree.max_height = *o.max_height;
     if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    cli::warn_if_long(o.input, pts.size(), bp.octree);
     bp.progress = cli::stderr_progress();
     bp.keep_links = !o.count_links;
 
@@ -265,6 +268,7 @@ int run_build(BuildOptions& o) {
 }
 
 int run_info(const std::string& path, bool json) {
+    io::check_input_path(path);
     VisibilityMap vm = load_vmap(path);
     if (json) {
         nlohmann::json j = params_json(vm);
@@ -289,6 +293,36 @@ int run_info(const std::string& path, bool json) {
     fmt::print("links:      {}\n", vm.num_links());
     print_tree_summary(vm);
     return 0;
+}
+
+std::string command_names(CLI::App& app) {
+    std::string names;
+    for (const CLI::App* s : app.get_subcommands({}))
+        names += (names.empty() ? "" : ", ") + s->get_name();
+    return names;
+}
+
+// The first word that is not an option (nor --threads' value) when it names no subcommand:
+// says so, with the list, and returns true.
+bool report_unknown_command(CLI::App& app, int argc, char** argv) {
+    for (int i = 1; i < argc; ++i) {
+        const std::string w = argv[i];
+        if (w == "--threads") {
+            ++i;
+            continue;
+        }
+        if (w.empty() || w[0] == '-') continue;
+        for (const CLI::App* sub : app.get_subcommands({}))
+            if (sub->check_name(w)) return false;  // a known command: CLI11 says what is wrong
+        fmt::print(stderr, "vmap: unknown command '{}' (the commands: {}; see vmap --help)\n", w,
+                   command_names(app));
+        return true;
+    }
+    for (int i = 1; i < argc; ++i)
+        if (std::string(argv[i]) != "--threads" || ++i == argc) return false;
+    fmt::print(stderr, "vmap: no command given (the commands: {}; see vmap --help)\n",
+               command_names(app));
+    return true;
 }
 
 }  // namespace
@@ -431,8 +465,10 @@ int main(int argc, char** argv) {
     benchc
         ->add_option("--cpu-budget", bo2.cpu_budget_s,
                      "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
+        ->check(CLI::Range(0.0, 1e7))
         ->capture_default_str();
-    benchc->add_option("--points", bo2.points, "Override every scene's point count");
+    benchc->add_option("--points", bo2.points, "Override every scene's point count")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
     benchc->add_option("--construction", bo2.construction, "nodes or leaf-pairs (as for build)")
         ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
@@ -440,9 +476,11 @@ int main(int argc, char** argv) {
 
     auto* validate = cli::add_validate_command(app);
 
+    cli::harden_options(app);
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
+        if (app.get_subcommands().empty() && report_unknown_command(app, argc, argv)) return 2;
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
@@ -485,6 +523,9 @@ int main(int argc, char** argv) {
             if (c->app->parsed()) return c->run();
         if (*validate) return cli::run_validate_command();
         if (gi.selected()) return gi.run();
+    } catch (const cli::UsageError& e) {
+        fmt::print(stderr, "vmap: error: {}\n", e.what());
+        return 2;
     } catch (const vmap::Error& e) {
         fmt::print(stderr, "vmap: error: {}\n", e.what());
         return 1;

@@ -18,6 +18,7 @@
 #include <fstream>
 #include <random>
 
+#include "io/atomic_file.h"
 #include "visibility/backend.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
@@ -101,6 +102,7 @@ std::string fmt_time(const Stat& s, bool done, bool est) {
 
 int run(const Options& o) {
     if (o.runs < 1 || o.runs > 100) throw Error("--runs: must be 1..100");
+    if (!o.out_dir.empty()) io::make_output_folder(o.out_dir, "--out");
     std::vector<std::string> backends = o.backends;
     std::string why;
     const bool have_gpu = detail::make_cuda_backend(&why) != nullptr;
@@ -282,9 +284,8 @@ int run(const Options& o) {
         "visibility, links), \"GPU kernel pairs/s\" the leaf-pair kernel alone (CUDA events).\n";
     fmt::print("{}", md);
     if (!o.out_dir.empty()) {
-        std::filesystem::create_directories(o.out_dir);
-        std::ofstream(o.out_dir + "/bench.md") << md;
-        std::ofstream(o.out_dir + "/bench.csv") << csv;
+        io::write_file_atomic(o.out_dir + "/bench.md", md);
+        io::write_file_atomic(o.out_dir + "/bench.csv", csv);
     }
     return 0;
 }

@@ -15,6 +15,7 @@
 #include <fstream>
 
 #include "apps/gi_cmd.h"
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
 #include "vmap/scene.h"
@@ -74,6 +75,7 @@ double slope(const std::vector<Row>& rows, Stat Row::*m) {
 
 int run_bench(BenchOptions& o) {
     if (o.scene.empty()) o.scene = default_scene_path();
+    if (!o.out_dir.empty()) io::make_output_folder(o.out_dir, "--out");
     // Default: cpu and cuda; cuda is dropped (with a note) when no device answers.
     const bool explicit_backends = !o.backends.empty();
     if (!explicit_backends) o.backends = {"cpu", "cuda"};
@@ -172,18 +174,19 @@ int run_bench(BenchOptions& o) {
         sl(&Row::cpu), sl(&Row::gpu), sl(&Row::brute));
     fmt::print("{}", md);
     if (!o.out_dir.empty()) {
-        std::filesystem::create_directories(o.out_dir);
-        std::ofstream(std::filesystem::path(o.out_dir) / "bench-gi.md") << md;
-        std::ofstream csv(std::filesystem::path(o.out_dir) / "bench-gi.csv");
-        csv << "points,leaves,links,interactions,node_interactions,setup_cpu,bounce_cpu,"
-               "bounce_cpu_lo,bounce_cpu_hi,setup_gpu,bounce_gpu,bounce_gpu_lo,bounce_gpu_hi,"
-               "brute_pairs,bounce_brute,bounce_brute_lo,bounce_brute_hi,rms\n";
+        std::string csv;
+        csv +=
+            "points,leaves,links,interactions,node_interactions,setup_cpu,bounce_cpu,"
+            "bounce_cpu_lo,bounce_cpu_hi,setup_gpu,bounce_gpu,bounce_gpu_lo,bounce_gpu_hi,"
+            "brute_pairs,bounce_brute,bounce_brute_lo,bounce_brute_hi,rms\n";
         for (const Row& r : rows)
-            csv << fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points,
+            csv += fmt::format("{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n", r.points,
                                r.leaves, r.links, r.interactions, r.node_interactions,
                                r.setup_cpu.median, r.cpu.median, r.cpu.lo, r.cpu.hi,
                                r.setup_gpu.median, r.gpu.median, r.gpu.lo, r.gpu.hi, r.brute_pairs,
                                r.brute.median, r.brute.lo, r.brute.hi, r.rms);
+        io::write_file_atomic(o.out_dir + "/bench-gi.md", md);
+        io::write_file_atomic(o.out_dir + "/bench-gi.csv", csv);
     }
     return 0;
 }
@@ -206,7 +209,7 @@ std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
         ->check(CLI::Range(1, 1000000))
         ->capture_default_str();
     b->add_option("--theta", o->theta, "Separation parameter")
-        ->check(CLI::PositiveNumber)
+        ->check(CLI::Range(1e-3, 1e3))
         ->capture_default_str();
     b->add_option("--refine", o->refine, "blocks or links (see vmap gi --help)")
         ->check(CLI::IsMember({"blocks", "links"}))

@@ -17,6 +17,7 @@
 #include <random>
 
 #include "apps/commands.h"
+#include "io/atomic_file.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/query.h"
@@ -76,6 +77,7 @@ volatile uint64_t g_sink;  // keeps the timed loops from being optimised away
 int run_bench_query(QueryBenchArgs& a) {
     if (a.scene.empty()) a.scene = default_scene_path();
     if (a.points.size() < 2) throw Error("--points: give at least two sizes");
+    if (!a.out_dir.empty()) io::make_output_folder(a.out_dir, "--out");
     std::vector<Row> rows;
     for (uint64_t n : a.points) {
         Scene sc = load_scene(a.scene);
@@ -198,9 +200,8 @@ int run_bench_query(QueryBenchArgs& a) {
         slope(f.ray.median, l.ray.median), slope(f.brute.median, l.brute.median));
     fmt::print("{}", md);
     if (!a.out_dir.empty()) {
-        std::filesystem::create_directories(a.out_dir);
-        std::ofstream(a.out_dir + "/bench-query.md") << md;
-        std::ofstream(a.out_dir + "/bench-query.csv") << csv;
+        io::write_file_atomic(a.out_dir + "/bench-query.md", md);
+        io::write_file_atomic(a.out_dir + "/bench-query.csv", csv);
     }
     return 0;
 }

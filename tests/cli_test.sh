@@ -113,10 +113,15 @@ expect_input_error() {
     fi
 }
 
-# expect_no_file NAME PATH: neither PATH nor PATH.tmp exists.
+# temps_of PATH: the temporaries of PATH in its folder (.NAME.<pid>.<n>.<t>.tmp), if any.
+temps_of() {
+    ls -d "$(dirname "$1")/.$(basename "$1")."*.tmp 2>/dev/null
+}
+
+# expect_no_file NAME PATH: neither PATH nor a temporary of it exists.
 expect_no_file() {
-    if [ -e "$2" ] || [ -e "$2.tmp" ]; then
-        fail "$1: left $(ls -d "$2" "$2.tmp" 2>/dev/null | tr '\n' ' ')behind"
+    if [ -e "$2" ] || [ -n "$(temps_of "$2")" ]; then
+        fail "$1: left $(ls -d "$2" $(temps_of "$2") 2>/dev/null | tr '\n' ' ')behind"
     else
         ok "$1"
     fi
@@ -133,7 +138,18 @@ if expect_ok "build the empty Cornell room" \
     expect_stdout "build says what it wrote" '^wrote: +x\.vmap$'
 fi
 if [ -s x.vmap ]; then ok "x.vmap exists"; else fail "x.vmap was not written"; fi
-if [ -e x.vmap.tmp ]; then fail "build left x.vmap.tmp behind"; else ok "no x.vmap.tmp"; fi
+if [ -n "$(temps_of x.vmap)" ]; then fail "build left a temporary behind"; else ok "no temporary of x.vmap"; fi
+
+# Two builds of different maps into one path at once: the file is one of them, whole.
+"$VMAP" build "$SCENE" --points 3000 --max-height 5 -o both.vmap --backend cpu >/dev/null 2>&1 &
+"$VMAP" build "$SCENE" --points 2000 --max-height 4 -o both.vmap --backend cpu >/dev/null 2>&1 &
+wait
+if "$VMAP" info both.vmap >info2.txt 2>&1 && grep -Eq '^points: +(3000|2000)$' info2.txt &&
+    [ -z "$(temps_of both.vmap)" ]; then
+    ok "two builds into one path leave one whole map"
+else
+    fail "two builds into one path: $(head -1 info2.txt)"
+fi
 links=$(sed -nE 's/^links: +([0-9]+).*/\1/p' out.txt)
 
 if expect_ok "info" info x.vmap; then
@@ -351,7 +367,7 @@ if [ -e no_such_dir ]; then fail "a failed build created no_such_dir"; else ok "
 cp x.vmap keep.vmap
 expect_input_error "failed build over an existing file" "$DATA/malformed.json" \
     build "$DATA/malformed.json" -o keep.vmap --backend cpu
-if cmp -s x.vmap keep.vmap && [ ! -e keep.vmap.tmp ]; then
+if cmp -s x.vmap keep.vmap && [ -z "$(temps_of keep.vmap)" ]; then
     ok "a failed build leaves the existing output untouched"
 else
     fail "a failed build changed keep.vmap or left keep.vmap.tmp"
@@ -429,13 +445,13 @@ expect_ok "render --fov 179 (the end of the documented range)" render x.vmap --f
     --size 40x40 -o fov179.png
 expect_usage_error "render visible without an eye" render x.vmap --mode visible -o novis.png
 expect_no_file "no PNG after a usage error" novis.png
-expect_input_error "render --size 0x10" --size render x.vmap --size 0x10 -o bad.png
+expect_usage_error "render --size 0x10" render x.vmap --size 0x10 -o bad.png
 expect_no_file "no PNG after a bad size" bad.png
 expect_input_error "render --eye-id out of range" x.vmap render x.vmap --mode visible \
     --eye-id 3000 -o bad.png --ply bad.ply
 expect_no_file "no PNG after a bad eye id" bad.png
 expect_no_file "no PLY after a bad eye id" bad.ply
-expect_input_error "render --eye with a NaN" --eye render x.vmap --eye nan,0,0 -o bad.png
+expect_usage_error "render --eye with a NaN" render x.vmap --eye nan,0,0 -o bad.png
 expect_no_file "no PNG after a NaN eye" bad.png
 expect_input_error "render into a missing folder" no_such_dir/r.png render x.vmap --size 8x8 \
     -o no_such_dir/r.png
@@ -455,8 +471,8 @@ fi
 expect_usage_error "query --ray without --dir" query x.vmap --ray 3
 expect_usage_error "query --ply without --from" query x.vmap --pair 0 1 --ply nofrom.ply
 expect_no_file "no PLY without --from" nofrom.ply
-expect_input_error "query --dir 0,0,0" --dir query x.vmap --ray 3 --dir 0,0,0
-expect_input_error "query --from-pos not a position" --from-pos query x.vmap --from-pos 1,2
+expect_usage_error "query --dir 0,0,0" query x.vmap --ray 3 --dir 0,0,0
+expect_usage_error "query --from-pos not a position" query x.vmap --from-pos 1,2
 expect_usage_error "query --pair with --pair-pos" query x.vmap --pair 0 1 --pair-pos 0,0,0 1,1,1
 expect_usage_error "query --from with --from-pos" query x.vmap --from 0 --from-pos 0,0,0
 expect_input_error "query --ray id out of range" x.vmap query x.vmap --ray 3000 --dir 0,1,0
@@ -542,7 +558,7 @@ if expect_ok "gi --reference prints the error table" gi "$SCENE" --reference --p
     fi
 fi
 expect_input_error "gi --reference on a .vmap" x.vmap gi x.vmap --reference
-expect_input_error "gi --size nonsense" nonsense gi x.vmap --size nonsense -o y.png
+expect_usage_error "gi --size nonsense" gi x.vmap --size nonsense -o y.png
 if [ -e y.png ]; then fail "gi --size nonsense wrote y.png"; else ok "no y.png"; fi
 if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 --max-height 5 \
     --bounces 1 --backend cpu --compare-brute; then
@@ -629,7 +645,7 @@ else fail "validate on a mesh file"; show validate boxes.obj --points 2000 --pai
 
 # ---- done ------------------------------------------------------------------------------------
 
-leftovers=$(ls -- *.tmp 2>/dev/null)
+leftovers=$(ls -A | grep '\.tmp$')
 if [ -n "$leftovers" ]; then fail "temporary files left behind: $leftovers"; else ok "no *.tmp"; fi
 
 if [ "$failures" -ne 0 ]; then

@@ -527,9 +527,9 @@ TEST(Ply, WriterFailureThrowsAndLeavesNothingBehind) {
     const PointSet points = sample_points(10, false, false, false);
     // The directory does not exist: the temporary cannot even be created.
     EXPECT_READ_ERROR(write_ply(dir.path("missing/out.ply"), points), "missing/out.ply");
-    // The target is a directory: the temporary is written, then cannot be renamed onto it.
+    // The target is a directory: refused before anything is written.
     fs::create_directory(dir.path("target.ply"));
-    EXPECT_READ_ERROR(write_ply(dir.path("target.ply"), points), "target.ply", "rename");
+    EXPECT_READ_ERROR(write_ply(dir.path("target.ply"), points), "target.ply", "is a folder");
     EXPECT_EQ(dir.files(), (std::vector<std::string>{"target.ply"}));
 }
 

@@ -11,6 +11,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include "test_files.h"
@@ -93,6 +94,7 @@ void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
     EXPECT_EQ(s.params.leaf_points, t.params.leaf_points);
     EXPECT_EQ(s.root_min, t.root_min);
     EXPECT_EQ(s.root_size, t.root_size);
+    EXPECT_EQ(s.scale, t.scale);
     EXPECT_EQ(s.num_nodes(), t.num_nodes());
     EXPECT_EQ(s.num_leaves(), t.num_leaves());
     EXPECT_EQ(s.height(), t.height());
@@ -276,7 +278,7 @@ TEST_F(VmapFile, BadMagicIsRejected) {
 TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
-    for (uint32_t version : {0u, 1u, 2u, 4u, 0xffffffffu}) {
+    for (uint32_t version : {0u, 1u, 2u, 3u, 5u, 0xffffffffu}) {
         SCOPED_TRACE(version);
         std::string bytes = whole;
         std::memcpy(bytes.data() + 8, &version, 4);
@@ -391,11 +393,32 @@ TEST_F(VmapFile, SavingOverAnExistingFileReplacesItAndLeavesNoTemporary) {
     EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
     expect_same_map(map(), load_vmap(p));
 
-    // Over a stale temporary from an earlier, interrupted run, too.
-    spit(p + ".tmp", "left over");
+    // A stale temporary of an interrupted run (a process that no longer exists) is removed.
+    spit(dir.path(".map.vmap.999999999.0.0.tmp"), "left over");
     save_vmap(p, map());
     EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
     expect_same_map(map(), load_vmap(p));
+}
+
+// Two saves of different maps to one path at the same time, many times over: the file is
+// always one complete map (with a shared temporary name the loser's bytes went into the
+// winner's file: "checksum mismatch").
+TEST_F(VmapFile, ConcurrentSavesToOnePathLeaveOneCompleteMap) {
+    ScratchDir dir;
+    const std::string p = dir.path("map.vmap");
+    VisibilityMap other = map();
+    other.visibility_params.K = 7;
+    for (int round = 0; round < 6; ++round) {
+        std::thread a([&] { save_vmap(p, map()); });
+        std::thread b([&] { save_vmap(p, other); });
+        a.join();
+        b.join();
+        VisibilityMap back = load_vmap(p);
+        EXPECT_TRUE(back.visibility_params.K == 3 || back.visibility_params.K == 7);
+        back.visibility_params.K = 3;
+        expect_same_map(map(), back);
+    }
+    EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});
 }
 
 TEST_F(VmapFile, SavingOntoADirectoryThrowsAndLeavesNoTemporary) {

@@ -120,7 +120,7 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
 // The point-level kernel K(r, s) above (the form factor is A_s * K).
 float gi_kernel(Vec3 pr, Vec3 nr, float ar, Vec3 ps, Vec3 ns, float as);
 
-// Total power sum_i A_i B_i per channel (W), points in octree order.
+// Total power sum_i A_i B_i per channel (W, areas in input units), points in octree order.
 Vec3 total_power(const VisibilityMap& vm, const std::vector<Vec3>& radiosity);
 
 // Relative RMS difference over points: sqrt(sum |a_i - b_i|^2 / sum |b_i|^2) (all channels).

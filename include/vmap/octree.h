@@ -79,6 +79,22 @@ class Octree {
     // or parameters out of range, naming `source`.
     static Octree build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
                         const std::string& source = "points");
+    // The same in a frame of the cloud's own size: first maps `points` (positions and splat
+    // radii) to world / scale, with scale the power of two that brings the bounding cube's edge
+    // into [0.5, 1), then builds. Squared distances then never overflow or underflow a float
+    // whatever the input's unit, and since the map is a power of two it is exact: a cloud and
+    // the same cloud times 2^k give bit-identical octrees apart from `scale`.
+    static Octree build_in_unit_frame(PointSet& points, const OctreeParams& params,
+                                      std::vector<uint32_t>& order,
+                                      const std::string& source = "points");
+
+    // Between the octree's frame and the input's units (world = local x scale), in double.
+    Vec3 to_world(Vec3 local) const {
+        return {float(local.x * scale), float(local.y * scale), float(local.z * scale)};
+    }
+    Vec3 to_local(Vec3 world) const {
+        return {float(world.x / scale), float(world.y / scale), float(world.z / scale)};
+    }
 
     OctreeView view() const;
     // Derives the packed walk array from boxes, skip and node_leaf (build and load call it).
@@ -100,7 +116,8 @@ class Octree {
 
     // Per node (all indexed by node): the cell, the bounding sphere, structure, ranges.
     OctreeParams params;
-    Vec3 root_min;  // corner of the root cube
+    double scale = 1;  // input units per octree unit, a power of two (build_in_unit_frame)
+    Vec3 root_min;     // corner of the root cube
     float root_size = 0;
     std::vector<Sphere> spheres;
     std::vector<Box> boxes;        // tight content bounds (points and discs), grown for rounding

@@ -23,8 +23,8 @@
 
 namespace vmap {
 
-// The input id of the point nearest `pos` (linear scan; ties to the lowest id). Throws
-// vmap::Error for an empty set or a non-finite position.
+// The input id of the point nearest `pos`, in input units (linear scan; ties to the lowest id).
+// Throws vmap::Error for an empty set or a non-finite position.
 uint32_t nearest_point(const PointSet& points, Vec3 pos);
 uint32_t nearest_point(const VisibilityMap& vm, Vec3 pos);
 
@@ -35,7 +35,7 @@ uint64_t visible_count(const VisibilityMap& vm, uint32_t i);
 struct RayHit {
     bool hit = false;
     uint32_t id = 0;     // input id of the point hit
-    float distance = 0;  // along the (normalised) ray, scene units
+    float distance = 0;  // along the (normalised) ray, input units
 };
 
 struct RayStats {

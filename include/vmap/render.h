@@ -94,8 +94,8 @@ Image read_png(const std::string& path);
 
 // ---- visibility pictures (paper Fig. 9 and 11) ----
 
-// The V-map's points back in input order (vm.points are in octree order), so that input ids
-// index them directly.
+// The V-map's points back in input order and units (vm.points are in octree order and frame),
+// so that input ids index them directly.
 PointSet points_in_input_order(const VisibilityMap& vm);
 
 struct VisibleStyle {

@@ -113,7 +113,9 @@ class VisibilityMap {
   public:
     OctreeParams octree_params;
     VisibilityParams visibility_params;
-    PointSet points;                // in octree order (normals, colours (albedo), radii)
+    PointSet points;                // in octree order and the octree's frame (positions and
+                                    // radii in input units / octree.scale; render.h's
+                                    // points_in_input_order gives them back in input units)
     std::vector<uint32_t> order;    // octree position -> input index
     std::vector<uint32_t> inverse;  // input index -> octree position
     Octree octree;
@@ -140,11 +142,13 @@ class VisibilityMap {
     std::vector<uint32_t> visible_set(uint32_t i) const;
 };
 
-// Builds the octree over `points` (which need normals) and the V-map. Points without splat radii
-// get them from estimate_radii (vmap/normals.h); that, normals that look inconsistent, and
-// almost no facing leaf pairs are reported in stats->warnings. Throws vmap::Error naming
-// `source` for bad input or parameters (messages name the BuildParams field), or for backend
-// "cuda" without a usable GPU; vmap::Cancelled when the progress callback returned false.
+// Builds the octree over `points` (which need normals) and the V-map, in the frame of the
+// cloud's own size (Octree::build_in_unit_frame), so the map is the same whatever unit the
+// input was written in. Points without splat radii get them from estimate_radii
+// (vmap/normals.h); that, normals that look inconsistent, and almost no facing leaf pairs are
+// reported in stats->warnings. Throws vmap::Error naming `source` for bad input or parameters
+// (messages name the BuildParams field), or for backend "cuda" without a usable GPU;
+// vmap::Cancelled when the progress callback returned false.
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
                          const std::string& source = "points");
 

@@ -689,7 +689,8 @@ Vec3 total_power(const VisibilityMap& vm, const std::vector<Vec3>& radiosity) {
         const double a = area_of(vm.points, i);
         s[0] += a * radiosity[i].x, s[1] += a * radiosity[i].y, s[2] += a * radiosity[i].z;
     }
-    return Vec3{float(s[0]), float(s[1]), float(s[2])};
+    const double unit2 = vm.octree.scale * vm.octree.scale;  // areas back in input units
+    return Vec3{float(s[0] * unit2), float(s[1] * unit2), float(s[2] * unit2)};
 }
 
 double relative_rms(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {

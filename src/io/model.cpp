@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "io/line_reader.h"
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 
@@ -81,6 +82,7 @@ bool obj_has_faces(InputFile& in) {
 }  // namespace
 
 ModelData read_model(const std::string& path) {
+    io::check_input_path(path);  // a FIFO would block the reader, a folder fail obscurely
     switch (kind_of(path)) {
         case Kind::kPly:
             return read_ply(path);
@@ -100,6 +102,7 @@ ModelData read_model(const std::string& path) {
 
 // A malformed header is the reader's to report: here it only decides which path to take.
 bool model_has_faces(const std::string& path) {
+    io::check_input_path(path);  // never open a FIFO (it would block) or a folder
     const Kind kind = kind_of(path);
     if (kind == Kind::kXyz || kind == Kind::kPcd) return false;
     if (kind == Kind::kStl) return true;

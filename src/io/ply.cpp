@@ -17,6 +17,7 @@
 #include <system_error>
 #include <vector>
 
+#include "io/atomic_file.h"
 #include "io/text_util.h"
 #include "vmap/io.h"
 
@@ -764,43 +765,6 @@ void read_data(const std::string& path, const Header& header, Source& source, Mo
 
 // ---- writing -------------------------------------------------------------------------------
 
-// Owns the temporary file until it is renamed into place, so every early exit cleans up.
-class TempFile {
-  public:
-    explicit TempFile(const std::string& path) : path_(path), temp_(path + ".tmp") {
-        file_ = std::fopen(temp_.c_str(), "wb");
-        if (file_ == nullptr) fail(path_, "cannot create '", temp_, "': ", std::strerror(errno));
-    }
-    ~TempFile() {
-        if (file_ != nullptr) std::fclose(file_);
-        if (!committed_) std::remove(temp_.c_str());
-    }
-    TempFile(const TempFile&) = delete;
-    TempFile& operator=(const TempFile&) = delete;
-
-    void write(const std::string& bytes) {
-        if (std::fwrite(bytes.data(), 1, bytes.size(), file_) != bytes.size()) {
-            fail(path_, "write error: ", std::strerror(errno));
-        }
-    }
-
-    void commit() {
-        std::FILE* f = file_;
-        file_ = nullptr;
-        if (std::fclose(f) != 0) fail(path_, "write error: ", std::strerror(errno));
-        if (std::rename(temp_.c_str(), path_.c_str()) != 0) {
-            fail(path_, "cannot rename '", temp_, "' onto it: ", std::strerror(errno));
-        }
-        committed_ = true;
-    }
-
-  private:
-    std::string path_;
-    std::string temp_;
-    std::FILE* file_ = nullptr;
-    bool committed_ = false;
-};
-
 template <class T>
 void put_le(std::string& out, T v) {
     char bytes[sizeof(T)];
@@ -890,7 +854,7 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
     }
     header += "end_header\n";
 
-    TempFile file(path);
+    io::AtomicFile file(path);
     file.write(header);
     std::string chunk;
     constexpr size_t kChunk = 1 << 20;

@@ -10,7 +10,8 @@
 //           [radii], [emission]  (octree order)
 //     ORDR: u32 order[n] (octree position -> input index)
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
-//           include/vmap/octree.h (spheres, boxes, half_size, skip, ...)
+//           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
+//           units per octree unit: points and octree are stored in the octree's frame)
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
 
@@ -22,12 +23,14 @@
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
+#include <cmath>
 #include <cstring>
 #include <deque>
 #include <filesystem>
 #include <fstream>
 #include <type_traits>
 
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -35,8 +38,9 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 3;  // 2: 64-bit link offsets; 3: emission in octree order and
-                                  // the measured Delta rule (a version-2 file is built wrong)
+constexpr uint32_t kVersion = 4;  // 2: 64-bit link offsets; 3: emission in octree order and
+                                  // the measured Delta rule (a version-2 file is built wrong);
+                                  // 4: the octree's frame (scale)
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -229,6 +233,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
         w.vec(t.level);
     w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
     w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
+    w.put(t.scale);
     w.end(s);
     s = w.begin("LINK");
     w.vec(vm.link_offsets);
@@ -248,10 +253,8 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     put(uint64_t(w.size));
     put(pieces_hash(w.pieces, w.size));
 
-    // Temporary name, then rename: a failure never leaves half a file under `path`. The pieces
-    // are written in parallel chunks at their offsets (pwrite), which the page cache takes
-    // several times faster than one stream.
-    const std::string tmp = path + ".tmp";
+    // Through an AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at
+    // their offsets, which the page cache takes several times faster than one stream.
     struct Chunk {
         const uint8_t* p;
         size_t n;
@@ -266,34 +269,16 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
             chunks.push_back({pc.p + o, n, at});
             at += off_t(n);
         }
-    const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0666);
-    if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", tmp, std::strerror(errno)));
+    io::AtomicFile file(path);
     std::atomic<int> err{0};
     tbb::parallel_for(size_t(0), chunks.size(), [&](size_t k) {
-        const Chunk& c = chunks[k];
-        for (size_t done = 0; done < c.n && err.load() == 0;) {
-            const ssize_t got = ::pwrite(fd, c.p + done, c.n - done, c.at + off_t(done));
-            if (got < 0 && errno == EINTR) continue;
-            if (got <= 0) {
-                int zero = 0;
-                err.compare_exchange_strong(zero, got < 0 ? errno : EIO);
-                break;
-            }
-            done += size_t(got);
-        }
+        if (err.load() != 0) return;
+        const int e = file.write_at(chunks[k].p, chunks[k].n, chunks[k].at);
+        int zero = 0;
+        if (e != 0) err.compare_exchange_strong(zero, e);
     });
-    const int close_err = ::close(fd) == 0 ? 0 : errno;
-    std::error_code ec;
-    if (err.load() != 0 || close_err != 0) {
-        std::filesystem::remove(tmp, ec);
-        throw Error(fmt::format("{}: write failed: {}", tmp,
-                                std::strerror(err.load() ? err.load() : close_err)));
-    }
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::filesystem::remove(tmp, ec);
-        throw Error(fmt::format("{}: cannot rename the finished file into place", path));
-    }
+    if (err.load() != 0) file.fail(err.load());
+    file.commit();
 }
 
 VisibilityMap load_vmap(const std::string& path) {
@@ -386,6 +371,10 @@ VisibilityMap load_vmap(const std::string& path) {
     r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
     r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
     r.vec(t.leaf_splat, nl);
+    t.scale = r.get<double>();
+    int exponent = 0;
+    if (!(t.scale > 0) || !std::isfinite(t.scale) || std::frexp(t.scale, &exponent) != 0.5)
+        r.fail(fmt::format("scale {} is not a power of two", t.scale));
     finish(e);
     // Structure checks, so that even a well-checksummed but inconsistent file cannot make a
     // query index out of bounds.

@@ -65,6 +65,29 @@ struct Builder {
 
 }  // namespace
 
+Octree Octree::build_in_unit_frame(PointSet& points, const OctreeParams& params,
+                                   std::vector<uint32_t>& order, const std::string& source) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    double maxabs = 0;
+    for (const Vec3& p : points.positions) {
+        if (!is_finite(p)) continue;  // build() names it
+        const double c[3] = {p.x, p.y, p.z};
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+            maxabs = std::max(maxabs, std::fabs(c[a]));
+        }
+    }
+    const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2], 0.0});
+    const double size = extent > 0 ? extent : maxabs;  // one point (or all at one place)
+    const int k = size > 0 && std::isfinite(size) ? std::ilogb(size) + 1 : 0;
+    auto down = [k](float v) { return float(std::ldexp(double(v), -k)); };
+    for (Vec3& p : points.positions) p = {down(p.x), down(p.y), down(p.z)};
+    for (float& r : points.radii) r = down(r);
+    Octree t = build(points, params, order, source);
+    t.scale = std::ldexp(1.0, k);
+    return t;
+}
+
 Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
                      const std::string& source) {
     if (params.max_height < 1 || params.max_height > kMortonBits)

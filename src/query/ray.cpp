@@ -78,12 +78,17 @@ inline float box_entry(const Ray& r, const Box& b, float g, float t_max) {
     return t0;
 }
 
+double distance2(Vec3 a, Vec3 b) {
+    const double x = double(a.x) - b.x, y = double(a.y) - b.y, z = double(a.z) - b.z;
+    return x * x + y * y + z * z;
+}
+
 RayHit result(const VisibilityMap& vm, float t, int64_t k) {
     RayHit h;
     if (k < 0) return h;
     h.hit = true;
     h.id = vm.order[size_t(k)];
-    h.distance = t;
+    h.distance = float(t * vm.octree.scale);  // the octree's frame -> input units
     return h;
 }
 
@@ -93,9 +98,9 @@ uint32_t nearest_point(const PointSet& points, Vec3 pos) {
     if (points.size() == 0) throw Error("nearest point: the point set is empty");
     if (!is_finite(pos)) throw Error("nearest point: the position must be finite");
     uint32_t best = 0;
-    float best_d = INFINITY;
+    double best_d = INFINITY;  // in double: squared distances of large coordinates overflow floats
     for (size_t i = 0; i < points.size(); ++i) {
-        const float d = length2(points.positions[i] - pos);
+        const double d = distance2(points.positions[i], pos);
         if (d < best_d) best_d = d, best = uint32_t(i);
     }
     return best;
@@ -104,10 +109,11 @@ uint32_t nearest_point(const PointSet& points, Vec3 pos) {
 uint32_t nearest_point(const VisibilityMap& vm, Vec3 pos) {
     if (vm.points.size() == 0) throw Error("nearest point: the V-map has no points");
     if (!is_finite(pos)) throw Error("nearest point: the position must be finite");
+    pos = vm.octree.to_local(pos);
     uint32_t best = 0;
-    float best_d = INFINITY;
+    double best_d = INFINITY;
     for (size_t k = 0; k < vm.points.size(); ++k) {
-        const float d = length2(vm.points.positions[k] - pos);
+        const double d = distance2(vm.points.positions[k], pos);
         const uint32_t id = vm.order[k];
         if (d < best_d || (d == best_d && id < best)) best_d = d, best = id;
     }

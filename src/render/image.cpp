@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <cstring>
 
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 #include "vmap/render.h"
 
@@ -179,22 +180,8 @@ void write_png(const std::string& path, const Image& img) {
     if (!stbi_write_png_to_func(sink, &bytes, img.width, img.height, 3, img.rgb.data(),
                                 img.width * 3))
         throw Error(fmt::format("{}: PNG encoding failed", path));
-    const std::string temp = path + ".tmp";
-    std::FILE* f = std::fopen(temp.c_str(), "wb");
-    if (f == nullptr)
-        throw Error(fmt::format("{}: cannot create '{}': {}", path, temp, std::strerror(errno)));
-    const bool ok = std::fwrite(bytes.data(), 1, bytes.size(), f) == bytes.size();
-    const int err = errno;
-    if (std::fclose(f) != 0 || !ok) {
-        std::remove(temp.c_str());
-        throw Error(fmt::format("{}: write error: {}", path, std::strerror(ok ? errno : err)));
-    }
-    if (std::rename(temp.c_str(), path.c_str()) != 0) {
-        const int e = errno;
-        std::remove(temp.c_str());
-        throw Error(
-            fmt::format("{}: cannot rename '{}' onto it: {}", path, temp, std::strerror(e)));
-    }
+    io::write_file_atomic(
+        path, std::string_view(reinterpret_cast<const char*>(bytes.data()), bytes.size()));
 }
 
 Image read_png(const std::string& path) {

@@ -23,6 +23,9 @@ PointSet points_in_input_order(const VisibilityMap& vm) {
     permute(p.colors, out.colors);
     permute(p.radii, out.radii);
     permute(p.emission, out.emission);
+    const Octree& t = vm.octree;  // from the octree's frame back to input units (exact)
+    for (Vec3& q : out.positions) q = t.to_world(q);
+    for (float& r : out.radii) r = float(r * t.scale);
     return out;
 }
 

@@ -10,6 +10,8 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
+#include "io/atomic_file.h"
+#include "io/json_file.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/version.h"
@@ -23,7 +25,19 @@ using nlohmann::json;
 struct Ctx {
     std::string file;
     [[noreturn]] void fail(const std::string& field, const std::string& what) const {
+        if (field.empty()) throw Error(fmt::format("{}: {}", file, what));
         throw Error(fmt::format("{}: {}: {}", file, field, what));
+    }
+    std::string text(const json& obj, const char* key, const std::string& field,
+                     const std::string& def) const {
+        if (!obj.contains(key)) return def;
+        if (!obj[key].is_string()) fail(field, "expected a string");
+        return obj[key].get<std::string>();
+    }
+    bool boolean(const json& obj, const char* key, const std::string& field, bool def) const {
+        if (!obj.contains(key)) return def;
+        if (!obj[key].is_boolean()) fail(field, "expected true or false");
+        return obj[key].get<bool>();
     }
     double number(const json& j, const std::string& field, double lo, double hi) const {
         if (!j.is_number()) fail(field, "expected a number");
@@ -224,7 +238,8 @@ Placement placement(const Ctx& cx, const json& m, const std::string& f, const st
 }
 
 fs::path entry_file(const Ctx& cx, const json& m, const std::string& f, const fs::path& dir) {
-    if (!m.contains("file") || !m["file"].is_string()) cx.fail(f + ".file", "missing");
+    if (!m.contains("file")) cx.fail(f + ".file", "missing");
+    if (!m["file"].is_string()) cx.fail(f + ".file", "expected a string");
     const std::string rel = m["file"].get<std::string>();
     const fs::path file = fs::path(rel).is_absolute() ? fs::path(rel) : dir / rel;
     if (!fs::exists(file))
@@ -256,7 +271,7 @@ void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path
     if (md.triangles.empty()) cx.fail(f + ".file", file.string() + ": has no faces");
     SceneSurface s;
     s.is_model = true;
-    s.name = m.value("name", file.stem().string());
+    s.name = cx.text(m, "name", f + ".name", file.stem().string());
     if (m.contains("albedo")) {
         s.albedo = cx.vec3(m["albedo"], f + ".albedo", 0, 1);
     } else {
@@ -271,7 +286,7 @@ void add_mesh(const Ctx& cx, const json& m, const std::string& f, const fs::path
     s.mesh = md.mesh();
     const Placement pl = placement(cx, m, f, file.string(), s.mesh.vertices, sc);
     for (Vec3& v : s.mesh.vertices) v = pl.point(v);
-    orient_outward(s.mesh, m.value("flip_normals", false));
+    orient_outward(s.mesh, cx.boolean(m, "flip_normals", f + ".flip_normals", false));
     sc.notes.insert(sc.notes.end(), md.notes.begin(), md.notes.end());
     sc.surfaces.push_back(std::move(s));
 }
@@ -412,20 +427,13 @@ Scene load_scene(const std::string& path) {
     for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
     if (ext != ".json") return mesh_file_scene(path);
     Ctx cx{path};
-    std::ifstream in(path);
-    if (!in) throw Error(fmt::format("{}: cannot open scene file", path));
-    json j;
-    try {
-        j = json::parse(in, nullptr, true, /*ignore_comments=*/true);
-    } catch (const json::parse_error& e) {
-        throw Error(fmt::format("{}: not valid JSON: {}", path, e.what()));
-    }
+    const json j = io::parse_json_file(path);
     cx.known(j, "",
              {"name", "description", "room", "light", "meshes", "clouds", "sampling", "octree",
               "camera"});
     Scene sc;
     sc.path = path;
-    sc.name = j.value("name", fs::path(path).stem().string());
+    sc.name = cx.text(j, "name", "name", fs::path(path).stem().string());
     sc.has_room = !(j.contains("room") && j["room"].is_null());
     if (sc.has_room) {
         add_walls(cx, j.value("room", json::object()), sc);

@@ -611,7 +611,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     VisibilityMap vm;
     vm.octree_params = params.octree;
     vm.visibility_params = vp;
-    vm.octree = Octree::build(points, params.octree, vm.order, source);
+    vm.octree = Octree::build_in_unit_frame(points, params.octree, vm.order, source);
     vm.points = std::move(points);
     vm.inverse.resize(vm.order.size());
     for (uint32_t k = 0; k < vm.order.size(); ++k) vm.inverse[vm.order[k]] = k;

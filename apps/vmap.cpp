@@ -415,9 +415,10 @@ int main(int argc, char** argv) {
         ->expected(3);
     build
         ->add_option("--construction", bo.params.construction,
-                     "nodes (decide node pairs whole where bounds prove it) or leaf-pairs (walk "
-                     "every leaf pair: the oracle; the same V-map)")
-        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+                     "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
+                     "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
+                     "leaf pair: the oracle; the same V-map)")
+        ->check(CLI::IsMember({"auto", "nodes", "leaf-pairs"}))
         ->capture_default_str();
     build
         ->add_option("--walk-pairs", bo.params.walk_pairs,
@@ -470,8 +471,9 @@ int main(int argc, char** argv) {
     benchc->add_option("--points", bo2.points, "Override every scene's point count")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
-    benchc->add_option("--construction", bo2.construction, "nodes or leaf-pairs (as for build)")
-        ->check(CLI::IsMember({"nodes", "leaf-pairs"}))
+    benchc->add_option("--construction", bo2.construction,
+                       "auto, nodes or leaf-pairs (as for build)")
+        ->check(CLI::IsMember({"auto", "nodes", "leaf-pairs"}))
         ->capture_default_str();
 
     auto* validate = cli::add_validate_command(app);

@@ -229,6 +229,21 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
     EXPECT_GT(none, 1000u);
 }
 
+// The default picks by backend: node-pair decisions on the CPU (where they pay), the leaf-pair
+// walk on the GPU (gpu_test checks that the two give the same V-map there).
+TEST(Construction, AutoDecidesNodePairsOnTheCpu) {
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 2);
+    BuildParams bp = test::cpu_params(7, 2);
+    ASSERT_EQ(bp.construction, "auto");
+    BuildStats st;
+    const VisibilityMap got = build_vmap(ps, bp, &st);
+    EXPECT_EQ(st.construction, "nodes");
+    EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs);
+    bp.construction = "leaf-pairs";
+    const VisibilityMap ref = build_vmap(ps, bp);
+    EXPECT_EQ(got.link_targets, ref.link_targets);
+}
+
 TEST(Construction, UnknownMethodIsRejected) {
     const PointSet ps = test::sample(test::scene_path("cornell-empty"), 300, 1);
     BuildParams bp = test::cpu_params(5, 4);

@@ -56,8 +56,11 @@ struct BuildParams {
     bool keep_links = true;
     // nodes: node pairs decided at node level where the bounds of visibility/node_pair.h prove
     // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
-    // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte).
-    std::string construction = "nodes";
+    // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte);
+    // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
+    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (whose node tests run
+    // on the host and whose narrow rectangles waste lanes: 2x slower on the dragon, H200).
+    std::string construction = "auto";
     // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
     // columns of a row at once).

@@ -470,9 +470,10 @@ void check_params(const BuildParams& params, const std::string& source) {
         throw Error(
             fmt::format("{}: occluders: unknown search '{}' (expected spheres or bresenham)",
                         source, params.occluders));
-    if (params.construction != "nodes" && params.construction != "leaf-pairs")
+    if (params.construction != "nodes" && params.construction != "leaf-pairs" &&
+        params.construction != "auto")
         throw Error(
-            fmt::format("{}: construction: unknown method '{}' (expected nodes or leaf-pairs)",
+            fmt::format("{}: construction: unknown method '{}' (expected auto, nodes or leaf-pairs)",
                         source, params.construction));
     if (params.max_batch_pairs < 1024)
         throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
@@ -563,9 +564,11 @@ struct NodeTests {
     detail::NodeBoundsSet nb;
     detail::NodePairContext ctx;
 };
-void prepare_node_tests(const Octree& t, const BuildParams& params, NodeTests& nt) {
+void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, NodeTests& nt) {
     // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
-    nt.on = params.construction == "nodes" && params.occluders == "spheres";
+    const bool nodes =
+        params.construction == "nodes" || (params.construction == "auto" && !gpu);
+    nt.on = nodes && params.occluders == "spheres";
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
     nt.ctx = {t.view(),      nt.nb.nodes.data(), nt.nb.cones.data(),
@@ -624,7 +627,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     st.backend = backend->name();
     st.note = note;
     NodeTests nt;
-    prepare_node_tests(t, params, nt);
+    prepare_node_tests(t, params, st.backend.rfind("cuda", 0) == 0, nt);
     Planner plan = plan_pairs(t, params, nt, st);
     st.seconds_decide = st.seconds_plan = seconds_since(t1);
 

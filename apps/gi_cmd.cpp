@@ -178,61 +178,46 @@ float auto_exposure(const VisibilityMap& vm, const std::vector<Vec3>& B) {
     return tone_map(vm, B, 0.0f, unused);
 }
 
+// Appends the bytes of a trivially copyable value (the files below are little-endian, as the
+// machines vmap runs on).
+template <class T>
+void put(std::string& out, const T& v) {
+    out.append(reinterpret_cast<const char*>(&v), sizeof v);
+}
+
 // The image as PFM (little-endian float RGB, rows bottom-up), in radiosity units: the linear
-// render divided by the exposure.
+// render divided by the exposure. Written atomically (io/atomic_file.h).
 void write_pfm(const std::string& path, const Image& img, float exposure) {
-    const std::string tmp = path + ".tmp";
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (!f) throw Error(fmt::format("{}: --pfm: cannot write", path));
-    fmt::print(f, "PF\n{} {}\n-1.0\n", img.width, img.height);
-    std::vector<float> row(size_t(3) * img.width);
-    bool ok = true;
-    for (int y = img.height - 1; y >= 0 && ok; --y) {
+    std::string out = fmt::format("PF\n{} {}\n-1.0\n", img.width, img.height);
+    out.reserve(out.size() + size_t(12) * img.width * img.height);
+    for (int y = img.height - 1; y >= 0; --y)
         for (int x = 0; x < img.width; ++x) {
             const Vec3 c = img.linear[size_t(y) * img.width + x] / exposure;
-            row[3 * x] = c.x, row[3 * x + 1] = c.y, row[3 * x + 2] = c.z;
+            put(out, c.x), put(out, c.y), put(out, c.z);
         }
-        ok = std::fwrite(row.data(), sizeof(float), row.size(), f) == row.size();
-    }
-    ok = std::fclose(f) == 0 && ok;
-    if (!ok) {
-        std::remove(tmp.c_str());
-        throw Error(fmt::format("{}: --pfm: write failed", path));
-    }
-    std::filesystem::rename(tmp, path);
+    io::write_file_atomic(path, out);
 }
 
 // Points (input order) with their display colours (uchar sRGB) and linear radiosity as float
-// properties radiosity_r/g/b (W/m^2), binary little-endian.
+// properties radiosity_r/g/b (W/m^2), binary little-endian, written atomically.
 void write_lit_ply(const std::string& path, const PointSet& pts, const std::vector<Vec3>& B,
                    float exposure) {
-    const std::string tmp = path + ".tmp";
-    std::FILE* f = std::fopen(tmp.c_str(), "wb");
-    if (!f) throw Error(fmt::format("{}: --ply: cannot write", path));
-    fmt::print(f,
-               "ply\nformat binary_little_endian 1.0\ncomment vmap gi: display = sRGB(clamp({} x "
-               "radiosity))\nelement vertex {}\nproperty float x\nproperty float y\nproperty "
-               "float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar "
-               "red\nproperty uchar green\nproperty uchar blue\nproperty float radius\nproperty "
-               "float radiosity_r\nproperty float radiosity_g\nproperty float radiosity_b\n"
-               "end_header\n",
-               exposure, pts.size());
-    bool ok = true;
-    for (size_t i = 0; i < pts.size() && ok; ++i) {
+    std::string out = fmt::format(
+        "ply\nformat binary_little_endian 1.0\ncomment vmap gi: display = sRGB(clamp({} x "
+        "radiosity))\nelement vertex {}\nproperty float x\nproperty float y\nproperty "
+        "float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar "
+        "red\nproperty uchar green\nproperty uchar blue\nproperty float radius\nproperty "
+        "float radiosity_r\nproperty float radiosity_g\nproperty float radiosity_b\n"
+        "end_header\n",
+        exposure, pts.size());
+    out.reserve(out.size() + size_t(43) * pts.size());
+    for (size_t i = 0; i < pts.size(); ++i) {
         const Vec3 p = pts.positions[i], n = pts.normals[i], b = B[i];
-        const float head[6] = {p.x, p.y, p.z, n.x, n.y, n.z};
-        const uint8_t rgb[3] = {linear_to_srgb8(b.x * exposure), linear_to_srgb8(b.y * exposure),
-                                linear_to_srgb8(b.z * exposure)};
-        const float tail[4] = {pts.radii[i], b.x, b.y, b.z};
-        ok = std::fwrite(head, sizeof head, 1, f) == 1 && std::fwrite(rgb, 3, 1, f) == 1 &&
-             std::fwrite(tail, sizeof tail, 1, f) == 1;
+        for (float v : {p.x, p.y, p.z, n.x, n.y, n.z}) put(out, v);
+        for (float c : {b.x, b.y, b.z}) put(out, linear_to_srgb8(c * exposure));
+        for (float v : {pts.radii[i], b.x, b.y, b.z}) put(out, v);
     }
-    ok = std::fclose(f) == 0 && ok;
-    if (!ok) {
-        std::remove(tmp.c_str());
-        throw Error(fmt::format("{}: --ply: write failed", path));
-    }
-    std::filesystem::rename(tmp, path);
+    io::write_file_atomic(path, out);
 }
 
 void write_outputs(const VisibilityMap& vm, const std::vector<Vec3>& B, float exposure,

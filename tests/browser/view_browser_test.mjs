@@ -83,9 +83,10 @@ try {
             });
         });
     }, [[0.2764, 0, 0.1], [0.08, 0.45, 0.5592]]);
+    // With --ids, stdout holds the ids alone (one a line); the sentence goes to stderr.
     const fromOut = cli('query', map, '--from', String(eye), '--ids');
-    const count = Number(fromOut.match(/(\d+) points visible from/)[1]);
-    const visibleIds = fromOut.split('\n').slice(1).filter((l) => /^\d+$/.test(l)).map(Number);
+    const visibleIds = fromOut.split('\n').filter((l) => /^\d+$/.test(l)).map(Number);
+    const count = visibleIds.length;
     const pairResult =
         cli('query', map, '--pair', String(eye), String(second)).trim().split(' ')[2];
 

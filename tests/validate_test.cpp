@@ -7,8 +7,11 @@
 #include <cmath>
 #include <random>
 
+#include "test_files.h"
 #include "test_util.h"
 #include "vmap/error.h"
+#include "vmap/io.h"
+#include "vmap/scene.h"
 
 namespace vmap {
 namespace {
@@ -163,6 +166,115 @@ TEST(Validate, CountsAddUpAndTheBlockScenePredictsMostPairs) {
     EXPECT_NE(md.find("| 5 | 5 |"), std::string::npos);
     const std::string js = validation_json(r);
     EXPECT_NE(js.find("\"false_visible_rate\""), std::string::npos);
+}
+
+// Where people look: pairs with an end on the block (the scene's one model) and eyes on it,
+// each against every point.
+TEST(Validate, ModelPairsAndEyesAreScoredOnTheModel) {
+    ValidateParams p;
+    p.pairs = 4000;
+    p.heights = {5};
+    p.eyes = 4;
+    p.predict = "direct";
+    const ValidationReport r = validate_scene(kBlock, p);
+    ASSERT_EQ(r.rows.size(), 1u);
+    const HeightResult& h = r.rows[0];
+    EXPECT_GT(r.model_points, r.points / 50);  // the block holds a share of the area
+    EXPECT_LT(r.model_points, r.points / 2);
+    EXPECT_EQ(r.model_pairs, p.pairs);
+    EXPECT_EQ(r.eyes, p.eyes);
+    // Pairs sharing a leaf are left out, so each set is at most its size, and nearly all of it.
+    EXPECT_LE(h.model.total(), r.model_pairs);
+    EXPECT_GT(h.model.total(), r.model_pairs * 9 / 10);
+    const uint64_t per_set = p.eyes * (r.points - 1);
+    EXPECT_LE(h.eyes_model.total(), per_set);
+    EXPECT_GT(h.eyes_model.total(), per_set * 9 / 10);
+    EXPECT_LE(h.eyes_all.total(), per_set);
+    EXPECT_GT(h.eyes_all.total(), per_set * 9 / 10);
+    // The block's points see the room and are seen: both answers occur, and mostly right.
+    EXPECT_GT(h.model.true_visible, 0u);
+    EXPECT_GT(h.model.true_hidden, 0u);
+    EXPECT_GT(h.eyes_model.agreement(), 0.8);
+    EXPECT_EQ(r.normal_agreement, 1.0);  // the scene's own normals
+    EXPECT_NE(validation_markdown(r).find("Where people look"), std::string::npos);
+    EXPECT_NE(validation_json(r).find("\"eyes_model\""), std::string::npos);
+}
+
+TEST(Validate, ModelPairsAndEyesAgreeBetweenDirectAndVmap) {
+    ValidateParams p;
+    p.pairs = 3000;
+    p.heights = {5};
+    p.eyes = 2;
+    const ValidationReport v = validate_scene(kBlock, p);
+    p.predict = "direct";
+    const ValidationReport d = validate_scene(kBlock, p);
+    for (auto part : {&HeightResult::model, &HeightResult::eyes_model, &HeightResult::eyes_all}) {
+        const Confusion& a = v.rows[0].*part;
+        const Confusion& b = d.rows[0].*part;
+        EXPECT_EQ(a.true_visible, b.true_visible);
+        EXPECT_EQ(a.false_visible, b.false_visible);
+        EXPECT_EQ(a.false_hidden, b.false_hidden);
+        EXPECT_EQ(a.true_hidden, b.true_hidden);
+    }
+}
+
+TEST(Validate, AnEmptyRoomHasNoModelPairsNorEyes) {
+    ValidateParams p;
+    p.points = 1500;
+    p.pairs = 2000;
+    p.heights = {4};
+    p.predict = "direct";
+    const ValidationReport r = validate_scene(test::scene_path("cornell-empty"), p);
+    EXPECT_EQ(r.model_points, 0u);
+    EXPECT_EQ(r.model_pairs, 0u);
+    EXPECT_EQ(r.eyes, 0u);
+    EXPECT_EQ(r.rows[0].model.total(), 0u);
+    EXPECT_EQ(r.rows[0].eyes_model.total(), 0u);
+}
+
+// The samples as a raw cloud: with their normals kept, the normals are the true ones; bare, the
+// estimated ones are scored against the truth (a room from inside with a block: nearly all on
+// the true side).
+TEST(Validate, SamplesAsARawCloudScoreTheirNormals) {
+    ValidateParams p;
+    p.pairs = 3000;
+    p.heights = {5};
+    p.eyes = 2;
+    p.predict = "direct";
+    p.as_cloud = "normals";
+    const ValidationReport kept = validate_scene(kBlock, p);
+    EXPECT_EQ(kept.normal_agreement, 1.0);
+    EXPECT_NE(kept.source.find("true normals"), std::string::npos);
+    p.as_cloud = "bare";
+    const ValidationReport bare = validate_scene(kBlock, p);
+    EXPECT_LT(bare.normal_agreement, 1.0);  // estimated: some edge points go wrong
+    EXPECT_GT(bare.normal_agreement, 0.9);
+    EXPECT_GT(bare.rows[0].all.agreement(), 0.8);
+    p.as_cloud = "guess";
+    EXPECT_THROW(validate_scene(kBlock, p), Error);
+}
+
+// A cloud file scored against the scene it came from: each point's truth normal is the nearest
+// dense sample's, so the file's own (true) normals agree with it almost everywhere.
+TEST(Validate, ACloudFileIsScoredAgainstTheScenesTriangles) {
+    test::ScratchDir dir;
+    PointSet ps = sample_scene(load_scene(kBlock));
+    ps.radii.clear();
+    const std::string cloud = dir.path("block.ply");
+    write_ply(cloud, ps);
+    ValidateParams p;
+    p.pairs = 3000;
+    p.heights = {5};
+    p.eyes = 2;
+    p.predict = "direct";
+    p.cloud = cloud;
+    const ValidationReport r = validate_scene(kBlock, p);
+    EXPECT_EQ(r.points, ps.size());
+    EXPECT_GT(r.normal_agreement, 0.98);
+    EXPECT_GT(r.model_points, 0u);
+    EXPECT_GT(r.rows[0].model.total(), 0u);
+    p.as_cloud = "bare";
+    EXPECT_THROW(validate_scene(kBlock, p), Error);  // one source of points, not two
 }
 
 TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {

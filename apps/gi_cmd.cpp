@@ -32,11 +32,6 @@ double seconds_since(Clock::time_point t0) {
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-bool has_suffix_ci(std::string s, const std::string& suf) {
-    std::transform(s.begin(), s.end(), s.begin(), ::tolower);
-    return s.size() >= suf.size() && s.compare(s.size() - suf.size(), suf.size(), suf) == 0;
-}
-
 // The points that emit; none is an error naming what to add, raised before any V-map is built.
 size_t count_emitters(const PointSet& ps, const std::string& input) {
     size_t emitters = 0;
@@ -55,7 +50,7 @@ size_t count_emitters(const PointSet& ps, const std::string& input) {
 VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
-    const bool is_vmap = has_suffix_ci(o.input, ".vmap");
+    const bool is_vmap = ends_with_ci(o.input, ".vmap");
     if (!is_vmap && is_scene_input(o.input, o.as_points)) {
         Scene sc = load_scene(o.input);
         print_notes(sc.notes);
@@ -69,7 +64,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         VisibilityMap vm = build_vmap(std::move(points), gi_build_params(sc.octree, o), &st, o.input);
         build_s = seconds_since(t0);
         what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
-                           has_suffix_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
+                           ends_with_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
                            st.backend, build_s);
         return vm;
     }

@@ -39,6 +39,8 @@ if [[ "$cmd" == bundle ]]; then
     # Large libraries (Embree is 43 MB) travel compressed; `run` unpacks them.
     find .device/lib -type f -size +8M -exec xz -T0 -6 {} \;
     strip --strip-unneeded .device/bin/* 2>/dev/null || true
+    # The test binaries travel compressed too (together they pass the 64 MiB a carry may hold).
+    xz -T0 -6 .device/bin/*_test
     for f in models/dragon.ply models/bunny.off models/armadillo.off; do
         gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
     done
@@ -52,7 +54,7 @@ if [[ "$cmd" == run ]]; then
     mkdir -p "$OUT"
     # The binaries find scenes, models and tests/data from their own folder up (vmap::data_dir()).
     export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-    for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
+    for f in .device/lib/*.xz .device/bin/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
     mkdir -p models
     for f in .device/models/*.gz; do
         n="models/$(basename "$f" .gz)"

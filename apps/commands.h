@@ -1,4 +1,4 @@
-// Subcommands defined outside apps/vmap.cpp. Each add_* function declares its options on `app`
+// Subcommands defined outside apps/main.cpp. Each add_* function declares its options on `app`
 // and returns the subcommand with the function that runs it after parsing; main() calls run()
 // inside its error handling (vmap::Error -> exit 1), and a run() returning 2 is a usage error.
 #pragma once

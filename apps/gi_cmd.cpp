@@ -220,7 +220,7 @@ void write_outputs(const VisibilityMap& vm, const std::vector<Vec3>& B, float ex
     // Back to input order for the outputs.
     const PointSet out = points_in_input_order(vm);
     std::vector<Vec3> lit(B.size());
-    for (size_t k = 0; k < B.size(); ++k) lit[vm.order[k]] = B[k];
+    for (size_t k = 0; k < B.size(); ++k) lit[vm.order()[k]] = B[k];
     if (!o.image.empty() || !o.pfm.empty()) {
         const auto t0 = Clock::now();
         o.render.keep_linear = !o.pfm.empty();
@@ -257,7 +257,7 @@ int run_gi(GiOptions& o) {
     double build_s = 0;
     std::optional<Camera> scene_camera;
     const VisibilityMap vm = input_vmap(o, what, build_s, scene_camera);
-    const PointSet& ps = vm.points;
+    const PointSet& ps = vm.points();
     PointSet out = points_in_input_order(vm);  // input order and units, for the outputs
     // The camera (the default one frames the points' box, which the order does not change),
     // checked before the solve.
@@ -275,7 +275,7 @@ int run_gi(GiOptions& o) {
 
     fmt::print("input:      {}\n", what);
     fmt::print("points:     {} ({} emitting), {} nodes, {} leaves, {} links\n", ps.size(), emitters,
-               vm.octree.num_nodes(), vm.octree.num_leaves(), vm.num_links());
+               vm.octree().num_nodes(), vm.octree().num_leaves(), vm.num_links());
     const std::vector<Vec3> B = solve(vm, o);
     const float exposure = o.exposure > 0 ? o.exposure : auto_exposure(vm, B);
     fmt::print(

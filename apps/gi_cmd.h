@@ -1,5 +1,5 @@
 // `vmap gi` (apps/gi_cmd.cpp) and `vmap bench-gi` (bench/gi_bench.cpp): declared here, registered
-// from apps/vmap.cpp with one call; main() runs the selected one inside its error handling.
+// from apps/main.cpp with one call; main() runs the selected one inside its error handling.
 #pragma once
 
 #include <CLI/CLI.hpp>

@@ -59,8 +59,8 @@ struct Sets {
 Sets choose_points(const Scene& sc, const VisibilityMap& vm, const std::vector<uint32_t>& surf,
                    size_t n, uint64_t seed) {
     std::vector<uint32_t> lit, model;
-    for (uint32_t k = 0; k < vm.points.size(); ++k) {
-        const SceneSurface& s = sc.surfaces[surf[vm.order[k]]];
+    for (uint32_t k = 0; k < vm.points().size(); ++k) {
+        const SceneSurface& s = sc.surfaces[surf[vm.order()[k]]];
         if (s.emission.x > 0 || s.emission.y > 0 || s.emission.z > 0) continue;
         lit.push_back(k);
         if (!is_room_surface(s.name)) model.push_back(k);
@@ -215,8 +215,8 @@ void write_csv(const std::string& path, const Scene& sc, const VisibilityMap& vm
     }
     fmt::print(f, "\n");
     for (size_t i = 0; i < sets.points.size(); ++i) {
-        const uint32_t k = sets.points[i], in = vm.order[k];
-        const Vec3 p = vm.points.positions[k];
+        const uint32_t k = sets.points[i], in = vm.order()[k];
+        const Vec3 p = vm.points().positions[k];
         fmt::print(f, "{},{},{},{},{},{}", i < sets.num_all ? "all" : "model", in,
                    sc.surfaces[surf[in]].name, p.x, p.y, p.z);
         for (int b = 0; b <= K; ++b) {
@@ -251,23 +251,23 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
             throw Error(
                 fmt::format("{}: -K/--eps apply to a V-map built from a scene file", o.input));
         VisibilityMap vm = load_vmap(o.input);
-        bool same = vm.points.size() == ps.size();
-        for (size_t k = 0; same && k < vm.points.size(); ++k)
-            same = vm.points.positions[k] == ps.positions[vm.order[k]];
+        bool same = vm.points().size() == ps.size();
+        for (size_t k = 0; same && k < vm.points().size(); ++k)
+            same = vm.points().positions[k] == ps.positions[vm.order()[k]];
         if (!same)
             throw Error(fmt::format("{}: points: not the samples of {} (points {}, seed {})",
                                     o.input, o.scene, sc.points, sc.seed));
         fmt::print(
             "scene:      {} ({}): {} points, V-map {} (K {}, eps {}, {} links) loaded in {:.2f} "
             "s\n",
-            sc.name, o.scene, vm.points.size(), o.input, vm.visibility_params.K,
-            vm.visibility_params.eps, vm.num_links(), seconds_since(t0));
+            sc.name, o.scene, vm.points().size(), o.input, vm.visibility_params().K,
+            vm.visibility_params().eps, vm.num_links(), seconds_since(t0));
         return vm;
     }
     const BuildParams bp = gi_build_params(sc.octree, o);
     VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.input);
     fmt::print("scene:      {} ({}): {} points, V-map (K {}, eps {}) {} links in {:.2f} s\n",
-               sc.name, o.input, vm.points.size(), o.K, o.eps, vm.num_links(), seconds_since(t0));
+               sc.name, o.input, vm.points().size(), o.K, o.eps, vm.num_links(), seconds_since(t0));
     return vm;
 }
 
@@ -283,10 +283,10 @@ Vec3 heat(float e) {
 void side_by_side_picture(const Scene& sc, const VisibilityMap& vm,
                           const std::vector<uint32_t>& surf, const std::vector<Vec3>& gi,
                           GiOptions& o) {
-    std::vector<ReferencePoint> at(vm.points.size());
+    std::vector<ReferencePoint> at(vm.points().size());
     for (size_t k = 0; k < at.size(); ++k) {
-        const SceneSurface& s = sc.surfaces[surf[vm.order[k]]];
-        at[k] = {vm.points.positions[k], vm.points.normals[k], s.albedo, s.emission};
+        const SceneSurface& s = sc.surfaces[surf[vm.order()[k]]];
+        at[k] = {vm.points().positions[k], vm.points().normals[k], s.albedo, s.emission};
     }
     ReferenceParams rp = o.ref;
     rp.samples = o.ref_picture_samples;
@@ -301,7 +301,7 @@ void side_by_side_picture(const Scene& sc, const VisibilityMap& vm,
     const PointSet pts = points_in_input_order(vm);
     std::vector<Vec3> a(gi.size()), b(gi.size()), e(gi.size());
     for (size_t k = 0; k < gi.size(); ++k) {
-        const uint32_t i = vm.order[k];
+        const uint32_t i = vm.order()[k];
         a[i] = r[k] * exposure, b[i] = gi[k] * exposure;
         const float rr = length(r[k]);
         e[i] = heat(rr > 0 ? length(gi[k] - r[k]) / rr : 0.0f);
@@ -331,8 +331,8 @@ int run_gi_reference(GiOptions& o) {
     const Sets sets = choose_points(sc, vm, surf, o.ref_points, o.ref.seed);
     std::vector<ReferencePoint> at;
     for (uint32_t k : sets.points) {
-        const SceneSurface& s = sc.surfaces[surf[vm.order[k]]];
-        at.push_back({vm.points.positions[k], vm.points.normals[k], s.albedo, s.emission});
+        const SceneSurface& s = sc.surfaces[surf[vm.order()[k]]];
+        at.push_back({vm.points().positions[k], vm.points().normals[k], s.albedo, s.emission});
     }
     const int K = o.ref.bounces;
     ReferenceParams rp = o.ref;

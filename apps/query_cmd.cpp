@@ -43,9 +43,9 @@ const char* answer_word(uint8_t v) {
 
 uint32_t checked_id(const VisibilityMap& vm, const std::string& path, const char* option,
                     uint32_t id) {
-    if (id >= vm.points.size())
+    if (id >= vm.points().size())
         throw Error(fmt::format("{}: {}: point id {} out of range (the V-map has {} points)", path,
-                                option, id, vm.points.size()));
+                                option, id, vm.points().size()));
     return id;
 }
 
@@ -53,7 +53,7 @@ uint32_t checked_id(const VisibilityMap& vm, const std::string& path, const char
 uint32_t resolve_pos(const VisibilityMap& vm, const char* pos_option, const std::string& pos) {
     const Vec3 p = parse_vec3(pos, pos_option);
     const uint32_t k = nearest_point(vm, p);
-    const Vec3 q = vm.octree.to_world(vm.points.positions[vm.inverse[k]]);
+    const Vec3 q = vm.octree().to_world(vm.points().positions[vm.inverse()[k]]);
     if (verbosity() != Verbosity::kQuiet)
         fmt::print(stderr, "{} {},{},{}: nearest point {} at ({}, {}, {}), {:.3g} away\n",
                    pos_option, p.x, p.y, p.z, k, q.x, q.y, q.z,
@@ -124,7 +124,7 @@ void run_from(const QueryArgs& a, const VisibilityMap& vm, json& js) {
     for (size_t k = 0; k < ids.size(); ++k) {
         const uint64_t n = sets.offsets[k + 1] - sets.offsets[k];
         const std::string line =
-            fmt::format("{} points visible from {} (of {})", n, ids[k], vm.points.size());
+            fmt::format("{} points visible from {} (of {})", n, ids[k], vm.points().size());
         if (a.json) {
             json e = {{"from", ids[k]}, {"count", n}};
             if (a.ids)
@@ -151,7 +151,7 @@ void run_ray(const QueryArgs& a, const VisibilityMap& vm, Vec3 dir, json& js) {
         a.ray ? checked_id(vm, a.path, "--ray", *a.ray) : resolve_pos(vm, "--ray-pos", a.ray_pos);
     RayStats st;
     const RayHit h = shoot_ray(vm, i, dir, &st);
-    const Vec3 q = h.hit ? vm.octree.to_world(vm.points.positions[vm.inverse[h.id]]) : Vec3{};
+    const Vec3 q = h.hit ? vm.octree().to_world(vm.points().positions[vm.inverse()[h.id]]) : Vec3{};
     if (a.json) {
         js["ray"] = {{"from", i},
                      {"hit", h.hit},

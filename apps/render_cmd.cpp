@@ -68,7 +68,7 @@ Source load_source(RenderArgs& a) {
     } else if (ends_with_ci(a.input, ".vmap")) {
         s.vm = load_vmap(a.input);
         s.points = points_in_input_order(*s.vm);
-        s.octree = s.vm->octree_params;
+        s.octree = s.vm->octree_params();
     } else {
         s.points = load_point_cloud(a.input);
     }
@@ -98,7 +98,7 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
     BuildStats st;
     VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",
-               bp.octree.max_height, vm.octree.height(), vm.num_links(), st.seconds_total,
+               bp.octree.max_height, vm.octree().height(), vm.num_links(), st.seconds_total,
                st.backend);
     if (stats) *stats = std::move(st);
     return vm;
@@ -106,11 +106,11 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
 
 // Per input point: the share of its leaf's pairs that were walked, dark blue (0) to yellow (1).
 std::vector<Vec3> decided_colors(const VisibilityMap& vm, const BuildStats& st) {
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     const double others = std::max(1, t.num_leaves() - 1);
-    std::vector<Vec3> c(vm.points.size());
+    std::vector<Vec3> c(vm.points().size());
     for (size_t i = 0; i < c.size(); ++i) {
-        const int32_t leaf = t.leaf_of_point(vm.inverse[i]);
+        const int32_t leaf = t.leaf_of_point(vm.inverse()[i]);
         const float f = float(st.leaf_walked[leaf] / others);
         c[i] = Vec3{0.05f, 0.05f, 0.35f} * (1 - f) + Vec3{1.f, 0.85f, 0.1f} * f;
     }

@@ -1,4 +1,4 @@
-// `vmap validate`: registered on the CLI by apps/vmap.cpp (see validate_cmd.cpp).
+// `vmap validate`: registered on the CLI by apps/main.cpp (see validate_cmd.cpp).
 #pragma once
 
 #include <CLI/CLI.hpp>

@@ -78,7 +78,7 @@ VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
     fmt::print(
         "built:      V-map of {} points at max_height {}: {} leaves, {} links, {:.2f} s on "
         "{}\n",
-        vm.points.size(), bp.octree.max_height, vm.octree.num_leaves(), vm.num_links(),
+        vm.points().size(), bp.octree.max_height, vm.octree().num_leaves(), vm.num_links(),
         st.seconds_total, st.backend);
     return vm;
 }
@@ -94,7 +94,7 @@ std::vector<Vec3> gi_colors(const VisibilityMap& vm, const std::string& backend)
     std::vector<Vec3> colors;
     tone_map(vm, B, 0, colors);
     std::vector<Vec3> out(colors.size());
-    for (size_t k = 0; k < colors.size(); ++k) out[vm.order[k]] = colors[k];
+    for (size_t k = 0; k < colors.size(); ++k) out[vm.order()[k]] = colors[k];
     fmt::print("gi:         {} bounces, theta {} on {}: {:.2f} s\n", gp.bounces, gp.theta,
                st.backend,
                std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count());
@@ -142,7 +142,7 @@ int run_view(ViewArgs& a) {
     const int port = server.bind(a.host, a.port);
     const VisibilityMap& m = server.map();
     fmt::print("serving:    {} ({} points, octree height {}, {} links)\n", cfg.name,
-               m.points.size(), m.octree.height(), m.num_links());
+               m.points().size(), m.octree().height(), m.num_links());
     const std::string host = a.host.find(':') != std::string::npos ? "[" + a.host + "]" : a.host;
     fmt::print("url:        http://{}:{}/   (Ctrl-C stops)\n", host, port);
     std::fflush(stdout);

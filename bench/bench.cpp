@@ -154,7 +154,7 @@ int run(const Options& o) {
                     r.walked = st.leaf_pairs_walked;
                     r.node_pairs_tested = st.node_pairs_tested;
                     r.device_bytes = st.peak_device_bytes;
-                    r.leaves = vm.octree.num_leaves();
+                    r.leaves = vm.octree().num_leaves();
                     r.links = vm.num_links();
                     if (o.save) {
                         const auto t0 = Clock::now();
@@ -187,7 +187,7 @@ int run(const Options& o) {
                             r.work = st.work;
                             r.walked = st.leaf_pairs_walked;
                             r.node_pairs_tested = st.node_pairs_tested;
-                            r.leaves = vm.octree.num_leaves();
+                            r.leaves = vm.octree().num_leaves();
                             r.links = vm.num_links();
                             non_pair = st.seconds_total - st.seconds_wait;
                             if (o.save) {

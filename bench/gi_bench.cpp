@@ -92,8 +92,8 @@ int run_bench(BenchOptions& o) {
         bp.backend = "auto";
         const VisibilityMap vm = build_vmap(sample_scene(sc), bp, nullptr, o.scene);
         Row r;
-        r.points = vm.points.size();
-        r.leaves = vm.octree.num_leaves();
+        r.points = vm.points().size();
+        r.leaves = vm.octree().num_leaves();
         r.links = vm.num_links();
         std::vector<Vec3> hier;
         for (const std::string& be : {std::string("cpu"), std::string("cuda")}) {

@@ -92,8 +92,8 @@ int run_bench_query(QueryBenchArgs& a) {
         const VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.scene);
         Row r;
         r.points = n;
-        r.height = vm.octree.height();
-        r.leaves = vm.octree.num_leaves();
+        r.height = vm.octree().height();
+        r.leaves = vm.octree().num_leaves();
         r.links = vm.num_links();
         r.build_s = st.seconds_total;
 
@@ -110,7 +110,7 @@ int run_bench_query(QueryBenchArgs& a) {
             qb[k] = pick(rng);
             Vec3 g{gauss(rng), gauss(rng), gauss(rng)};
             g = g / std::max(length(g), 1e-6f);
-            const Vec3 nrm = vm.points.normals[vm.inverse[qa[k]]];
+            const Vec3 nrm = vm.points().normals[vm.inverse()[qa[k]]];
             dirs[k] = nrm + g;
             if (!(length(dirs[k]) > 1e-3f)) dirs[k] = nrm;
         }
@@ -150,8 +150,8 @@ int run_bench_query(QueryBenchArgs& a) {
         }
         uint64_t probes = 0;
         for (size_t k = 0; k < Q; ++k)
-            for (int32_t A = vm.octree.leaf_node[vm.octree.leaf_of_point(vm.inverse[qa[k]])];
-                 A >= 0; A = vm.octree.parent[A])
+            for (int32_t A = vm.octree().leaf_node()[vm.octree().leaf_of_point(vm.inverse()[qa[k]])];
+                 A >= 0; A = vm.octree().parent()[A])
                 probes += 1 + uint64_t(std::ceil(std::log2(double(vm.links(A).size()) + 1)));
         r.pair_probes = double(probes) / Q;
         r.set_size = double(set) / Q;

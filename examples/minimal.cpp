@@ -23,7 +23,7 @@ int main(int argc, char** argv) {
         const vmap::VisibilityMap vm =
             vmap::build_vmap(vmap::sample_scene(scene), params, &stats, scene_path);
         std::printf("vmap %s: %zu points, %zu links, built on %s in %.2f s\n", vmap::version(),
-                    vm.points.size(), vm.num_links(), stats.backend.c_str(), stats.seconds_total);
+                    vm.points().size(), vm.num_links(), stats.backend.c_str(), stats.seconds_total);
 
         const vmap::PairVisibility v = vm.query(0, 1);
         std::printf("points 0 and 1: %s\n", v == vmap::PairVisibility::kVisible  ? "visible"

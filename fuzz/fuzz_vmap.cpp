@@ -26,7 +26,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const vmap::fuzz::MemFile file(bytes.data(), bytes.size(), "fuzz.vmap");
     vmap::fuzz::expect_only_vmap_errors([&] {
         const vmap::VisibilityMap vm = vmap::load_vmap(file.path());
-        const uint32_t n = uint32_t(vm.points.size());
+        const uint32_t n = uint32_t(vm.points().size());
         if (n == 0) return;
         (void)vm.query(0, n - 1);
         (void)vm.visible_set(n / 2);

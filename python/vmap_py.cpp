@@ -144,9 +144,9 @@ VisibilityMap build_file(const std::string& path, std::optional<uint64_t> points
 }
 
 uint32_t id_of(const VisibilityMap& vm, int64_t i, const char* what) {
-    if (i < 0 || uint64_t(i) >= vm.order.size())
+    if (i < 0 || uint64_t(i) >= vm.order().size())
         throw Error(fmt::format("{}: point id {} out of range (the V-map has {} points)", what, i,
-                                vm.order.size()));
+                                vm.order().size()));
     return uint32_t(i);
 }
 
@@ -209,7 +209,7 @@ py::tuple shoot_rays(const VisibilityMap& vm, const Array<int64_t>& origins,
 
 Camera camera_of(const VisibilityMap& vm, const std::optional<std::array<float, 3>>& eye,
                  const std::optional<std::array<float, 3>>& target, float fov) {
-    Camera cam = default_camera(vm.points);
+    Camera cam = default_camera(vm.points());
     if (eye) cam.eye = {(*eye)[0], (*eye)[1], (*eye)[2]};
     if (target) cam.target = {(*target)[0], (*target)[1], (*target)[2]};
     if (fov > 0) cam.fov_y_deg = fov;
@@ -230,7 +230,7 @@ py::array_t<float> input_order(const VisibilityMap& vm, const std::vector<Vec3>&
     float* o = out.mutable_data();
     for (size_t k = 0; k < octree_order.size(); ++k) {
         const Vec3 v = octree_order[k];
-        float* row = o + 3 * size_t(vm.order[k]);
+        float* row = o + 3 * size_t(vm.order()[k]);
         row[0] = v.x, row[1] = v.y, row[2] = v.z;
     }
     return out;
@@ -332,31 +332,31 @@ void def_build(py::module_& m) {
 
 void def_map(py::module_& m) {
     py::class_<VisibilityMap>(m, "VisibilityMap")
-        .def_property_readonly("num_points", [](const VisibilityMap& v) { return v.order.size(); })
+        .def_property_readonly("num_points", [](const VisibilityMap& v) { return v.order().size(); })
         .def_property_readonly("num_links", &VisibilityMap::num_links)
         .def_property_readonly("num_nodes",
-                               [](const VisibilityMap& v) { return v.octree.num_nodes(); })
+                               [](const VisibilityMap& v) { return v.octree().num_nodes(); })
         .def_property_readonly("num_leaves",
-                               [](const VisibilityMap& v) { return v.octree.num_leaves(); })
-        .def_property_readonly("height", [](const VisibilityMap& v) { return v.octree.height(); })
+                               [](const VisibilityMap& v) { return v.octree().num_leaves(); })
+        .def_property_readonly("height", [](const VisibilityMap& v) { return v.octree().height(); })
         .def_property_readonly(
-            "points", [](const VisibilityMap& v) { return input_order(v, v.points.positions); },
+            "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
             "Positions, N x 3 float32, in input order.")
         .def_property_readonly(
-            "normals", [](const VisibilityMap& v) { return input_order(v, v.points.normals); },
+            "normals", [](const VisibilityMap& v) { return input_order(v, v.points().normals); },
             "Normals, N x 3 float32, in input order.")
         .def_property_readonly(
-            "colors", [](const VisibilityMap& v) { return input_order(v, v.points.colors); },
+            "colors", [](const VisibilityMap& v) { return input_order(v, v.points().colors); },
             "Albedo, N x 3 float32 (linear RGB), in input order (empty when none).")
         .def_property_readonly(
-            "emission", [](const VisibilityMap& v) { return input_order(v, v.points.emission); },
+            "emission", [](const VisibilityMap& v) { return input_order(v, v.points().emission); },
             "Emission, N x 3 float32, in input order (empty when none).")
         .def_property_readonly(
             "radii",
             [](const VisibilityMap& v) {
-                py::array_t<float> out(py::ssize_t(v.points.radii.size()));
-                for (size_t k = 0; k < v.points.radii.size(); ++k)
-                    out.mutable_data()[v.order[k]] = v.points.radii[k];
+                py::array_t<float> out(py::ssize_t(v.points().radii.size()));
+                for (size_t k = 0; k < v.points().radii.size(); ++k)
+                    out.mutable_data()[v.order()[k]] = v.points().radii[k];
                 return out;
             },
             "Splat radii, N float32, in input order (empty when none).")

@@ -1,4 +1,5 @@
 // The grid-walk occluder kernel of [7] (src/visibility/bresenham.h) against brute force.
+#include "octree/records.h"
 #include "visibility/bresenham.h"
 
 #include <gtest/gtest.h>
@@ -33,8 +34,8 @@ struct Fixture {
 // (m > 0) by m? In double.
 bool segment_meets_cell(const Octree& t, int32_t n, Vec3 p, Vec3 q, double s0, double s1,
                         double m) {
-    const Vec3 c = t.spheres[n].center;
-    const double h = t.half_size[n] + m;
+    const Vec3 c = t.spheres()[n].center;
+    const double h = t.half_size()[n] + m;
     const double P[3] = {p.x, p.y, p.z},
                  D[3] = {double(q.x) - p.x, double(q.y) - p.y, double(q.z) - p.z};
     const double C[3] = {c.x, c.y, c.z};
@@ -56,13 +57,13 @@ TEST(Bresenham, VisitsExactlyTheLeavesWhoseCellsTheSegmentCrosses) {
     const LeafGrid g(f.t);
     EXPECT_EQ(g.level(), f.t.height());
     const int32_t L = f.t.num_leaves();
-    const double cell = f.t.root_size / double(1 << g.level());
+    const double cell = f.t.root_size() / double(1 << g.level());
     std::mt19937 rng(11);
     int checked = 0;
     for (int it = 0; it < 400; ++it) {
         const int32_t a = rng() % L, b = rng() % L;
         if (a == b) continue;
-        const Vec3 p = f.t.leaves[a].centroid, q = f.t.leaves[b].centroid;
+        const Vec3 p = leaf_discs(f.t)[a].centroid, q = leaf_discs(f.t)[b].centroid;
         const float s0 = 0.01f, s1 = 0.99f;
         std::vector<int32_t> seen;
         uint64_t cells = 0;
@@ -75,7 +76,7 @@ TEST(Bresenham, VisitsExactlyTheLeavesWhoseCellsTheSegmentCrosses) {
         EXPECT_GT(cells, 0u);
         for (int32_t l = 0; l < L; ++l) {
             if (l == a || l == b) continue;
-            const int32_t n = f.t.leaf_node[l];
+            const int32_t n = f.t.leaf_node()[l];
             // Clearly crossed (the cube shrunk by a thousandth of a cell): must be visited.
             if (segment_meets_cell(f.t, n, p, q, s0, s1, -1e-3 * cell)) {
                 EXPECT_TRUE(set.count(l)) << "missed leaf " << l << " of pair " << a << "," << b;
@@ -95,26 +96,26 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
     const LeafGrid g(f.t);
     const VisibilityParams vp;
     const int32_t L = f.t.num_leaves();
-    const double cell = f.t.root_size / double(1 << g.level());
+    const double cell = f.t.root_size() / double(1 << g.level());
     std::mt19937 rng(12);
     uint64_t brute_total = 0, found_total = 0, missed_outside = 0;
     for (int it = 0; it < 1500; ++it) {
         const int32_t a = rng() % L, b = rng() % L;
         if (a == b) continue;
-        const Vec3 p = f.t.leaves[a].centroid, q = f.t.leaves[b].centroid;
+        const Vec3 p = leaf_discs(f.t)[a].centroid, q = leaf_discs(f.t)[b].centroid;
         const Vec3 d = q - p;
         const float len = length(d);
         std::set<int32_t> brute;
         for (int32_t l = 0; l < L; ++l)
             if (l != a && l != b &&
-                detail::counts_as_occluder(detail::pair_segment(f.t.leaves[a], f.t.leaves[b], vp),
-                                           f.t.leaves[l], vp))
+                detail::counts_as_occluder(detail::pair_segment(leaf_discs(f.t)[a], leaf_discs(f.t)[b], vp),
+                                           leaf_discs(f.t)[l], vp))
                 brute.insert(l);
         std::set<int32_t> found;
         uint64_t cells = 0;
         g.for_each_leaf(p, q, vp.eps * 0.999f, 1 - vp.eps * 0.999f, a, b, &cells, [&](int32_t l) {
-            if (detail::counts_as_occluder(detail::pair_segment(f.t.leaves[a], f.t.leaves[b], vp),
-                                           f.t.leaves[l], vp))
+            if (detail::counts_as_occluder(detail::pair_segment(leaf_discs(f.t)[a], leaf_discs(f.t)[b], vp),
+                                           leaf_discs(f.t)[l], vp))
                 found.insert(l);
             return true;
         });
@@ -123,7 +124,7 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
             if (!found.count(l)) {
                 // Known weakness: the disc is crossed outside the leaf's cell. Never a leaf
                 // whose cell the segment clearly crosses.
-                EXPECT_FALSE(segment_meets_cell(f.t, f.t.leaf_node[l], p, q, vp.eps, 1 - vp.eps,
+                EXPECT_FALSE(segment_meets_cell(f.t, f.t.leaf_node()[l], p, q, vp.eps, 1 - vp.eps,
                                                 -1e-3 * cell))
                     << "missed occluder " << l << " in a crossed cell";
                 ++missed_outside;
@@ -144,7 +145,7 @@ TEST(Bresenham, VisibleWheneverTheSphereWalkSaysVisible) {
     // It finds a subset of the occluders, so it never hides what the sphere walk sees.
     Fixture f(5, 4);
     const LeafGrid g(f.t);
-    const OctreeView v = f.t.view();
+    const OctreeView v = octree_view(f.t);
     const VisibilityParams vp;
     const int32_t L = f.t.num_leaves();
     uint64_t sphere_vis = 0, bres_vis = 0, pairs = 0;
@@ -175,14 +176,14 @@ TEST(Bresenham, VmapBuiltWithItMatchesTheKernelOnEveryLeafPair) {
         build_vmap(test::sample(test::oracle_path("room-with-block.json"), 1500, 3), bp, &st);
     EXPECT_NE(st.backend.find("bresenham"), std::string::npos);
     EXPECT_GT(st.work.cells_stepped, 0u);
-    const LeafGrid g(vm.octree);
-    const int32_t L = vm.octree.num_leaves();
+    const LeafGrid g(vm.octree());
+    const int32_t L = vm.octree().num_leaves();
     WorkCounters wc;
     uint64_t vis = 0;
     for (int32_t a = 0; a < L; ++a)
         for (int32_t b = a + 1; b < L; ++b) {
             const bool want =
-                bresenham_leaf_pair_visible(vm.octree, g, a, b, vm.visibility_params, &wc);
+                bresenham_leaf_pair_visible(vm.octree(), g, a, b, vm.visibility_params(), &wc);
             ASSERT_EQ(vm.leaves_visible(a, b), want) << a << " " << b;
             vis += want;
         }

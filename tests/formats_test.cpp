@@ -632,10 +632,10 @@ TEST(Formats, TheSameMeshGivesTheSameVmapAsOffPlyObjOrStl) {
             first = std::move(vm);
             continue;
         }
-        EXPECT_EQ(vm.points.positions, first->points.positions);
-        EXPECT_EQ(vm.points.normals, first->points.normals);
-        EXPECT_EQ(vm.link_offsets, first->link_offsets);
-        EXPECT_TRUE(vm.link_targets == first->link_targets);
+        EXPECT_EQ(vm.points().positions, first->points().positions);
+        EXPECT_EQ(vm.points().normals, first->points().normals);
+        EXPECT_EQ(vm.link_offsets(), first->link_offsets());
+        EXPECT_TRUE(std::ranges::equal(vm.link_targets(), first->link_targets()));
     }
 }
 

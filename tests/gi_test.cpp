@@ -66,8 +66,8 @@ GiParams cpu_gi(float theta, int bounces, const char* refine = "blocks") {
 
 // sum_j F_ij per point i: one bounce with E = 1 and albedo 1 everywhere gives 1 + sum_j F_ij.
 std::vector<double> row_sums(VisibilityMap vm, float theta) {
-    vm.points.emission.assign(vm.points.size(), Vec3{1, 1, 1});
-    vm.points.colors.assign(vm.points.size(), Vec3{1, 1, 1});
+    test::points_of(vm).emission.assign(vm.points().size(), Vec3{1, 1, 1});
+    test::points_of(vm).colors.assign(vm.points().size(), Vec3{1, 1, 1});
     const auto B = theta > 0 ? solve_radiosity(vm, cpu_gi(theta, 1)) : brute_force_radiosity(vm, 1);
     std::vector<double> s(B.size());
     for (size_t i = 0; i < B.size(); ++i) s[i] = double(B[i].x) - 1.0;
@@ -119,14 +119,14 @@ TEST(FormFactor, IsReciprocalAndNeverAboveOne) {
 // One bounce from the V-map by an independent route: every point pair, visibility from
 // leaves_visible, the same form factor, in double.
 std::vector<Vec3> oracle_one_bounce(const VisibilityMap& vm) {
-    const PointSet& ps = vm.points;
+    const PointSet& ps = vm.points();
     const size_t P = ps.size();
     std::vector<Vec3> out(P);
     for (size_t i = 0; i < P; ++i) {
-        const int32_t li = vm.octree.leaf_of_point(uint32_t(i));
+        const int32_t li = vm.octree().leaf_of_point(uint32_t(i));
         double h[3] = {0, 0, 0};
         for (size_t j = 0; j < P; ++j) {
-            const int32_t lj = vm.octree.leaf_of_point(uint32_t(j));
+            const int32_t lj = vm.octree().leaf_of_point(uint32_t(j));
             if (li == lj || !vm.leaves_visible(li, lj)) continue;
             const float ai = kPi * ps.radii[i] * ps.radii[i], aj = kPi * ps.radii[j] * ps.radii[j];
             const double F = double(aj) * gi_kernel(ps.positions[i], ps.normals[i], ai,
@@ -148,7 +148,7 @@ TEST(Gi, BruteForceMatchesAPointPairOracle) {
     EXPECT_LT(relative_rms(brute, oracle), 1e-5);
     // And the light did reach the other points.
     size_t lit = 0;
-    for (size_t i = 0; i < brute.size(); ++i) lit += vm.points.emission[i].x == 0 && brute[i].x > 0;
+    for (size_t i = 0; i < brute.size(); ++i) lit += vm.points().emission[i].x == 0 && brute[i].x > 0;
     EXPECT_GT(lit, brute.size() / 2);
 }
 
@@ -261,7 +261,7 @@ TEST(Gi, ClosedBoxKeepsEnergyWithAlbedoOne) {
     const double mn = *std::min_element(rs.begin(), rs.end());
     std::vector<std::vector<Vec3>> per;
     brute_force_radiosity(vm, 4, &per);
-    const double e0 = total_power(vm, std::vector<Vec3>(vm.points.emission)).x;
+    const double e0 = total_power(vm, std::vector<Vec3>(vm.points().emission)).x;
     double prev = e0, prev_inc = e0;
     for (int b = 0; b < 4; ++b) {
         const double p = total_power(vm, per[b]).x;
@@ -291,7 +291,7 @@ TEST(Gi, EachBounceAddsLessWithAlbedoBelowOne) {
 
 TEST(Gi, OpenRoomLosesEnergyThroughItsOpenSide) {
     VisibilityMap vm = room_vmap("cornell-empty", 3000, 6);
-    vm.points.colors.assign(vm.points.size(), Vec3{1, 1, 1});
+    test::points_of(vm).colors.assign(vm.points().size(), Vec3{1, 1, 1});
     const auto rs = row_sums(vm, 1.0f);
     double mean = 0;
     for (double s : rs) mean += s / rs.size();
@@ -308,7 +308,7 @@ TEST(Gi, PerChannelAlbedoColoursTheBounce) {
     const float W = 0.5528f;
     double red = 0, green = 0;
     for (size_t i = 0; i < one.size(); ++i) {
-        const Vec3 p = vm.points.positions[i], n = vm.points.normals[i];
+        const Vec3 p = vm.points().positions[i], n = vm.points().normals[i];
         if (n.y > 0.9f && p.y < 0.01f && p.x > 0.8f * W) {  // floor, next to the x = W wall
             red += two[i].x - one[i].x;
             green += two[i].y - one[i].y;
@@ -352,13 +352,13 @@ TEST(Gi, EmissionStaysWithItsPointInOctreeOrder) {
     const PointSet in = test::sample(test::scene_path("cornell-bunny"), 4000, 1);
     const VisibilityMap vm = build_vmap(in, test::cpu_params(7, 4));
     size_t emitting = 0;
-    for (size_t k = 0; k < vm.points.size(); ++k) {
-        const uint32_t i = vm.order[k];
-        ASSERT_TRUE(vm.points.emission[k] == in.emission[i]) << k;
-        if (vm.points.emission[k].x > 0) {
+    for (size_t k = 0; k < vm.points().size(); ++k) {
+        const uint32_t i = vm.order()[k];
+        ASSERT_TRUE(vm.points().emission[k] == in.emission[i]) << k;
+        if (vm.points().emission[k].x > 0) {
             ++emitting;
-            EXPECT_LT(vm.points.normals[k].y, -0.99f) << k;
-            EXPECT_GT(vm.points.positions[k].y, 0.54f) << k;
+            EXPECT_LT(vm.points().normals[k].y, -0.99f) << k;
+            EXPECT_GT(vm.points().positions[k].y, 0.54f) << k;
         }
     }
     EXPECT_GT(emitting, 0u);
@@ -367,7 +367,7 @@ TEST(Gi, EmissionStaysWithItsPointInOctreeOrder) {
 TEST(Gi, ZeroBouncesGiveTheEmission) {
     const VisibilityMap vm = room_vmap("cornell-empty", 1000, 5);
     const auto B = solve_radiosity(vm, cpu_gi(1.0f, 0));
-    for (size_t i = 0; i < B.size(); ++i) ASSERT_TRUE(B[i] == vm.points.emission[i]);
+    for (size_t i = 0; i < B.size(); ++i) ASSERT_TRUE(B[i] == vm.points().emission[i]);
 }
 
 TEST(Gi, BadParametersAreErrors) {
@@ -395,7 +395,7 @@ TEST(Gi, BadParametersAreErrors) {
     fails(p, "theta");
     EXPECT_THROW(brute_force_radiosity(vm, -2), Error);
     VisibilityMap no_radii = vm;
-    no_radii.points.radii.clear();
+    test::points_of(no_radii).radii.clear();
     try {
         RadiositySolver s(no_radii, cpu_gi(1.0f, 1));
         ADD_FAILURE() << "no error without radii";

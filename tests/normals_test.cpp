@@ -786,7 +786,7 @@ TEST(RawCloud, BuildWithoutRadiiEstimatesThemAndSaysSo) {
     bp.backend = "cpu";
     BuildStats st;
     const VisibilityMap vm = build_vmap(ps, bp, &st, "room");
-    ASSERT_TRUE(vm.points.has_radii());
+    ASSERT_TRUE(vm.points().has_radii());
     const float r = std::sqrt(5.0f / (kPi * float(ps.size())));  // five unit walls
     EXPECT_NEAR(median(points_in_input_order(vm).radii), r, 0.1f * r);  // input units
     ASSERT_EQ(st.warnings.size(), 1u);

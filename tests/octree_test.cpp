@@ -1,4 +1,5 @@
 // The adaptive octree: structure, statistics and bounds (DESIGN.md "Octree").
+#include "octree/records.h"
 #include "vmap/octree.h"
 
 #include <gtest/gtest.h>
@@ -32,52 +33,52 @@ PointSet random_cloud(size_t n, uint32_t seed) {
 void check_structure(const Octree& t, const PointSet& ps, const OctreeParams& p) {
     const int32_t nn = t.num_nodes();
     ASSERT_GT(nn, 0);
-    EXPECT_EQ(t.parent[0], -1);
-    EXPECT_EQ(t.skip[0], nn);
-    EXPECT_EQ(t.point_begin[0], 0u);
-    EXPECT_EQ(t.point_end[0], ps.size());
+    EXPECT_EQ(t.parent()[0], -1);
+    EXPECT_EQ(t.skip()[0], nn);
+    EXPECT_EQ(t.point_begin()[0], 0u);
+    EXPECT_EQ(t.point_end()[0], ps.size());
     int32_t leaves = 0;
     for (int32_t n = 0; n < nn; ++n) {
-        ASSERT_GT(t.skip[n], n);
-        ASSERT_LE(t.skip[n], nn);
-        const uint32_t cnt = t.point_end[n] - t.point_begin[n];
+        ASSERT_GT(t.skip()[n], n);
+        ASSERT_LE(t.skip()[n], nn);
+        const uint32_t cnt = t.point_end()[n] - t.point_begin()[n];
         EXPECT_GT(cnt, 0u) << "empty nodes are not stored";
-        EXPECT_LE(t.level[n], p.max_height);
+        EXPECT_LE(t.level()[n], p.max_height);
         if (t.is_leaf(n)) {
-            EXPECT_EQ(t.skip[n], n + 1);
-            EXPECT_EQ(t.node_leaf[n], leaves) << "leaves numbered in depth-first order";
-            EXPECT_EQ(t.leaf_begin[n], leaves);
-            EXPECT_EQ(t.leaf_end[n], leaves + 1);
+            EXPECT_EQ(t.skip()[n], n + 1);
+            EXPECT_EQ(t.node_leaf()[n], leaves) << "leaves numbered in depth-first order";
+            EXPECT_EQ(t.leaf_begin()[n], leaves);
+            EXPECT_EQ(t.leaf_end()[n], leaves + 1);
             ++leaves;
             // A leaf either is small enough or sits at max height.
-            EXPECT_TRUE(cnt <= uint32_t(p.leaf_points) || t.level[n] == p.max_height);
+            EXPECT_TRUE(cnt <= uint32_t(p.leaf_points) || t.level()[n] == p.max_height);
         } else {
             EXPECT_GT(cnt, uint32_t(p.leaf_points)) << "a node splits only when over leaf_points";
-            EXPECT_LT(t.level[n], p.max_height);
+            EXPECT_LT(t.level()[n], p.max_height);
             // Children tile the parent's point and leaf ranges in order.
-            uint32_t pb = t.point_begin[n];
-            int32_t lb = t.leaf_begin[n];
+            uint32_t pb = t.point_begin()[n];
+            int32_t lb = t.leaf_begin()[n];
             int kids = 0;
             t.for_each_child(n, [&](int32_t c) {
-                EXPECT_EQ(t.parent[c], n);
-                EXPECT_EQ(t.level[c], t.level[n] + 1);
-                EXPECT_EQ(t.point_begin[c], pb);
-                EXPECT_EQ(t.leaf_begin[c], lb);
-                pb = t.point_end[c];
-                lb = t.leaf_end[c];
+                EXPECT_EQ(t.parent()[c], n);
+                EXPECT_EQ(t.level()[c], t.level()[n] + 1);
+                EXPECT_EQ(t.point_begin()[c], pb);
+                EXPECT_EQ(t.leaf_begin()[c], lb);
+                pb = t.point_end()[c];
+                lb = t.leaf_end()[c];
                 ++kids;
                 // The child's cell is one octant of the parent's.
-                EXPECT_FLOAT_EQ(t.half_size[c] * 2, t.half_size[n]);
+                EXPECT_FLOAT_EQ(t.half_size()[c] * 2, t.half_size()[n]);
             });
-            EXPECT_EQ(pb, t.point_end[n]);
-            EXPECT_EQ(lb, t.leaf_end[n]);
+            EXPECT_EQ(pb, t.point_end()[n]);
+            EXPECT_EQ(lb, t.leaf_end()[n]);
             EXPECT_GE(kids, 1);
             EXPECT_LE(kids, 8);
         }
         // Every point of the node lies in its cell (up to rounding of the cell bounds).
-        const Vec3 c = t.spheres[n].center;
-        const float h = t.half_size[n] * 1.0001f + 1e-6f;
-        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k) {
+        const Vec3 c = t.spheres()[n].center;
+        const float h = t.half_size()[n] * 1.0001f + 1e-6f;
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
             const Vec3 q = ps.positions[k];
             ASSERT_LE(std::fabs(q.x - c.x), h);
             ASSERT_LE(std::fabs(q.y - c.y), h);
@@ -89,18 +90,18 @@ void check_structure(const Octree& t, const PointSet& ps, const OctreeParams& p)
 
 void check_spheres(const Octree& t, const PointSet& ps) {
     for (int32_t n = 0; n < t.num_nodes(); ++n) {
-        const Sphere s = t.spheres[n];
+        const Sphere s = t.spheres()[n];
         // Encloses every point below it.
-        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k)
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k)
             ASSERT_LE(length(ps.positions[k] - s.center), s.radius) << "node " << n;
         if (t.is_leaf(n)) {
-            const LeafDisc& d = t.leaves[t.node_leaf[n]];
+            const LeafDisc& d = leaf_discs(t)[t.node_leaf()[n]];
             // Encloses the occluder disc: every point of the disc is within |c - o| + Delta.
             EXPECT_LE(length(d.centroid - s.center) + d.delta, s.radius);
         } else {
             // Encloses each child's sphere (DEVIATION from the paper's plain maximum).
             t.for_each_child(n, [&](int32_t c) {
-                EXPECT_LE(length(t.spheres[c].center - s.center) + t.spheres[c].radius, s.radius);
+                EXPECT_LE(length(t.spheres()[c].center - s.center) + t.spheres()[c].radius, s.radius);
             });
         }
     }
@@ -112,16 +113,16 @@ bool inside(const Box& b, Vec3 p) {
 }
 
 void check_boxes(const Octree& t, const PointSet& ps) {
-    ASSERT_EQ(t.walk.size(), size_t(t.num_nodes()));
+    ASSERT_EQ(walk_nodes(t).size(), size_t(t.num_nodes()));
     for (int32_t n = 0; n < t.num_nodes(); ++n) {
-        const Box& b = t.boxes[n];
-        EXPECT_EQ(t.walk[n].skip, t.skip[n]);
-        EXPECT_EQ(t.walk[n].leaf, t.node_leaf[n]);
-        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k)
+        const Box& b = t.boxes()[n];
+        EXPECT_EQ(walk_nodes(t)[n].skip, t.skip()[n]);
+        EXPECT_EQ(walk_nodes(t)[n].leaf, t.node_leaf()[n]);
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k)
             ASSERT_TRUE(inside(b, ps.positions[k])) << "node " << n;
         if (t.is_leaf(n)) {
             // Points of the occluder disc: centroid + Delta (u cos + v sin) for a basis u, v.
-            const LeafDisc& d = t.leaves[t.node_leaf[n]];
+            const LeafDisc& d = leaf_discs(t)[t.node_leaf()[n]];
             Vec3 nr = (d.flags & kLeafNormalDegenerate) ? Vec3{0, 0, 1} : d.normal;
             Vec3 u = std::fabs(nr.x) < 0.9f ? cross(nr, {1, 0, 0}) : cross(nr, {0, 1, 0});
             u = u / length(u);
@@ -134,7 +135,7 @@ void check_boxes(const Octree& t, const PointSet& ps) {
             }
         } else {
             t.for_each_child(n, [&](int32_t c) {
-                EXPECT_TRUE(inside(b, t.boxes[c].lo) && inside(b, t.boxes[c].hi));
+                EXPECT_TRUE(inside(b, t.boxes()[c].lo) && inside(b, t.boxes()[c].hi));
             });
         }
     }
@@ -176,7 +177,7 @@ TEST(Octree, SceneOctreeIsAdaptiveWithLeavesAtManyLevels) {
     check_structure(t, ps, p);
     check_spheres(t, ps);
     std::set<int> levels;
-    for (int32_t l : t.leaf_node) levels.insert(t.level[l]);
+    for (int32_t l : t.leaf_node()) levels.insert(t.level()[l]);
     EXPECT_GE(levels.size(), 3u) << "leaves appear at several depths";
 }
 
@@ -185,11 +186,11 @@ TEST(Octree, LeafStatisticsMatchTheirPoints) {
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {7, 6}, order);
     for (int32_t l = 0; l < t.num_leaves(); ++l) {
-        const int32_t n = t.leaf_node[l];
-        const LeafDisc& d = t.leaves[l];
+        const int32_t n = t.leaf_node()[l];
+        const LeafDisc& d = leaf_discs(t)[l];
         Vec3 c{}, nr{};
         float far = 0, splat = 0;
-        const uint32_t b = t.point_begin[n], e = t.point_end[n];
+        const uint32_t b = t.point_begin()[n], e = t.point_end()[n];
         for (uint32_t k = b; k < e; ++k) c += ps.positions[k], nr += ps.normals[k];
         c = c / float(e - b);
         for (uint32_t k = b; k < e; ++k) {
@@ -217,7 +218,7 @@ TEST(Octree, OnePointLeafStillOccludesThroughItsSplat) {
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {4, 1}, order);
     ASSERT_EQ(t.num_leaves(), 2);
-    for (const LeafDisc& d : t.leaves) EXPECT_FLOAT_EQ(d.delta, detail::kDeltaSplatFloor * 0.05f);
+    for (const LeafDisc& d : leaf_discs(t)) EXPECT_FLOAT_EQ(d.delta, detail::kDeltaSplatFloor * 0.05f);
 }
 
 TEST(Octree, LeafWhoseNormalsCancelIsFlagged) {
@@ -227,7 +228,7 @@ TEST(Octree, LeafWhoseNormalsCancelIsFlagged) {
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {1, 2}, order);
     int flagged = 0;
-    for (const LeafDisc& d : t.leaves) flagged += (d.flags & kLeafNormalDegenerate) != 0;
+    for (const LeafDisc& d : leaf_discs(t)) flagged += (d.flags & kLeafNormalDegenerate) != 0;
     EXPECT_EQ(flagged, 1);
 }
 
@@ -270,9 +271,9 @@ TEST(Octree, LeafOfPointFindsTheLeafHoldingIt) {
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {7, 3}, order);
     for (uint32_t k = 0; k < ps.size(); ++k) {
-        const int32_t n = t.leaf_node[t.leaf_of_point(k)];
-        ASSERT_GE(k, t.point_begin[n]);
-        ASSERT_LT(k, t.point_end[n]);
+        const int32_t n = t.leaf_node()[t.leaf_of_point(k)];
+        ASSERT_GE(k, t.point_begin()[n]);
+        ASSERT_LT(k, t.point_end()[n]);
     }
 }
 

@@ -20,8 +20,8 @@ class RayQueryTest : public ::testing::Test {
                        test::cpu_params(7, 3)));
     }
     static void TearDownTestSuite() { delete vm_; }
-    static Vec3 pos(uint32_t id) { return vm_->points.positions[vm_->inverse[id]]; }
-    static Vec3 normal(uint32_t id) { return vm_->points.normals[vm_->inverse[id]]; }
+    static Vec3 pos(uint32_t id) { return vm_->points().positions[vm_->inverse()[id]]; }
+    static Vec3 normal(uint32_t id) { return vm_->points().normals[vm_->inverse()[id]]; }
     static VisibilityMap* vm_;
 };
 VisibilityMap* RayQueryTest::vm_ = nullptr;
@@ -37,7 +37,7 @@ Vec3 random_dir(std::mt19937& rng, Vec3 n) {
 
 TEST_F(RayQueryTest, PrunedRayEqualsBruteForceOverTheVisibleSet) {
     std::mt19937 rng(11);
-    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points.size() - 1));
+    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points().size() - 1));
     int hits = 0;
     for (int it = 0; it < 400; ++it) {
         const uint32_t i = pick(rng);
@@ -60,7 +60,7 @@ TEST_F(RayQueryTest, PrunedRayAgreesWithTheExhaustiveSearchWhereTheVMapSeesTheHi
     // visible set, the pruned search (a subset holding h) must find h's distance exactly; when
     // it is not, the pruned hit can only be farther.
     std::mt19937 rng(12);
-    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points.size() - 1));
+    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points().size() - 1));
     int agree = 0, farther = 0;
     for (int it = 0; it < 400; ++it) {
         const uint32_t i = pick(rng);
@@ -92,7 +92,7 @@ TEST_F(RayQueryTest, RayStraightUpFromTheFloorHitsTheCeilingOrTheLight) {
     // of a surface uncovered), none may hit anything else.
     const float H = 0.5488f;
     int tested = 0, hits = 0;
-    for (uint32_t i = 0; i < vm_->points.size() && tested < 50; ++i) {
+    for (uint32_t i = 0; i < vm_->points().size() && tested < 50; ++i) {
         const Vec3 p = pos(i);
         if (p.y != 0 || std::fabs(p.x - 0.2764f) < 0.15f || std::fabs(p.z - 0.28f) < 0.15f)
             continue;
@@ -110,7 +110,7 @@ TEST_F(RayQueryTest, RayStraightUpFromTheFloorHitsTheCeilingOrTheLight) {
 TEST_F(RayQueryTest, DirectionLengthDoesNotMatter) {
     // Only the direction counts: a length whose square over- or underflows a float is fine.
     int compared = 0;
-    for (uint32_t i = 0; i < vm_->points.size() && compared < 20; i += 97) {
+    for (uint32_t i = 0; i < vm_->points().size() && compared < 20; i += 97) {
         const RayHit unit = shoot_ray(*vm_, i, {0.3f, 0.8f, 0.1f});
         for (const float s : {1e20f, 1e-23f}) {
             const RayHit h = shoot_ray(*vm_, i, {0.3f * s, 0.8f * s, 0.1f * s});
@@ -129,13 +129,13 @@ TEST_F(RayQueryTest, NearestPointMatchesALinearScan) {
         const Vec3 q{u(rng), u(rng), u(rng)};
         const uint32_t k = nearest_point(*vm_, q);
         const float dk = length2(pos(k) - q);
-        for (uint32_t j = 0; j < vm_->points.size(); ++j) ASSERT_LE(dk, length2(pos(j) - q));
+        for (uint32_t j = 0; j < vm_->points().size(); ++j) ASSERT_LE(dk, length2(pos(j) - q));
     }
 }
 
 TEST_F(RayQueryTest, PairAndVisibleSetByPositionEqualTheirIdForms) {
     std::mt19937 rng(14);
-    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points.size() - 1));
+    std::uniform_int_distribution<uint32_t> pick(0, uint32_t(vm_->points().size() - 1));
     for (int it = 0; it < 200; ++it) {
         const uint32_t i = pick(rng), j = pick(rng);
         // A position a hair off the surface point names that point.
@@ -150,7 +150,7 @@ TEST_F(RayQueryTest, PairAndVisibleSetByPositionEqualTheirIdForms) {
 }
 
 TEST_F(RayQueryTest, BadQueriesAreErrors) {
-    const uint32_t n = uint32_t(vm_->points.size());
+    const uint32_t n = uint32_t(vm_->points().size());
     EXPECT_THROW(shoot_ray(*vm_, n, {0, 1, 0}), Error);
     EXPECT_THROW(shoot_ray(*vm_, 0, {0, 0, 0}), Error);
     EXPECT_THROW(shoot_ray(*vm_, 0, {std::nanf(""), 1, 0}), Error);

@@ -93,7 +93,7 @@ TEST_F(RenderTest, ShadowOfTheBlockOnTheBackWallIsNotPurpleTheWallBesideItIs) {
     ASSERT_TRUE(scene_->camera.has_value());
     const Camera cam = *scene_->camera;
     const Image img = render_visible(*vm_, eye_, cam, small());
-    const Vec3 eye = vm_->points.positions[vm_->inverse[eye_]];
+    const Vec3 eye = vm_->points().positions[vm_->inverse()[eye_]];
     const Vec3 shadow[] = {{0.2764f, 0.13f, kBack}, {0.24f, 0.11f, kBack}, {0.31f, 0.15f, kBack}};
     const Vec3 lit[] = {{0.08f, 0.13f, kBack}, {0.47f, 0.13f, kBack}, {0.2764f, 0.35f, kBack}};
     for (Vec3 w : shadow) {
@@ -107,10 +107,10 @@ TEST_F(RenderTest, ShadowOfTheBlockOnTheBackWallIsNotPurpleTheWallBesideItIs) {
 }
 
 TEST_F(RenderTest, TheEyeIsMarkedCyan) {
-    const Camera cam = default_camera(vm_->points);
+    const Camera cam = default_camera(vm_->points());
     const Image img = render_visible(*vm_, eye_, cam, small());
     const Projection pr =
-        project(cam, img.width, img.height, vm_->points.positions[vm_->inverse[eye_]]);
+        project(cam, img.width, img.height, vm_->points().positions[vm_->inverse()[eye_]]);
     ASSERT_GT(pr.depth, 0);
     ASSERT_TRUE(pr.x >= 0 && pr.y >= 0 && pr.x < img.width && pr.y < img.height);
     EXPECT_TRUE(is_cyan(img.pixel(int(pr.x), int(pr.y))));
@@ -147,7 +147,7 @@ TEST_F(RenderTest, ColouredPlyReadsBackWithTheVisibleSetInPurple) {
 TEST_F(RenderTest, VisibleColoursFollowTheVisibleSet) {
     const auto colors = visible_colors(*vm_, eye_);
     const auto set = vm_->visible_set(eye_);
-    std::vector<uint8_t> in(vm_->points.size(), 0);
+    std::vector<uint8_t> in(vm_->points().size(), 0);
     for (uint32_t i : set) in[i] = 1;
     const VisibleStyle style;
     for (uint32_t i = 0; i < colors.size(); ++i) {
@@ -159,7 +159,7 @@ TEST_F(RenderTest, VisibleColoursFollowTheVisibleSet) {
             ASSERT_FALSE(colors[i] == style.visible) << i;
         }
     }
-    EXPECT_THROW(visible_colors(*vm_, uint32_t(vm_->points.size())), Error);
+    EXPECT_THROW(visible_colors(*vm_, uint32_t(vm_->points().size())), Error);
 }
 
 // Two squares of points facing the camera: a red one far, a smaller green one near.

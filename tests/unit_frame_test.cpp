@@ -47,13 +47,13 @@ class UnitFrame : public ::testing::Test {
 };
 
 void expect_same_links(const VisibilityMap& a, const VisibilityMap& b) {
-    ASSERT_EQ(a.octree.num_nodes(), b.octree.num_nodes());
-    EXPECT_EQ(a.octree.skip, b.octree.skip);
-    EXPECT_EQ(a.order, b.order);
-    EXPECT_EQ(a.link_offsets, b.link_offsets);
-    ASSERT_EQ(a.link_targets.size(), b.link_targets.size());
-    EXPECT_EQ(0, std::memcmp(a.link_targets.data(), b.link_targets.data(),
-                             a.link_targets.size() * sizeof(int32_t)));
+    ASSERT_EQ(a.octree().num_nodes(), b.octree().num_nodes());
+    EXPECT_EQ(a.octree().skip(), b.octree().skip());
+    EXPECT_EQ(a.order(), b.order());
+    EXPECT_EQ(a.link_offsets(), b.link_offsets());
+    ASSERT_EQ(a.link_targets().size(), b.link_targets().size());
+    EXPECT_EQ(0, std::memcmp(a.link_targets().data(), b.link_targets().data(),
+                             a.link_targets().size() * sizeof(int32_t)));
 }
 
 // Squared distances of 1e20 overflow a float: built in the input's units the map was empty.
@@ -74,12 +74,12 @@ TEST_F(UnitFrame, PowerOfTwoUnitsGiveIdenticalFilesApartFromTheScale) {
     for (int k : {-20, 20, 66, -100, 120}) {
         SCOPED_TRACE(k);
         const VisibilityMap vm = at(std::ldexp(1.0, k));
-        EXPECT_EQ(vm.octree.scale, std::ldexp(unit_->octree.scale, k));
+        EXPECT_EQ(vm.octree().scale(), std::ldexp(unit_->octree().scale(), k));
         const std::string p = dir.path("k" + std::to_string(k) + ".vmap");
         save_vmap(p, vm);
         VisibilityMap back = load_vmap(p);
-        EXPECT_EQ(back.octree.scale, vm.octree.scale);
-        back.octree.scale = unit_->octree.scale;
+        EXPECT_EQ(back.octree().scale(), vm.octree().scale());
+        test::octree_of(back).scale = unit_->octree().scale();
         save_vmap(p, back);
         EXPECT_TRUE(slurp(p) == want);
     }

@@ -97,9 +97,9 @@ TEST_F(ViewTest, InfoDescribesTheMap) {
     ASSERT_TRUE(r);
     ASSERT_EQ(r->status, 200);
     const json j = json::parse(r->body);
-    EXPECT_EQ(j["points"], vm_->points.size());
-    EXPECT_EQ(j["leaves"], vm_->octree.num_leaves());
-    EXPECT_EQ(j["height"], vm_->octree.height());
+    EXPECT_EQ(j["points"], vm_->points().size());
+    EXPECT_EQ(j["leaves"], vm_->octree().num_leaves());
+    EXPECT_EQ(j["height"], vm_->octree().height());
     EXPECT_EQ(j["links"], vm_->num_links());
     EXPECT_EQ(j["gi"], false);
     EXPECT_EQ(j["camera"]["eye"].size(), 3u);
@@ -126,7 +126,7 @@ TEST_F(ViewTest, PointsBufferHoldsTheCloudInInputOrder) {
 }
 
 TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
-    const uint32_t n = uint32_t(vm_->points.size());
+    const uint32_t n = uint32_t(vm_->points().size());
     std::mt19937 rng(7);
     std::vector<uint32_t> ids{0, n / 2, n - 1};
     for (int k = 0; k < 12; ++k) ids.push_back(rng() % n);
@@ -139,9 +139,9 @@ TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
         EXPECT_EQ(j["count"], visible_count(*vm_, id));
         const auto leaf = j["leaf_ids"].get<std::vector<uint32_t>>();
         EXPECT_NE(std::find(leaf.begin(), leaf.end(), id), leaf.end()) << "its own leaf";
-        const int32_t node = vm_->octree.leaf_node[vm_->octree.leaf_of_point(vm_->inverse[id])];
-        EXPECT_EQ(j["level"], int(vm_->octree.level[node]));
-        EXPECT_EQ(leaf.size(), vm_->octree.point_end[node] - vm_->octree.point_begin[node]);
+        const int32_t node = vm_->octree().leaf_node()[vm_->octree().leaf_of_point(vm_->inverse()[id])];
+        EXPECT_EQ(j["level"], int(vm_->octree().level()[node]));
+        EXPECT_EQ(leaf.size(), vm_->octree().point_end()[node] - vm_->octree().point_begin()[node]);
         total += want.size();
         // The same set as a base64 bit mask.
         const std::string b64 = post("/api/visible", {{"id", id}, {"as", "bits"}})["bits"];
@@ -165,7 +165,7 @@ TEST_F(ViewTest, VisibleSetEqualsTheLibrary) {
 }
 
 TEST_F(ViewTest, ConcurrentClientsGetTheSameAnswers) {
-    const uint32_t n = uint32_t(vm_->points.size());
+    const uint32_t n = uint32_t(vm_->points().size());
     std::atomic<int> wrong{0}, done{0};
     std::vector<std::thread> clients;
     for (int t = 0; t < 4; ++t)
@@ -199,7 +199,7 @@ TEST_F(ViewTest, LargeAnswersAreNotCompressed) {
 }
 
 TEST_F(ViewTest, PairAndRayEqualTheLibrary) {
-    const uint32_t n = uint32_t(vm_->points.size());
+    const uint32_t n = uint32_t(vm_->points().size());
     std::mt19937 rng(9);
     int seen[3] = {0, 0, 0};
     for (int k = 0; k < 300; ++k) {
@@ -217,7 +217,7 @@ TEST_F(ViewTest, PairAndRayEqualTheLibrary) {
     int hits = 0;
     for (int k = 0; k < 40; ++k) {
         const uint32_t id = rng() % n;
-        const Vec3 d = vm_->points.normals[vm_->inverse[id]];
+        const Vec3 d = vm_->points().normals[vm_->inverse()[id]];
         const RayHit h = shoot_ray(*vm_, id, d);
         const json j = post("/api/ray", {{"id", id}, {"dir", {d.x, d.y, d.z}}});
         ASSERT_EQ(j["hit"], h.hit) << id;
@@ -230,7 +230,7 @@ TEST_F(ViewTest, PairAndRayEqualTheLibrary) {
 }
 
 TEST_F(ViewTest, BadRequestsGet400WithAMessage) {
-    const std::string n = std::to_string(vm_->points.size());
+    const std::string n = std::to_string(vm_->points().size());
     expect_400("/api/visible", "{\"id\": ", "malformed JSON");
     expect_400("/api/visible", "", "malformed JSON");
     expect_400("/api/visible", "[1, 2]", "JSON object");
@@ -335,7 +335,7 @@ TEST_F(ViewTest, StopEndsServeAndAPortInUseIsAnError) {
 TEST_F(ViewTest, GiColoursFollowThePointsAndMustMatchTheirCount) {
     view::ServerConfig cfg;
     cfg.web_root = (dir_ / "web").string();
-    const size_t n = vm_->points.size();
+    const size_t n = vm_->points().size();
     for (size_t i = 0; i < n; ++i) cfg.gi_colors.push_back({float(i % 7) / 7, 0.5f, 1.0f});
     view::Server gi(*vm_, cfg);
     const int port = gi.bind("127.0.0.1", 0);

@@ -3,6 +3,7 @@
 
 #include <random>
 
+#include "octree/records.h"
 #include "test_util.h"
 #include "visibility/leaf_pair.h"
 
@@ -166,7 +167,7 @@ TEST_P(TraversalOracle, SpherePruningNeverDropsAnOccluder) {
     Octree t = Octree::build(ps, {height, 3}, order);
     VisibilityParams vp;
     vp.K = k;
-    const OctreeView v = t.view();
+    const OctreeView v = octree_view(t);
     std::mt19937 rng(9);
     std::uniform_int_distribution<int32_t> pick(0, v.num_leaves - 1);
     int visible = 0, hidden = 0;
@@ -191,7 +192,7 @@ TEST(Counting, CountedAndUncountedPredicatesAgree) {
     PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {7, 4}, order);
-    const OctreeView v = t.view();
+    const OctreeView v = octree_view(t);
     VisibilityParams vp;
     WorkCounters wc;
     for (int32_t a = 0; a < 50; ++a)

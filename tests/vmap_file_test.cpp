@@ -1,5 +1,7 @@
 // The .vmap file: exact round trips, and truncated, corrupt, wrong-version or missing files, and
 // writes that never leave half a file behind.
+#include "vmap/map_access.h"
+#include "octree/records.h"
 #include "io/vmap_file.h"
 
 #include <gtest/gtest.h>
@@ -9,6 +11,7 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <thread>
@@ -66,54 +69,58 @@ size_t section_data(const std::string& bytes, const char* tag) {
 
 // ---- field-by-field comparison -------------------------------------------------------------
 
-template <class T, class A>
-void expect_same_bytes(const std::vector<T, A>& a, const std::vector<T, A>& b, const char* what) {
+template <class T>
+void expect_same_bytes(std::span<const T> a, std::span<const T> b, const char* what) {
     ASSERT_EQ(a.size(), b.size()) << what;
     if (a.empty()) return;
     EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(T)), 0) << what << " differ";
 }
+template <class T>
+void expect_same_bytes(const std::vector<T>& a, const std::vector<T>& b, const char* what) {
+    expect_same_bytes(std::span<const T>(a), std::span<const T>(b), what);
+}
 
 void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
-    EXPECT_EQ(a.octree_params.max_height, b.octree_params.max_height);
-    EXPECT_EQ(a.octree_params.leaf_points, b.octree_params.leaf_points);
-    EXPECT_EQ(a.visibility_params.K, b.visibility_params.K);
-    EXPECT_EQ(a.visibility_params.eps, b.visibility_params.eps);
-    EXPECT_EQ(a.visibility_params.facing_tol, b.visibility_params.facing_tol);
-    EXPECT_EQ(a.visibility_params.parallel_tol, b.visibility_params.parallel_tol);
+    EXPECT_EQ(a.octree_params().max_height, b.octree_params().max_height);
+    EXPECT_EQ(a.octree_params().leaf_points, b.octree_params().leaf_points);
+    EXPECT_EQ(a.visibility_params().K, b.visibility_params().K);
+    EXPECT_EQ(a.visibility_params().eps, b.visibility_params().eps);
+    EXPECT_EQ(a.visibility_params().facing_tol, b.visibility_params().facing_tol);
+    EXPECT_EQ(a.visibility_params().parallel_tol, b.visibility_params().parallel_tol);
 
-    expect_same_bytes(a.points.positions, b.points.positions, "positions");
-    expect_same_bytes(a.points.normals, b.points.normals, "normals");
-    expect_same_bytes(a.points.colors, b.points.colors, "colours");
-    expect_same_bytes(a.points.radii, b.points.radii, "radii");
-    expect_same_bytes(a.points.emission, b.points.emission, "emission");
-    expect_same_bytes(a.order, b.order, "order");
-    expect_same_bytes(a.inverse, b.inverse, "inverse");
+    expect_same_bytes(a.points().positions, b.points().positions, "positions");
+    expect_same_bytes(a.points().normals, b.points().normals, "normals");
+    expect_same_bytes(a.points().colors, b.points().colors, "colours");
+    expect_same_bytes(a.points().radii, b.points().radii, "radii");
+    expect_same_bytes(a.points().emission, b.points().emission, "emission");
+    expect_same_bytes(a.order(), b.order(), "order");
+    expect_same_bytes(a.inverse(), b.inverse(), "inverse");
 
-    const Octree &s = a.octree, &t = b.octree;
-    EXPECT_EQ(s.params.max_height, t.params.max_height);
-    EXPECT_EQ(s.params.leaf_points, t.params.leaf_points);
-    EXPECT_EQ(s.root_min, t.root_min);
-    EXPECT_EQ(s.root_size, t.root_size);
-    EXPECT_EQ(s.scale, t.scale);
+    const Octree &s = a.octree(), &t = b.octree();
+    EXPECT_EQ(s.params().max_height, t.params().max_height);
+    EXPECT_EQ(s.params().leaf_points, t.params().leaf_points);
+    EXPECT_EQ(s.root_min(), t.root_min());
+    EXPECT_EQ(s.root_size(), t.root_size());
+    EXPECT_EQ(s.scale(), t.scale());
     EXPECT_EQ(s.num_nodes(), t.num_nodes());
     EXPECT_EQ(s.num_leaves(), t.num_leaves());
     EXPECT_EQ(s.height(), t.height());
-    expect_same_bytes(s.spheres, t.spheres, "spheres");
-    expect_same_bytes(s.half_size, t.half_size, "half_size");
-    expect_same_bytes(s.skip, t.skip, "skip");
-    expect_same_bytes(s.parent, t.parent, "parent");
-    expect_same_bytes(s.level, t.level, "level");
-    expect_same_bytes(s.node_leaf, t.node_leaf, "node_leaf");
-    expect_same_bytes(s.point_begin, t.point_begin, "point_begin");
-    expect_same_bytes(s.point_end, t.point_end, "point_end");
-    expect_same_bytes(s.leaf_begin, t.leaf_begin, "leaf_begin");
-    expect_same_bytes(s.leaf_end, t.leaf_end, "leaf_end");
-    expect_same_bytes(s.leaf_node, t.leaf_node, "leaf_node");
-    expect_same_bytes(s.leaves, t.leaves, "leaves");
-    expect_same_bytes(s.leaf_splat, t.leaf_splat, "leaf_splat");
+    expect_same_bytes(s.spheres(), t.spheres(), "spheres");
+    expect_same_bytes(s.half_size(), t.half_size(), "half_size");
+    expect_same_bytes(s.skip(), t.skip(), "skip");
+    expect_same_bytes(s.parent(), t.parent(), "parent");
+    expect_same_bytes(s.level(), t.level(), "level");
+    expect_same_bytes(s.node_leaf(), t.node_leaf(), "node_leaf");
+    expect_same_bytes(s.point_begin(), t.point_begin(), "point_begin");
+    expect_same_bytes(s.point_end(), t.point_end(), "point_end");
+    expect_same_bytes(s.leaf_begin(), t.leaf_begin(), "leaf_begin");
+    expect_same_bytes(s.leaf_end(), t.leaf_end(), "leaf_end");
+    expect_same_bytes(s.leaf_node(), t.leaf_node(), "leaf_node");
+    expect_same_bytes(leaf_discs(s), leaf_discs(t), "leaves");
+    expect_same_bytes(s.leaf_splat(), t.leaf_splat(), "leaf_splat");
 
-    expect_same_bytes(a.link_offsets, b.link_offsets, "link_offsets");
-    expect_same_bytes(a.link_targets, b.link_targets, "link_targets");
+    expect_same_bytes(a.link_offsets(), b.link_offsets(), "link_offsets");
+    expect_same_bytes(a.link_targets(), b.link_targets(), "link_targets");
     EXPECT_EQ(a.num_links(), b.num_links());
 }
 
@@ -147,14 +154,14 @@ class VmapFile : public ::testing::Test {
 };
 
 TEST_F(VmapFile, TheTestMapIsNotTrivial) {
-    EXPECT_EQ(map().points.size(), 1500u);
-    EXPECT_GT(map().octree.num_leaves(), 50);
+    EXPECT_EQ(map().points().size(), 1500u);
+    EXPECT_GT(map().octree().num_leaves(), 50);
     EXPECT_GT(map().num_links(), 10u);
-    EXPECT_EQ(map().octree_params.max_height, 5);
-    EXPECT_EQ(map().visibility_params.K, 3);
-    EXPECT_FALSE(map().points.colors.empty());
-    EXPECT_FALSE(map().points.radii.empty());
-    EXPECT_FALSE(map().points.emission.empty());
+    EXPECT_EQ(map().octree_params().max_height, 5);
+    EXPECT_EQ(map().visibility_params().K, 3);
+    EXPECT_FALSE(map().points().colors.empty());
+    EXPECT_FALSE(map().points().radii.empty());
+    EXPECT_FALSE(map().points().emission.empty());
 }
 
 TEST_F(VmapFile, RoundTripKeepsEveryField) {
@@ -166,7 +173,7 @@ TEST_F(VmapFile, RoundTripKeepsEveryField) {
 TEST_F(VmapFile, RoundTripAnswersEveryQueryTheSame) {
     ScratchDir dir;
     const VisibilityMap back = load_vmap(saved(dir));
-    const uint32_t n = uint32_t(map().points.size());
+    const uint32_t n = uint32_t(map().points().size());
     size_t differ = 0, visible = 0, hidden = 0;
     for (uint32_t i = 0; i < n; ++i) {
         for (uint32_t j = 0; j < n; j += 3) {
@@ -210,9 +217,9 @@ TEST_F(VmapFile, AMapWithoutColoursRadiiOrEmissionRoundTrips) {
     save_vmap(dir.path("plates.vmap"), vm);
     const VisibilityMap back = load_vmap(dir.path("plates.vmap"));
     expect_same_map(vm, back);
-    EXPECT_EQ(back.points.colors.empty(), vm.points.colors.empty());
-    EXPECT_EQ(back.points.radii.empty(), vm.points.radii.empty());
-    EXPECT_TRUE(back.points.emission.empty());
+    EXPECT_EQ(back.points().colors.empty(), vm.points().colors.empty());
+    EXPECT_EQ(back.points().radii.empty(), vm.points().radii.empty());
+    EXPECT_TRUE(back.points().emission.empty());
 }
 
 // ---- bad files -----------------------------------------------------------------------------
@@ -333,8 +340,8 @@ TEST_F(VmapFile, AnOrderThatIsNotAPermutationIsRejected) {
 TEST_F(VmapFile, ALinkTargetOutOfRangeIsRejected) {
     ScratchDir dir;
     std::string bytes = slurp(saved(dir));
-    ASSERT_GT(map().link_targets.size(), 0u);
-    for (int32_t bad : {-1, map().octree.num_nodes(), INT32_MAX}) {
+    ASSERT_GT(map().link_targets().size(), 0u);
+    for (int32_t bad : {-1, map().octree().num_nodes(), INT32_MAX}) {
         SCOPED_TRACE(bad);
         std::memcpy(bytes.data() + bytes.size() - 4, &bad, 4);  // the last link target
         const std::string p = write_resealed(dir, "link.vmap", bytes);
@@ -346,7 +353,7 @@ TEST_F(VmapFile, AnInconsistentTreeIsRejected) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
     const size_t at = section_data(whole, "TREE");
-    const int32_t nn = map().octree.num_nodes();
+    const int32_t nn = map().octree().num_nodes();
     // TREE: i32 nodes, i32 leaves, Vec3 root_min, f32 root_size, spheres, boxes, half_size,
     // skip, ...
     const size_t skip = at + 4 + 4 + 12 + 4 + size_t(nn) * (sizeof(Sphere) + sizeof(Box) + 4);
@@ -407,15 +414,15 @@ TEST_F(VmapFile, ConcurrentSavesToOnePathLeaveOneCompleteMap) {
     ScratchDir dir;
     const std::string p = dir.path("map.vmap");
     VisibilityMap other = map();
-    other.visibility_params.K = 7;
+    detail::MapAccess::data(other).visibility_params.K = 7;
     for (int round = 0; round < 6; ++round) {
         std::thread a([&] { save_vmap(p, map()); });
         std::thread b([&] { save_vmap(p, other); });
         a.join();
         b.join();
         VisibilityMap back = load_vmap(p);
-        EXPECT_TRUE(back.visibility_params.K == 3 || back.visibility_params.K == 7);
-        back.visibility_params.K = 3;
+        EXPECT_TRUE(back.visibility_params().K == 3 || back.visibility_params().K == 7);
+        detail::MapAccess::data(back).visibility_params.K = 3;
         expect_same_map(map(), back);
     }
     EXPECT_EQ(dir.files(), std::vector<std::string>{"map.vmap"});

@@ -44,7 +44,7 @@
 #include <vector>
 
 #include "vmap/vec.h"
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap {
 

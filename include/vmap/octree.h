@@ -1,4 +1,4 @@
-// The adaptive octree over a point set (DESIGN.md "Octree").
+// The adaptive octree over a point set (paper §3; docs/design.md).
 //
 // Nodes are stored in depth-first preorder: a node's first child (if any) is the next node, and
 // skip[n] is the index just past its subtree, so "m is in the subtree of n" is
@@ -33,43 +33,12 @@ struct Box {
     Vec3 lo, hi;
 };
 
-// A node as the predicate walks it, packed in 32 bytes (two 16-byte loads on the GPU): its
-// content box, the end of its subtree, its leaf index (-1 for internal nodes).
-struct alignas(16) WalkNode {
-    Vec3 lo;
-    int32_t skip = 0;
-    Vec3 hi;
-    int32_t leaf = -1;
-};
-
-// What the visibility predicate needs of a leaf, packed in 32 bytes (one load on the GPU).
-struct alignas(16) LeafDisc {
-    Vec3 centroid;    // mean of its points
-    float delta = 0;  // occluder disc radius: farthest point from the centroid, >= splat radius
-    Vec3 normal;      // normalised mean of its points' normals (zero when flagged)
-    uint32_t flags = 0;
-};
-inline constexpr uint32_t kLeafNormalDegenerate = 1u;  // normals cancel out: no usable plane
-
-// `points_box` grown to hold the occluder disc of `d` (centroid, normal, Delta): a disc with
-// unit normal n reaches Delta sqrt(1 - n_i^2) from its centre along axis i (the full Delta when
-// the normal is flagged, i.e. zero).
-Box grow_by_disc(Box points_box, const LeafDisc& d);
-// The smallest box holding both.
-inline Box merge(const Box& a, const Box& b) {
-    return {{a.lo.x < b.lo.x ? a.lo.x : b.lo.x, a.lo.y < b.lo.y ? a.lo.y : b.lo.y,
-             a.lo.z < b.lo.z ? a.lo.z : b.lo.z},
-            {a.hi.x > b.hi.x ? a.hi.x : b.hi.x, a.hi.y > b.hi.y ? a.hi.y : b.hi.y,
-             a.hi.z > b.hi.z ? a.hi.z : b.hi.z}};
+// The records the visibility predicate walks (packed for the GPU; src/octree/records.h).
+struct WalkNode;
+struct LeafDisc;
+namespace detail {
+struct OctreeAccess;
 }
-
-// A plain, non-owning view of the arrays the predicate traverses; cheap to copy into a kernel.
-struct OctreeView {
-    const WalkNode* walk = nullptr;    // per node: box, end of subtree, leaf index (preorder)
-    const LeafDisc* leaves = nullptr;  // per leaf
-    int32_t num_nodes = 0;
-    int32_t num_leaves = 0;
-};
 
 class Octree {
   public:
@@ -90,50 +59,78 @@ class Octree {
 
     // Between the octree's frame and the input's units (world = local x scale), in double.
     Vec3 to_world(Vec3 local) const {
-        return {float(local.x * scale), float(local.y * scale), float(local.z * scale)};
+        const double s = d_.scale;
+        return {float(local.x * s), float(local.y * s), float(local.z * s)};
     }
     Vec3 to_local(Vec3 world) const {
-        return {float(world.x / scale), float(world.y / scale), float(world.z / scale)};
+        const double s = d_.scale;
+        return {float(world.x / s), float(world.y / s), float(world.z / s)};
     }
 
-    OctreeView view() const;
-    // Derives the packed walk array from boxes, skip and node_leaf (build and load call it).
-    void pack_walk();
-
-    int32_t num_nodes() const { return static_cast<int32_t>(skip.size()); }
-    int32_t num_leaves() const { return static_cast<int32_t>(leaf_node.size()); }
+    int32_t num_nodes() const { return static_cast<int32_t>(d_.skip.size()); }
+    int32_t num_leaves() const { return static_cast<int32_t>(d_.leaf_node.size()); }
     int height() const;  // deepest leaf level
-    bool is_leaf(int32_t n) const { return node_leaf[n] >= 0; }
+    bool is_leaf(int32_t n) const { return d_.node_leaf[n] >= 0; }
 
     // Children of n, in order (empty for a leaf).
     template <class F>
     void for_each_child(int32_t n, F&& f) const {
-        for (int32_t c = n + 1; c < skip[n]; c = skip[c]) f(c);
+        for (int32_t c = n + 1; c < d_.skip[n]; c = d_.skip[c]) f(c);
     }
 
     // The leaf holding the point at octree position k (0 <= k < number of points).
     int32_t leaf_of_point(uint32_t k) const;
 
+    const OctreeParams& params() const { return d_.params; }
+    double scale() const { return d_.scale; }  // input units per octree unit, a power of two
+    Vec3 root_min() const { return d_.root_min; }  // corner of the root cube
+    float root_size() const { return d_.root_size; }
     // Per node (all indexed by node): the cell, the bounding sphere, structure, ranges.
-    OctreeParams params;
-    double scale = 1;  // input units per octree unit, a power of two (build_in_unit_frame)
-    Vec3 root_min;     // corner of the root cube
-    float root_size = 0;
-    std::vector<Sphere> spheres;
-    std::vector<Box> boxes;        // tight content bounds (points and discs), grown for rounding
-    std::vector<WalkNode> walk;    // derived: boxes + skip + node_leaf, packed for the walk
-    std::vector<float> half_size;  // half the cell edge
-    std::vector<int32_t> skip;
-    std::vector<int32_t> parent;  // -1 for the root
-    std::vector<uint8_t> level;
-    std::vector<int32_t> node_leaf;
-    std::vector<uint32_t> point_begin, point_end;
-    std::vector<int32_t> leaf_begin, leaf_end;
+    const std::vector<Sphere>& spheres() const { return d_.spheres; }
+    // Tight content bounds (points and occluder discs), grown for rounding.
+    const std::vector<Box>& boxes() const { return d_.boxes; }
+    const std::vector<float>& half_size() const { return d_.half_size; }  // half the cell edge
+    const std::vector<int32_t>& skip() const { return d_.skip; }  // end of the subtree
+    const std::vector<int32_t>& parent() const { return d_.parent; }  // -1 for the root
+    const std::vector<uint8_t>& level() const { return d_.level; }
+    const std::vector<int32_t>& node_leaf() const { return d_.node_leaf; }  // -1: internal
+    const std::vector<uint32_t>& point_begin() const { return d_.point_begin; }
+    const std::vector<uint32_t>& point_end() const { return d_.point_end; }
+    const std::vector<int32_t>& leaf_begin() const { return d_.leaf_begin; }
+    const std::vector<int32_t>& leaf_end() const { return d_.leaf_end; }
+    // Per leaf: its node, the largest splat radius of its points.
+    const std::vector<int32_t>& leaf_node() const { return d_.leaf_node; }
+    const std::vector<float>& leaf_splat() const { return d_.leaf_splat; }
 
-    // Per leaf.
-    std::vector<int32_t> leaf_node;
-    std::vector<LeafDisc> leaves;
-    std::vector<float> leaf_splat;  // largest splat radius of its points
+    Octree();
+    ~Octree();
+    Octree(const Octree&);
+    Octree(Octree&&) noexcept;
+    Octree& operator=(const Octree&);
+    Octree& operator=(Octree&&) noexcept;
+
+  private:
+    friend struct detail::OctreeAccess;  // the builder, the file reader and tests fill it
+    struct Data {
+        OctreeParams params;
+        double scale = 1;
+        Vec3 root_min;
+        float root_size = 0;
+        std::vector<Sphere> spheres;
+        std::vector<Box> boxes;
+        std::vector<WalkNode> walk;  // derived: boxes + skip + node_leaf, packed for the walk
+        std::vector<float> half_size;
+        std::vector<int32_t> skip;
+        std::vector<int32_t> parent;
+        std::vector<uint8_t> level;
+        std::vector<int32_t> node_leaf;
+        std::vector<uint32_t> point_begin, point_end;
+        std::vector<int32_t> leaf_begin, leaf_end;
+        std::vector<int32_t> leaf_node;
+        std::vector<LeafDisc> leaves;  // what the predicate needs of each leaf
+        std::vector<float> leaf_splat;
+    };
+    Data d_;
 };
 
 }  // namespace vmap

@@ -19,7 +19,7 @@
 #include <span>
 #include <vector>
 
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap {
 

@@ -16,7 +16,7 @@
 
 #include "vmap/camera.h"
 #include "vmap/mesh.h"
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap {
 

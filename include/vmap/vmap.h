@@ -1,168 +1,22 @@
-// The visibility map (paper §3, DESIGN.md "The V-map"): links between octree nodes, each saying
-// that every leaf under one end sees every leaf under the other.
+// The vmap library in one include: point sets and their files, scenes, the octree, the V-map
+// (build, save, load), queries, rendering and global illumination. Validation and the Embree
+// reference (vmap/validate.h, vmap/gi_reference.h) are the optional `validate` component
+// (find_package(vmap COMPONENTS validate), target vmap::validate) and are included apart.
 #pragma once
 
-#include <cstdint>
-#include <span>
-#include <string>
-#include <utility>
-#include <vector>
-
+#include "vmap/camera.h"
+#include "vmap/error.h"
+#include "vmap/gi.h"
+#include "vmap/io.h"
 #include "vmap/mesh.h"
+#include "vmap/normals.h"
 #include "vmap/octree.h"
+#include "vmap/options.h"
 #include "vmap/progress.h"
+#include "vmap/query.h"
+#include "vmap/render.h"
+#include "vmap/scene.h"
+#include "vmap/vec.h"
+#include "vmap/version.h"
 #include "vmap/visibility.h"
-
-namespace vmap {
-
-// std::allocator, except that resize() leaves new elements uninitialised: the link arrays run to
-// gigabytes and are filled in parallel right after they are sized (zeroing them first would be
-// a serial pass over all of that memory).
-template <class T>
-struct UninitAllocator : std::allocator<T> {
-    template <class U>
-    struct rebind {
-        using other = UninitAllocator<U>;
-    };
-    UninitAllocator() = default;
-    template <class U>
-    UninitAllocator(const UninitAllocator<U>&) noexcept {}
-    template <class U>
-    void construct(U* p) noexcept {
-        ::new (static_cast<void*>(p)) U;
-    }
-    template <class U, class... A>
-    void construct(U* p, A&&... a) {
-        ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
-    }
-};
-using LinkTargets = std::vector<int32_t, UninitAllocator<int32_t>>;
-
-struct BuildParams {
-    OctreeParams octree;
-    VisibilityParams visibility;
-    // auto: the GPU when one is usable, else the CPU (the progress callback's first report
-    // and BuildStats::note say why); cuda: the GPU or vmap::Error; cpu.
-    std::string backend = "auto";
-    std::string occluders = "spheres";      // spheres (paper §5.2) | bresenham (the grid walk
-                                            // of [7], CPU only: visibility/bresenham.h)
-    uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
-    int threads = 0;  // CPU threads for the build (0: all cores; the caller's limit, if any)
-    // Called with the leaf pairs done (vmap/progress.h); returning false cancels the build
-    // (vmap::Cancelled). The library itself never prints.
-    ProgressCallback progress;
-    // false: extract and count the links but keep none (BuildStats::links; the map then has no
-    // links). Sizes a V-map too large for host memory, and times the GPU on it.
-    bool keep_links = true;
-    // nodes: node pairs decided at node level where the bounds of visibility/node_pair.h prove
-    // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
-    // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte);
-    // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
-    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (whose node tests run
-    // on the host and whose narrow rectangles waste lanes: 2x slower on the dragon, H200).
-    std::string construction = "auto";
-    // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
-    // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
-    // columns of a row at once).
-    uint64_t walk_pairs = 0;
-};
-
-// Node pairs of the construction at one octree level (the deeper level of the pair's nodes).
-struct ConstructionLevel {
-    uint64_t pairs = 0;      // node pairs met (sibling pairs and the child pairs of splits)
-    uint64_t tested = 0;     // of them, tested at node level
-    uint64_t visible = 0;    // decided all visible (one link, no leaf pair walked)
-    uint64_t invisible = 0;  // decided none visible
-    uint64_t split = 0;      // undecided, split into child pairs
-    uint64_t walked = 0;     // undecided (or too small to test), leaf pairs walked
-    uint64_t leaf_pairs_decided = 0;  // leaf pairs under the decided ones
-    uint64_t leaf_pairs_visible = 0;  // ... of them under the ones decided all visible
-    uint64_t leaf_pairs_walked = 0;
-};
-
-struct BuildStats {
-    WorkCounters work;
-    std::string backend;  // which backend ran, in words
-    std::string note;     // e.g. why the requested backend was not used
-    // What looked wrong with the input, one sentence each: radii estimated because none were
-    // given, normals inconsistent, almost no leaf pairs facing (src/vmap/build_checks.h).
-    std::vector<std::string> warnings;
-    double seconds_octree = 0;
-    double seconds_visibility = 0;  // leaf pairs and link extraction
-    double seconds_total = 0;
-    double seconds_plan = 0;     // listing the node-pair rectangles
-    double seconds_wait = 0;     // host blocked on the backend (GPU busy, or CPU evaluation)
-    double seconds_backend = 0;  // the backend evaluating leaf pairs (GPU: kernel time)
-    double seconds_extract = 0;  // link extraction from the tables
-    double seconds_links = 0;    // merging links into the compact per-node arrays
-    uint64_t links = 0;          // links of the V-map (also when they were not kept)
-    uint64_t batches = 0;
-    uint64_t peak_device_bytes = 0;
-    std::string construction;        // nodes | leaf-pairs
-    uint64_t leaf_pairs = 0;         // all unordered leaf pairs
-    uint64_t leaf_pairs_walked = 0;  // of them, walked by the leaf-pair predicate
-    uint64_t node_pairs_tested = 0;
-    uint64_t shaft_node_tests = 0;          // tree nodes tested against node-pair shafts
-    double seconds_decide = 0;              // node bounds and node-pair tests
-    std::vector<ConstructionLevel> levels;  // indexed by octree level
-    // Per leaf: leaf pairs it takes part in that were walked (for `vmap render --mode decided`).
-    std::vector<uint64_t> leaf_walked;
-};
-
-// Visibility of one point pair, from the V-map.
-enum class PairVisibility { kHidden, kVisible, kSameLeaf };
-
-class VisibilityMap {
-  public:
-    OctreeParams octree_params;
-    VisibilityParams visibility_params;
-    PointSet points;                // in octree order and the octree's frame (positions and
-                                    // radii in input units / octree.scale; render.h's
-                                    // points_in_input_order gives them back in input units)
-    std::vector<uint32_t> order;    // octree position -> input index
-    std::vector<uint32_t> inverse;  // input index -> octree position
-    Octree octree;
-    std::vector<uint64_t> link_offsets;  // per node + 1: node n's links are
-    LinkTargets link_targets;            // link_targets[link_offsets[n] .. link_offsets[n+1]),
-                                         // sorted; every link is stored at both ends
-
-    size_t num_links() const { return link_targets.size() / 2; }
-    // False for a map built with BuildParams::keep_links = false (links counted, not kept):
-    // queries, saving and GI then throw instead of answering "hidden" for everything.
-    bool has_links() const { return link_offsets.size() == size_t(octree.num_nodes()) + 1; }
-    void require_links(const char* what) const;
-    std::span<const int32_t> links(int32_t node) const {
-        return {link_targets.data() + link_offsets[node],
-                link_targets.data() + link_offsets[node + 1]};
-    }
-
-    // Is leaf b covered by a link of leaf a or one of its ancestors? O(height x log degree).
-    bool leaves_visible(int32_t leaf_a, int32_t leaf_b) const;
-    // Point pair by input indices. Throws vmap::Error for an index out of range.
-    PairVisibility query(uint32_t i, uint32_t j) const;
-    // All input indices visible from input point i (paper Fig. 9): the points of every subtree
-    // linked to i's leaf or an ancestor, sorted. Points sharing i's leaf are not included.
-    std::vector<uint32_t> visible_set(uint32_t i) const;
-};
-
-// Builds the octree over `points` (which need normals) and the V-map, in the frame of the
-// cloud's own size (Octree::build_in_unit_frame), so the map is the same whatever unit the
-// input was written in. Points without splat radii get them from estimate_radii
-// (vmap/normals.h); that, normals that look inconsistent, and almost no facing leaf pairs are
-// reported in stats->warnings. Throws vmap::Error naming `source` for bad input or parameters
-// (messages name the BuildParams field), or for backend "cuda" without a usable GPU;
-// vmap::Cancelled when the progress callback returned false.
-VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
-                         const std::string& source = "points");
-
-// Sets the links from a list of unordered node pairs (each once): sorts into both-direction
-// compact arrays. Exposed for the file reader and tests.
-void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs);
-
-// The .vmap file (versioned binary with a checksum; io/vmap_file.cpp). save writes to a
-// temporary name and renames it; load throws vmap::Error for a missing, truncated, corrupt or
-// wrong-version file, naming the file and the section.
-void save_vmap(const std::string& path, const VisibilityMap& vm);
-VisibilityMap load_vmap(const std::string& path);
-
-}  // namespace vmap
+#include "vmap/visibility_map.h"

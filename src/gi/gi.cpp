@@ -33,7 +33,7 @@ double seconds_since(Clock::time_point t0) {
 }
 
 void check_points(const VisibilityMap& vm, const char* who) {
-    const PointSet& ps = vm.points;
+    const PointSet& ps = vm.points();
     if (ps.size() == 0) throw Error(fmt::format("{}: the V-map has no points", who));
     if (!ps.has_normals() || ps.normals.size() != ps.size())
         throw Error(fmt::format("{}: points: normals are required", who));
@@ -47,7 +47,7 @@ void check_points(const VisibilityMap& vm, const char* who) {
     if (!ps.emission.empty() && ps.emission.size() != ps.size())
         throw Error(fmt::format("{}: points: {} emission values for {} points", who,
                                 ps.emission.size(), ps.size()));
-    if (vm.octree.num_nodes() == 0 || vm.link_offsets.size() != size_t(vm.octree.num_nodes()) + 1)
+    if (vm.octree().num_nodes() == 0 || vm.link_offsets().size() != size_t(vm.octree().num_nodes()) + 1)
         throw Error(fmt::format("{}: the V-map has no octree or links", who));
 }
 
@@ -63,10 +63,10 @@ float area_of(const PointSet& ps, size_t i) { return kPi * ps.radii[i] * ps.radi
 // f(i, j, area_i, area_j, kernel).
 template <class F>
 void for_point_pairs(const VisibilityMap& vm, int32_t a, int32_t b, F&& f) {
-    const Octree& t = vm.octree;
-    const PointSet& ps = vm.points;
-    for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
-        for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
+    for (uint32_t i = t.point_begin()[a]; i < t.point_end()[a]; ++i)
+        for (uint32_t j = t.point_begin()[b]; j < t.point_end()[b]; ++j) {
             const float ai = area_of(ps, i), aj = area_of(ps, j);
             const float k =
                 gi_kernel(ps.positions[i], ps.normals[i], ai, ps.positions[j], ps.normals[j], aj);
@@ -83,12 +83,12 @@ struct NodeGeom {
 };
 
 std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
-    const Octree& t = vm.octree;
-    const PointSet& ps = vm.points;
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
     std::vector<NodeGeom> g(t.num_nodes());
     tbb::parallel_for(0, t.num_nodes(), [&](int32_t n) {
         double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
-        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k) {
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
             const double ak = area_of(ps, k);
             const Vec3 p = ps.positions[k], q = ps.normals[k];
             a += ak;
@@ -97,14 +97,14 @@ std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
         }
         NodeGeom& o = g[n];
         o.area = float(a);
-        o.point_area = float(a / std::max<uint32_t>(1, t.point_end[n] - t.point_begin[n]));
+        o.point_area = float(a / std::max<uint32_t>(1, t.point_end()[n] - t.point_begin()[n]));
         if (a > 0) {
             o.center = Vec3{float(c[0] / a), float(c[1] / a), float(c[2] / a)};
             o.normal = Vec3{float(m[0] / a), float(m[1] / a), float(m[2] / a)};
         } else {
-            o.center = (t.boxes[n].lo + t.boxes[n].hi) * 0.5f;
+            o.center = (t.boxes()[n].lo + t.boxes()[n].hi) * 0.5f;
         }
-        o.size = 0.5f * length(t.boxes[n].hi - t.boxes[n].lo);
+        o.size = 0.5f * length(t.boxes()[n].hi - t.boxes()[n].lo);
     });
     return g;
 }
@@ -118,7 +118,7 @@ struct Refiner {
 
     template <class Emit>
     void refine(int32_t a, int32_t b, Emit& emit) const {
-        const Octree& t = vm.octree;
+        const Octree& t = vm.octree();
         const NodeGeom &ga = g[a], &gb = g[b];
         const float d = length(gb.center - ga.center);
         if (d > theta * (ga.size + gb.size)) {
@@ -153,7 +153,7 @@ struct Refiner {
     // Every link once (a < b).
     template <class MakeEmit>
     void run(MakeEmit&& make_emit) const {
-        tbb::parallel_for(tbb::blocked_range<int32_t>(0, vm.octree.num_nodes()), [&](auto r) {
+        tbb::parallel_for(tbb::blocked_range<int32_t>(0, vm.octree().num_nodes()), [&](auto r) {
             auto emit = make_emit();
             for (int32_t a = r.begin(); a < r.end(); ++a)
                 for (int32_t b : vm.links(a))
@@ -183,7 +183,7 @@ struct BlockRefiner {
         double w;
     };
 
-    bool within(int32_t a, int32_t x) const { return x <= a && a < vm.octree.skip[x]; }
+    bool within(int32_t a, int32_t x) const { return x <= a && a < vm.octree().skip()[x]; }
     bool separated(int32_t a, int32_t b) const {
         if (within(a, b) || within(b, a)) return false;
         if (!flat(a) || !flat(b)) return false;
@@ -195,12 +195,12 @@ struct BlockRefiner {
     // than 1 - kFlatness / theta (normals spread) are opened instead (leaves are taken as they
     // are: opening them would pair single points with everything they see).
     bool flat(int32_t a) const {
-        return vm.octree.is_leaf(a) || length(g[a].normal) >= 1.0f - kFlatness / theta;
+        return vm.octree().is_leaf(a) || length(g[a].normal) >= 1.0f - kFlatness / theta;
     }
     static constexpr float kFlatness = 0.05f;
     int32_t child_toward(int32_t a, int32_t x) const {
         int32_t hit = -1;
-        vm.octree.for_each_child(a, [&](int32_t c) {
+        vm.octree().for_each_child(a, [&](int32_t c) {
             if (within(x, c)) hit = c;
         });
         return hit;
@@ -211,7 +211,7 @@ struct BlockRefiner {
     }
 
     void descend(int32_t a, int32_t b, int32_t x, int32_t y, std::vector<Entry>& out) const {
-        const Octree& t = vm.octree;
+        const Octree& t = vm.octree();
         const bool ax = within(a, x), by = within(b, y);
         if (separated(a, b)) {
             // The part of the link inside the block: the finer of the two nodes on each side.
@@ -251,7 +251,7 @@ struct BlockRefiner {
     // end's entries are reduced in link order, then all are sorted by (key, node) and summed
     // in that order.
     std::vector<Entry> run(const ProgressCallback& progress) const {
-        const int32_t N = vm.octree.num_nodes();
+        const int32_t N = vm.octree().num_nodes();
         std::vector<std::vector<Entry>> per(N);
         detail::Progress bar("gi refinement", uint64_t(N), &progress);
         std::mutex bar_mutex;
@@ -312,12 +312,12 @@ struct FinalGather {
     float theta;
 
     Vec3 from_node(Vec3 x, Vec3 n, float a, int32_t L) const {
-        const Octree& t = vm.octree;
+        const Octree& t = vm.octree();
         const NodeGeom& gl = g[L];
         const bool leaf = t.is_leaf(L);
         // Emitters are always gathered point by point: the direct light carries the shadows and
         // most of the power, and the lights are a small share of the points.
-        const bool many = t.point_end[L] - t.point_begin[L] > 1;
+        const bool many = t.point_end()[L] - t.point_begin()[L] > 1;
         if (many && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
             length(gl.center - x) > theta * gl.size) {
             const float k = gi_kernel(x, n, a, gl.center, gl.normal, gl.point_area);
@@ -325,9 +325,9 @@ struct FinalGather {
         }
         Vec3 h{0, 0, 0};
         if (leaf) {
-            const PointSet& ps = vm.points;
+            const PointSet& ps = vm.points();
             const uint64_t base = uint64_t(t.num_nodes());
-            for (uint32_t j = t.point_begin[L]; j < t.point_end[L]; ++j) {
+            for (uint32_t j = t.point_begin()[L]; j < t.point_end()[L]; ++j) {
                 const float aj = area_of(ps, j);
                 const float k = gi_kernel(x, n, a, ps.positions[j], ps.normals[j], aj);
                 if (k > 0) h = h + B[base + j] * (k * aj);
@@ -339,12 +339,12 @@ struct FinalGather {
     }
 
     Vec3 at(uint32_t i) const {
-        const Octree& t = vm.octree;
-        const PointSet& ps = vm.points;
+        const Octree& t = vm.octree();
+        const PointSet& ps = vm.points();
         const Vec3 x = ps.positions[i], n = ps.normals[i];
         const float a = area_of(ps, i);
         Vec3 h{0, 0, 0};
-        for (int32_t A = t.leaf_node[t.leaf_of_point(i)]; A >= 0; A = t.parent[A])
+        for (int32_t A = t.leaf_node()[t.leaf_of_point(i)]; A >= 0; A = t.parent()[A])
             for (int32_t L : vm.links(A)) h = h + from_node(x, n, a, L);
         const Vec3 E = emission_of(ps, i), rho = albedo_of(ps, i);
         return Vec3{E.x + rho.x * h.x, E.y + rho.y * h.y, E.z + rho.z * h.z};
@@ -396,8 +396,8 @@ struct RadiositySolver::Impl {
 
 void RadiositySolver::Impl::setup() {
     const auto t0 = Clock::now();
-    const Octree& t = vm.octree;
-    const PointSet& ps = vm.points;
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
     const int32_t N = t.num_nodes();
     const uint32_t P = uint32_t(ps.size());
     const uint64_t num_el = uint64_t(N) + P;
@@ -410,8 +410,8 @@ void RadiositySolver::Impl::setup() {
         area[i] = area_of(ps, i);
     });
     for (int32_t l = 0; l < t.num_leaves(); ++l) {
-        const int32_t n = t.leaf_node[l];
-        for (uint32_t k = t.point_begin[n]; k < t.point_end[n]; ++k) point_leaf[k] = n;
+        const int32_t n = t.leaf_node()[l];
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) point_leaf[k] = n;
     }
     inv_area.resize(N);
     node_area.resize(N);
@@ -494,9 +494,9 @@ void RadiositySolver::Impl::setup() {
     view.albedo = albedo.data();
     view.area = area.data();
     view.point_leaf = point_leaf.data();
-    view.parent = t.parent.data();
-    view.point_begin = t.point_begin.data();
-    view.point_end = t.point_end.data();
+    view.parent = t.parent().data();
+    view.point_begin = t.point_begin().data();
+    view.point_end = t.point_end().data();
     view.inv_area = inv_area.data();
     view.B = B.data();
     view.G = G.data();
@@ -641,8 +641,8 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
                                         std::vector<double>* seconds_per_bounce, uint64_t* pairs) {
     if (bounces < 0) throw Error(fmt::format("gi: bounces: {} (must be >= 0)", bounces));
     check_points(vm, "gi");
-    const Octree& t = vm.octree;
-    const PointSet& ps = vm.points;
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
     const uint32_t P = uint32_t(ps.size());
     std::vector<Vec3> B(P), next(P);
     for (uint32_t i = 0; i < P; ++i) B[i] = emission_of(ps, i);
@@ -651,8 +651,8 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
             tbb::blocked_range<uint32_t>(0, P), uint64_t(0),
             [&](auto r, uint64_t acc) {
                 for (uint32_t i = r.begin(); i < r.end(); ++i)
-                    for (int32_t A = t.leaf_node[t.leaf_of_point(i)]; A >= 0; A = t.parent[A])
-                        for (int32_t L : vm.links(A)) acc += t.point_end[L] - t.point_begin[L];
+                    for (int32_t A = t.leaf_node()[t.leaf_of_point(i)]; A >= 0; A = t.parent()[A])
+                        for (int32_t L : vm.links(A)) acc += t.point_end()[L] - t.point_begin()[L];
                 return acc;
             },
             std::plus<>());
@@ -664,9 +664,9 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
                 const Vec3 pi = ps.positions[i], ni = ps.normals[i];
                 const float ai = area_of(ps, i);
                 Vec3 h{0, 0, 0};
-                for (int32_t A = t.leaf_node[t.leaf_of_point(i)]; A >= 0; A = t.parent[A])
+                for (int32_t A = t.leaf_node()[t.leaf_of_point(i)]; A >= 0; A = t.parent()[A])
                     for (int32_t L : vm.links(A))
-                        for (uint32_t j = t.point_begin[L]; j < t.point_end[L]; ++j) {
+                        for (uint32_t j = t.point_begin()[L]; j < t.point_end()[L]; ++j) {
                             const float aj = area_of(ps, j);
                             const float k =
                                 gi_kernel(pi, ni, ai, ps.positions[j], ps.normals[j], aj);
@@ -685,11 +685,11 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
 
 Vec3 total_power(const VisibilityMap& vm, const std::vector<Vec3>& radiosity) {
     double s[3] = {0, 0, 0};
-    for (size_t i = 0; i < radiosity.size() && i < vm.points.size(); ++i) {
-        const double a = area_of(vm.points, i);
+    for (size_t i = 0; i < radiosity.size() && i < vm.points().size(); ++i) {
+        const double a = area_of(vm.points(), i);
         s[0] += a * radiosity[i].x, s[1] += a * radiosity[i].y, s[2] += a * radiosity[i].z;
     }
-    const double unit2 = vm.octree.scale * vm.octree.scale;  // areas back in input units
+    const double unit2 = vm.octree().scale() * vm.octree().scale();  // areas back in input units
     return Vec3{float(s[0] * unit2), float(s[1] * unit2), float(s[2] * unit2)};
 }
 
@@ -708,7 +708,7 @@ double relative_rms(const std::vector<Vec3>& a, const std::vector<Vec3>& b) {
 float tone_map(const VisibilityMap& vm, const std::vector<Vec3>& radiosity, float exposure,
                std::vector<Vec3>& colors) {
     if (!std::isfinite(exposure)) throw Error(fmt::format("gi: exposure: {}", exposure));
-    const PointSet& ps = vm.points;
+    const PointSet& ps = vm.points();
     if (!(exposure > 0)) {
         std::vector<float> lum;
         for (size_t i = 0; i < radiosity.size(); ++i) {

@@ -25,6 +25,7 @@
 #include <cerrno>
 #include <cmath>
 #include <cstring>
+#include <span>
 #include <deque>
 #include <filesystem>
 #include <fstream>
@@ -32,7 +33,8 @@
 
 #include "io/atomic_file.h"
 #include "vmap/error.h"
-#include "vmap/vmap.h"
+#include "octree/records.h"
+#include "vmap/map_access.h"
 
 namespace vmap {
 namespace {
@@ -147,6 +149,10 @@ struct Writer {
     }
     template <class T, class A>
     void vec(const std::vector<T, A>& v) {
+        vec(std::span<const T>(v));
+    }
+    template <class T>
+    void vec(std::span<const T> v) {
         static_assert(std::is_trivially_copyable_v<T>);
         if (v.empty()) return;
         close_small();
@@ -199,15 +205,15 @@ struct Reader {
 void save_vmap(const std::string& path, const VisibilityMap& vm) {
     vm.require_links(path.c_str());
     Writer w;
-    const Octree& t = vm.octree;
-    const PointSet& ps = vm.points;
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
     Writer::Mark s = w.begin("PARM");
-    w.put(int32_t(vm.octree_params.max_height));
-    w.put(int32_t(vm.octree_params.leaf_points));
-    w.put(int32_t(vm.visibility_params.K));
-    w.put(vm.visibility_params.eps);
-    w.put(vm.visibility_params.facing_tol);
-    w.put(vm.visibility_params.parallel_tol);
+    w.put(int32_t(vm.octree_params().max_height));
+    w.put(int32_t(vm.octree_params().leaf_points));
+    w.put(int32_t(vm.visibility_params().K));
+    w.put(vm.visibility_params().eps);
+    w.put(vm.visibility_params().facing_tol);
+    w.put(vm.visibility_params().parallel_tol);
     w.end(s);
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
@@ -222,22 +228,22 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     if (mask & 4) w.vec(ps.emission);
     w.end(s);
     s = w.begin("ORDR");
-    w.vec(vm.order);
+    w.vec(vm.order());
     w.end(s);
     s = w.begin("TREE");
     w.put(int32_t(t.num_nodes()));
     w.put(int32_t(t.num_leaves()));
-    w.put(t.root_min);
-    w.put(t.root_size);
-    w.vec(t.spheres), w.vec(t.boxes), w.vec(t.half_size), w.vec(t.skip), w.vec(t.parent),
-        w.vec(t.level);
-    w.vec(t.node_leaf), w.vec(t.point_begin), w.vec(t.point_end), w.vec(t.leaf_begin);
-    w.vec(t.leaf_end), w.vec(t.leaf_node), w.vec(t.leaves), w.vec(t.leaf_splat);
-    w.put(t.scale);
+    w.put(t.root_min());
+    w.put(t.root_size());
+    w.vec(t.spheres()), w.vec(t.boxes()), w.vec(t.half_size()), w.vec(t.skip()), w.vec(t.parent()),
+        w.vec(t.level());
+    w.vec(t.node_leaf()), w.vec(t.point_begin()), w.vec(t.point_end()), w.vec(t.leaf_begin());
+    w.vec(t.leaf_end()), w.vec(t.leaf_node()), w.vec(leaf_discs(t)), w.vec(t.leaf_splat());
+    w.put(t.scale());
     w.end(s);
     s = w.begin("LINK");
-    w.vec(vm.link_offsets);
-    w.vec(vm.link_targets);
+    w.vec(vm.link_offsets());
+    w.vec(vm.link_targets());
     w.end(s);
 
     w.finish();
@@ -313,6 +319,7 @@ VisibilityMap load_vmap(const std::string& path) {
         throw Error(fmt::format("{}: checksum mismatch: the file is corrupt", path));
 
     VisibilityMap vm;
+    detail::MapData& d = detail::MapAccess::data(vm);
     Reader r{data.data() + kHeader, data.data() + size, path, "header"};
     auto section = [&](const char* tag) {
         r.section = tag;
@@ -331,18 +338,18 @@ VisibilityMap load_vmap(const std::string& path) {
     };
 
     const uint8_t* e = section("PARM");
-    vm.octree_params.max_height = r.get<int32_t>();
-    vm.octree_params.leaf_points = r.get<int32_t>();
-    vm.visibility_params.K = r.get<int32_t>();
-    vm.visibility_params.eps = r.get<float>();
-    vm.visibility_params.facing_tol = r.get<float>();
-    vm.visibility_params.parallel_tol = r.get<float>();
+    d.octree_params.max_height = r.get<int32_t>();
+    d.octree_params.leaf_points = r.get<int32_t>();
+    d.visibility_params.K = r.get<int32_t>();
+    d.visibility_params.eps = r.get<float>();
+    d.visibility_params.facing_tol = r.get<float>();
+    d.visibility_params.parallel_tol = r.get<float>();
     finish(e);
 
     e = section("PNTS");
     const uint64_t n = r.get<uint64_t>();
     const uint8_t mask = r.get<uint8_t>();
-    PointSet& ps = vm.points;
+    PointSet& ps = d.points;
     r.vec(ps.positions, n);
     r.vec(ps.normals, n);
     if (mask & 1) r.vec(ps.colors, n);
@@ -351,19 +358,19 @@ VisibilityMap load_vmap(const std::string& path) {
     finish(e);
 
     e = section("ORDR");
-    r.vec(vm.order, n);
+    r.vec(d.order, n);
     finish(e);
-    vm.inverse.assign(n, UINT32_MAX);
+    d.inverse.assign(n, UINT32_MAX);
     for (uint32_t k = 0; k < n; ++k) {
-        if (vm.order[k] >= n || vm.inverse[vm.order[k]] != UINT32_MAX) r.fail("not a permutation");
-        vm.inverse[vm.order[k]] = k;
+        if (d.order[k] >= n || d.inverse[d.order[k]] != UINT32_MAX) r.fail("not a permutation");
+        d.inverse[d.order[k]] = k;
     }
 
     e = section("TREE");
-    Octree& t = vm.octree;
+    detail::OctreeData& t = detail::OctreeAccess::data(d.octree);
     const int32_t nn = r.get<int32_t>(), nl = r.get<int32_t>();
     if (nn < 1 || nl < 1 || nl > nn) r.fail(fmt::format("bad counts: {} nodes, {} leaves", nn, nl));
-    t.params = vm.octree_params;
+    t.params = d.octree_params;
     t.root_min = r.get<Vec3>();
     t.root_size = r.get<float>();
     r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn),
@@ -393,15 +400,20 @@ VisibilityMap load_vmap(const std::string& path) {
         if (t.leaf_node[l] < 0 || t.leaf_node[l] >= nn || t.node_leaf[t.leaf_node[l]] != l)
             r.fail(fmt::format("leaf {} is inconsistent", l));
 
-    t.pack_walk();
+    detail::OctreeAccess::pack_walk(d.octree);
 
     e = section("LINK");
-    r.vec(vm.link_offsets, uint64_t(nn) + 1);
-    if (vm.link_offsets[0] != 0) r.fail("bad offsets");
+    r.vec(d.link_offsets, uint64_t(nn) + 1);
+    if (d.link_offsets[0] != 0) r.fail("bad offsets");
     for (int32_t i = 0; i < nn; ++i)
-        if (vm.link_offsets[i + 1] < vm.link_offsets[i]) r.fail("bad offsets");
-    r.vec(vm.link_targets, vm.link_offsets[nn]);
-    for (int32_t x : vm.link_targets)
+        if (d.link_offsets[i + 1] < d.link_offsets[i]) r.fail("bad offsets");
+    const uint64_t num_targets = d.link_offsets[nn];
+    if (num_targets > uint64_t(r.end - r.p) / sizeof(int32_t))
+        r.fail(fmt::format("truncated: {} items expected", num_targets));
+    int32_t* targets = detail::allocate_link_targets(d, num_targets);
+    copy_bytes(reinterpret_cast<uint8_t*>(targets), r.p, num_targets * sizeof(int32_t));
+    r.p += num_targets * sizeof(int32_t);
+    for (int32_t x : vm.link_targets())
         if (x < 0 || x >= nn) r.fail("link target out of range");
     finish(e);
     if (r.p != r.end) throw Error(fmt::format("{}: trailing bytes after the last section", path));

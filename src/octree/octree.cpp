@@ -1,8 +1,7 @@
-// Adaptive octree construction (DESIGN.md "Octree", paper §3 and §5.2).
+// Adaptive octree construction (paper §3 and §5.2; docs/design.md).
 #include "vmap/octree.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
 #include <algorithm>
@@ -10,6 +9,8 @@
 #include <numeric>
 
 #include "geom/morton.h"
+#include "octree/records.h"
+#include "util/parallel.h"
 #include "octree/delta_rule.h"
 #include "vmap/error.h"
 
@@ -22,7 +23,9 @@ struct Builder {
     const PointSet& pts;
     const std::vector<uint64_t>& codes;  // sorted, aligned with pts
     const OctreeParams& params;
-    Octree& t;
+    detail::OctreeData& t;
+
+    int32_t num_leaves() const { return static_cast<int32_t>(t.leaf_node.size()); }
 
     int32_t build(int level, uint32_t b, uint32_t e, Vec3 cell_min, float size, int32_t par) {
         const int32_t n = static_cast<int32_t>(t.skip.size());
@@ -35,7 +38,7 @@ struct Builder {
         t.node_leaf.push_back(-1);
         t.point_begin.push_back(b);
         t.point_end.push_back(e);
-        t.leaf_begin.push_back(t.num_leaves());
+        t.leaf_begin.push_back(num_leaves());
         t.leaf_end.push_back(0);
 
         if (e - b > static_cast<uint32_t>(params.leaf_points) && level < params.max_height) {
@@ -54,11 +57,11 @@ struct Builder {
                 lo = hi;
             }
         } else {
-            t.node_leaf[n] = t.num_leaves();
+            t.node_leaf[n] = num_leaves();
             t.leaf_node.push_back(n);
         }
         t.skip[n] = static_cast<int32_t>(t.skip.size());
-        t.leaf_end[n] = t.num_leaves();
+        t.leaf_end[n] = num_leaves();
         return n;
     }
 };
@@ -84,12 +87,14 @@ Octree Octree::build_in_unit_frame(PointSet& points, const OctreeParams& params,
     for (Vec3& p : points.positions) p = {down(p.x), down(p.y), down(p.z)};
     for (float& r : points.radii) r = down(r);
     Octree t = build(points, params, order, source);
-    t.scale = std::ldexp(1.0, k);
+    detail::OctreeAccess::data(t).scale = std::ldexp(1.0, k);
     return t;
 }
 
-Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
-                     const std::string& source) {
+namespace {
+
+// Throws for parameters out of range or points the octree cannot hold.
+void check_input(const PointSet& points, const OctreeParams& params, const std::string& source) {
     if (params.max_height < 1 || params.max_height > kMortonBits)
         throw Error(fmt::format("{}: max_height {} out of range (1..{})", source, params.max_height,
                                 kMortonBits));
@@ -108,10 +113,18 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     if (!points.emission.empty() && points.emission.size() != n)
         throw Error(
             fmt::format("{}: {} emission values for {} points", source, points.emission.size(), n));
+}
 
-    double maxabs = 0;
+struct Extent {
     Vec3 lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
-    for (size_t i = 0; i < n; ++i) {
+    double maxabs = 0;  // largest |coordinate|
+};
+
+// The bounds of the points; normalises the normals. Throws for non-finite coordinates and
+// zero or non-finite normals or radii.
+Extent check_points(PointSet& points, const std::string& source) {
+    Extent x;
+    for (size_t i = 0; i < points.size(); ++i) {
         const Vec3 p = points.positions[i];
         if (!is_finite(p))
             throw Error(fmt::format("{}: point {}: non-finite coordinate ({}, {}, {})", source, i,
@@ -125,16 +138,19 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
         if (!points.radii.empty() && !(points.radii[i] >= 0 && std::isfinite(points.radii[i])))
             throw Error(fmt::format("{}: point {}: splat radius {} is negative or not finite",
                                     source, i, points.radii[i]));
-        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-        maxabs = std::max(
-            {maxabs, (double)std::fabs(p.x), (double)std::fabs(p.y), (double)std::fabs(p.z)});
+        x.lo = {std::min(x.lo.x, p.x), std::min(x.lo.y, p.y), std::min(x.lo.z, p.z)};
+        x.hi = {std::max(x.hi.x, p.x), std::max(x.hi.y, p.y), std::max(x.hi.z, p.z)};
+        x.maxabs = std::max(
+            {x.maxabs, (double)std::fabs(p.x), (double)std::fabs(p.y), (double)std::fabs(p.z)});
     }
+    return x;
+}
 
-    Octree t;
-    t.params = params;
-    // The root is the bounding cube, padded by 0.1% so no point lies on its far faces.
+// The root cell: the bounding cube, padded by 0.1% so no point lies on its far faces. Sets
+// root_min and root_size.
+void place_root(detail::OctreeData& t, const Extent& x, const std::string& source) {
     // The extent in double: float coordinates near +-3e38 can span more than a float holds.
+    const Vec3 lo = x.lo, hi = x.hi;
     const double dext = std::max({double(hi.x) - lo.x, double(hi.y) - lo.y, double(hi.z) - lo.z});
     if (!(dext * 1.001 < 3.0e38))
         throw Error(
@@ -142,24 +158,29 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
                         "rescale the coordinates",
                         source, dext));
     float extent = float(dext);
-    if (!(extent > 0)) extent = std::max(1e-3f, static_cast<float>(maxabs) * 1e-3f);
+    if (!(extent > 0)) extent = std::max(1e-3f, static_cast<float>(x.maxabs) * 1e-3f);
     const float size = extent * 1.001f;
     const Vec3 mid = (lo + hi) * 0.5f;
     t.root_min = mid - Vec3{size * 0.5f, size * 0.5f, size * 0.5f};
     t.root_size = size;
+}
 
-    // Morton order: sort by 63-bit code, ties by input index (deterministic).
+// Sorts the points into Morton order (63-bit codes, ties by input index: deterministic);
+// returns the sorted codes and sets order[k] to the input index of the k-th point.
+std::vector<uint64_t> morton_sort(PointSet& points, Vec3 root_min, float size,
+                                  std::vector<uint32_t>& order) {
+    const size_t n = points.size();
     std::vector<uint64_t> code(n);
     const double scale = static_cast<double>(1u << kMortonBits) / size;
-    tbb::parallel_for(size_t(0), n, [&](size_t i) {
+    parallel_for(n, [&](size_t i) {
         auto q = [&](float v, float m) {
             const double c = std::floor((static_cast<double>(v) - m) * scale);
             return static_cast<uint64_t>(std::clamp(c, 0.0, double((1u << kMortonBits) - 1)));
         };
         const Vec3 p = points.positions[i];
-        code[i] = detail::spread_bits(q(p.x, t.root_min.x)) |
-                  detail::spread_bits(q(p.y, t.root_min.y)) << 1 |
-                  detail::spread_bits(q(p.z, t.root_min.z)) << 2;
+        code[i] = detail::spread_bits(q(p.x, root_min.x)) |
+                  detail::spread_bits(q(p.y, root_min.y)) << 1 |
+                  detail::spread_bits(q(p.z, root_min.z)) << 2;
     });
     order.resize(n);
     std::iota(order.begin(), order.end(), 0u);
@@ -176,20 +197,18 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
     permute(points.normals);
     permute(points.colors);
     permute(points.radii);
-    permute(points.emission);  // emission belongs to its point like the colour (was left behind)
+    permute(points.emission);
     permute(code);
+    return code;
+}
 
-    Builder{points, code, params, t}.build(0, 0, static_cast<uint32_t>(n), t.root_min, size, -1);
-
-    // Leaf statistics (DESIGN.md: centroid, normal, Delta, splat radius, bounding sphere).
-    // Conservative slack on every sphere: the float segment-sphere test errs by a few ulps of
-    // the coordinates' magnitude, so spheres grow by 8 ulps of (|coordinates| + root size).
-    const float slack = static_cast<float>((maxabs + size) * 1e-6);
-    const int32_t L = t.num_leaves();
+// Per leaf: the centroid and mean normal of its points (flagged when they cancel out) and the
+// largest splat radius. Delta is left to apply_delta_rule.
+void leaf_means(detail::OctreeData& t, const PointSet& points) {
+    const int32_t L = static_cast<int32_t>(t.leaf_node.size());
     t.leaves.resize(L);
-    t.boxes.resize(t.num_nodes());
     t.leaf_splat.resize(L);
-    tbb::parallel_for(int32_t(0), L, [&](int32_t l) {
+    parallel_for(L, [&](int32_t l) {
         const int32_t nd = t.leaf_node[l];
         const uint32_t b = t.point_begin[nd], e = t.point_end[nd];
         double cx = 0, cy = 0, cz = 0, nx = 0, ny = 0, nz = 0;
@@ -213,54 +232,94 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
             const double s = 1.0 / (nlen * cnt);
             d.normal = {float(nx * s), float(ny * s), float(nz * s)};
         }
-        float far2 = 0, rad2 = 0;
-        const Vec3 c = t.spheres[nd].center;
-        for (uint32_t k = b; k < e; ++k) {
-            far2 = std::max(far2, length2(points.positions[k] - d.centroid));
-            rad2 = std::max(rad2, length2(points.positions[k] - c));
-        }
-        // Delta never below the splat radius (times a floor, octree/delta_rule.h), so a
-        // one-point leaf still occludes.
-        d.delta = std::max(std::sqrt(far2), detail::kDeltaSplatFloor * splat);
         t.leaves[l] = d;
         t.leaf_splat[l] = splat;
-        // The box encloses the points and the disc: along axis i a disc of radius Delta and
-        // normal n reaches Delta sqrt(1 - n_i^2) from its centre (the full Delta when flagged).
-        Box bx{d.centroid, d.centroid};
-        for (uint32_t k = b; k < e; ++k) {
-            const Vec3 q = points.positions[k];
-            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
-            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
-        }
-        bx = grow_by_disc(bx, d);
-        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
-        // The sphere encloses the points and the occluder disc (centroid, normal, Delta).
+    });
+}
+
+// The bounding spheres about the cell centres: a leaf's encloses its points and its occluder
+// disc, an internal node's every child sphere. DEVIATION from paper §5.2, which takes the plain
+// maximum of the children's radii and so does not bound them.
+void bounding_spheres(Octree& tree, const PointSet& points, float slack) {
+    detail::OctreeData& t = detail::OctreeAccess::data(tree);
+    parallel_for(tree.num_leaves(), [&](int32_t l) {
+        const int32_t nd = t.leaf_node[l];
+        const LeafDisc& d = t.leaves[l];
+        const Vec3 c = t.spheres[nd].center;
+        float rad2 = 0;
+        for (uint32_t k = t.point_begin[nd]; k < t.point_end[nd]; ++k)
+            rad2 = std::max(rad2, length2(points.positions[k] - c));
         t.spheres[nd].radius =
             std::max(std::sqrt(rad2), length(d.centroid - c) + d.delta) * 1.00001f + slack;
     });
-    // Internal nodes, children first (they follow their parent in preorder): the sphere about
-    // the cell centre that encloses every child sphere. DEVIATION from paper §5.2, which takes
-    // the plain maximum of the children's radii and so does not bound them.
-    for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
-        if (t.is_leaf(nd)) continue;
+    for (int32_t nd = tree.num_nodes() - 1; nd >= 0; --nd) {
+        if (tree.is_leaf(nd)) continue;
         float r = 0;
-        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
-        t.for_each_child(nd, [&](int32_t c) {
-            bx = merge(bx, t.boxes[c]);
+        tree.for_each_child(nd, [&](int32_t c) {
             r = std::max(r,
                          length(t.spheres[c].center - t.spheres[nd].center) + t.spheres[c].radius);
         });
         t.spheres[nd].radius = r * 1.00001f + slack;
-        t.boxes[nd] = bx;
     }
-    t.pack_walk();
-    return t;
 }
 
-void Octree::pack_walk() {
-    walk.resize(skip.size());
-    for (size_t n = 0; n < skip.size(); ++n)
-        walk[n] = WalkNode{boxes[n].lo, skip[n], boxes[n].hi, node_leaf[n]};
+}  // namespace
+
+Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<uint32_t>& order,
+                     const std::string& source) {
+    check_input(points, params, source);
+    const Extent extent = check_points(points, source);
+    Octree tree;
+    Data& t = tree.d_;
+    t.params = params;
+    place_root(t, extent, source);
+    const std::vector<uint64_t> code = morton_sort(points, t.root_min, t.root_size, order);
+    Builder{points, code, params, t}.build(0, 0, static_cast<uint32_t>(points.size()),
+                                           t.root_min, t.root_size, -1);
+    leaf_means(t, points);
+    const float slack = detail::content_slack(extent.maxabs, t.root_size);
+    detail::apply_delta_rule(tree, points, 1.f, detail::kDeltaSplatFloor, slack);
+    bounding_spheres(tree, points, slack);
+    return tree;
+}
+
+float detail::content_slack(double maxabs, float root_size) {
+    return static_cast<float>((maxabs + root_size) * 1e-6);
+}
+
+void detail::apply_delta_rule(Octree& tree, const PointSet& pts, float scale, float floor,
+                              float slack) {
+    OctreeData& t = OctreeAccess::data(tree);
+    t.boxes.resize(t.skip.size());
+    parallel_for(tree.num_leaves(), [&](int32_t l) {
+        const int32_t nd = t.leaf_node[l];
+        LeafDisc& d = t.leaves[l];
+        float far2 = 0;
+        Box bx{d.centroid, d.centroid};
+        for (uint32_t k = t.point_begin[nd]; k < t.point_end[nd]; ++k) {
+            const Vec3 q = pts.positions[k];
+            far2 = std::max(far2, length2(q - d.centroid));
+            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
+            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
+        }
+        d.delta = scale * std::max(std::sqrt(far2), floor * t.leaf_splat[l]);
+        bx = grow_by_disc(bx, d);
+        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
+    });
+    for (int32_t nd = tree.num_nodes() - 1; nd >= 0; --nd) {
+        if (tree.is_leaf(nd)) continue;
+        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
+        tree.for_each_child(nd, [&](int32_t c) { bx = merge(bx, t.boxes[c]); });
+        t.boxes[nd] = bx;
+    }
+    OctreeAccess::pack_walk(tree);
+}
+
+void detail::OctreeAccess::pack_walk(Octree& tree) {
+    OctreeData& t = tree.d_;
+    t.walk.resize(t.skip.size());
+    for (size_t n = 0; n < t.skip.size(); ++n)
+        t.walk[n] = WalkNode{t.boxes[n].lo, t.skip[n], t.boxes[n].hi, t.node_leaf[n]};
 }
 
 Box grow_by_disc(Box bx, const LeafDisc& d) {
@@ -274,13 +333,16 @@ Box grow_by_disc(Box bx, const LeafDisc& d) {
     return bx;
 }
 
-OctreeView Octree::view() const {
-    return OctreeView{walk.data(), leaves.data(), num_nodes(), num_leaves()};
-}
+Octree::Octree() = default;
+Octree::~Octree() = default;
+Octree::Octree(const Octree&) = default;
+Octree::Octree(Octree&&) noexcept = default;
+Octree& Octree::operator=(const Octree&) = default;
+Octree& Octree::operator=(Octree&&) noexcept = default;
 
 int Octree::height() const {
     int h = 0;
-    for (int32_t l : leaf_node) h = std::max(h, int(level[l]));
+    for (int32_t l : d_.leaf_node) h = std::max(h, int(d_.level[l]));
     return h;
 }
 
@@ -289,7 +351,7 @@ int32_t Octree::leaf_of_point(uint32_t k) const {
     int32_t lo = 0, hi = num_leaves();
     while (hi - lo > 1) {
         const int32_t mid = (lo + hi) / 2;
-        if (point_begin[leaf_node[mid]] <= k)
+        if (d_.point_begin[d_.leaf_node[mid]] <= k)
             lo = mid;
         else
             hi = mid;

@@ -13,16 +13,16 @@ void query_pairs(const VisibilityMap& vm, std::span<const uint32_t> pairs, std::
     if (pairs.size() % 2 != 0 || out.size() != pairs.size() / 2)
         throw Error(fmt::format("query_pairs: {} ids for {} answers (expected two ids per answer)",
                                 pairs.size(), out.size()));
-    const size_t n = vm.order.size();
+    const size_t n = vm.order().size();
     for (size_t k = 0; k < pairs.size(); ++k)
         if (pairs[k] >= n)
             throw Error(fmt::format("pair {}: point id {} out of range (the V-map has {} points)",
                                     k / 2, pairs[k], n));
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     tbb::parallel_for(tbb::blocked_range<size_t>(0, out.size(), 4096), [&](const auto& r) {
         for (size_t k = r.begin(); k < r.end(); ++k) {
-            const int32_t la = t.leaf_of_point(vm.inverse[pairs[2 * k]]);
-            const int32_t lb = t.leaf_of_point(vm.inverse[pairs[2 * k + 1]]);
+            const int32_t la = t.leaf_of_point(vm.inverse()[pairs[2 * k]]);
+            const int32_t lb = t.leaf_of_point(vm.inverse()[pairs[2 * k + 1]]);
             out[k] = la == lb ? uint8_t(PairVisibility::kSameLeaf)
                               : uint8_t(vm.leaves_visible(la, lb) ? PairVisibility::kVisible
                                                                   : PairVisibility::kHidden);
@@ -33,9 +33,9 @@ void query_pairs(const VisibilityMap& vm, std::span<const uint32_t> pairs, std::
 VisibleSets visible_sets(const VisibilityMap& vm, std::span<const uint32_t> ids) {
     std::vector<std::vector<uint32_t>> sets(ids.size());
     for (uint32_t i : ids)
-        if (i >= vm.order.size())
+        if (i >= vm.order().size())
             throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)", i,
-                                    vm.order.size()));
+                                    vm.order().size()));
     tbb::parallel_for(size_t(0), ids.size(), [&](size_t k) { sets[k] = vm.visible_set(ids[k]); });
     VisibleSets r;
     r.offsets.resize(ids.size() + 1, 0);

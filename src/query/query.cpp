@@ -1,21 +1,21 @@
-// Queries answered from the V-map (DESIGN.md "Queries").
+// Point-pair queries and visible sets, answered from the V-map (paper §3).
 #include <fmt/format.h>
 
 #include <algorithm>
 
 #include "vmap/error.h"
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap {
 
 bool VisibilityMap::leaves_visible(int32_t leaf_a, int32_t leaf_b) const {
-    const int32_t nb = octree.leaf_node[leaf_b];
+    const int32_t nb = d_.octree.leaf_node()[leaf_b];
     // Walk a's ancestors; the targets of one node are disjoint subtrees sorted by preorder
     // index, so the only candidate ancestor of b among them is the last target <= nb.
-    for (int32_t A = octree.leaf_node[leaf_a]; A >= 0; A = octree.parent[A]) {
+    for (int32_t A = d_.octree.leaf_node()[leaf_a]; A >= 0; A = d_.octree.parent()[A]) {
         const auto ls = links(A);
         auto it = std::upper_bound(ls.begin(), ls.end(), nb);
-        if (it != ls.begin() && nb < octree.skip[*(it - 1)]) return true;
+        if (it != ls.begin() && nb < d_.octree.skip()[*(it - 1)]) return true;
     }
     return false;
 }
@@ -28,27 +28,27 @@ void VisibilityMap::require_links(const char* what) const {
 
 PairVisibility VisibilityMap::query(uint32_t i, uint32_t j) const {
     require_links("query");
-    const size_t n = order.size();
+    const size_t n = d_.order.size();
     if (i >= n || j >= n)
         throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)",
                                 std::max(i, j), n));
-    const int32_t la = octree.leaf_of_point(inverse[i]);
-    const int32_t lb = octree.leaf_of_point(inverse[j]);
+    const int32_t la = d_.octree.leaf_of_point(d_.inverse[i]);
+    const int32_t lb = d_.octree.leaf_of_point(d_.inverse[j]);
     if (la == lb) return PairVisibility::kSameLeaf;
     return leaves_visible(la, lb) ? PairVisibility::kVisible : PairVisibility::kHidden;
 }
 
 std::vector<uint32_t> VisibilityMap::visible_set(uint32_t i) const {
     require_links("query");
-    if (i >= order.size())
+    if (i >= d_.order.size())
         throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)", i,
-                                order.size()));
+                                d_.order.size()));
     std::vector<uint32_t> out;
-    for (int32_t A = octree.leaf_node[octree.leaf_of_point(inverse[i])]; A >= 0;
-         A = octree.parent[A]) {
+    for (int32_t A = d_.octree.leaf_node()[d_.octree.leaf_of_point(d_.inverse[i])]; A >= 0;
+         A = d_.octree.parent()[A]) {
         for (int32_t B : links(A))
-            for (uint32_t k = octree.point_begin[B]; k < octree.point_end[B]; ++k)
-                out.push_back(order[k]);
+            for (uint32_t k = d_.octree.point_begin()[B]; k < d_.octree.point_end()[B]; ++k)
+                out.push_back(d_.order[k]);
     }
     std::sort(out.begin(), out.end());
     return out;

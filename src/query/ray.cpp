@@ -20,20 +20,20 @@ void check(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
     vm.require_links("ray");
     if (!(scale > 0 && scale <= 100))
         throw Error(fmt::format("ray: splat scale {} out of range (0, 100]", scale));
-    const size_t n = vm.points.size();
+    const size_t n = vm.points().size();
     if (from >= n)
         throw Error(
             fmt::format("ray: point id {} out of range (the V-map has {} points)", from, n));
     if (!is_finite(dir) || (dir.x == 0 && dir.y == 0 && dir.z == 0))
         throw Error("ray: the direction must be finite and non-zero");
-    if (!vm.points.has_normals() || !vm.points.has_radii())
+    if (!vm.points().has_normals() || !vm.points().has_radii())
         throw Error("ray: the V-map's points have no normals or splat radii");
 }
 
 Ray make_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
     Ray r;
     r.scale = scale;
-    r.o = vm.points.positions[vm.inverse[from]];
+    r.o = vm.points().positions[vm.inverse()[from]];
     // Normalised in double: the length of a very long or very short float vector over- or
     // underflows in float.
     const double dx = dir.x, dy = dir.y, dz = dir.z, l = std::sqrt(dx * dx + dy * dy + dz * dz);
@@ -45,13 +45,13 @@ Ray make_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, float scale) {
 // Two-sided disc test for the point at octree position k; updates best (t, k).
 inline void hit_disc(const VisibilityMap& vm, const Ray& r, uint32_t k, float& best_t,
                      int64_t& best_k) {
-    const Vec3 c = vm.points.positions[k], n = vm.points.normals[k];
+    const Vec3 c = vm.points().positions[k], n = vm.points().normals[k];
     const float den = dot(r.d, n);
     if (std::fabs(den) < 1e-8f) return;
     const float t = dot(c - r.o, n) / den;
     if (!(t > 0) || t >= best_t) return;
     const Vec3 off = r.o + r.d * t - c;
-    const float rad = vm.points.radii[k] * r.scale;
+    const float rad = vm.points().radii[k] * r.scale;
     if (length2(off) > rad * rad) return;
     best_t = t;
     best_k = k;
@@ -87,8 +87,8 @@ RayHit result(const VisibilityMap& vm, float t, int64_t k) {
     RayHit h;
     if (k < 0) return h;
     h.hit = true;
-    h.id = vm.order[size_t(k)];
-    h.distance = float(t * vm.octree.scale);  // the octree's frame -> input units
+    h.id = vm.order()[size_t(k)];
+    h.distance = float(t * vm.octree().scale());  // the octree's frame -> input units
     return h;
 }
 
@@ -107,27 +107,27 @@ uint32_t nearest_point(const PointSet& points, Vec3 pos) {
 }
 
 uint32_t nearest_point(const VisibilityMap& vm, Vec3 pos) {
-    if (vm.points.size() == 0) throw Error("nearest point: the V-map has no points");
+    if (vm.points().size() == 0) throw Error("nearest point: the V-map has no points");
     if (!is_finite(pos)) throw Error("nearest point: the position must be finite");
-    pos = vm.octree.to_local(pos);
+    pos = vm.octree().to_local(pos);
     uint32_t best = 0;
     double best_d = INFINITY;
-    for (size_t k = 0; k < vm.points.size(); ++k) {
-        const double d = distance2(vm.points.positions[k], pos);
-        const uint32_t id = vm.order[k];
+    for (size_t k = 0; k < vm.points().size(); ++k) {
+        const double d = distance2(vm.points().positions[k], pos);
+        const uint32_t id = vm.order()[k];
         if (d < best_d || (d == best_d && id < best)) best_d = d, best = id;
     }
     return best;
 }
 
 uint64_t visible_count(const VisibilityMap& vm, uint32_t i) {
-    if (i >= vm.points.size())
+    if (i >= vm.points().size())
         throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)", i,
-                                vm.points.size()));
-    const Octree& t = vm.octree;
+                                vm.points().size()));
+    const Octree& t = vm.octree();
     uint64_t count = 0;
-    for (int32_t A = t.leaf_node[t.leaf_of_point(vm.inverse[i])]; A >= 0; A = t.parent[A])
-        for (int32_t B : vm.links(A)) count += t.point_end[B] - t.point_begin[B];
+    for (int32_t A = t.leaf_node()[t.leaf_of_point(vm.inverse()[i])]; A >= 0; A = t.parent()[A])
+        for (int32_t B : vm.links(A)) count += t.point_end()[B] - t.point_begin()[B];
     return count;
 }
 
@@ -135,26 +135,26 @@ RayHit shoot_ray(const VisibilityMap& vm, uint32_t from, Vec3 dir, RayStats* sta
                  float splat_scale) {
     check(vm, from, dir, splat_scale);
     const Ray r = make_ray(vm, from, dir, splat_scale);
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     // Node boxes bound points and leaf discs, not every point's splat: grow them by the largest
     // splat radius so that no disc pokes out of its node's box.
     const float grow =
-        *std::max_element(vm.points.radii.begin(), vm.points.radii.end()) * splat_scale;
+        *std::max_element(vm.points().radii.begin(), vm.points().radii.end()) * splat_scale;
     float best_t = INFINITY;
     int64_t best_k = -1;
     RayStats st;
-    for (int32_t A = t.leaf_node[t.leaf_of_point(vm.inverse[from])]; A >= 0; A = t.parent[A]) {
+    for (int32_t A = t.leaf_node()[t.leaf_of_point(vm.inverse()[from])]; A >= 0; A = t.parent()[A]) {
         for (int32_t B : vm.links(A)) {
             // Stackless preorder walk of B's subtree: skip a subtree whose box the ray misses or
             // enters beyond the best hit so far.
-            for (int32_t m = B; m < t.skip[B];) {
+            for (int32_t m = B; m < t.skip()[B];) {
                 ++st.node_tests;
-                if (box_entry(r, t.boxes[m], grow, best_t) == INFINITY) {
-                    m = t.skip[m];
+                if (box_entry(r, t.boxes()[m], grow, best_t) == INFINITY) {
+                    m = t.skip()[m];
                     continue;
                 }
                 if (t.is_leaf(m)) {
-                    for (uint32_t k = t.point_begin[m]; k < t.point_end[m]; ++k) {
+                    for (uint32_t k = t.point_begin()[m]; k < t.point_end()[m]; ++k) {
                         ++st.disc_tests;
                         hit_disc(vm, r, k, best_t, best_k);
                     }
@@ -177,11 +177,11 @@ RayHit shoot_ray_brute(const VisibilityMap& vm, uint32_t from, Vec3 dir, bool vi
     float best_t = INFINITY;
     int64_t best_k = -1;
     if (visible_only) {
-        for (uint32_t id : vm.visible_set(from)) hit_disc(vm, r, vm.inverse[id], best_t, best_k);
+        for (uint32_t id : vm.visible_set(from)) hit_disc(vm, r, vm.inverse()[id], best_t, best_k);
     } else {
-        const int32_t node = vm.octree.leaf_node[vm.octree.leaf_of_point(vm.inverse[from])];
-        for (uint32_t k = 0; k < vm.points.size(); ++k)
-            if (k < vm.octree.point_begin[node] || k >= vm.octree.point_end[node])
+        const int32_t node = vm.octree().leaf_node()[vm.octree().leaf_of_point(vm.inverse()[from])];
+        for (uint32_t k = 0; k < vm.points().size(); ++k)
+            if (k < vm.octree().point_begin()[node] || k >= vm.octree().point_end()[node])
                 hit_disc(vm, r, k, best_t, best_k);
     }
     return result(vm, best_t, best_k);

@@ -10,38 +10,38 @@
 namespace vmap {
 
 PointSet points_in_input_order(const VisibilityMap& vm) {
-    const PointSet& p = vm.points;
+    const PointSet& p = vm.points();
     const size_t n = p.size();
     PointSet out;
     auto permute = [&](const auto& src, auto& dst) {
         if (src.empty()) return;
         dst.resize(n);
-        for (size_t k = 0; k < n; ++k) dst[vm.order[k]] = src[k];
+        for (size_t k = 0; k < n; ++k) dst[vm.order()[k]] = src[k];
     };
     permute(p.positions, out.positions);
     permute(p.normals, out.normals);
     permute(p.colors, out.colors);
     permute(p.radii, out.radii);
     permute(p.emission, out.emission);
-    const Octree& t = vm.octree;  // from the octree's frame back to input units (exact)
+    const Octree& t = vm.octree();  // from the octree's frame back to input units (exact)
     for (Vec3& q : out.positions) q = t.to_world(q);
-    for (float& r : out.radii) r = float(r * t.scale);
+    for (float& r : out.radii) r = float(r * t.scale());
     return out;
 }
 
 std::vector<Vec3> visible_colors(const VisibilityMap& vm, uint32_t eye, const VisibleStyle& style) {
-    const size_t n = vm.points.size();
+    const size_t n = vm.points().size();
     if (eye >= n)
         throw Error(fmt::format("eye point id {} out of range (the V-map has {} points)", eye, n));
     std::vector<Vec3> c(n);
     for (size_t k = 0; k < n; ++k) {
-        const Vec3 albedo = vm.points.has_colors() ? vm.points.colors[k] : Vec3{0.8f, 0.8f, 0.8f};
-        c[vm.order[k]] = albedo * style.hidden_dim;
+        const Vec3 albedo = vm.points().has_colors() ? vm.points().colors[k] : Vec3{0.8f, 0.8f, 0.8f};
+        c[vm.order()[k]] = albedo * style.hidden_dim;
     }
     for (uint32_t i : vm.visible_set(eye)) c[i] = style.visible;
-    const int32_t node = vm.octree.leaf_node[vm.octree.leaf_of_point(vm.inverse[eye])];
-    for (uint32_t k = vm.octree.point_begin[node]; k < vm.octree.point_end[node]; ++k)
-        c[vm.order[k]] = style.eye;
+    const int32_t node = vm.octree().leaf_node()[vm.octree().leaf_of_point(vm.inverse()[eye])];
+    for (uint32_t k = vm.octree().point_begin()[node]; k < vm.octree().point_end()[node]; ++k)
+        c[vm.order()[k]] = style.eye;
     return c;
 }
 

@@ -1,5 +1,6 @@
 // `vmap validate` (include/vmap/validate.h): V-map answers against exact visibility from the
 // scene's triangles, per octree height; and Embree rays timed against the leaf-pair kernel.
+#include "octree/records.h"
 #include "vmap/validate.h"
 
 #include <fmt/format.h>
@@ -23,7 +24,7 @@
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/octree.h"
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap {
 
@@ -99,36 +100,13 @@ void check_params(const ValidateParams& p, const std::string& src) {
 }
 
 // Recomputes every leaf's Delta by the rule delta_scale * max(farthest, splat_floor * splat) and
-// the content boxes the walk prunes with (leaf: points and disc; internal: union of children),
-// as octree.cpp does, so the walk still bounds every occluder disc. `pts` in octree order.
+// the content boxes (detail::apply_delta_rule, the builder's). `pts` in octree order.
 void apply_delta_rule(Octree& t, const PointSet& pts, float scale, float floor) {
     double maxabs = 0;
     for (const Vec3& q : pts.positions)
         maxabs = std::max(
             {maxabs, double(std::fabs(q.x)), double(std::fabs(q.y)), double(std::fabs(q.z))});
-    const float slack = static_cast<float>((maxabs + t.root_size) * 1e-6);
-    tbb::parallel_for(int32_t(0), t.num_leaves(), [&](int32_t l) {
-        const int32_t nd = t.leaf_node[l];
-        LeafDisc& d = t.leaves[l];
-        float far2 = 0;
-        Box bx{d.centroid, d.centroid};
-        for (uint32_t k = t.point_begin[nd]; k < t.point_end[nd]; ++k) {
-            const Vec3 q = pts.positions[k];
-            far2 = std::max(far2, length2(q - d.centroid));
-            bx.lo = {std::min(bx.lo.x, q.x), std::min(bx.lo.y, q.y), std::min(bx.lo.z, q.z)};
-            bx.hi = {std::max(bx.hi.x, q.x), std::max(bx.hi.y, q.y), std::max(bx.hi.z, q.z)};
-        }
-        d.delta = scale * std::max(std::sqrt(far2), floor * t.leaf_splat[l]);
-        bx = grow_by_disc(bx, d);
-        t.boxes[nd] = {bx.lo - Vec3{slack, slack, slack}, bx.hi + Vec3{slack, slack, slack}};
-    });
-    for (int32_t nd = t.num_nodes() - 1; nd >= 0; --nd) {
-        if (t.is_leaf(nd)) continue;
-        Box bx{{INFINITY, INFINITY, INFINITY}, {-INFINITY, -INFINITY, -INFINITY}};
-        t.for_each_child(nd, [&](int32_t c) { bx = merge(bx, t.boxes[c]); });
-        t.boxes[nd] = bx;
-    }
-    t.pack_walk();
+    detail::apply_delta_rule(t, pts, scale, floor, detail::content_slack(maxabs, t.root_size()));
 }
 
 struct Pair {
@@ -160,7 +138,7 @@ struct DirectPredictor {
     bool operator()(int32_t a, int32_t b, WorkCounters* wc) const {
         if (a > b) std::swap(a, b);
         if (grid) return detail::bresenham_leaf_pair_visible(t, *grid, a, b, vp, wc);
-        return detail::leaf_pair_visible<true>(t.view(), a, b, vp, wc);
+        return detail::leaf_pair_visible<true>(octree_view(t), a, b, vp, wc);
     }
 };
 
@@ -419,8 +397,8 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
         bp.occluders = params.occluders;
         BuildStats st;
         vm = build_vmap(pred_pts, bp, &st, path);
-        row.height = vm.octree.height();
-        row.leaves = vm.octree.num_leaves();
+        row.height = vm.octree().height();
+        row.leaves = vm.octree().num_leaves();
         row.links = vm.num_links();
         row.work = st.work;
         row.backend = st.backend;
@@ -761,7 +739,7 @@ EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
         lp.resize(p.sample_pairs);
     }
     r.pairs = lp.size();
-    const OctreeView v = t.view();
+    const OctreeView v = octree_view(t);
     const VisibilityParams vp = p.visibility;
     const float t0 = vp.eps, t1 = 1.f - vp.eps;
     std::vector<uint8_t> kern(lp.size()), ray(lp.size());

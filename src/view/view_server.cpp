@@ -226,9 +226,9 @@ Server::Impl::Impl(VisibilityMap map, ServerConfig cfg)
     if (!fs::is_regular_file(root / "index.html"))
         throw Error(fmt::format("{}: no index.html in the web folder", config.web_root));
     vm.require_links("vmap view");
-    if (!config.gi_colors.empty() && config.gi_colors.size() != vm.points.size())
+    if (!config.gi_colors.empty() && config.gi_colors.size() != vm.points().size())
         throw Error(
-            fmt::format("GI colours: {} for {} points", config.gi_colors.size(), vm.points.size()));
+            fmt::format("GI colours: {} for {} points", config.gi_colors.size(), vm.points().size()));
     const PointSet input_order = points_in_input_order(vm);
     points_bin = points_buffer(input_order, config.gi_colors);
     info = make_info(input_order);
@@ -242,15 +242,15 @@ json Server::Impl::make_info(const PointSet& p) const {
         hi = {std::max(hi.x, q.x), std::max(hi.y, q.y), std::max(hi.z, q.z)};
     }
     const Camera cam = config.camera ? *config.camera : default_camera(p);
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     return json{
         {"name", config.name},
         {"points", p.size()},
         {"nodes", t.num_nodes()},
         {"leaves", t.num_leaves()},
         {"height", t.height()},
-        {"max_height", vm.octree_params.max_height},
-        {"leaf_points", vm.octree_params.leaf_points},
+        {"max_height", vm.octree_params().max_height},
+        {"leaf_points", vm.octree_params().leaf_points},
         {"links", vm.num_links()},
         {"bounds", {{"min", vec_json(lo)}, {"max", vec_json(hi)}}},
         {"camera",
@@ -265,26 +265,26 @@ json Server::Impl::make_info(const PointSet& p) const {
 
 json Server::Impl::on_visible(const json& req) const {
     const auto t0 = std::chrono::steady_clock::now();
-    const uint32_t id = id_field(req, "id", vm.points.size());
+    const uint32_t id = id_field(req, "id", vm.points().size());
     const bool bits = wants_bits(req);
     const std::vector<uint32_t> set = vm.visible_set(id);
-    const Octree& t = vm.octree;
-    const int32_t leaf = t.leaf_of_point(vm.inverse[id]);
-    const int32_t node = t.leaf_node[leaf];
+    const Octree& t = vm.octree();
+    const int32_t leaf = t.leaf_of_point(vm.inverse()[id]);
+    const int32_t node = t.leaf_node()[leaf];
     std::vector<uint32_t> leaf_ids;
-    for (uint32_t k = t.point_begin[node]; k < t.point_end[node]; ++k)
-        leaf_ids.push_back(vm.order[k]);
+    for (uint32_t k = t.point_begin()[node]; k < t.point_end()[node]; ++k)
+        leaf_ids.push_back(vm.order()[k]);
     std::sort(leaf_ids.begin(), leaf_ids.end());
     json out{{"id", id},
              {"count", set.size()},
              {"leaf", leaf},
              {"node", node},
-             {"level", int(t.level[node])},
+             {"level", int(t.level()[node])},
              {"height", t.height()},
-             {"cell", {{"center", vec_json(t.spheres[node].center)}, {"half", t.half_size[node]}}},
+             {"cell", {{"center", vec_json(t.spheres()[node].center)}, {"half", t.half_size()[node]}}},
              {"leaf_ids", leaf_ids}};
     if (bits) {
-        out["bits"] = base64(bit_mask(set, vm.points.size()));
+        out["bits"] = base64(bit_mask(set, vm.points().size()));
     } else {
         out["ids"] = set;
     }
@@ -294,8 +294,8 @@ json Server::Impl::on_visible(const json& req) const {
 }
 
 json Server::Impl::on_pair(const json& req) const {
-    const uint32_t a = id_field(req, "a", vm.points.size());
-    const uint32_t b = id_field(req, "b", vm.points.size());
+    const uint32_t a = id_field(req, "a", vm.points().size());
+    const uint32_t b = id_field(req, "b", vm.points().size());
     const PairVisibility v = vm.query(a, b);
     return json{{"a", a},
                 {"b", b},
@@ -305,7 +305,7 @@ json Server::Impl::on_pair(const json& req) const {
 }
 
 json Server::Impl::on_ray(const json& req) const {
-    const uint32_t id = id_field(req, "id", vm.points.size());
+    const uint32_t id = id_field(req, "id", vm.points().size());
     const Vec3 dir = direction_field(req, "dir");
     RayStats st;
     const RayHit h = shoot_ray(vm, id, dir, &st);
@@ -314,7 +314,7 @@ json Server::Impl::on_ray(const json& req) const {
     if (h.hit) {
         out["hit_id"] = h.id;
         out["distance"] = h.distance;
-        out["point"] = vec_json(vm.points.positions[vm.inverse[h.id]]);
+        out["point"] = vec_json(vm.points().positions[vm.inverse()[h.id]]);
     }
     return out;
 }

@@ -28,7 +28,7 @@
 
 #include "vmap/camera.h"
 #include "vmap/vec.h"
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap::view {
 

@@ -1,4 +1,5 @@
 // The grid-walk occluder kernel of reference [7] (see bresenham.h) and its CPU backend.
+#include "octree/records.h"
 #include "visibility/bresenham.h"
 
 #include <tbb/task_arena.h>
@@ -12,13 +13,13 @@
 namespace vmap::detail {
 
 LeafGrid::LeafGrid(const Octree& t) : t_(t), level_(t.height()) {
-    cell_ = double(t.root_size) / double(1u << level_);
+    cell_ = double(t.root_size()) / double(1u << level_);
     child_.assign(size_t(t.num_nodes()) * 8, -1);
     for (int32_t n = 0; n < t.num_nodes(); ++n) {
         if (t.is_leaf(n)) continue;
-        const Vec3 pc = t.spheres[n].center;  // the cell centre (octree.cpp)
+        const Vec3 pc = t.spheres()[n].center;  // the cell centre (octree.cpp)
         t.for_each_child(n, [&](int32_t c) {
-            const Vec3 cc = t.spheres[c].center;
+            const Vec3 cc = t.spheres()[c].center;
             const int oct = (cc.x > pc.x ? 1 : 0) | (cc.y > pc.y ? 2 : 0) | (cc.z > pc.z ? 4 : 0);
             child_[size_t(n) * 8 + oct] = c;
         });
@@ -30,7 +31,7 @@ int32_t LeafGrid::lookup(uint32_t x, uint32_t y, uint32_t z, int* lvl) const {
     for (int l = 0;; ++l) {
         if (t_.is_leaf(n)) {
             *lvl = l;
-            return t_.node_leaf[n];
+            return t_.node_leaf()[n];
         }
         const int sh = level_ - 1 - l;
         const int oct = ((x >> sh) & 1) | ((y >> sh) & 1) << 1 | ((z >> sh) & 1) << 2;
@@ -45,7 +46,7 @@ int32_t LeafGrid::lookup(uint32_t x, uint32_t y, uint32_t z, int* lvl) const {
 
 bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
                                  const VisibilityParams& vp, WorkCounters* wc) {
-    const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
+    const PairSegment s = pair_segment(leaf_discs(t)[a], leaf_discs(t)[b], vp);
     if (!s.faces) return false;
     wc->facing_pairs++;
     // Only crossings with eps < t < 1 - eps count (counts_as_occluder), so only that part of
@@ -55,7 +56,7 @@ bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, 
         s.p, s.q, vp.eps * 0.999f, 1.f - vp.eps * 0.999f, a, b, &wc->cells_stepped,
         [&](int32_t l) {
             wc->occluder_tests++;
-            return !(counts_as_occluder(s, t.leaves[l], vp) && ++occluders >= vp.K);
+            return !(counts_as_occluder(s, leaf_discs(t)[l], vp) && ++occluders >= vp.K);
         });
 }
 

@@ -65,7 +65,7 @@ bool LeafGrid::for_each_leaf(Vec3 p, Vec3 q, float t0, float t1, int32_t a, int3
                              uint64_t* cells, F&& f) const {
     // Grid coordinates in double: cell indices must not suffer float rounding at 2^21 cells.
     const double n = double(1u << level_);
-    const double o[3] = {t_.root_min.x, t_.root_min.y, t_.root_min.z};
+    const double o[3] = {t_.root_min().x, t_.root_min().y, t_.root_min().z};
     const double P[3] = {p.x, p.y, p.z},
                  D[3] = {double(q.x) - p.x, double(q.y) - p.y, double(q.z) - p.z};
     double g0[3], dir[3];

@@ -3,6 +3,7 @@
 
 #include <string>
 
+#include "octree/records.h"
 #include "visibility/host_backend.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/node_pair.h"
@@ -17,7 +18,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     }
 
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
-        view_ = tree.view();
+        view_ = octree_view(tree);
         vp_ = vp;
     }
 

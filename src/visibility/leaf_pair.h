@@ -4,6 +4,7 @@
 // inputs give the same bits on the host and on the device.
 #pragma once
 
+#include "octree/records.h"
 #include "vmap/octree.h"
 #include "vmap/vec.h"
 #include "vmap/visibility.h"

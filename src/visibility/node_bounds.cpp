@@ -6,6 +6,7 @@
 #include <array>
 #include <cmath>
 
+#include "octree/records.h"
 #include "visibility/node_pair.h"
 
 namespace vmap::detail {
@@ -25,16 +26,16 @@ float round_down(double v, double slack) {
 // Node n's bounds; its cones (one per normal bin present, in bin order) go to `cones`.
 NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones) {
     NodeBounds b;
-    const int32_t l0 = t.leaf_begin[n], l1 = t.leaf_end[n];
+    const int32_t l0 = t.leaf_begin()[n], l1 = t.leaf_end()[n];
     double sx = 0, sy = 0, sz = 0;
     Vec3 first{0, 0, 1};
-    b.clo = b.chi = t.leaves[l0].centroid;
+    b.clo = b.chi = leaf_discs(t)[l0].centroid;
     std::array<double, 27 * 3> bin_sum{};
     std::array<int32_t, 27> bin_at;
     bin_at.fill(-1);
     std::array<NormalCone, 27> bin{};
     for (int32_t l = l0; l < l1; ++l) {
-        const LeafDisc& d = t.leaves[l];
+        const LeafDisc& d = leaf_discs(t)[l];
         const Vec3 c = d.centroid;
         b.clo = {std::fmin(b.clo.x, c.x), std::fmin(b.clo.y, c.y), std::fmin(b.clo.z, c.z)};
         b.chi = {std::fmax(b.chi.x, c.x), std::fmax(b.chi.y, c.y), std::fmax(b.chi.z, c.z)};
@@ -68,7 +69,7 @@ NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones)
     double chord = 0, lo = INFINITY, hi = -INFINITY, scale = 0;
     std::array<double, 27> bin_chord{};
     for (int32_t l = l0; l < l1; ++l) {
-        const LeafDisc& d = t.leaves[l];
+        const LeafDisc& d = leaf_discs(t)[l];
         const D3 c = d3(d.centroid);
         const double s = dot3(ax, c);
         lo = std::fmin(lo, s);

@@ -42,6 +42,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "octree/records.h"
 #include "visibility/leaf_pair.h"
 
 namespace vmap::detail {

@@ -1,4 +1,4 @@
-// V-map construction (paper §3 and §4.3, DESIGN.md "The V-map").
+// V-map construction (paper §3 and §4.3; docs/design.md).
 //
 // Every unordered leaf pair (a, b) lies in exactly one "sibling rectangle": leaves(A) x leaves(B)
 // for the two distinct children A, B of the lowest common ancestor of a and b. Since leaves are in
@@ -21,13 +21,14 @@
 #include <chrono>
 #include <numeric>
 
+#include "octree/records.h"
 #include "util/progress.h"
 #include "visibility/backend.h"
 #include "visibility/bresenham.h"
 #include "visibility/node_pair.h"
 #include "vmap/build_checks.h"
 #include "vmap/error.h"
-#include "vmap/vmap.h"
+#include "vmap/map_access.h"
 
 namespace vmap {
 namespace {
@@ -70,7 +71,7 @@ struct Planner {
     std::vector<ConstructionLevel> levels;
     uint64_t shaft_node_tests = 0;
 
-    uint64_t size(int32_t n) const { return uint64_t(t.leaf_end[n] - t.leaf_begin[n]); }
+    uint64_t size(int32_t n) const { return uint64_t(t.leaf_end()[n] - t.leaf_begin()[n]); }
     uint32_t num_kids(int32_t a, int32_t b) const {
         uint32_t ka = 0, kb = 0;
         t.for_each_child(a, [&](int32_t) { ++ka; });
@@ -110,7 +111,7 @@ struct Planner {
             auto& nc = ncs.local();
             for (size_t i = r.begin(); i < r.end(); ++i) {
                 Entry& e = entries[i];
-                ConstructionLevel& l = lv[std::max(t.level[e.a], t.level[e.b])];
+                ConstructionLevel& l = lv[std::max(t.level()[e.a], t.level()[e.b])];
                 e.kind = classify(e, l, nc);
                 const uint64_t area = size(e.a) * size(e.b);
                 if (e.kind == Kind::kFull)
@@ -138,8 +139,8 @@ struct Planner {
             if (e.kind == Kind::kJob) {
                 PairJob j;
                 j.a = e.a, j.b = e.b;
-                j.row0 = t.leaf_begin[e.a], j.rows = int32_t(size(e.a));
-                j.col0 = t.leaf_begin[e.b], j.cols = int32_t(size(e.b));
+                j.row0 = t.leaf_begin()[e.a], j.rows = int32_t(size(e.a));
+                j.col0 = t.leaf_begin()[e.b], j.cols = int32_t(size(e.b));
                 e.job = int32_t(jobs.size());
                 jobs.push_back(j);
             } else if (e.kind == Kind::kSplit) {
@@ -224,14 +225,14 @@ struct Extractor {
         LinkSink& out = sinks.local();
         for (int32_t r = r0; r < r1; ++r) {
             const uint32_t* row = bits + r * rw;
-            const int32_t la = t.leaf_node[job.row0 + r];
+            const int32_t la = t.leaf_node()[job.row0 + r];
             for (int32_t w = w0; w <= w1; ++w) {
                 uint32_t word = row[w];
                 if (w == w0) word &= ~0u << (c0 % 32);
                 if (w == w1) word &= ~0u >> (31 - (c1 - 1) % 32);
                 while (word) {
                     const int32_t c = w * 32 + __builtin_ctz(word);
-                    out.push(la, t.leaf_node[job.col0 + c]);
+                    out.push(la, t.leaf_node()[job.col0 + c]);
                     word &= word - 1;
                 }
             }
@@ -248,8 +249,8 @@ struct Extractor {
     }
 
     void resolve(int32_t a, int32_t b) {
-        const int32_t r0 = t.leaf_begin[a] - job.row0, r1 = t.leaf_end[a] - job.row0;
-        const int32_t c0 = t.leaf_begin[b] - job.col0, c1 = t.leaf_end[b] - job.col0;
+        const int32_t r0 = t.leaf_begin()[a] - job.row0, r1 = t.leaf_end()[a] - job.row0;
+        const int32_t c0 = t.leaf_begin()[b] - job.col0, c1 = t.leaf_end()[b] - job.col0;
         const uint64_t n = count(r0, r1, c0, c1);
         if (n == 0) return;  // nothing visible below either: no link anywhere under (a, b)
         if (n == uint64_t(r1 - r0) * uint64_t(c1 - c0)) {
@@ -261,8 +262,8 @@ struct Extractor {
 
     // (a, b) is partly visible: resolve the pairs it splits into.
     void split(int32_t a, int32_t b) {
-        const int32_t r0 = t.leaf_begin[a] - job.row0, r1 = t.leaf_end[a] - job.row0;
-        const int32_t c0 = t.leaf_begin[b] - job.col0, c1 = t.leaf_end[b] - job.col0;
+        const int32_t r0 = t.leaf_begin()[a] - job.row0, r1 = t.leaf_end()[a] - job.row0;
+        const int32_t c0 = t.leaf_begin()[b] - job.col0, c1 = t.leaf_end()[b] - job.col0;
         if (leafy[a] && leafy[b]) {
             // The split reaches leaf pairs at once: each visible one is a link of its own. Read
             // them off the table a word at a time (most links of a large V-map are made here).
@@ -320,10 +321,11 @@ class LinkArrays {
     void finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
         std::vector<uint64_t>& deg = deg_;
         for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
-        vm.link_offsets = deg;
-        vm.link_targets.resize(deg.back());  // uninitialised: every slot is written below
+        detail::MapData& d = detail::MapAccess::data(vm);
+        d.link_offsets = deg;
+        // uninitialised: every slot is written below
+        int32_t* out = detail::allocate_link_targets(d, deg.back());
         std::vector<uint64_t> fill(deg.begin(), deg.end() - 1);
-        int32_t* out = vm.link_targets.data();
         const auto tasks = split(pieces);
         tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
             for (auto [a, b] : tasks[k]) {
@@ -351,7 +353,7 @@ class LinkArrays {
 }  // namespace
 
 void set_links(VisibilityMap& vm, std::vector<std::pair<int32_t, int32_t>> pairs) {
-    LinkArrays la(vm.octree.num_nodes());
+    LinkArrays la(vm.octree().num_nodes());
     const std::vector<std::span<const Link>> one{std::span<const Link>(pairs)};
     la.count(one);
     la.finish(vm, one);
@@ -571,8 +573,8 @@ void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, No
     nt.on = nodes && params.occluders == "spheres";
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
-    nt.ctx = {t.view(),      nt.nb.nodes.data(), nt.nb.cones.data(),
-              t.skip.data(), params.visibility,  detail::node_pair_margin(t.boxes[0])};
+    nt.ctx = {octree_view(t),      nt.nb.nodes.data(), nt.nb.cones.data(),
+              t.skip().data(), params.visibility,  detail::node_pair_margin(t.boxes()[0])};
 }
 
 // The node pairs: decided at node level where the construction allows it, the rest as jobs.
@@ -612,16 +614,16 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     BuildStats st;
     detail::prepare_points(points, st, source);
     VisibilityMap vm;
-    vm.octree_params = params.octree;
-    vm.visibility_params = vp;
-    vm.octree = Octree::build_in_unit_frame(points, params.octree, vm.order, source);
-    vm.points = std::move(points);
-    vm.inverse.resize(vm.order.size());
-    for (uint32_t k = 0; k < vm.order.size(); ++k) vm.inverse[vm.order[k]] = k;
+    detail::MapData& d = detail::MapAccess::data(vm);
+    d.octree_params = params.octree;
+    d.visibility_params = vp;
+    d.octree = Octree::build_in_unit_frame(points, params.octree, d.order, source);
+    d.points = std::move(points);
+    detail::set_inverse(d);
     st.seconds_octree = seconds_since(t0);
 
     const auto t1 = Clock::now();
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     std::string note;
     std::unique_ptr<detail::Backend> backend = pick_backend(params, &note, source);
     st.backend = backend->name();
@@ -659,7 +661,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
         walked.arrays.finish(vm, spans);
         st.links = vm.num_links();
     } else {
-        vm.link_offsets.clear();  // has_links() is false: queries and save refuse the map
+        d.link_offsets.clear();  // has_links() is false: queries and save refuse the map
         st.links = walked.counted_links + merged.size();
     }
     st.seconds_links = seconds_since(tl);

@@ -4,7 +4,7 @@
 
 #include <string>
 
-#include "vmap/vmap.h"
+#include "vmap/visibility_map.h"
 
 namespace vmap::detail {
 

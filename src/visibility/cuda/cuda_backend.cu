@@ -14,6 +14,7 @@
 #include <string>
 #include <vector>
 
+#include "octree/records.h"
 #include "util/cuda_check.h"
 #include "visibility/backend.h"
 #include "visibility/leaf_pair.h"
@@ -244,8 +245,8 @@ class CudaBackend final : public Backend {
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
         vp_ = vp;
         cudaStream_t s = slots_[0].stream;
-        walk_.upload(tree.walk.data(), tree.walk.size(), s, held_, peak_);
-        leaves_.upload(tree.leaves.data(), tree.leaves.size(), s, held_, peak_);
+        walk_.upload(walk_nodes(tree).data(), walk_nodes(tree).size(), s, held_, peak_);
+        leaves_.upload(leaf_discs(tree).data(), leaf_discs(tree).size(), s, held_, peak_);
         VMAP_CUDA_CHECK(cudaEventRecord(origin_, s));
         last_end_ = 0;
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));

@@ -45,15 +45,15 @@ bool ends_with_ci(std::string s, const std::string& suf) {
 }
 
 void print_tree_summary(const VisibilityMap& vm) {
-    const Octree& t = vm.octree;
+    const Octree& t = vm.octree();
     int h = 0;  // deepest node (not only leaf), so every level below indexes in range
-    for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level[n]));
+    for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level()[n]));
     std::vector<uint64_t> nodes(h + 1), leaves(h + 1), links(h + 1);
     for (int32_t n = 0; n < t.num_nodes(); ++n) {
-        nodes[t.level[n]]++;
-        if (t.is_leaf(n)) leaves[t.level[n]]++;
+        nodes[t.level()[n]]++;
+        if (t.is_leaf(n)) leaves[t.level()[n]]++;
         for (int32_t m : vm.links(n))
-            if (m > n) links[t.level[n]]++;  // count each link once, at its first end's level
+            if (m > n) links[t.level()[n]]++;  // count each link once, at its first end's level
     }
     fmt::print("  level      nodes     leaves      links\n");
     for (int l = 0; l <= h; ++l)
@@ -61,11 +61,11 @@ void print_tree_summary(const VisibilityMap& vm) {
 }
 
 void print_params(const VisibilityMap& vm) {
-    const auto& o = vm.octree_params;
-    const auto& v = vm.visibility_params;
+    const auto& o = vm.octree_params();
+    const auto& v = vm.visibility_params();
     fmt::print("octree:     max_height {}, leaf_points {} -> height {}, {} nodes, {} leaves\n",
-               o.max_height, o.leaf_points, vm.octree.height(), vm.octree.num_nodes(),
-               vm.octree.num_leaves());
+               o.max_height, o.leaf_points, vm.octree().height(), vm.octree().num_nodes(),
+               vm.octree().num_leaves());
     fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}\n", v.K, v.eps,
                v.facing_tol, v.parallel_tol);
 }
@@ -142,13 +142,13 @@ PointSet load_input(BuildOptions& o, std::string& what) {
 double short_decimal(float f) { return std::stod(fmt::format("{}", f)); }
 
 nlohmann::json params_json(const VisibilityMap& vm) {
-    const auto& o = vm.octree_params;
-    const auto& v = vm.visibility_params;
+    const auto& o = vm.octree_params();
+    const auto& v = vm.visibility_params();
     return {{"max_height", o.max_height},
             {"leaf_points", o.leaf_points},
-            {"height", vm.octree.height()},
-            {"nodes", vm.octree.num_nodes()},
-            {"leaves", vm.octree.num_leaves()},
+            {"height", vm.octree().height()},
+            {"nodes", vm.octree().num_nodes()},
+            {"leaves", vm.octree().num_leaves()},
             {"K", v.K},
             {"eps", short_decimal(v.eps)},
             {"facing_tol", short_decimal(v.facing_tol)},
@@ -231,7 +231,7 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
                    st.links, st.links * 8 / 1073741824.0);
     else
         fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
-                   vm.link_targets.size() * 4);
+                   vm.link_targets().size() * 4);
     fmt::print("time:       {:.3f} s total{}\n", st.seconds_total,
                verbose ? "" : " (-v for the breakdown and the links per level)");
     if (verbose) print_build_details(vm, st, save_s);
@@ -274,21 +274,21 @@ int run_info(const std::string& path, bool json) {
         nlohmann::json j = params_json(vm);
         j["file"] = path;
         j["bytes"] = fs::file_size(path);
-        j["points"] = vm.points.size();
+        j["points"] = vm.points().size();
         j["links"] = vm.num_links();
-        const Octree& t = vm.octree;
+        const Octree& t = vm.octree();
         int h = 0;
-        for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level[n]));
+        for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level()[n]));
         std::vector<uint64_t> links_per_level(h + 1);
         for (int32_t n = 0; n < t.num_nodes(); ++n)
             for (int32_t m : vm.links(n))
-                if (m > n) links_per_level[t.level[n]]++;
+                if (m > n) links_per_level[t.level()[n]]++;
         j["links_per_level"] = links_per_level;
         fmt::print("{}\n", j.dump(2));
         return 0;
     }
     fmt::print("file:       {} ({} bytes)\n", path, fs::file_size(path));
-    fmt::print("points:     {}\n", vm.points.size());
+    fmt::print("points:     {}\n", vm.points().size());
     print_params(vm);
     fmt::print("links:      {}\n", vm.num_links());
     print_tree_summary(vm);

@@ -1,0 +1,37 @@
+// The library's one parallel loop on the CPU (oneTBB underneath): parallel_for(n, f) calls f(i)
+// for every i in [0, n), parallel_for(begin, end, f) for every i in [begin, end), and
+// parallel_for_range(n, grain, f) calls f(begin, end) on chunks of about `grain` indices (for
+// bodies that keep per-chunk state). Threads: the caller's oneTBB limit (BuildParams::threads
+// sets one for a build). The GPU's counterpart, one thread per index, is launch_for in
+// util/parallel_cuda.cuh.
+#pragma once
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <cstddef>
+#include <type_traits>
+
+namespace vmap {
+
+template <class Index, class F>
+void parallel_for(Index begin, Index end, F&& f) {
+    static_assert(std::is_integral_v<Index>);
+    if (end <= begin) return;
+    tbb::parallel_for(begin, end, [&](Index i) { f(i); });
+}
+
+template <class Index, class F>
+void parallel_for(Index n, F&& f) {
+    parallel_for(Index(0), n, std::forward<F>(f));
+}
+
+template <class Index, class F>
+void parallel_for_range(Index n, Index grain, F&& f) {
+    static_assert(std::is_integral_v<Index>);
+    if (n <= 0) return;
+    tbb::parallel_for(tbb::blocked_range<Index>(Index(0), n, grain > 0 ? grain : Index(1)),
+                      [&](const tbb::blocked_range<Index>& r) { f(r.begin(), r.end()); });
+}
+
+}  // namespace vmap

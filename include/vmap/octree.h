@@ -78,8 +78,8 @@ class Octree {
         for (int32_t c = n + 1; c < d_.skip[n]; c = d_.skip[c]) f(c);
     }
 
-    // The leaf holding the point at octree position k (0 <= k < number of points).
-    int32_t leaf_of_point(uint32_t k) const;
+    // The leaf holding the point at octree position k (0 <= k < number of points). O(1).
+    int32_t leaf_of_point(uint32_t k) const { return d_.point_leaf[k]; }
 
     const OctreeParams& params() const { return d_.params; }
     double scale() const { return d_.scale; }  // input units per octree unit, a power of two
@@ -129,6 +129,7 @@ class Octree {
         std::vector<int32_t> leaf_node;
         std::vector<LeafDisc> leaves;  // what the predicate needs of each leaf
         std::vector<float> leaf_splat;
+        std::vector<int32_t> point_leaf;  // derived: per point (octree order), its leaf
     };
     Data d_;
 };

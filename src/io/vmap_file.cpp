@@ -16,6 +16,8 @@
 #include "io/vmap_file.h"
 
 #include <fcntl.h>
+#include <sys/mman.h>
+#include <sys/stat.h>
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 #include <unistd.h>
@@ -287,18 +289,53 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     file.commit();
 }
 
+namespace {
+
+// A file mapped read-only (no copy into a buffer first: the arrays are copied out of the
+// mapping once, in parallel). Throws vmap::Error naming the file.
+class MappedFile {
+  public:
+    explicit MappedFile(const std::string& path) {
+        const int fd = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+        if (fd < 0) throw Error(fmt::format("{}: cannot open ({})", path, std::strerror(errno)));
+        struct stat st {};
+        if (::fstat(fd, &st) != 0) {
+            ::close(fd);
+            throw Error(fmt::format("{}: cannot stat ({})", path, std::strerror(errno)));
+        }
+        size_ = uint64_t(st.st_size);
+        if (size_ > 0) {
+            void* p = ::mmap(nullptr, size_, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd, 0);
+            if (p == MAP_FAILED) {
+                ::close(fd);
+                throw Error(fmt::format("{}: read error ({})", path, std::strerror(errno)));
+            }
+            data_ = static_cast<const uint8_t*>(p);
+        }
+        ::close(fd);
+    }
+    ~MappedFile() {
+        if (data_) ::munmap(const_cast<uint8_t*>(data_), size_);
+    }
+    MappedFile(const MappedFile&) = delete;
+    MappedFile& operator=(const MappedFile&) = delete;
+    const uint8_t* data() const { return data_; }
+    uint64_t size() const { return size_; }
+
+  private:
+    const uint8_t* data_ = nullptr;
+    uint64_t size_ = 0;
+};
+
+}  // namespace
+
 VisibilityMap load_vmap(const std::string& path) {
     std::error_code ec;
     if (!std::filesystem::exists(path, ec)) throw Error(fmt::format("{}: no such file", path));
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
-    std::ifstream in(path, std::ios::binary | std::ios::ate);
-    if (!in) throw Error(fmt::format("{}: cannot open", path));
-    const auto size = static_cast<uint64_t>(in.tellg());
-    in.seekg(0);
-    std::vector<uint8_t> data(size);
-    if (!in.read(reinterpret_cast<char*>(data.data()), size))
-        throw Error(fmt::format("{}: read error", path));
+    const MappedFile data(path);
+    const uint64_t size = data.size();
     if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));
     if (std::memcmp(data.data(), kMagic, 8) != 0)
         throw Error(fmt::format("{}: header: not a .vmap file (bad magic)", path));
@@ -396,6 +433,7 @@ VisibilityMap load_vmap(const std::string& path) {
             t.leaf_begin[i] < 0 || t.leaf_begin[i] > t.leaf_end[i] || t.leaf_end[i] > nl)
             r.fail(fmt::format("node {} is inconsistent", i));
     }
+    if (t.point_begin[0] != 0 || t.point_end[0] != n) r.fail("the root does not hold every point");
     for (int32_t l = 0; l < nl; ++l)
         if (t.leaf_node[l] < 0 || t.leaf_node[l] >= nn || t.node_leaf[t.leaf_node[l]] != l)
             r.fail(fmt::format("leaf {} is inconsistent", l));

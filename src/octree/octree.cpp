@@ -320,6 +320,10 @@ void detail::OctreeAccess::pack_walk(Octree& tree) {
     t.walk.resize(t.skip.size());
     for (size_t n = 0; n < t.skip.size(); ++n)
         t.walk[n] = WalkNode{t.boxes[n].lo, t.skip[n], t.boxes[n].hi, t.node_leaf[n]};
+    t.point_leaf.resize(t.skip.empty() ? 0 : t.point_end[0]);
+    for (size_t l = 0; l < t.leaf_node.size(); ++l)
+        for (uint32_t k = t.point_begin[t.leaf_node[l]]; k < t.point_end[t.leaf_node[l]]; ++k)
+            t.point_leaf[k] = int32_t(l);
 }
 
 Box grow_by_disc(Box bx, const LeafDisc& d) {
@@ -344,19 +348,6 @@ int Octree::height() const {
     int h = 0;
     for (int32_t l : d_.leaf_node) h = std::max(h, int(d_.level[l]));
     return h;
-}
-
-int32_t Octree::leaf_of_point(uint32_t k) const {
-    // Leaves are in point order: the last leaf whose first point is <= k.
-    int32_t lo = 0, hi = num_leaves();
-    while (hi - lo > 1) {
-        const int32_t mid = (lo + hi) / 2;
-        if (d_.point_begin[d_.leaf_node[mid]] <= k)
-            lo = mid;
-        else
-            hi = mid;
-    }
-    return lo;
 }
 
 }  // namespace vmap

@@ -56,7 +56,8 @@ struct OctreeAccess {
     static auto& data(Octree& t) { return t.d_; }
     static const std::vector<LeafDisc>& leaves(const Octree& t) { return t.d_.leaves; }
     static const std::vector<WalkNode>& walk(const Octree& t) { return t.d_.walk; }
-    // Derives the packed walk array from boxes, skip and node_leaf (build and load call it).
+    // Derives the packed walk array (from boxes, skip and node_leaf) and the leaf of every
+    // point (from the leaves' point ranges); build and load call it.
     static void pack_walk(Octree& t);
 };
 

@@ -1,8 +1,7 @@
-// Batches of queries (include/vmap/query.h): point pairs and visible sets on all cores.
+// Batches of queries (vmap/query.h): point pairs and visible sets on all cores.
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
+#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/query.h"
 
@@ -19,10 +18,11 @@ void query_pairs(const VisibilityMap& vm, std::span<const uint32_t> pairs, std::
             throw Error(fmt::format("pair {}: point id {} out of range (the V-map has {} points)",
                                     k / 2, pairs[k], n));
     const Octree& t = vm.octree();
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, out.size(), 4096), [&](const auto& r) {
-        for (size_t k = r.begin(); k < r.end(); ++k) {
-            const int32_t la = t.leaf_of_point(vm.inverse()[pairs[2 * k]]);
-            const int32_t lb = t.leaf_of_point(vm.inverse()[pairs[2 * k + 1]]);
+    const std::vector<uint32_t>& inverse = vm.inverse();
+    parallel_for_range(out.size(), size_t(4096), [&](size_t k0, size_t k1) {
+        for (size_t k = k0; k < k1; ++k) {
+            const int32_t la = t.leaf_of_point(inverse[pairs[2 * k]]);
+            const int32_t lb = t.leaf_of_point(inverse[pairs[2 * k + 1]]);
             out[k] = la == lb ? uint8_t(PairVisibility::kSameLeaf)
                               : uint8_t(vm.leaves_visible(la, lb) ? PairVisibility::kVisible
                                                                   : PairVisibility::kHidden);
@@ -36,12 +36,12 @@ VisibleSets visible_sets(const VisibilityMap& vm, std::span<const uint32_t> ids)
         if (i >= vm.order().size())
             throw Error(fmt::format("query: point id {} out of range (the V-map has {} points)", i,
                                     vm.order().size()));
-    tbb::parallel_for(size_t(0), ids.size(), [&](size_t k) { sets[k] = vm.visible_set(ids[k]); });
+    parallel_for(ids.size(), [&](size_t k) { sets[k] = vm.visible_set(ids[k]); });
     VisibleSets r;
     r.offsets.resize(ids.size() + 1, 0);
     for (size_t k = 0; k < ids.size(); ++k) r.offsets[k + 1] = r.offsets[k] + sets[k].size();
     r.targets.resize(r.offsets.back());
-    tbb::parallel_for(size_t(0), ids.size(), [&](size_t k) {
+    parallel_for(ids.size(), [&](size_t k) {
         std::copy(sets[k].begin(), sets[k].end(), r.targets.begin() + r.offsets[k]);
     });
     return r;

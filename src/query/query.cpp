@@ -9,13 +9,18 @@
 namespace vmap {
 
 bool VisibilityMap::leaves_visible(int32_t leaf_a, int32_t leaf_b) const {
+    const std::vector<int32_t>& skip = d_.octree.skip();
+    const std::vector<int32_t>& parent = d_.octree.parent();
     const int32_t nb = d_.octree.leaf_node()[leaf_b];
-    // Walk a's ancestors; the targets of one node are disjoint subtrees sorted by preorder
-    // index, so the only candidate ancestor of b among them is the last target <= nb.
-    for (int32_t A = d_.octree.leaf_node()[leaf_a]; A >= 0; A = d_.octree.parent()[A]) {
+    // Walk a's ancestors up to (not including) the lowest common ancestor of a and b: a link
+    // joins disjoint subtrees, so no node holding b links to a node holding it. The targets of
+    // one node are disjoint subtrees sorted by preorder index, so the only candidate ancestor of
+    // b among them is the last target <= nb.
+    for (int32_t A = d_.octree.leaf_node()[leaf_a]; A >= 0 && !(A <= nb && nb < skip[A]);
+         A = parent[A]) {
         const auto ls = links(A);
         auto it = std::upper_bound(ls.begin(), ls.end(), nb);
-        if (it != ls.begin() && nb < d_.octree.skip()[*(it - 1)]) return true;
+        if (it != ls.begin() && nb < skip[*(it - 1)]) return true;
     }
     return false;
 }

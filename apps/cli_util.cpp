@@ -22,12 +22,6 @@
 
 namespace vmap::cli {
 
-bool ends_with_ci(std::string s, const std::string& suffix) {
-    std::transform(s.begin(), s.end(), s.begin(), [](unsigned char c) { return std::tolower(c); });
-    return s.size() >= suffix.size() &&
-           s.compare(s.size() - suffix.size(), suffix.size(), suffix) == 0;
-}
-
 bool sampled_input(const std::string& path, bool as_points) {
     try {
         return is_scene_input(path, as_points);

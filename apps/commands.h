@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@
 #include "vmap/progress.h"
 #include "vmap/error.h"
 #include "vmap/octree.h"
+#include "vmap/options.h"
 #include "vmap/vec.h"
 
 namespace vmap::cli {
@@ -41,6 +43,18 @@ Vec3 parse_vec3(const std::string& text, const std::string& option);
 Vec3 parse_direction(const std::string& text, const std::string& option);
 std::pair<int, int> parse_size(const std::string& text, const std::string& option);
 
+// An option taking one of E's names (vmap/options.h: backend, occluders, construction, refine),
+// into `target`, whose current value is the default shown.
+template <class E>
+CLI::Option* add_choice(CLI::App* app, const std::string& flag, E& target,
+                        const std::string& help) {
+    std::map<std::string, E> names;
+    for (const std::string& n : names_of<E>()) names.emplace(n, parse<E>(n, flag));
+    return app->add_option(flag, target, help)
+        ->transform(CLI::CheckedTransformer(names))
+        ->default_str(name_of(target));
+}
+
 // Adds to every numeric option of `app` and its subcommands: floating-point values must be
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to
 // 2^64-1). Call after all options are declared.
@@ -51,8 +65,6 @@ void harden_options(CLI::App& app);
 // cores: printed before the work starts, so an hours-long job is never a surprise.
 double estimated_leaf_pairs(uint64_t points, const OctreeParams& op);
 void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& op);
-
-bool ends_with_ci(std::string s, const std::string& suffix);
 
 // Whether the input is sampled: a scene file, or a mesh file unless `as_points` (is_scene_input),
 // so --points/--seed apply. A file that cannot be read counts as sampled: its loader reports it.

@@ -28,9 +28,6 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // The points that emit; none is an error naming what to add, raised before any V-map is built.
 size_t count_emitters(const PointSet& ps, const std::string& input) {
@@ -50,7 +47,7 @@ size_t count_emitters(const PointSet& ps, const std::string& input) {
 VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
-    const bool is_vmap = ends_with_ci(o.input, ".vmap");
+    const bool is_vmap = has_extension(o.input, ".vmap");
     if (!is_vmap && is_scene_input(o.input, o.as_points)) {
         Scene sc = load_scene(o.input);
         print_notes(sc.notes);
@@ -64,7 +61,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         VisibilityMap vm = build_vmap(std::move(points), gi_build_params(sc.octree, o), &st, o.input);
         build_s = seconds_since(t0);
         what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
-                           ends_with_ci(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
+                           has_extension(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
                            st.backend, build_s);
         return vm;
     }
@@ -116,7 +113,7 @@ std::vector<Vec3> solve(const VisibilityMap& vm, GiOptions& o) {
     fmt::print(
         "refinement: {}, theta {}: {} interactions ({} node level, {} point to point), "
         "setup {:.3f} s\n",
-        o.gi.refine, o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
+        name_of(o.gi.refine), o.gi.theta, st0.interactions(), st0.node_interactions, st0.point_interactions,
         st0.seconds_setup);
     const bool gather = o.final_gather && (!o.bounces || *o.bounces > 0);
     const int fixed = o.bounces ? *o.bounces - (gather ? 1 : 0) : -1;
@@ -337,15 +334,9 @@ GiCommands add_gi_commands(CLI::App& app) {
                    "theta x (sum of the node sizes) apart; larger is finer and slower")
         ->check(CLI::Range(1e-3, 1e3))
         ->capture_default_str();
-    gi->add_option("--backend", o->gi.backend,
-                   "auto (GPU when present), cpu or cuda; for the V-map build and the bounces")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
-    gi->add_option("--refine", o->gi.refine,
-                   "blocks: links summed into well-separated node pairs (fast); links: every "
-                   "V-map link moves energy itself (exact visibility, slower)")
-        ->check(CLI::IsMember({"blocks", "links"}))
-        ->capture_default_str();
+    cli::add_choice(gi, "--backend", o->gi.backend, "auto (GPU when present), cpu or cuda; for the V-map build and the bounces");
+    cli::add_choice(gi, "--refine", o->gi.refine, "blocks: links summed into well-separated node pairs (fast); links: every "
+                   "V-map link moves energy itself (exact visibility, slower)");
     gi->add_option("--exposure", o->exposure,
                    "Display colour = clamp(exposure x radiosity) (linear, then sRGB); 0: "
                    "automatic (95th percentile of the lit points -> 0.8)")

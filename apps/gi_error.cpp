@@ -25,9 +25,6 @@ namespace vmap::cli {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 uint64_t splitmix(uint64_t& s) {
     uint64_t x = (s += 0x9e3779b97f4a7c15ULL);
@@ -235,7 +232,7 @@ void write_csv(const std::string& path, const Scene& sc, const VisibilityMap& vm
 // The scene, its points' surfaces and the V-map: built from the scene, or a saved V-map of it
 // (--scene; its points must be the scene's samples, checked point by point).
 VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t>& surf) {
-    const bool saved = !ends_with_ci(o.input, ".json");
+    const bool saved = !has_extension(o.input, ".json");
     if (saved && o.scene.empty())
         throw Error(
             fmt::format("{}: --reference needs the scene file (.json, or --scene for a "

@@ -39,11 +39,6 @@ namespace {
 using namespace vmap;
 namespace fs = std::filesystem;
 
-bool ends_with_ci(std::string s, const std::string& suf) {
-    std::transform(s.begin(), s.end(), s.begin(), ::tolower);
-    return s.size() >= suf.size() && s.compare(s.size() - suf.size(), suf.size(), suf) == 0;
-}
-
 void print_tree_summary(const VisibilityMap& vm) {
     const Octree& t = vm.octree();
     int h = 0;  // deepest node (not only leaf), so every level below indexes in range
@@ -131,7 +126,7 @@ PointSet load_input(BuildOptions& o, std::string& what) {
     if (o.points) sc.points = *o.points;
     if (o.seed) sc.seed = *o.seed;
     if (sc.octree) o.params.octree = *sc.octree;
-    what = ends_with_ci(o.input, ".json")
+    what = has_extension(o.input, ".json")
                ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.input, sc.surfaces.size())
                : fmt::format("mesh {} ({} triangles, area-sampled)", o.input,
                              sc.surfaces[0].mesh.triangles.size());
@@ -386,15 +381,10 @@ int main(int argc, char** argv) {
                      "Occluder planes with |n.d| <= tol |d| are ignored")
         ->check(CLI::Range(0.0f, 0.99f))
         ->capture_default_str();
-    build->add_option("--backend", bo.params.backend, "auto (GPU when present), cpu or cuda")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
-    build
-        ->add_option("--occluders", bo.params.occluders,
-                     "Potential occluders: spheres (hierarchical walk) or bresenham (grid walk "
-                     "of [7], CPU only)")
-        ->check(CLI::IsMember({"spheres", "bresenham"}))
-        ->capture_default_str();
+    cli::add_choice(build, "--backend", bo.params.backend, "auto (GPU when present), cpu or cuda");
+    cli::add_choice(build, "--occluders", bo.params.occluders,
+                    "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "
+                    "grid (grid walk of [7], CPU only); spheres and bresenham are old names");
     build
         ->add_option("--batch-pairs", bo.params.max_batch_pairs,
                      "Leaf pairs evaluated per batch (bounds memory)")
@@ -413,13 +403,10 @@ int main(int argc, char** argv) {
                      "Point clouds: orient every normal toward this point X,Y,Z (the scanner)")
         ->delimiter(',')
         ->expected(3);
-    build
-        ->add_option("--construction", bo.params.construction,
-                     "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
-                     "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
-                     "leaf pair: the oracle; the same V-map)")
-        ->check(CLI::IsMember({"auto", "nodes", "leaf-pairs"}))
-        ->capture_default_str();
+    cli::add_choice(build, "--construction", bo.params.construction,
+                    "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
+                    "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
+                    "leaf pair: the oracle; the same V-map)");
     build
         ->add_option("--walk-pairs", bo.params.walk_pairs,
                      "Undecided node pairs of at most this many leaf pairs are walked, not split "
@@ -471,10 +458,7 @@ int main(int argc, char** argv) {
     benchc->add_option("--points", bo2.points, "Override every scene's point count")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
-    benchc->add_option("--construction", bo2.construction,
-                       "auto, nodes or leaf-pairs (as for build)")
-        ->check(CLI::IsMember({"auto", "nodes", "leaf-pairs"}))
-        ->capture_default_str();
+    cli::add_choice(benchc, "--construction", bo2.construction, "auto, nodes or leaf-pairs (as for build)");
 
     auto* validate = cli::add_validate_command(app);
 

@@ -78,7 +78,7 @@ int check_args(const QueryArgs& a) {
         return usage("--ids and --ply go with --from/--from-pos");
     if (!a.out.empty() && a.pairs.empty()) return usage("--out goes with --pairs");
     if (!a.ply.empty() && a.from.size() > 1) return usage("--ply takes one --from point");
-    if (!a.out.empty() && !ends_with_ci(a.out, ".npy"))
+    if (!a.out.empty() && !has_extension(a.out, ".npy"))
         return usage("--out writes an .npy file (name it *.npy)");
     return 0;
 }

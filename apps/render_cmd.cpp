@@ -1,4 +1,4 @@
-// `vmap render`: pictures of a scene, a point cloud or a .vmap file (issue 4).
+// `vmap render`: pictures of a scene, a point cloud or a .vmap file.
 //
 // Input: a scene (.json) or a mesh file (sampled; --points/--seed override), a point cloud or a
 // .vmap file (its points; the camera from --scene, else the default). Modes:
@@ -40,7 +40,7 @@ struct RenderArgs {
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
     std::vector<int> heights{7, 9};
-    std::string backend = "auto";
+    Backend backend = Backend::kAuto;
     int time_runs = 0;
     bool as_points = false;
     RenderOptions opt;
@@ -57,7 +57,7 @@ struct Source {
 Source load_source(RenderArgs& a) {
     Source s;
     if (a.input.empty()) a.input = default_scene_path();
-    if (!ends_with_ci(a.input, ".vmap") && is_scene_input(a.input, a.as_points)) {
+    if (!has_extension(a.input, ".vmap") && is_scene_input(a.input, a.as_points)) {
         Scene sc = load_scene(a.input);
         print_notes(sc.notes);
         if (a.points) sc.points = *a.points;
@@ -65,7 +65,7 @@ Source load_source(RenderArgs& a) {
         s.points = sample_scene(sc);
         s.camera = sc.camera;
         s.octree = sc.octree;
-    } else if (ends_with_ci(a.input, ".vmap")) {
+    } else if (has_extension(a.input, ".vmap")) {
         s.vm = load_vmap(a.input);
         s.points = points_in_input_order(*s.vm);
         s.octree = s.vm->octree_params();
@@ -161,7 +161,7 @@ void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
 int run_render(RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
     if ((a.points || a.seed) && !a.input.empty() &&
-        (ends_with_ci(a.input, ".vmap") || !sampled_input(a.input, a.as_points))) {
+        (has_extension(a.input, ".vmap") || !sampled_input(a.input, a.as_points))) {
         fmt::print(stderr,
                    "vmap render: --points/--seed apply to scene and mesh files, not to {}\n",
                    a.input);
@@ -293,9 +293,7 @@ Command add_render_command(CLI::App& app) {
     c->add_option("--points", a->points, "Scene input: number of sample points")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     c->add_option("--seed", a->seed, "Scene input: sampling seed");
-    c->add_option("--backend", a->backend, "Backend when building: auto, cpu or cuda")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
+    cli::add_choice(c, "--backend", a->backend, "Backend when building: auto, cpu or cuda");
     c->add_option("--splat-scale", a->opt.splat_scale, "Disc radius = splat radius x this")
         ->check(CLI::Range(0.01f, 100.f))
         ->capture_default_str();

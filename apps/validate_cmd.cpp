@@ -72,14 +72,9 @@ CLI::App* add_validate_command(CLI::App& app) {
     c->add_option("--parallel-tol", v.parallel_tol, "Occluder planes with |n.d| <= tol |d| ignored")
         ->check(CLI::Range(0.0f, 0.99f))
         ->capture_default_str();
-    c->add_option("--occluders", opt.vp.occluders,
-                  "Potential occluders: spheres (hierarchical walk) or bresenham (grid walk of "
-                  "[7], CPU only)")
-        ->check(CLI::IsMember({"spheres", "bresenham"}))
-        ->capture_default_str();
-    c->add_option("--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
+    cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
+                  "[7], CPU only)");
+    cli::add_choice(c, "--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda");
     c->add_option("--predict", opt.vp.predict,
                   "vmap (build and query the V-map per height: all leaf pairs, minutes per "
                   "height beyond ~50k points on a few CPU cores) or direct (the leaf-pair "

@@ -34,13 +34,13 @@ struct ViewArgs {
     int port = 0;
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
-    std::string backend = "auto";
+    Backend backend = Backend::kAuto;
     bool gi = false;
 };
 
 // The map to show: loaded, or built from a scene or cloud (the scene's octree defaults).
 VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
-    const bool is_vmap = ends_with_ci(a.input, ".vmap");
+    const bool is_vmap = has_extension(a.input, ".vmap");
     if (is_vmap && (a.points || a.seed || a.max_height || a.leaf_points))
         throw Error(fmt::format(
             "{}: --points/--seed/--max-height/--leaf-points apply when building (scene or cloud)",
@@ -56,7 +56,7 @@ VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
     }
     BuildParams bp;
     PointSet pts;
-    if (ends_with_ci(a.input, ".json")) {
+    if (has_extension(a.input, ".json")) {
         Scene sc = load_scene(a.input);
         if (a.points) sc.points = *a.points;
         if (a.seed) sc.seed = *a.seed;
@@ -84,7 +84,7 @@ VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
 }
 
 // GI display colours in input order (the page's "GI" mode).
-std::vector<Vec3> gi_colors(const VisibilityMap& vm, const std::string& backend) {
+std::vector<Vec3> gi_colors(const VisibilityMap& vm, Backend backend) {
     GiParams gp;
     gp.backend = backend;
     gp.progress = cli::stderr_progress();
@@ -177,9 +177,7 @@ Command add_view_command(CLI::App& app) {
         ->check(CLI::Range(1, 21));
     c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
         ->check(CLI::Range(1, 1000000));
-    c->add_option("--backend", a->backend, "auto, cpu or cuda (building and --gi)")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
+    cli::add_choice(c, "--backend", a->backend, "auto, cpu or cuda (building and --gi)");
     c->add_flag("--gi", a->gi, "Compute global illumination first (the page's GI colours)");
     return {c, [a] { return run_view(*a); }};
 }

@@ -138,7 +138,7 @@ int run(const Options& o) {
             std::vector<double> gpu_t, cpu_t, save_t;
             double non_pair = 0;
             if (want_gpu) {
-                bp.backend = "cuda";
+                bp.backend = Backend::kCuda;
                 if (!warmed) {
                     build_vmap(pts, bp);
                     warmed = true;
@@ -167,7 +167,7 @@ int run(const Options& o) {
                 r.gpu_done = true;
             }
             if (want_cpu) {
-                bp.backend = "cpu";
+                bp.backend = Backend::kCpu;
                 // Estimate first from a sample; run in full only when within the budget.
                 PointSet copy = pts;
                 std::vector<uint32_t> order;
@@ -228,7 +228,7 @@ int run(const Options& o) {
     md += fmt::format(
         "vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, construction {}, commit {}, "
         "{}\n\n",
-        cores, device, o.runs, o.leaf_points, o.construction, git_commit(), date);
+        cores, device, o.runs, o.leaf_points, name_of(o.construction), git_commit(), date);
     md +=
         "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | "
         "CPU s "

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include "vmap/options.h"
 #include <string>
 #include <vector>
 
@@ -19,7 +20,7 @@ struct Options {
     uint64_t points = 0;                 // 0: each scene's own count
     bool save = true;                    // time writing the .vmap too (end to end)
     std::string out_dir;                 // bench.md and bench.csv here when set
-    std::string construction = "auto";  // auto | nodes | leaf-pairs (BuildParams::construction)
+    Construction construction = Construction::kAuto;  // BuildParams::construction
 };
 
 // Runs the sweep, prints the Markdown table to stdout, writes files. Returns 0.

@@ -89,7 +89,7 @@ int run_bench(BenchOptions& o) {
         BuildParams bp;
         bp.octree.max_height = o.max_height;
         bp.octree.leaf_points = o.leaf_points;
-        bp.backend = "auto";
+        bp.backend = Backend::kAuto;
         const VisibilityMap vm = build_vmap(sample_scene(sc), bp, nullptr, o.scene);
         Row r;
         r.points = vm.points().size();
@@ -100,8 +100,8 @@ int run_bench(BenchOptions& o) {
             if (std::find(o.backends.begin(), o.backends.end(), be) == o.backends.end()) continue;
             GiParams gp;
             gp.theta = o.theta;
-            gp.backend = be;
-            gp.refine = o.refine;
+            gp.backend = parse<Backend>(be, "--backends");
+            gp.refine = parse<GiRefine>(o.refine, "--refine");
             std::vector<double> setup, per;
             for (int run = 0; run < o.runs; ++run) {
                 RadiositySolver s(vm, gp);

@@ -30,7 +30,8 @@ struct QueryBenchArgs {
     std::string scene;
     std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
     int max_height = 10, leaf_points = 4, queries = 2000, runs = 5;
-    std::string backend = "auto", out_dir;
+    Backend backend = Backend::kAuto;
+    std::string out_dir;
 };
 
 struct Spread {
@@ -228,9 +229,7 @@ Command add_bench_query_command(CLI::App& app) {
     c->add_option("--runs", a->runs, "Timed runs per batch")
         ->check(CLI::Range(1, 100))
         ->capture_default_str();
-    c->add_option("--backend", a->backend, "Backend for the builds: auto, cpu or cuda")
-        ->check(CLI::IsMember({"auto", "cpu", "cuda"}))
-        ->capture_default_str();
+    cli::add_choice(c, "--backend", a->backend, "Backend for the builds: auto, cpu or cuda");
     c->add_option("--out", a->out_dir, "Write bench-query.md and bench-query.csv here");
     return {c, [a] { return run_bench_query(*a); }};
 }

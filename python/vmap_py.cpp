@@ -90,8 +90,8 @@ struct BuildArgs {
         if (max_height) bp.octree.max_height = *max_height;
         if (leaf_points) bp.octree.leaf_points = *leaf_points;
         bp.visibility = {K, eps, facing_tol, parallel_tol};
-        bp.backend = backend;
-        bp.occluders = occluders;
+        bp.backend = parse<Backend>(backend, "backend");
+        bp.occluders = parse<OccluderSearch>(occluders, "occluders");
         bp.threads = threads;
         bp.max_batch_pairs = batch_pairs;
         return bp;
@@ -261,7 +261,8 @@ py::array_t<uint8_t> render(const VisibilityMap& vm, int64_t eye_id, int width, 
 py::array_t<float> gi(const VisibilityMap& vm, int bounces, float theta, const std::string& refine,
                       const std::string& backend) {
     GiParams p;
-    p.bounces = bounces, p.theta = theta, p.refine = refine, p.backend = backend;
+    p.bounces = bounces, p.theta = theta;
+    p.refine = parse<GiRefine>(refine, "refine"), p.backend = parse<Backend>(backend, "backend");
     std::vector<Vec3> b;
     {
         py::gil_scoped_release nogil;

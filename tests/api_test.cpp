@@ -82,7 +82,7 @@ TEST(Api, CudaWithoutAUsableDeviceIsAnErrorAndAutoFallsBackWithANote) {
     std::string why;
     if (detail::make_cuda_backend(&why)) GTEST_SKIP() << "a GPU is present";
     BuildParams bp = test::cpu_params(4, 4);
-    bp.backend = "cuda";
+    bp.backend = Backend::kCuda;
     const PointSet pts = test::sample(test::scene_path("cornell-empty"), 400, 1);
     try {
         build_vmap(pts, bp);
@@ -90,7 +90,7 @@ TEST(Api, CudaWithoutAUsableDeviceIsAnErrorAndAutoFallsBackWithANote) {
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("backend cuda"), std::string::npos) << e.what();
     }
-    bp.backend = "auto";
+    bp.backend = Backend::kAuto;
     std::string note;
     bp.progress = [&](const ProgressInfo& p) {
         if (p.done == 0) note = p.note;

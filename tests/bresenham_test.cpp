@@ -1,6 +1,6 @@
-// The grid-walk occluder kernel of [7] (src/visibility/bresenham.h) against brute force.
+// The grid-walk occluder kernel of [7] (src/visibility/grid_walk.h) against brute force.
 #include "octree/records.h"
-#include "visibility/bresenham.h"
+#include "visibility/grid_walk.h"
 
 #include <gtest/gtest.h>
 
@@ -14,7 +14,7 @@
 namespace vmap {
 namespace {
 
-using detail::bresenham_leaf_pair_visible;
+using detail::grid_walk_leaf_pair_visible;
 using detail::is_actual_occluder;
 using detail::LeafGrid;
 
@@ -154,7 +154,7 @@ TEST(Bresenham, VisibleWheneverTheSphereWalkSaysVisible) {
         for (int32_t b = a + 1; b < L; b += 2) {
             const bool s =
                 detail::leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr));
-            const bool r = bresenham_leaf_pair_visible(f.t, g, a, b, vp, &wc);
+            const bool r = grid_walk_leaf_pair_visible(f.t, g, a, b, vp, &wc);
             if (s) {
                 EXPECT_TRUE(r) << a << " " << b;
             }
@@ -170,11 +170,11 @@ TEST(Bresenham, VisibleWheneverTheSphereWalkSaysVisible) {
 
 TEST(Bresenham, VmapBuiltWithItMatchesTheKernelOnEveryLeafPair) {
     BuildParams bp = test::cpu_params(5, 4);
-    bp.occluders = "bresenham";
+    bp.occluders = OccluderSearch::kGridWalk;
     BuildStats st;
     const VisibilityMap vm =
         build_vmap(test::sample(test::oracle_path("room-with-block.json"), 1500, 3), bp, &st);
-    EXPECT_NE(st.backend.find("bresenham"), std::string::npos);
+    EXPECT_NE(st.backend.find("grid walk"), std::string::npos);
     EXPECT_GT(st.work.cells_stepped, 0u);
     const LeafGrid g(vm.octree());
     const int32_t L = vm.octree().num_leaves();
@@ -183,7 +183,7 @@ TEST(Bresenham, VmapBuiltWithItMatchesTheKernelOnEveryLeafPair) {
     for (int32_t a = 0; a < L; ++a)
         for (int32_t b = a + 1; b < L; ++b) {
             const bool want =
-                bresenham_leaf_pair_visible(vm.octree(), g, a, b, vm.visibility_params(), &wc);
+                grid_walk_leaf_pair_visible(vm.octree(), g, a, b, vm.visibility_params(), &wc);
             ASSERT_EQ(vm.leaves_visible(a, b), want) << a << " " << b;
             vis += want;
         }
@@ -192,34 +192,36 @@ TEST(Bresenham, VmapBuiltWithItMatchesTheKernelOnEveryLeafPair) {
 
 TEST(Bresenham, CudaRequestIsAnError) {
     BuildParams bp = test::cpu_params(4, 8);
-    bp.backend = "cuda";
-    bp.occluders = "bresenham";
+    bp.backend = Backend::kCuda;
+    bp.occluders = OccluderSearch::kGridWalk;
     try {
         build_vmap(test::sample(test::oracle_path("room-with-block.json"), 500, 3), bp);
         ADD_FAILURE() << "no error";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("spheres only"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("boxes only"), std::string::npos) << e.what();
     }
 }
 
 TEST(Bresenham, AutoRunsOnTheCpu) {
     BuildParams bp = test::cpu_params(4, 8);
-    bp.backend = "auto";
-    bp.occluders = "bresenham";
+    bp.backend = Backend::kAuto;
+    bp.occluders = OccluderSearch::kGridWalk;
     BuildStats st;
     build_vmap(test::sample(test::oracle_path("room-with-block.json"), 500, 3), bp, &st);
-    EXPECT_NE(st.backend.find("bresenham"), std::string::npos) << st.backend;
+    EXPECT_NE(st.backend.find("grid walk"), std::string::npos) << st.backend;
 }
 
-TEST(Bresenham, UnknownOccluderKernelIsRejected) {
-    BuildParams bp = test::cpu_params(4, 8);
-    bp.occluders = "cones";
+TEST(Bresenham, UnknownOccluderSearchIsRejectedAndOldNamesAreRead) {
     try {
-        build_vmap(test::sample(test::oracle_path("room-with-block.json"), 200, 3), bp);
+        parse<OccluderSearch>("cones", "occluders");
         ADD_FAILURE() << "no error";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("occluders: unknown"), std::string::npos) << e.what();
+        EXPECT_EQ(std::string(e.what()),
+                  "occluders: unknown value 'cones' (expected boxes or grid)");
     }
+    EXPECT_EQ(parse<OccluderSearch>("bresenham", "occluders"), OccluderSearch::kGridWalk);
+    EXPECT_EQ(parse<OccluderSearch>("spheres", "occluders"), OccluderSearch::kBoxes);
+    EXPECT_STREQ(name_of(OccluderSearch::kGridWalk), "grid");
 }
 
 }  // namespace

@@ -492,12 +492,12 @@ else
     fail "validate --md/--json"
     show validate "$BLOCK" --pairs 5000 --heights 4,5 --md v.md --json v.json
 fi
-run validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders bresenham
-if [ "$rc" -eq 0 ] && grep -q 'bresenham occluders' out.txt; then
-    ok "validate --occluders bresenham prints its table"
+run validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders grid
+if [ "$rc" -eq 0 ] && grep -q 'grid occluders' out.txt; then
+    ok "validate --occluders grid prints its table"
 else
-    fail "validate --occluders bresenham"
-    show validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders bresenham
+    fail "validate --occluders grid"
+    show validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --occluders grid
 fi
 run validate "$BLOCK" --time-embree --heights 4 --embree-pairs 20000 --runs 1
 if [ "$rc" -eq 0 ] && grep -q 'rtcOccluded1' out.txt; then

@@ -16,10 +16,10 @@ namespace {
 
 void expect_same_vmap(const PointSet& ps, BuildParams bp, const std::string& what,
                       BuildStats* nodes_stats = nullptr) {
-    bp.construction = "leaf-pairs";
+    bp.construction = Construction::kLeafPairs;
     BuildStats ls, ns;
     const VisibilityMap ref = build_vmap(ps, bp, &ls);
-    bp.construction = "nodes";
+    bp.construction = Construction::kNodes;
     const VisibilityMap got = build_vmap(ps, bp, &ns);
     ASSERT_EQ(ns.construction, "nodes");
     EXPECT_EQ(ls.leaf_pairs_walked, ls.leaf_pairs) << what;
@@ -74,9 +74,9 @@ TEST(Construction, SavedFilesAreByteIdentical) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 5);
     BuildParams bp = test::cpu_params(8, 4);
     test::ScratchDir dir;
-    bp.construction = "leaf-pairs";
+    bp.construction = Construction::kLeafPairs;
     save_vmap(dir.path("a.vmap"), build_vmap(ps, bp));
-    bp.construction = "nodes";
+    bp.construction = Construction::kNodes;
     save_vmap(dir.path("b.vmap"), build_vmap(ps, bp));
     EXPECT_EQ(test::slurp(dir.path("a.vmap")), test::slurp(dir.path("b.vmap")));
 }
@@ -201,7 +201,7 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
     for (uint64_t seed = 300; seed < 320; ++seed) {
         const PointSet ps = random_scene(seed);
         BuildParams bp = test::cpu_params(4 + int(seed % 4), 2 + int(seed % 3));
-        bp.construction = "leaf-pairs";
+        bp.construction = Construction::kLeafPairs;
         const VisibilityMap vm = build_vmap(ps, bp);
         const Octree& t = vm.octree();
         const auto m = test::brute_matrix(vm);
@@ -235,26 +235,25 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
 TEST(Construction, AutoDecidesNodePairsOnTheCpu) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 2);
     BuildParams bp = test::cpu_params(7, 2);
-    ASSERT_EQ(bp.construction, "auto");
+    ASSERT_EQ(bp.construction, Construction::kAuto);
     BuildStats st;
     const VisibilityMap got = build_vmap(ps, bp, &st);
     EXPECT_EQ(st.construction, "nodes");
     EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs);
-    bp.construction = "leaf-pairs";
+    bp.construction = Construction::kLeafPairs;
     const VisibilityMap ref = build_vmap(ps, bp);
     EXPECT_TRUE(std::ranges::equal(got.link_targets(), ref.link_targets()));
 }
 
 TEST(Construction, UnknownMethodIsRejected) {
-    const PointSet ps = test::sample(test::scene_path("cornell-empty"), 300, 1);
-    BuildParams bp = test::cpu_params(5, 4);
-    bp.construction = "magic";
     try {
-        build_vmap(ps, bp, nullptr, "scene.json");
+        parse<Construction>("magic", "construction");
         FAIL() << "no error";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("construction"), std::string::npos) << e.what();
+        EXPECT_EQ(std::string(e.what()),
+                  "construction: unknown value 'magic' (expected auto, nodes or leaf-pairs)");
     }
+    EXPECT_EQ(parse<Construction>("leaf-pairs", "construction"), Construction::kLeafPairs);
 }
 
 }  // namespace

@@ -32,9 +32,9 @@ TEST_P(GiGpuMatchesCpu, RadiosityIsBitIdenticalEveryBounce) {
                                         test::cpu_params(c.height, 4));
     GiParams p;
     p.theta = c.theta;
-    p.backend = "cpu";
+    p.backend = Backend::kCpu;
     RadiositySolver cpu(vm, p);
-    p.backend = "cuda";
+    p.backend = Backend::kCuda;
     RadiositySolver gpu(vm, p);
     ASSERT_EQ(gpu.stats().backend.rfind("cuda", 0), 0u) << gpu.stats().backend;
     EXPECT_EQ(gpu.stats().interactions(), cpu.stats().interactions());

@@ -182,7 +182,7 @@ TEST(Sampling, LightPointsEmitTheLightsPower) {
 
 GiParams cpu_gi(float theta) {
     GiParams p;
-    p.backend = "cpu";
+    p.backend = Backend::kCpu;
     p.theta = theta;
     return p;
 }

@@ -55,9 +55,9 @@ VisibilityMap room_vmap(const char* scene, uint64_t points, int height) {
                       test::cpu_params(height, 4));
 }
 
-GiParams cpu_gi(float theta, int bounces, const char* refine = "blocks") {
+GiParams cpu_gi(float theta, int bounces, GiRefine refine = GiRefine::kBlocks) {
     GiParams p;
-    p.backend = "cpu";
+    p.backend = Backend::kCpu;
     p.refine = refine;
     p.theta = theta;
     p.bounces = bounces;
@@ -152,7 +152,7 @@ TEST(Gi, BruteForceMatchesAPointPairOracle) {
     EXPECT_GT(lit, brute.size() / 2);
 }
 
-class GiMode : public ::testing::TestWithParam<const char*> {};
+class GiMode : public ::testing::TestWithParam<GiRefine> {};
 
 TEST_P(GiMode, HierarchicalEqualsBruteForceWhenThetaIsHuge) {
     const VisibilityMap vm = room_vmap("cornell-two-models", 2500, 7);
@@ -196,7 +196,8 @@ TEST_P(GiMode, FormFactorsAreReciprocalAndBounded) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Refine, GiMode, ::testing::Values("blocks", "links"));
+INSTANTIATE_TEST_SUITE_P(Refine, GiMode, ::testing::Values(GiRefine::kBlocks, GiRefine::kLinks),
+                         [](const auto& i) { return std::string(name_of(i.param)); });
 
 TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     const VisibilityMap vm = room_vmap("cornell-two-models", 4000, 7);
@@ -215,7 +216,7 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
         }
     }
     for (size_t t = 0; t < thetas.size(); ++t) {
-        std::cout << GetParam() << ", theta " << thetas[t] << ": node interactions "
+        std::cout << name_of(GetParam()) << ", theta " << thetas[t] << ": node interactions "
                   << node_links[t] << ", relative RMS per bounce";
         for (double e : err[t]) std::cout << " " << e;
         std::cout << "\n";
@@ -335,8 +336,8 @@ TEST(Gi, BlockInteractionsGrowSlowerThanLinks) {
     const uint64_t sizes[2] = {2000, 8000};
     for (int k = 0; k < 2; ++k) {
         const VisibilityMap vm = room_vmap("cornell-bunny", sizes[k], 10);
-        blocks[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, "blocks")).stats().interactions();
-        links[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, "links")).stats().interactions();
+        blocks[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, GiRefine::kBlocks)).stats().interactions();
+        links[k] = RadiositySolver(vm, cpu_gi(1.0f, 1, GiRefine::kLinks)).stats().interactions();
         EXPECT_GE(links[k], vm.num_links());
     }
     const double gb = double(blocks[1]) / blocks[0], gl = double(links[1]) / links[0];
@@ -386,10 +387,8 @@ TEST(Gi, BadParametersAreErrors) {
     fails(cpu_gi(INFINITY, 1), "theta");
     fails(cpu_gi(1.0f, -1), "bounces");
     GiParams p = cpu_gi(1.0f, 1);
-    p.backend = "gpu";
-    fails(p, "backend");
-    p = cpu_gi(1.0f, 1, "nope");
-    fails(p, "refine");
+    EXPECT_THROW(parse<Backend>("gpu", "backend"), Error);
+    EXPECT_THROW(parse<GiRefine>("nope", "refine"), Error);
     p = cpu_gi(1e9f, 1);
     p.max_interactions = 10;
     fails(p, "theta");

@@ -29,10 +29,10 @@ TEST_P(GpuMatchesCpu, VmapIsByteIdentical) {
     const BuildCase c = GetParam();
     const PointSet ps = test::sample(c.file(), c.points, 3);
     BuildParams bp = test::cpu_params(c.height, c.leaf_points);
-    bp.construction = "leaf-pairs";
+    bp.construction = Construction::kLeafPairs;
     BuildStats cs, gs;
     const VisibilityMap cpu = build_vmap(ps, bp, &cs);
-    bp.backend = "cuda";
+    bp.backend = Backend::kCuda;
     const VisibilityMap gpu = build_vmap(ps, bp, &gs);
     EXPECT_NE(gs.backend.find("cuda"), std::string::npos) << gs.backend;
     EXPECT_EQ(gs.work.pairs, cs.work.pairs);
@@ -60,13 +60,13 @@ TEST_P(GpuMatchesCpu, NodePathGivesTheSameVmap) {
     const BuildCase c = GetParam();
     const PointSet ps = test::sample(c.file(), c.points, 3);
     BuildParams bp = test::cpu_params(c.height, c.leaf_points);
-    bp.construction = "leaf-pairs";
+    bp.construction = Construction::kLeafPairs;
     const VisibilityMap ref = build_vmap(ps, bp);
-    bp.construction = "nodes";
+    bp.construction = Construction::kNodes;
     bp.walk_pairs = 256;
     BuildStats cs, gs;
     const VisibilityMap cpu = build_vmap(ps, bp, &cs);
-    bp.backend = "cuda";
+    bp.backend = Backend::kCuda;
     const VisibilityMap gpu = build_vmap(ps, bp, &gs);
     EXPECT_NE(gs.backend.find("cuda"), std::string::npos) << gs.backend;
     EXPECT_EQ(gs.construction, "nodes");
@@ -126,7 +126,7 @@ TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
 TEST(GpuBackend, AutoPicksTheGpuAndSaysSo) {
     VMAP_REQUIRE_GPU();
     BuildParams bp = test::cpu_params(5, 4);
-    bp.backend = "auto";
+    bp.backend = Backend::kAuto;
     BuildStats st;
     build_vmap(test::sample(test::scene_path("cornell-empty"), 1000, 1), bp, &st);
     EXPECT_NE(st.backend.find("cuda"), std::string::npos) << st.backend;
@@ -136,7 +136,7 @@ TEST(GpuBackend, CudaRequestWithoutDeviceIsAnError) {
     std::string why;
     if (have_device(&why)) GTEST_SKIP() << "a GPU is present; the error is not reachable";
     BuildParams bp = test::cpu_params(5, 4);
-    bp.backend = "cuda";
+    bp.backend = Backend::kCuda;
     try {
         build_vmap(test::sample(test::scene_path("cornell-empty"), 500, 1), bp);
         ADD_FAILURE() << "backend cuda ran without a device";

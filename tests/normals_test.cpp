@@ -783,7 +783,7 @@ TEST(RawCloud, BuildWithoutRadiiEstimatesThemAndSaysSo) {
     ps.normals = truth;
     BuildParams bp;
     bp.octree.max_height = 4;
-    bp.backend = "cpu";
+    bp.backend = Backend::kCpu;
     BuildStats st;
     const VisibilityMap vm = build_vmap(ps, bp, &st, "room");
     ASSERT_TRUE(vm.points().has_radii());
@@ -800,7 +800,7 @@ TEST(RawCloud, BuildWarnsWhenARoomFacesOutward) {
     ps.radii.assign(ps.size(), 0.01f);
     BuildParams bp;
     bp.octree.max_height = 4;
-    bp.backend = "cpu";
+    bp.backend = Backend::kCpu;
     BuildStats st;
     build_vmap(ps, bp, &st, "room");
     ASSERT_EQ(st.warnings.size(), 1u);
@@ -821,7 +821,7 @@ TEST(RawCloud, BuildWarnsWhenNormalsLookInconsistent) {
     ps.radii.assign(ps.size(), 0.01f);
     BuildParams bp;
     bp.octree.max_height = 4;
-    bp.backend = "cpu";
+    bp.backend = Backend::kCpu;
     BuildStats st;
     build_vmap(ps, bp, &st, "room");
     ASSERT_FALSE(st.warnings.empty());

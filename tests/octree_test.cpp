@@ -1,4 +1,4 @@
-// The adaptive octree: structure, statistics and bounds (DESIGN.md "Octree").
+// The adaptive octree: structure, statistics and bounds (docs/design.md "Octree").
 #include "octree/records.h"
 #include "vmap/octree.h"
 

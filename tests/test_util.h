@@ -38,7 +38,7 @@ inline PointSet sample(const std::string& scene_file, uint64_t n, uint64_t seed 
 
 inline BuildParams cpu_params(int max_height, int leaf_points) {
     BuildParams bp;
-    bp.backend = "cpu";
+    bp.backend = Backend::kCpu;
     bp.octree.max_height = max_height;
     bp.octree.leaf_points = leaf_points;
     return bp;

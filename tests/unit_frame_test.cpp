@@ -109,7 +109,7 @@ TEST_F(UnitFrame, QueriesAndOutputsAreInTheInputsUnits) {
 
 TEST_F(UnitFrame, RadiosityIsTheSameInAnyUnitAndPowerScalesWithArea) {
     GiParams gp;
-    gp.backend = "cpu";
+    gp.backend = Backend::kCpu;
     gp.bounces = 2;
     const std::vector<Vec3> a = solve_radiosity(*unit_, gp);
     for (double s : {1e-6, 1e6, 1e20}) {

@@ -348,9 +348,6 @@ TEST(Validate, BadInputIsRejectedNamingTheField) {
     q.heights = {};
     fails(kBlock, q, "heights");
     q = p;
-    q.occluders = "cones";
-    fails(kBlock, q, "occluders");
-    q = p;
     q.splat_floor = 2;  // needs --predict direct
     fails(kBlock, q, "predict direct");
     q = p;

@@ -1,4 +1,4 @@
-// The leaf-pair predicate (paper §5, DESIGN.md "Leaf-pair visibility").
+// The leaf-pair predicate (paper §5; docs/design.md "Leaf-pair visibility").
 #include <gtest/gtest.h>
 
 #include <random>

@@ -1,5 +1,6 @@
-// V-map construction against a brute-force leaf-pair matrix (DESIGN.md "The V-map": the
-// invariant is the oracle).
+// V-map construction against a brute-force leaf-pair matrix (the invariant is the oracle: a
+// link means every leaf under one end sees every leaf under the other, and every visible leaf
+// pair is covered by exactly one link).
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
@@ -22,7 +23,8 @@ LinkSet links_of(const VisibilityMap& vm) {
     return s;
 }
 
-// The construction of DESIGN.md, written as plainly as possible over the dense matrix.
+// The construction (paper §4.3: sibling rectangles resolved top down), written as plainly as
+// possible over the dense matrix.
 struct Naive {
     const Octree& t;
     const std::vector<uint8_t>& m;
@@ -220,9 +222,8 @@ TEST(VmapBuild, AbsurdParametersAreRejected) {
 }
 
 TEST(VmapBuild, UnknownBackendIsAUsageError) {
-    BuildParams bp = test::cpu_params(5, 4);
-    bp.backend = "tpu";
-    EXPECT_THROW(build_vmap(test::sample(test::scene_path("cornell-empty"), 300, 1), bp), Error);
+    EXPECT_THROW(parse<Backend>("tpu", "backend"), Error);
+    EXPECT_STREQ(name_of(parse<Backend>("cuda", "backend")), "cuda");
 }
 
 }  // namespace

@@ -132,7 +132,7 @@ class VmapFile : public ::testing::Test {
         Scene sc = load_scene(std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-empty.json");
         sc.points = 1500;
         BuildParams bp;
-        bp.backend = "cpu";
+        bp.backend = Backend::kCpu;
         bp.octree.max_height = 5;
         bp.octree.leaf_points = 4;
         bp.visibility.K = 3;  // not the default, so a lost parameter shows
@@ -210,7 +210,7 @@ TEST_F(VmapFile, AMapWithoutColoursRadiiOrEmissionRoundTrips) {
         ps.normals.push_back({0, -1, 0});
     }
     BuildParams bp;
-    bp.backend = "cpu";
+    bp.backend = Backend::kCpu;
     bp.octree.max_height = 4;
     const VisibilityMap vm = build_vmap(ps, bp, nullptr, "plates");
     ScratchDir dir;

@@ -1,4 +1,4 @@
-// Diffuse global illumination over the V-map (paper §6.3, DESIGN.md "Global illumination").
+// Diffuse global illumination over the V-map (paper §6.3; docs/gi.md).
 //
 // Radiosity over the points: B_i = E_i + rho_i * sum_j F_ij B_j, with V_ij from the V-map (a
 // link (A, B) means every leaf under A sees every leaf under B; points of one leaf do not
@@ -43,6 +43,7 @@
 #include <string>
 #include <vector>
 
+#include "vmap/options.h"
 #include "vmap/vec.h"
 #include "vmap/visibility_map.h"
 
@@ -51,10 +52,13 @@ namespace vmap {
 struct GiParams {
     int bounces = 3;                         // gather steps after B = E; 1 = direct light only
     float theta = 1.0f;                      // separation parameter (> 0): larger is finer, slower
-    std::string backend = "auto";            // auto | cpu | cuda
-    std::string refine = "blocks";           // blocks | links (see above)
+    Backend backend = Backend::kAuto;
+    GiRefine refine = GiRefine::kBlocks;     // see above
     uint64_t max_interactions = 1ull << 31;  // refuse a refinement larger than this
     ProgressCallback progress;  // refinement progress (vmap/progress.h); false cancels
+
+    // Throws vmap::Error naming `source` and the field: theta <= 0 or not finite, bounces < 0.
+    void check(const std::string& source) const;
 };
 
 struct GiStats {

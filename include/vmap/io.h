@@ -10,6 +10,7 @@
 #include <array>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "vmap/mesh.h"
@@ -76,6 +77,9 @@ ModelData read_stl(const std::string& path);
 // Dispatches on the extension (case-insensitive): .ply, .off, .xyz/.xyzn/.xyzrgb/.pts/.asc/.csv,
 // .pcd, .obj, .stl; throws for anything else.
 ModelData read_model(const std::string& path);
+
+// Whether `path` ends with `suffix`, ignoring ASCII case (has_extension("A.PLY", ".ply")).
+bool has_extension(std::string_view path, std::string_view suffix);
 
 // Whether the file is a mesh (has faces) without reading all of it where the format allows: the
 // PLY and OFF headers; an OBJ's first "f" line; every STL. Point-list formats are never meshes.

@@ -19,7 +19,10 @@ namespace vmap {
 struct OctreeParams {
     int max_height = 9;   // deepest level a leaf may have (root = level 0); 1..21
     int leaf_points = 1;  // a node splits while it holds more points than this (and is not at
-                          // max_height); >= 1
+                          // max_height); 1..1000000
+
+    // Throws vmap::Error naming `source` and the field for a value out of range.
+    void check(const std::string& source) const;
 };
 
 // A bounding sphere: centre and radius.

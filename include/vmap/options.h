@@ -14,7 +14,7 @@ enum class Backend { kAuto, kCpu, kCuda };
 
 // How the predicate finds potential occluders of a segment: a walk of the octree that prunes
 // with each node's content box (paper §5.2), or a walk of the grid cells the segment crosses
-// (the grid walk of [7], CPU only: visibility/bresenham.h).
+// (the grid walk of [7], CPU only: visibility/grid_walk.h).
 enum class OccluderSearch { kBoxes, kGridWalk };
 
 // How the V-map is built: node pairs decided whole where the bounds allow (nodes), every leaf

@@ -1,6 +1,7 @@
 // Progress and cancellation for long library calls: the library never prints; it calls back.
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <string>
@@ -25,6 +26,12 @@ struct ProgressInfo {
 // from a worker thread, never from two at once) and at its end (done == total). Return false to
 // cancel: the call then stops early and throws vmap::Cancelled.
 using ProgressCallback = std::function<bool(const ProgressInfo&)>;
+
+// Seconds on the steady clock since t0 (how the library times its stages, for callers that time
+// theirs the same way).
+inline double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
 
 // Thrown when a ProgressCallback asked to stop.
 class Cancelled : public Error {

@@ -1,4 +1,4 @@
-// Queries beyond point pairs and visible sets (issue 4): points by position and ray shooting.
+// Queries beyond point pairs and visible sets: points by position and ray shooting.
 //
 // Ray shooting (paper §6) from a surface point i: the first point splat (a disc: centre =
 // position, normal, radius = splat radius x splat_scale) hit by the ray i + t dir, t > 0. The

@@ -1,4 +1,4 @@
-// Point rendering to images (issue 4): disc splats with a depth buffer, simple shading and
+// Point rendering to images: disc splats with a depth buffer, simple shading and
 // supersampled anti-aliasing, on all CPU cores (oneTBB, screen tiles).
 //
 // A point is drawn as its surface disc: centre = position, orientation = normal (a disc facing

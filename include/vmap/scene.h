@@ -1,4 +1,4 @@
-// Scenes (DESIGN.md "Scenes"): a JSON file describing a Cornell room, meshes and point clouds
+// Scenes (docs/design.md "Scenes and sampling"): a JSON file describing a Cornell room, meshes and point clouds
 // placed in it and an area light, sampled into one mixed point set. A mesh file on its own
 // (PLY with faces, OFF, OBJ, STL) is a scene of one surface with no room. Also raw point clouds
 // (files without faces).

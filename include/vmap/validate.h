@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "vmap/mesh.h"
+#include "vmap/options.h"
 #include "vmap/progress.h"
 #include "vmap/scene.h"
 #include "vmap/visibility.h"
@@ -49,8 +50,8 @@ struct ValidateParams {
     std::vector<int> heights{5, 6, 7, 8, 9, 10};  // octree max_height values, 1..21
     int leaf_points = 0;                // 0: the scene's octree.leaf_points, else the default
     VisibilityParams visibility;        // K, eps, tolerances of the predicate
-    std::string occluders = "spheres";  // spheres | bresenham
-    std::string backend = "cpu";        // for the V-map build: auto | cpu | cuda
+    OccluderSearch occluders = OccluderSearch::kBoxes;
+    Backend backend = Backend::kCpu;  // for the V-map build
     // "vmap": build the V-map and query it (the real thing). "direct": evaluate the leaf-pair
     // predicate on the sampled pairs' leaves only, with no V-map: the same answers (the V-map
     // stores the leaf-pair table exactly; tests/validate_test.cpp checks it), far faster, for
@@ -81,6 +82,9 @@ struct ValidateParams {
     // each point's true normal and model flag from the nearest point of a dense scene sample).
     std::string cloud;
     ProgressCallback progress;  // heights done (vmap/progress.h); false cancels
+
+    // Throws vmap::Error naming `source` and the field for a value out of range.
+    void check(const std::string& source) const;
 };
 
 // One octree height's outcome.

@@ -1,7 +1,8 @@
-// Parameters of the leaf-pair visibility predicate (DESIGN.md "Leaf-pair visibility").
+// Parameters of the leaf-pair visibility predicate (paper §5; docs/design.md "Leaf-pair visibility").
 #pragma once
 
 #include <cstdint>
+#include <string>
 
 namespace vmap {
 
@@ -10,6 +11,10 @@ struct VisibilityParams {
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
     float facing_tol = 0.001f;   // facing: n_a . d > facing_tol |d| (a rounding guard)
     float parallel_tol = 1e-3f;  // a plane with |n . d| <= parallel_tol |d| is parallel to pq
+
+    // Throws vmap::Error naming `source` and the field for a value out of range: K 1..1000,
+    // eps [0, 0.5), facing_tol and parallel_tol [0, 1).
+    void check(const std::string& source) const;
 };
 
 // Work counted while resolving leaf pairs.
@@ -19,7 +24,7 @@ struct WorkCounters {
     uint64_t visible_pairs = 0;
     uint64_t node_tests = 0;      // segment-sphere tests
     uint64_t occluder_tests = 0;  // tangent-plane tests on potential occluders
-    uint64_t cells_stepped = 0;   // grid cells visited (the Bresenham kernel only)
+    uint64_t cells_stepped = 0;   // grid cells visited (the grid walk only)
 
     WorkCounters& operator+=(const WorkCounters& o) {
         pairs += o.pairs;

@@ -11,6 +11,7 @@
 
 #include "vmap/mesh.h"
 #include "vmap/octree.h"
+#include "vmap/options.h"
 #include "vmap/progress.h"
 #include "vmap/visibility.h"
 
@@ -21,9 +22,8 @@ struct BuildParams {
     VisibilityParams visibility;
     // auto: the GPU when one is usable, else the CPU (the progress callback's first report
     // and BuildStats::note say why); cuda: the GPU or vmap::Error; cpu.
-    std::string backend = "auto";
-    std::string occluders = "spheres";      // spheres (paper §5.2) | bresenham (the grid walk
-                                            // of [7], CPU only: visibility/bresenham.h)
+    Backend backend = Backend::kAuto;
+    OccluderSearch occluders = OccluderSearch::kBoxes;  // vmap/options.h (the grid walk: CPU only)
     uint64_t max_batch_pairs = 1ull << 28;  // leaf pairs evaluated per batch (bounds memory)
     int threads = 0;  // CPU threads for the build (0: all cores; the caller's limit, if any)
     // Called with the leaf pairs done (vmap/progress.h); returning false cancels the build
@@ -38,11 +38,15 @@ struct BuildParams {
     // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
     // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (whose node tests run
     // on the host and whose narrow rectangles waste lanes: 2x slower on the dragon, H200).
-    std::string construction = "auto";
+    Construction construction = Construction::kAuto;
     // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
     // columns of a row at once).
     uint64_t walk_pairs = 0;
+
+    // Throws vmap::Error naming `source` and the field for a value out of range (octree and
+    // visibility included), or the grid walk with backend cuda.
+    void check(const std::string& source) const;
 };
 
 // Node pairs of the construction at one octree level (the deeper level of the pair's nodes).

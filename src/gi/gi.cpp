@@ -17,6 +17,7 @@
 #include <numbers>
 
 #include "gi/gi_device.h"
+#include "util/device.h"
 #include "gi/gi_kernels.h"
 #include "util/progress.h"
 #include "vmap/error.h"
@@ -28,9 +29,6 @@ using Clock = std::chrono::steady_clock;
 constexpr float kPi = std::numbers::pi_v<float>;
 const Vec3 kDefaultAlbedo{0.8f, 0.8f, 0.8f};
 
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 void check_points(const VisibilityMap& vm, const char* who) {
     const PointSet& ps = vm.points();
@@ -424,7 +422,7 @@ void RadiositySolver::Impl::setup() {
     // sorted by source so the sums run in an order that does not depend on thread timing.
     const Refiner ref{vm, geom, params.theta};
     std::vector<BlockRefiner::Entry> blocks;
-    const bool by_links = params.refine == "links";
+    const bool by_links = params.refine == GiRefine::kLinks;
     if (!by_links) blocks = BlockRefiner{vm, geom, params.theta}.run(params.progress);
     auto element_area = [&](uint32_t e) {
         return e < uint32_t(N) ? double(geom[e].area) : double(area_of(ps, e - uint32_t(N)));
@@ -502,12 +500,10 @@ void RadiositySolver::Impl::setup() {
     view.G = G.data();
     reset_host();
 
-    if (params.backend == "auto" || params.backend == "cuda") {
+    if (params.backend != Backend::kCpu) {
         std::string why;
         device = detail::make_gi_cuda(&why);
-        if (!device && params.backend == "cuda")
-            throw Error(fmt::format("gi: backend cuda: {} (backend auto falls back to the CPU)",
-                                    why));
+        if (!device) detail::fall_back_to_cpu(params.backend, "gi: backend", why, &stats.note);
     }
     if (device) {
         try {
@@ -518,7 +514,7 @@ void RadiositySolver::Impl::setup() {
             stats.note = fmt::format(
                 "backend {}: the GPU could not take the problem ({}); "
                 "using the CPU",
-                params.backend, e.what());
+                name_of(params.backend), e.what());
         }
     }
     if (device) {
@@ -547,20 +543,17 @@ void RadiositySolver::Impl::cpu_bounce() {
     tbb::parallel_for(0, view.num_nodes, [&](int32_t n) { detail::gi_pull_up(view, n); });
 }
 
+void GiParams::check(const std::string& source) const {
+    if (!(theta > 0) || !std::isfinite(theta))
+        throw Error(
+            fmt::format("{}: theta: {} (the separation parameter must be > 0)", source, theta));
+    if (bounces < 0) throw Error(fmt::format("{}: bounces: {} (must be >= 0)", source, bounces));
+}
+
 RadiositySolver::RadiositySolver(const VisibilityMap& vm, const GiParams& params, GiStats* stats)
     : impl_(std::make_unique<Impl>(vm)) {
     vm.require_links("gi");
-    if (!(params.theta > 0) || !std::isfinite(params.theta))
-        throw Error(
-            fmt::format("gi: theta: {} (the separation parameter must be > 0)", params.theta));
-    if (params.bounces < 0)
-        throw Error(fmt::format("gi: bounces: {} (must be >= 0)", params.bounces));
-    if (params.refine != "blocks" && params.refine != "links")
-        throw Error(
-            fmt::format("gi: refine: unknown mode '{}' (expected blocks or links)", params.refine));
-    if (params.backend != "auto" && params.backend != "cpu" && params.backend != "cuda")
-        throw Error(fmt::format("gi: backend: unknown backend '{}' (expected auto, cpu or cuda)",
-                                params.backend));
+    params.check("gi");
     check_points(vm, "gi");
     impl_->params = params;
     impl_->setup();

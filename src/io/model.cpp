@@ -112,4 +112,13 @@ bool model_has_faces(const std::string& path) {
     return obj_has_faces(in);
 }
 
+bool has_extension(std::string_view path, std::string_view suffix) {
+    if (path.size() < suffix.size()) return false;
+    const std::string_view tail = path.substr(path.size() - suffix.size());
+    return std::equal(tail.begin(), tail.end(), suffix.begin(), [](char a, char b) {
+        return std::tolower(static_cast<unsigned char>(a)) ==
+               std::tolower(static_cast<unsigned char>(b));
+    });
+}
+
 }  // namespace vmap

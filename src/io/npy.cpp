@@ -11,6 +11,7 @@
 #include <fstream>
 #include <memory>
 
+#include "io/atomic_file.h"
 #include "vmap/error.h"
 
 namespace vmap::detail {
@@ -129,35 +130,14 @@ void write_npy_u8(const std::string& path, std::span<const uint8_t> values) {
     const size_t total = (10 + h.size() + 1 + 63) / 64 * 64;
     h.append(total - 10 - h.size() - 1, ' ');
     h += '\n';
-    const std::string tmp = path + ".tmp";
-    {
-        std::ofstream out(tmp, std::ios::binary | std::ios::trunc);
-        if (!out) throw Error(fmt::format("{}: cannot write", tmp));
-        const unsigned char pre[10] = {0x93,
-                                       'N',
-                                       'U',
-                                       'M',
-                                       'P',
-                                       'Y',
-                                       1,
-                                       0,
-                                       static_cast<unsigned char>(h.size() & 0xff),
-                                       static_cast<unsigned char>(h.size() >> 8)};
-        out.write(reinterpret_cast<const char*>(pre), 10);
-        out.write(h.data(), std::streamsize(h.size()));
-        out.write(reinterpret_cast<const char*>(values.data()), std::streamsize(values.size()));
-        if (!out.flush()) {
-            out.close();
-            std::remove(tmp.c_str());
-            throw Error(fmt::format("{}: cannot write", path));
-        }
-    }
-    std::error_code ec;
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::remove(tmp.c_str());
-        throw Error(fmt::format("{}: cannot rename {} to it: {}", path, tmp, ec.message()));
-    }
+    const unsigned char pre[10] = {0x93, 'N', 'U', 'M', 'P', 'Y', 1, 0,
+                                   static_cast<unsigned char>(h.size() & 0xff),
+                                   static_cast<unsigned char>(h.size() >> 8)};
+    io::AtomicFile out(path);
+    out.write(pre, sizeof pre);
+    out.write(h);
+    out.write(values.data(), values.size());
+    out.commit();
 }
 
 }  // namespace vmap::detail

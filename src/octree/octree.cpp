@@ -95,12 +95,8 @@ namespace {
 
 // Throws for parameters out of range or points the octree cannot hold.
 void check_input(const PointSet& points, const OctreeParams& params, const std::string& source) {
-    if (params.max_height < 1 || params.max_height > kMortonBits)
-        throw Error(fmt::format("{}: max_height {} out of range (1..{})", source, params.max_height,
-                                kMortonBits));
-    if (params.leaf_points < 1 || params.leaf_points > 1000000)
-        throw Error(fmt::format("{}: leaf_points {} out of range (1..1000000)", source,
-                                params.leaf_points));
+    static_assert(kMortonBits == 21);  // OctreeParams::check's bound on max_height
+    params.check(source);
     const size_t n = points.size();
     if (n == 0) throw Error(fmt::format("{}: the point cloud is empty", source));
     if (n >= (1ull << 31)) throw Error(fmt::format("{}: too many points ({})", source, n));

@@ -1,4 +1,4 @@
-// Scene files: parsing, the Cornell room, placing meshes (DESIGN.md "Scenes").
+// Scene files: parsing, the Cornell room, placing meshes (docs/design.md "Scenes and sampling").
 #include "vmap/scene.h"
 
 #include <fmt/format.h>
@@ -416,16 +416,12 @@ Scene mesh_file_scene(const std::string& path) {
 std::string default_scene_path() { return data_dir() + "/scenes/cornell-bunny.json"; }
 
 bool is_scene_input(const std::string& path, bool as_points) {
-    std::string ext = fs::path(path).extension().string();
-    for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
-    if (ext == ".json") return true;
+    if (has_extension(path, ".json")) return true;
     return !as_points && model_has_faces(path);
 }
 
 Scene load_scene(const std::string& path) {
-    std::string ext = fs::path(path).extension().string();
-    for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
-    if (ext != ".json") return mesh_file_scene(path);
+    if (!has_extension(path, ".json")) return mesh_file_scene(path);
     Ctx cx{path};
     const json j = io::parse_json_file(path);
     cx.known(j, "",

@@ -19,7 +19,7 @@
 
 #include "octree/delta_rule.h"
 #include "util/progress.h"
-#include "visibility/bresenham.h"
+#include "visibility/grid_walk.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
@@ -41,22 +41,11 @@ double Confusion::false_hidden_rate() const {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
-void check_visibility(const VisibilityParams& vp, const std::string& src) {
-    if (vp.K < 1 || vp.K > 1000)
-        throw Error(fmt::format("{}: K {} out of range (1..1000)", src, vp.K));
-    if (!(vp.eps >= 0 && vp.eps < 0.5f))
-        throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", src, vp.eps));
-    if (!(vp.facing_tol >= 0 && vp.facing_tol < 1))
-        throw Error(fmt::format("{}: facing_tol {} out of range [0, 1)", src, vp.facing_tol));
-    if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
-        throw Error(fmt::format("{}: parallel_tol {} out of range [0, 1)", src, vp.parallel_tol));
-}
+}  // namespace
 
-void check_params(const ValidateParams& p, const std::string& src) {
+void ValidateParams::check(const std::string& src) const {
+    const ValidateParams& p = *this;
     if (p.pairs < 1 || p.pairs > 1000000000ull)
         throw Error(fmt::format("{}: pairs {} out of range (1..1000000000)", src, p.pairs));
     if (p.heights.empty()) throw Error(fmt::format("{}: heights: no height given", src));
@@ -65,29 +54,25 @@ void check_params(const ValidateParams& p, const std::string& src) {
             throw Error(fmt::format("{}: heights: height {} out of range (1..21)", src, h));
     if (p.leaf_points < 0 || p.leaf_points > 1000000)
         throw Error(
-            fmt::format("{}: --leaf-points {} out of range (1..1000000)", src, p.leaf_points));
+            fmt::format("{}: leaf_points {} out of range (1..1000000)", src, p.leaf_points));
     if (p.points > 50000000)
         throw Error(fmt::format("{}: points {} out of range (1..50000000)", src, p.points));
     if (p.predict != "vmap" && p.predict != "direct")
         throw Error(fmt::format("{}: predict: unknown mode '{}' (expected vmap or direct)", src,
                                 p.predict));
-    if (p.occluders != "spheres" && p.occluders != "bresenham")
-        throw Error(
-            fmt::format("{}: --occluders: unknown kernel '{}' (expected spheres or bresenham)", src,
-                        p.occluders));
     if (!(p.bury_distance >= 0 && p.bury_distance <= 0.1))
         throw Error(
             fmt::format("{}: bury distance {} out of range [0, 0.1]", src, p.bury_distance));
     if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
     if (!p.as_cloud.empty() && p.as_cloud != "normals" && p.as_cloud != "bare")
-        throw Error(fmt::format("{}: --as-cloud: unknown mode '{}' (expected normals or bare)",
+        throw Error(fmt::format("{}: as_cloud: unknown mode '{}' (expected normals or bare)",
                                 src, p.as_cloud));
     if (!p.as_cloud.empty() && !p.cloud.empty())
-        throw Error(fmt::format("{}: give --as-cloud or --cloud, not both", src));
+        throw Error(fmt::format("{}: give as_cloud or cloud, not both", src));
     if (p.eyes > 10000)
-        throw Error(fmt::format("{}: --eyes {} out of range (0..10000)", src, p.eyes));
-    check_visibility(p.visibility, src);
+        throw Error(fmt::format("{}: eyes {} out of range (0..10000)", src, p.eyes));
+    p.visibility.check(src);
     if (!(p.delta_scale >= 0.1f && p.delta_scale <= 10.f))
         throw Error(fmt::format("{}: delta_scale {} out of range [0.1, 10]", src, p.delta_scale));
     if (!(p.splat_floor <= 10.f))
@@ -98,6 +83,8 @@ void check_params(const ValidateParams& p, const std::string& src) {
             "direct (the V-map build uses the octree's own rule)",
             src));
 }
+
+namespace {
 
 // Recomputes every leaf's Delta by the rule delta_scale * max(farthest, splat_floor * splat) and
 // the content boxes (detail::apply_delta_rule, the builder's). `pts` in octree order.
@@ -134,10 +121,10 @@ std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
 struct DirectPredictor {
     const Octree& t;
     const VisibilityParams& vp;
-    const detail::LeafGrid* grid;  // non-null: the Bresenham kernel
+    const detail::LeafGrid* grid;  // non-null: the grid walk
     bool operator()(int32_t a, int32_t b, WorkCounters* wc) const {
         if (a > b) std::swap(a, b);
-        if (grid) return detail::bresenham_leaf_pair_visible(t, *grid, a, b, vp, wc);
+        if (grid) return detail::grid_walk_leaf_pair_visible(t, *grid, a, b, vp, wc);
         return detail::leaf_pair_visible<true>(octree_view(t), a, b, vp, wc);
     }
 };
@@ -411,11 +398,11 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
             apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
         inverse.resize(order.size());
         for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
-        if (params.occluders == "bresenham") grid = std::make_unique<detail::LeafGrid>(t);
+        if (params.occluders == OccluderSearch::kGridWalk) grid = std::make_unique<detail::LeafGrid>(t);
         row.height = t.height();
         row.leaves = t.num_leaves();
         row.backend =
-            params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
+            params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
         direct = std::make_unique<DirectPredictor>(DirectPredictor{t, params.visibility, grid.get()});
         pr.tree = &t, pr.inverse = &inverse, pr.direct = direct.get();
     }
@@ -444,7 +431,7 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
 }  // namespace
 
 ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
-    check_params(params, path);
+    params.check(path);
     if (!is_scene_input(path))
         throw Error(
             fmt::format("{}: validate needs a scene file (.json) or a mesh: a point cloud has no "
@@ -558,7 +545,7 @@ std::string validation_markdown(const ValidationReport& r) {
         "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
         "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
-        p.occluders, vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
+        name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
         floor_of(p), r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
         r.live_pairs,
         r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
@@ -632,7 +619,7 @@ std::string validation_json(const ValidationReport& r) {
            {"ray_offset_relative", p.ray_offset},
            {"truth_seconds", r.truth_seconds},
            {"predict", p.predict},
-           {"occluders", p.occluders},
+           {"occluders", name_of(p.occluders)},
            {"leaf_points", p.leaf_points},
            {"K", p.visibility.K},
            {"eps", p.visibility.eps},
@@ -688,7 +675,7 @@ Spread spread(std::vector<double> v) {
 }  // namespace
 
 EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
-    check_visibility(p.visibility, path);
+    p.visibility.check(path);
     if (p.runs < 1 || p.runs > 100)
         throw Error(fmt::format("{}: runs {} out of range (1..100)", path, p.runs));
     if (p.sample_pairs < 1 || p.sample_pairs > 1000000000ull)

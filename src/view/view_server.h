@@ -1,4 +1,4 @@
-// The HTTP server behind `vmap view` (issue 19): holds one V-map in memory, serves the page in a
+// The HTTP server behind `vmap view`: holds one V-map in memory, serves the page in a
 // web folder and answers the page's questions with the library's queries.
 //
 // Endpoints (every id is an input point id, as in `vmap query`):

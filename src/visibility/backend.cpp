@@ -1,9 +1,7 @@
-// Backend selection: --backend auto|cpu|cuda.
+// Backend selection (the rule is util/device.h's).
 #include "visibility/backend.h"
 
-#include <fmt/format.h>
-
-#include "vmap/error.h"
+#include "util/device.h"
 
 namespace vmap::detail {
 
@@ -14,17 +12,12 @@ std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
 }
 #endif
 
-std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note) {
-    if (name == "cpu") return make_cpu_backend();
-    if (name == "auto" || name == "cuda") {
-        std::string why;
-        if (auto b = make_cuda_backend(&why)) return b;
-        if (name == "cuda")
-            throw Error(fmt::format("backend cuda: {} (backend auto falls back to the CPU)", why));
-        if (note) *note = fmt::format("no usable GPU ({}); using the CPU", why);
-        return make_cpu_backend();
-    }
-    throw Error(fmt::format("backend: unknown backend '{}' (expected auto, cpu or cuda)", name));
+std::unique_ptr<Backend> make_backend(vmap::Backend requested, std::string* note) {
+    if (requested == vmap::Backend::kCpu) return make_cpu_backend();
+    std::string why;
+    if (auto b = make_cuda_backend(&why)) return b;
+    fall_back_to_cpu(requested, "backend", why, note);
+    return make_cpu_backend();
 }
 
 }  // namespace vmap::detail

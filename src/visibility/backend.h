@@ -10,6 +10,7 @@
 
 #include "util/progress.h"
 #include "vmap/octree.h"
+#include "vmap/options.h"
 #include "vmap/visibility.h"
 
 namespace vmap::detail {
@@ -64,8 +65,8 @@ std::unique_ptr<Backend> make_cpu_backend();
 // nullptr with *why set when CUDA is not built in or no device is present.
 std::unique_ptr<Backend> make_cuda_backend(std::string* why);
 
-// "auto" (CUDA when a device is present, else CPU), "cpu" or "cuda". For "cuda" without a
-// device, falls back to the CPU and puts the reason in *note. Throws vmap::Error for other names.
-std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note);
+// The backend for `requested`: cpu; cuda (vmap::Error without a usable device); auto (the GPU
+// when usable, else the CPU with the reason in *note). The rule is util/device.h's.
+std::unique_ptr<Backend> make_backend(vmap::Backend requested, std::string* note);
 
 }  // namespace vmap::detail

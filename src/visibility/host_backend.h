@@ -1,5 +1,5 @@
 // The batching both CPU backends share (the sphere walk of leaf_pair.h and the grid walk of
-// bresenham.h): a batch is evaluated on all cores when it is submitted. Work items are words:
+// grid_walk.h): a batch is evaluated on all cores when it is submitted. Work items are words:
 // 32 consecutive columns of one row (neighbouring segments, so the walks share cache lines),
 // indexed across jobs by a prefix sum. Derived supplies
 //   bool visible(int32_t a, int32_t b, WorkCounters* wc) const;

@@ -1,4 +1,4 @@
-// The leaf-pair visibility predicate (paper §5, DESIGN.md "Leaf-pair visibility"), written once
+// The leaf-pair visibility predicate (paper §5; docs/design.md "Leaf-pair visibility"), written once
 // for the CPU and the CUDA backends. Plain inline functions on plain structs: no allocation, no
 // exceptions, no virtual calls. The build turns off FMA contraction on both sides, so the same
 // inputs give the same bits on the host and on the device.

@@ -24,7 +24,7 @@
 #include "octree/records.h"
 #include "util/progress.h"
 #include "visibility/backend.h"
-#include "visibility/bresenham.h"
+#include "visibility/grid_walk.h"
 #include "visibility/node_pair.h"
 #include "vmap/build_checks.h"
 #include "vmap/error.h"
@@ -37,9 +37,6 @@ using detail::PairJob;
 using Link = std::pair<int32_t, int32_t>;
 using Clock = std::chrono::steady_clock;
 
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 // One node pair of the construction: decided at node level (full: all its leaf pairs visible;
 // empty: none), split into the pairs of its children, or walked as one job (a rectangle).
@@ -456,43 +453,12 @@ struct Walked {
 
 namespace {
 
-void check_params(const BuildParams& params, const std::string& source) {
-    const VisibilityParams& vp = params.visibility;
-    if (vp.K < 1 || vp.K > 1000)
-        throw Error(fmt::format("{}: K {} out of range (1..1000)", source, vp.K));
-    if (!(vp.eps >= 0 && vp.eps < 0.5f))
-        throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", source, vp.eps));
-    if (!(vp.facing_tol >= 0 && vp.facing_tol < 1))
-        throw Error(
-            fmt::format("{}: facing tolerance {} out of range [0, 1)", source, vp.facing_tol));
-    if (!(vp.parallel_tol >= 0 && vp.parallel_tol < 1))
-        throw Error(
-            fmt::format("{}: parallel tolerance {} out of range [0, 1)", source, vp.parallel_tol));
-    if (params.occluders != "spheres" && params.occluders != "bresenham")
-        throw Error(
-            fmt::format("{}: occluders: unknown search '{}' (expected spheres or bresenham)",
-                        source, params.occluders));
-    if (params.construction != "nodes" && params.construction != "leaf-pairs" &&
-        params.construction != "auto")
-        throw Error(
-            fmt::format("{}: construction: unknown method '{}' (expected auto, nodes or leaf-pairs)",
-                        source, params.construction));
-    if (params.max_batch_pairs < 1024)
-        throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
-                                params.max_batch_pairs));
-}
-
 std::unique_ptr<detail::Backend> pick_backend(const BuildParams& params, std::string* note,
                                               const std::string& source) {
-    if (params.occluders != "bresenham") return detail::make_backend(params.backend, note);
-    if (params.backend == "cuda")
-        throw Error(
-            fmt::format("{}: backend cuda: the GPU does occluders spheres only "
-                        "(bresenham runs on the CPU; use backend auto or cpu)",
-                        source));
-    if (params.backend != "auto" && params.backend != "cpu")
-        detail::make_backend(params.backend, note);  // throws for an unknown name
-    return detail::make_bresenham_backend();
+    (void)source;  // BuildParams::check refused the grid walk with backend cuda
+    if (params.occluders != OccluderSearch::kGridWalk)
+        return detail::make_backend(params.backend, note);
+    return detail::make_grid_walk_backend();
 }
 
 // The sibling pairs: every unordered pair of distinct children of every internal node.
@@ -569,8 +535,9 @@ struct NodeTests {
 void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, NodeTests& nt) {
     // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
     const bool nodes =
-        params.construction == "nodes" || (params.construction == "auto" && !gpu);
-    nt.on = nodes && params.occluders == "spheres";
+        params.construction == Construction::kNodes ||
+        (params.construction == Construction::kAuto && !gpu);
+    nt.on = nodes && params.occluders == OccluderSearch::kBoxes;
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
     nt.ctx = {octree_view(t),      nt.nb.nodes.data(), nt.nb.cones.data(),
@@ -609,7 +576,7 @@ namespace {
 VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildStats* stats,
                              const std::string& source) {
     const auto t0 = Clock::now();
-    check_params(params, source);
+    params.check(source);
     const VisibilityParams& vp = params.visibility;
     BuildStats st;
     detail::prepare_points(points, st, source);
@@ -676,9 +643,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
                          const std::string& source) {
-    if (params.threads < 0 || params.threads > 4096)
-        throw Error(fmt::format("{}: threads {} out of range (0 = all cores, up to 4096)", source,
-                                params.threads));
+    params.check(source);
     if (params.threads == 0) return build_in_arena(std::move(points), params, stats, source);
     tbb::task_arena arena(params.threads);
     return arena.execute([&] { return build_in_arena(std::move(points), params, stats, source); });

@@ -36,7 +36,7 @@ int main() {
     check(std::strcmp(vmap::version(), "0.1.0") >= 0, "vmap::version()");
     vmap::BuildParams bp;
     bp.octree.max_height = 4;
-    bp.backend = "cpu";
+    bp.backend = vmap::Backend::kCpu;
     bp.threads = 1;
     const vmap::VisibilityMap vm = vmap::build_vmap(two_plates(), bp);
     check(vm.query(0, 100) == vmap::PairVisibility::kVisible, "facing plates see each other");

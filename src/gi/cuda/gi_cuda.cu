@@ -2,10 +2,12 @@
 // point or node, in the same summation order as the CPU (bit-identical with --fmad=false).
 #include <cuda_runtime.h>
 
+#include <optional>
 #include <string>
 
 #include "gi/gi_device.h"
 #include "util/cuda_check.h"
+#include "util/device.h"
 #include "vmap/error.h"
 
 namespace vmap::detail {
@@ -89,23 +91,9 @@ class CudaGi final : public GiDevice {
 }  // namespace
 
 std::unique_ptr<GiDevice> make_gi_cuda(std::string* why) {
-    int count = 0;
-    const cudaError_t err = cudaGetDeviceCount(&count);
-    if (err != cudaSuccess || count == 0) {
-        if (why)
-            *why = err != cudaSuccess
-                       ? std::string("no usable CUDA device (") + cudaGetErrorString(err) + ")"
-                       : std::string("no CUDA device");
-        cudaGetLastError();  // clear the sticky error
-        return nullptr;
-    }
-    cudaDeviceProp prop{};
-    if (cudaGetDeviceProperties(&prop, 0) != cudaSuccess) {
-        if (why) *why = "cudaGetDeviceProperties failed";
-        cudaGetLastError();
-        return nullptr;
-    }
-    return std::make_unique<CudaGi>(std::string("cuda (") + prop.name + ")");
+    const std::optional<std::string> name = cuda_device(why);
+    if (!name) return nullptr;
+    return std::make_unique<CudaGi>("cuda (" + *name + ")");
 }
 
 }  // namespace vmap::detail

@@ -16,6 +16,7 @@
 
 #include "octree/records.h"
 #include "util/cuda_check.h"
+#include "util/device.h"
 #include "visibility/backend.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
@@ -353,15 +354,7 @@ class CudaBackend final : public Backend {
 }  // namespace
 
 std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
-    int count = 0;
-    const cudaError_t err = cudaGetDeviceCount(&count);
-    if (err != cudaSuccess || count == 0) {
-        if (why)
-            *why = err != cudaSuccess
-                       ? std::string("no CUDA device (") + cudaGetErrorString(err) + ")"
-                       : std::string("no CUDA device found");
-        return nullptr;
-    }
+    if (!cuda_device(why)) return nullptr;
     // A device that is present but unusable (busy in exclusive mode, out of memory) is reported
     // like an absent one, so auto and cuda fall back to the CPU with the reason.
     try {

@@ -1,4 +1,4 @@
-// The prior kernel of the paper's reference [7] (DESIGN.md "Leaf-pair visibility"): potential
+// The prior kernel of the paper's reference [7] (docs/design.md "Leaf-pair visibility"): potential
 // occluders of a leaf pair are the leaves whose cells a 3D grid walk along the segment visits, at
 // the octree's finest level, instead of the leaves reached by the hierarchical sphere/box walk of
 // leaf_pair.h. The actual-occluder test and the K rule are the same (is_actual_occluder).
@@ -52,11 +52,11 @@ class LeafGrid {
 // Visibility of leaves a != b with the grid walk's occluders (same facing test, eps window,
 // actual-occluder test and K as leaf_pair_visible). Counts into wc: facing_pairs, cells stepped
 // (cells_stepped) and occluder tests.
-bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
+bool grid_walk_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
                                  const VisibilityParams& vp, WorkCounters* wc);
 
-// A CPU backend (oneTBB) that evaluates leaf pairs with bresenham_leaf_pair_visible.
-std::unique_ptr<Backend> make_bresenham_backend();
+// A CPU backend (oneTBB) that evaluates leaf pairs with grid_walk_leaf_pair_visible.
+std::unique_ptr<Backend> make_grid_walk_backend();
 
 // ---- implementation of the template ----------------------------------------------------------
 

@@ -1,6 +1,6 @@
-// The grid-walk occluder kernel of reference [7] (see bresenham.h) and its CPU backend.
+// The grid-walk occluder kernel of reference [7] (see grid_walk.h) and its CPU backend.
 #include "octree/records.h"
-#include "visibility/bresenham.h"
+#include "visibility/grid_walk.h"
 
 #include <tbb/task_arena.h>
 
@@ -44,7 +44,7 @@ int32_t LeafGrid::lookup(uint32_t x, uint32_t y, uint32_t z, int* lvl) const {
     }
 }
 
-bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
+bool grid_walk_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, int32_t b,
                                  const VisibilityParams& vp, WorkCounters* wc) {
     const PairSegment s = pair_segment(leaf_discs(t)[a], leaf_discs(t)[b], vp);
     if (!s.faces) return false;
@@ -63,10 +63,10 @@ bool bresenham_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, 
 namespace {
 
 // The same batching as the sphere-walk CPU backend (host_backend.h).
-class BresenhamBackend final : public HostBackend<BresenhamBackend> {
+class GridWalkBackend final : public HostBackend<GridWalkBackend> {
   public:
     std::string name() const override {
-        return "cpu bresenham (" + std::to_string(tbb::this_task_arena::max_concurrency()) +
+        return "cpu grid walk (" + std::to_string(tbb::this_task_arena::max_concurrency()) +
                " threads)";
     }
 
@@ -77,7 +77,7 @@ class BresenhamBackend final : public HostBackend<BresenhamBackend> {
     }
 
     bool visible(int32_t a, int32_t b, WorkCounters* wc) const {
-        return bresenham_leaf_pair_visible(*tree_, *grid_, a, b, vp_, wc);
+        return grid_walk_leaf_pair_visible(*tree_, *grid_, a, b, vp_, wc);
     }
 
   private:
@@ -88,6 +88,6 @@ class BresenhamBackend final : public HostBackend<BresenhamBackend> {
 
 }  // namespace
 
-std::unique_ptr<Backend> make_bresenham_backend() { return std::make_unique<BresenhamBackend>(); }
+std::unique_ptr<Backend> make_grid_walk_backend() { return std::make_unique<GridWalkBackend>(); }
 
 }  // namespace vmap::detail

@@ -22,6 +22,22 @@
 
 namespace vmap::cli {
 
+void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
+    app->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
+        ->check(CLI::Range(1, 1000))
+        ->capture_default_str();
+    app->add_option("--eps", vp.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
+        ->check(CLI::Range(0.0f, 0.49f))
+        ->capture_default_str();
+    app->add_option("--facing-tol", vp.facing_tol, "Facing test: n.d > tol |d|")
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
+    app->add_option("--parallel-tol", vp.parallel_tol,
+                    "Occluder planes with |n.d| <= tol |d| are ignored")
+        ->check(CLI::Range(0.0f, 0.99f))
+        ->capture_default_str();
+}
+
 bool sampled_input(const std::string& path, bool as_points) {
     try {
         return is_scene_input(path, as_points);

@@ -15,6 +15,7 @@
 #include "vmap/octree.h"
 #include "vmap/options.h"
 #include "vmap/vec.h"
+#include "vmap/visibility.h"
 
 namespace vmap::cli {
 
@@ -54,6 +55,10 @@ CLI::Option* add_choice(CLI::App* app, const std::string& flag, E& target,
         ->transform(CLI::CheckedTransformer(names))
         ->default_str(name_of(target));
 }
+
+// The predicate's options (-K, --eps, --facing-tol, --parallel-tol) into `vp`, in the ranges
+// VisibilityParams::check accepts.
+void add_predicate_options(CLI::App* app, VisibilityParams& vp);
 
 // Adds to every numeric option of `app` and its subcommands: floating-point values must be
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to

@@ -59,19 +59,7 @@ CLI::App* add_validate_command(CLI::App& app) {
     c->add_option("--leaf-points", opt.vp.leaf_points,
                   "Split nodes with more points than this (default: the scene's)")
         ->check(CLI::Range(1, 1000000));
-    auto& v = opt.vp.visibility;
-    c->add_option("-K", v.K, "Actual occluders that make a leaf pair invisible")
-        ->check(CLI::Range(1, 1000))
-        ->capture_default_str();
-    c->add_option("--eps", v.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
-        ->check(CLI::Range(0.0f, 0.49f))
-        ->capture_default_str();
-    c->add_option("--facing-tol", v.facing_tol, "Facing test: n.d > tol |d|")
-        ->check(CLI::Range(0.0f, 0.99f))
-        ->capture_default_str();
-    c->add_option("--parallel-tol", v.parallel_tol, "Occluder planes with |n.d| <= tol |d| ignored")
-        ->check(CLI::Range(0.0f, 0.99f))
-        ->capture_default_str();
+    cli::add_predicate_options(c, opt.vp.visibility);
     cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
                   "[7], CPU only)");
     cli::add_choice(c, "--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda");

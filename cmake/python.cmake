@@ -26,6 +26,7 @@ pybind11_add_module(vmap_python python/vmap_py.cpp)
 set_target_properties(vmap_python PROPERTIES OUTPUT_NAME _vmap
                       LIBRARY_OUTPUT_DIRECTORY ${VMAP_PYTHON_DIR}/vmap)
 target_link_libraries(vmap_python PRIVATE vmap_core)
+vmap_bit_identical(vmap_python)
 target_include_directories(vmap_python PRIVATE src)
 configure_file(python/vmap/__init__.py ${VMAP_PYTHON_DIR}/vmap/__init__.py COPYONLY)
 message(STATUS "vmap: Python module for ${Python3_EXECUTABLE} (${Python3_VERSION}) in "

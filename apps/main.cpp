@@ -8,8 +8,6 @@
 //   vmap bench-gi                                     GI time per bounce vs points
 //   vmap view [out.vmap | SCENE]                      browser viewer (apps/view_cmd.cpp)
 // Exit codes: 0 success, 1 an error in the input or while running, 2 a usage error.
-#include "vmap/vmap.h"
-
 #include <fmt/format.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
@@ -33,6 +31,7 @@
 #include "vmap/error.h"
 #include "vmap/scene.h"
 #include "vmap/version.h"
+#include "vmap/vmap.h"
 
 namespace {
 
@@ -320,6 +319,139 @@ bool report_unknown_command(CLI::App& app, int argc, char** argv) {
     return true;
 }
 
+// `vmap build`: a scene, mesh or cloud (or the default scene) into a .vmap.
+cli::Command add_build_command(CLI::App& app) {
+    auto bo = std::make_shared<BuildOptions>();
+    auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
+    build->add_option("input", bo->input,
+                      "Scene file (.json), mesh (.ply with faces, .off, .obj, .stl: area-sampled) "
+                      "or point cloud (.ply, .xyz, .xyzn, .xyzrgb, .pts, .pcd, ...; normals "
+                      "estimated if absent). Default: scenes/cornell-bunny.json");
+    build->add_option("-o,--output", bo->output, "Output .vmap file (default: <input name>.vmap)");
+    build->add_flag("--as-points", bo->as_points,
+                    "Take a mesh file's vertices as a point cloud instead of sampling its faces");
+    build->add_option("--points", bo->points, "Override the scene's number of sample points")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    build->add_option("--seed", bo->seed, "Override the scene's sampling seed");
+    build
+        ->add_option("--max-height", bo->max_height,
+                     "Deepest octree level (root = 0); default: the scene's octree.max_height, "
+                     "else 9")
+        ->check(CLI::Range(1, 21));
+    build
+        ->add_option("--leaf-points", bo->leaf_points,
+                     "Split nodes with more points than this; default: the scene's "
+                     "octree.leaf_points, else 4")
+        ->check(CLI::Range(1, 1000000));
+    cli::add_predicate_options(build, bo->params.visibility);
+    cli::add_choice(build, "--backend", bo->params.backend, "auto (GPU when present), cpu or cuda");
+    cli::add_choice(build, "--occluders", bo->params.occluders,
+                    "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "
+                    "grid (grid walk of [7], CPU only); spheres and bresenham are old names");
+    build
+        ->add_option("--batch-pairs", bo->params.max_batch_pairs,
+                     "Leaf pairs evaluated per batch (bounds memory)")
+        ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
+        ->capture_default_str();
+
+    build
+        ->add_option("--normals", bo->normals,
+                     "Point clouds: keep (the file's normals; estimated if it has none), flip, "
+                     "inward or outward (from the centroid), estimate (even if the file has "
+                     "them)")
+        ->check(CLI::IsMember({"keep", "flip", "inward", "outward", "estimate"}))
+        ->capture_default_str();
+    build
+        ->add_option("--viewpoint", bo->viewpoint,
+                     "Point clouds: orient every normal toward this point X,Y,Z (the scanner)")
+        ->delimiter(',')
+        ->expected(3);
+    cli::add_choice(build, "--construction", bo->params.construction,
+                    "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
+                    "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
+                    "leaf pair: the oracle; the same V-map)");
+    build
+        ->add_option("--walk-pairs", bo->params.walk_pairs,
+                     "Undecided node pairs of at most this many leaf pairs are walked, not split "
+                     "(0: the backend's choice)")
+        ->capture_default_str();
+    build->add_flag("--count-links", bo->count_links,
+                    "Count the links without keeping them and write no file: sizes a V-map "
+                    "too large for memory");
+
+    build->add_flag("--json", bo->json, "Print the summary as one JSON object (for scripts)");
+    return {
+        build, [bo]() {
+            const bool sampled = bo->input.empty() || cli::sampled_input(bo->input, bo->as_points);
+            if (sampled && (bo->normals != "keep" || !bo->viewpoint.empty())) {
+                fmt::print(
+                    stderr,
+                    "vmap build: --normals/--viewpoint apply to point clouds, not to scene or "
+                    "mesh files (their normals come from the meshes)\n");
+                return 2;
+            }
+            if ((bo->points || bo->seed) && !bo->input.empty() &&
+                !cli::sampled_input(bo->input, bo->as_points)) {
+                fmt::print(
+                    stderr,
+                    "vmap build: --points/--seed apply to scene and mesh files, not to the point "
+                    "cloud {}\n",
+                    bo->input);
+                return 2;
+            }
+            return run_build(*bo);
+        }};
+}
+
+// `vmap info`: what a .vmap file holds.
+cli::Command add_info_command(CLI::App& app) {
+    auto path = std::make_shared<std::string>();
+    auto json = std::make_shared<bool>(false);
+    auto* info = app.add_subcommand("info", "Describe a .vmap file");
+    info->add_option("file", *path, "The .vmap file")->required();
+    info->add_flag("--json", *json, "Print it as one JSON object (for scripts)");
+    return {info, [path, json]() { return run_info(*path, *json); }};
+}
+
+// `vmap bench`: the construction table (bench/bench.cpp).
+cli::Command add_bench_command(CLI::App& app) {
+    auto bo2 = std::make_shared<bench::Options>();
+    auto* benchc = app.add_subcommand(
+        "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
+    benchc->add_option("--scene", bo2->scenes,
+                       "Scene files (default: cornell-bunny, cornell-dragon, cornell-two-models)");
+    benchc->add_option("--heights", bo2->heights, "Octree heights")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 21));
+    benchc->add_option("--leaf-points", bo2->leaf_points, "leaf_points for every run")
+        ->check(CLI::Range(1, 1000000))
+        ->capture_default_str();
+    benchc->add_option("--runs", bo2->runs, "Timed runs per configuration (median, spread)")
+        ->check(CLI::Range(1, 100))
+        ->capture_default_str();
+    benchc
+        ->add_option("--backends", bo2->backends,
+                     "cpu and/or cuda (default: both when a GPU is present)")
+        ->delimiter(',')
+        ->check(CLI::IsMember({"cpu", "cuda"}));
+    benchc
+        ->add_option("--cpu-budget", bo2->cpu_budget_s,
+                     "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
+        ->check(CLI::Range(0.0, 1e7))
+        ->capture_default_str();
+    benchc->add_option("--points", bo2->points, "Override every scene's point count")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    benchc->add_option("--out", bo2->out_dir, "Write bench.md and bench.csv into this folder");
+    cli::add_choice(benchc, "--construction", bo2->construction,
+                    "auto, nodes or leaf-pairs (as for build)");
+    return {benchc, [bo2]() {
+                if (bo2->scenes.empty())
+                    for (const char* n : {"cornell-bunny", "cornell-dragon", "cornell-two-models"})
+                        bo2->scenes.push_back(data_dir() + "/scenes/" + n + ".json");
+                return bench::run(*bo2);
+            }};
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -344,122 +476,12 @@ int main(int argc, char** argv) {
     app.add_flag("-q,--quiet", quiet, "Say nothing but errors and the output asked for")
         ->excludes(vflag);
 
-    BuildOptions bo;
-    auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
-    build->add_option("input", bo.input,
-                      "Scene file (.json), mesh (.ply with faces, .off, .obj, .stl: area-sampled) "
-                      "or point cloud (.ply, .xyz, .xyzn, .xyzrgb, .pts, .pcd, ...; normals "
-                      "estimated if absent). Default: scenes/cornell-bunny.json");
-    build->add_option("-o,--output", bo.output, "Output .vmap file (default: <input name>.vmap)");
-    build->add_flag("--as-points", bo.as_points,
-                    "Take a mesh file's vertices as a point cloud instead of sampling its faces");
-    build->add_option("--points", bo.points, "Override the scene's number of sample points")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    build->add_option("--seed", bo.seed, "Override the scene's sampling seed");
-    build
-        ->add_option("--max-height", bo.max_height,
-                     "Deepest octree level (root = 0); default: the scene's octree.max_height, "
-                     "else 9")
-        ->check(CLI::Range(1, 21));
-    build
-        ->add_option("--leaf-points", bo.leaf_points,
-                     "Split nodes with more points than this; default: the scene's "
-                     "octree.leaf_points, else 4")
-        ->check(CLI::Range(1, 1000000));
-    auto& vp = bo.params.visibility;
-    build->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
-        ->check(CLI::Range(1, 1000))
-        ->capture_default_str();
-    build->add_option("--eps", vp.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
-        ->check(CLI::Range(0.0f, 0.49f))
-        ->capture_default_str();
-    build->add_option("--facing-tol", vp.facing_tol, "Facing test: n.d > tol |d|")
-        ->check(CLI::Range(0.0f, 0.99f))
-        ->capture_default_str();
-    build
-        ->add_option("--parallel-tol", vp.parallel_tol,
-                     "Occluder planes with |n.d| <= tol |d| are ignored")
-        ->check(CLI::Range(0.0f, 0.99f))
-        ->capture_default_str();
-    cli::add_choice(build, "--backend", bo.params.backend, "auto (GPU when present), cpu or cuda");
-    cli::add_choice(build, "--occluders", bo.params.occluders,
-                    "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "
-                    "grid (grid walk of [7], CPU only); spheres and bresenham are old names");
-    build
-        ->add_option("--batch-pairs", bo.params.max_batch_pairs,
-                     "Leaf pairs evaluated per batch (bounds memory)")
-        ->check(CLI::Range(uint64_t(1024), uint64_t(1) << 40))
-        ->capture_default_str();
-
-    build
-        ->add_option("--normals", bo.normals,
-                     "Point clouds: keep (the file's normals; estimated if it has none), flip, "
-                     "inward or outward (from the centroid), estimate (even if the file has "
-                     "them)")
-        ->check(CLI::IsMember({"keep", "flip", "inward", "outward", "estimate"}))
-        ->capture_default_str();
-    build
-        ->add_option("--viewpoint", bo.viewpoint,
-                     "Point clouds: orient every normal toward this point X,Y,Z (the scanner)")
-        ->delimiter(',')
-        ->expected(3);
-    cli::add_choice(build, "--construction", bo.params.construction,
-                    "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
-                    "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
-                    "leaf pair: the oracle; the same V-map)");
-    build
-        ->add_option("--walk-pairs", bo.params.walk_pairs,
-                     "Undecided node pairs of at most this many leaf pairs are walked, not split "
-                     "(0: the backend's choice)")
-        ->capture_default_str();
-    build->add_flag("--count-links", bo.count_links,
-                    "Count the links without keeping them and write no file: sizes a V-map "
-                    "too large for memory");
-
-    build->add_flag("--json", bo.json, "Print the summary as one JSON object (for scripts)");
-
-    std::string info_path;
-    bool info_json = false;
-    auto* info = app.add_subcommand("info", "Describe a .vmap file");
-    info->add_option("file", info_path, "The .vmap file")->required();
-    info->add_flag("--json", info_json, "Print it as one JSON object (for scripts)");
-
-    const cli::Command query = cli::add_query_command(app);
-    const cli::Command render = cli::add_render_command(app);
-    const cli::Command bench_query = cli::add_bench_query_command(app);
-    const cli::Command view = cli::add_view_command(app);
-
+    const cli::Command build = add_build_command(app), info = add_info_command(app),
+                       query = cli::add_query_command(app), render = cli::add_render_command(app),
+                       bench_query = cli::add_bench_query_command(app),
+                       view = cli::add_view_command(app);
     const cli::GiCommands gi = cli::add_gi_commands(app);
-
-    bench::Options bo2;
-    auto* benchc = app.add_subcommand(
-        "bench", "Time V-map construction, CPU vs GPU, per scene and height (paper Fig. 10)");
-    benchc->add_option("--scene", bo2.scenes,
-                       "Scene files (default: cornell-bunny, cornell-dragon, cornell-two-models)");
-    benchc->add_option("--heights", bo2.heights, "Octree heights")
-        ->delimiter(',')
-        ->check(CLI::Range(1, 21));
-    benchc->add_option("--leaf-points", bo2.leaf_points, "leaf_points for every run")
-        ->check(CLI::Range(1, 1000000))
-        ->capture_default_str();
-    benchc->add_option("--runs", bo2.runs, "Timed runs per configuration (median, spread)")
-        ->check(CLI::Range(1, 100))
-        ->capture_default_str();
-    benchc
-        ->add_option("--backends", bo2.backends,
-                     "cpu and/or cuda (default: both when a GPU is present)")
-        ->delimiter(',')
-        ->check(CLI::IsMember({"cpu", "cuda"}));
-    benchc
-        ->add_option("--cpu-budget", bo2.cpu_budget_s,
-                     "Seconds a full CPU sweep may take; beyond, the CPU is timed on a sample")
-        ->check(CLI::Range(0.0, 1e7))
-        ->capture_default_str();
-    benchc->add_option("--points", bo2.points, "Override every scene's point count")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    benchc->add_option("--out", bo2.out_dir, "Write bench.md and bench.csv into this folder");
-    cli::add_choice(benchc, "--construction", bo2.construction, "auto, nodes or leaf-pairs (as for build)");
-
+    const cli::Command benchc = add_bench_command(app);
     auto* validate = cli::add_validate_command(app);
 
     cli::harden_options(app);
@@ -470,42 +492,19 @@ int main(int argc, char** argv) {
         const int rc = app.exit(e);
         return rc == 0 ? 0 : 2;
     }
-    const bool sampled = bo.input.empty() || cli::sampled_input(bo.input, bo.as_points);
-    if (*build && sampled && (bo.normals != "keep" || !bo.viewpoint.empty())) {
-        fmt::print(stderr,
-                   "vmap build: --normals/--viewpoint apply to point clouds, not to scene or "
-                   "mesh files (their normals come from the meshes)\n");
-        return 2;
-    }
-    if (*build && (bo.points || bo.seed) && !bo.input.empty() &&
-        !cli::sampled_input(bo.input, bo.as_points)) {
-        fmt::print(stderr,
-                   "vmap build: --points/--seed apply to scene and mesh files, not to the point "
-                   "cloud {}\n",
-                   bo.input);
-        return 2;
-    }
     cli::verbosity() = quiet     ? cli::Verbosity::kQuiet
                        : verbose ? cli::Verbosity::kVerbose
                                  : cli::Verbosity::kNormal;
     // Commands whose stdout is a summary (not the answers asked for) print nothing with -q.
     if (quiet && (render.app->parsed() || bench_query.app->parsed() || *validate || gi.selected() ||
-                  *benchc))
+                  benchc.app->parsed()))
         if (!std::freopen("/dev/null", "w", stdout)) return 1;
     std::unique_ptr<tbb::global_control> limit;
     if (threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       threads);
     try {
-        if (*build) return run_build(bo);
-        if (*info) return run_info(info_path, info_json);
-        if (*benchc) {
-            if (bo2.scenes.empty())
-                for (const char* n : {"cornell-bunny", "cornell-dragon", "cornell-two-models"})
-                    bo2.scenes.push_back(data_dir() + "/scenes/" + n + ".json");
-            return bench::run(bo2);
-        }
-        for (const cli::Command* c : {&query, &render, &bench_query, &view})
+        for (const cli::Command* c : {&build, &info, &query, &render, &bench_query, &view, &benchc})
             if (c->app->parsed()) return c->run();
         if (*validate) return cli::run_validate_command();
         if (gi.selected()) return gi.run();

@@ -13,13 +13,13 @@
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
 //           units per octree unit: points and octree are stored in the octree's frame)
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
+#include "util/parallel.h"
 #include "io/vmap_file.h"
 
 #include <fcntl.h>
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -69,7 +69,7 @@ uint64_t detail::payload_hash(const uint8_t* p, size_t n) {
     constexpr size_t kBlock = size_t(1) << 20;
     const size_t blocks = (n + kBlock - 1) / kBlock;
     std::vector<uint64_t> hs(blocks);
-    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+    parallel_for(blocks, [&](size_t b) {
         hs[b] = block_hash(p + b * kBlock, std::min(kBlock, n - b * kBlock), b);
     });
     uint64_t h = 0x84222325cbf29ce4ULL ^ n;
@@ -88,7 +88,7 @@ uint64_t pieces_hash(const std::vector<Piece>& pieces, size_t n) {
     for (size_t k = 0; k < pieces.size(); ++k) at[k + 1] = at[k] + pieces[k].n;
     const size_t blocks = (n + kBlock - 1) / kBlock;
     std::vector<uint64_t> hs(blocks);
-    tbb::parallel_for(size_t(0), blocks, [&](size_t b) {
+    parallel_for(blocks, [&](size_t b) {
         const size_t lo = b * kBlock, len = std::min(kBlock, n - lo);
         size_t k = size_t(std::upper_bound(at.begin(), at.end(), lo) - at.begin()) - 1;
         if (lo + len <= at[k + 1]) {
@@ -112,7 +112,7 @@ uint64_t pieces_hash(const std::vector<Piece>& pieces, size_t n) {
 // memcpy of a large array, in parallel chunks.
 void copy_bytes(uint8_t* dst, const uint8_t* src, size_t n) {
     constexpr size_t kChunk = size_t(1) << 22;
-    tbb::parallel_for(size_t(0), (n + kChunk - 1) / kChunk, [&](size_t c) {
+    parallel_for((n + kChunk - 1) / kChunk, [&](size_t c) {
         std::memcpy(dst + c * kChunk, src + c * kChunk, std::min(kChunk, n - c * kChunk));
     });
 }
@@ -279,7 +279,7 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
         }
     io::AtomicFile file(path);
     std::atomic<int> err{0};
-    tbb::parallel_for(size_t(0), chunks.size(), [&](size_t k) {
+    parallel_for(chunks.size(), [&](size_t k) {
         if (err.load() != 0) return;
         const int e = file.write_at(chunks[k].p, chunks[k].n, chunks[k].at);
         int zero = 0;

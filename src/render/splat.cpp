@@ -1,14 +1,13 @@
 // Point splatting on the CPU (include/vmap/render.h): tiles of the supersampled image are
 // rendered in parallel, each from the list of discs whose screen bounds touch it.
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <limits>
 
+#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/render.h"
 
@@ -93,8 +92,8 @@ void resolve(Image& img, std::vector<Vec3> mean, std::vector<uint8_t> covered, i
     for (int pass = 0; pass < 2; ++pass) {
         std::vector<Vec3> mean2 = mean;
         std::vector<uint8_t> covered2 = covered;
-        tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
-            for (int y = rows.begin(); y != rows.end(); ++y)
+        parallel_for_range(H, 1, [&](int y0, int y1) {
+            for (int y = y0; y != y1; ++y)
                 for (int x = 0; x < W; ++x) {
                     const size_t p = size_t(y) * W + x;
                     if (covered[p] == full) continue;
@@ -117,8 +116,8 @@ void resolve(Image& img, std::vector<Vec3> mean, std::vector<uint8_t> covered, i
         mean.swap(mean2);
         covered.swap(covered2);
     }
-    tbb::parallel_for(tbb::blocked_range<int>(0, H), [&](const auto& rows) {
-        for (int y = rows.begin(); y != rows.end(); ++y)
+    parallel_for_range(H, 1, [&](int y0, int y1) {
+        for (int y = y0; y != y1; ++y)
             for (int x = 0; x < W; ++x) {
                 const size_t p = size_t(y) * W + x;
                 const float f = float(covered[p]) / float(full);
@@ -180,8 +179,8 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
 
     // 1. Per point: shade, project, bound on screen.
     std::vector<Disc> discs(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& range) {
-        for (size_t i = range.begin(); i != range.end(); ++i) {
+    parallel_for_range(n, size_t(4096), [&](size_t i0, size_t i1) {
+        for (size_t i = i0; i != i1; ++i) {
             Disc& d = discs[i];
             d.c = points.positions[i];
             const Vec3 v = d.c - fr.eye;
@@ -271,11 +270,11 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
     std::vector<Vec3> mean(size_t(img.width) * img.height);
     std::vector<uint8_t> covered(size_t(img.width) * img.height, 0);
     std::atomic<uint64_t> fragments{0};
-    tbb::parallel_for(tbb::blocked_range<int>(0, tw * th), [&](const tbb::blocked_range<int>& tr) {
+    parallel_for_range(tw * th, 1, [&](int tile0, int tile1) {
         std::vector<float> zbuf(size_t(T) * T), wsum(size_t(T) * T);
         std::vector<Vec3> acc(size_t(T) * T);
         std::vector<Fragment> frags;
-        for (int tile = tr.begin(); tile != tr.end(); ++tile) {
+        for (int tile = tile0; tile != tile1; ++tile) {
             const int tx0 = (tile % tw) * T, ty0 = (tile / tw) * T;
             const int tx1 = std::min(tx0 + T, W) - 1, ty1 = std::min(ty0 + T, H) - 1;
             std::fill(zbuf.begin(), zbuf.end(), std::numeric_limits<float>::infinity());

@@ -1,10 +1,10 @@
 // Area-weighted, seeded sampling of scene surfaces into points; raw point cloud loading.
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
 
+#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
@@ -103,7 +103,7 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
     // Each sample stands for an equal share of the area: a disc of that area.
     ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
     const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
-    tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) {
+    parallel_for(n, [&](uint64_t i) {
         const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
                        r2 = mix(seed + 3 * i + 2);
         const double pick = u01(r0) * area;

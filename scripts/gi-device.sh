@@ -3,6 +3,9 @@
 # sm_90 and gathers binaries, libraries and models into .device/). There (carry .device):
 #   scripts/gi-device.sh STEP...
 #       gpu     tests/gi_gpu_test (CPU vs CUDA radiosity, bit for bit)
+#       check   gi_gpu_test (refinement, bounces, final gather: CPU vs CUDA bit for bit), then
+#               compute-sanitizer memcheck and racecheck on it (small cases), then vmap gi on
+#               cornell-two-models twice (timing); one summary in $OUT/gi-check.txt
 #       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
 #       bench   vmap bench-gi (POINTS, default 5000..80000; BRUTE_MAX, default 40000)
@@ -32,6 +35,25 @@ for step in "$@"; do
         gpu)
             "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
             tail -4 "$OUT/gi_gpu_test.log" ;;
+        check)
+            {
+                "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
+                grep -E "^\[  (PASSED|FAILED) |FAILED|SKIPPED \]" "$OUT/gi_gpu_test.log" | head -20
+                san=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
+                for tool in memcheck racecheck; do
+                    "$san" --tool "$tool" --error-exitcode 9 "$bin/gi_gpu_test" \
+                        --gtest_filter='GiGpu.*:*cornell_empty*' >"$OUT/gi-$tool.log" 2>&1 || rc=1
+                    echo "$tool: $(grep -E "ERROR SUMMARY|PASSED|FAILED" "$OUT/gi-$tool.log" | tr '\n' ' ')"
+                done
+                for r in 1 2; do
+                    /usr/bin/time -f "wall %e s, user %U s, max RSS %M kB" "$bin/vmap" gi \
+                        scenes/cornell-two-models.json --backend cuda -o "$OUT/two-$r.png" \
+                        >"$OUT/two-$r.log" 2>&1 || rc=1
+                    echo "two-models run $r:"
+                    grep -E "^(input|scene|mesh|backend|refinement|converged|gather|wall|note)" "$OUT/two-$r.log" |
+                        cut -c1-220
+                done
+            } 2>&1 | tee "$OUT/gi-check.txt" ;;
         two)
             "$bin/vmap" gi scenes/cornell-two-models.json -o "$OUT/gi-cornell-two-models.png" \
                 --size 640x640 --backend cuda 2>&1 | tee "$OUT/two-models.log" || rc=1 ;;

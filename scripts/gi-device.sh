@@ -6,6 +6,9 @@
 #       check   gi_gpu_test (refinement, bounces, final gather: CPU vs CUDA bit for bit), then
 #               compute-sanitizer memcheck and racecheck on it (small cases), then vmap gi on
 #               cornell-two-models twice (timing); one summary in $OUT/gi-check.txt
+#       full    vmap gi --reference on cornell-two-models and cornell-dragon at their full point
+#               counts, the V-map at each of EPS (default "0.05 0.1"), 1000 + 1000 points; the
+#               summary lines appended to $OUT/gi-check.txt
 #       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
 #       bench   vmap bench-gi (POINTS, default 5000..80000; BRUTE_MAX, default 40000)
@@ -38,7 +41,7 @@ for step in "$@"; do
         check)
             {
                 "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
-                grep -E "^\[  (PASSED|FAILED) |FAILED|SKIPPED \]" "$OUT/gi_gpu_test.log" | head -20
+                grep -E "^\[  (PASSED|FAILED) |FAILED|SKIPPED \]" "$OUT/gi_gpu_test.log" | head -20 || true
                 san=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
                 for tool in memcheck racecheck; do
                     "$san" --tool "$tool" --error-exitcode 9 "$bin/gi_gpu_test" \
@@ -46,14 +49,25 @@ for step in "$@"; do
                     echo "$tool: $(grep -E "ERROR SUMMARY|PASSED|FAILED" "$OUT/gi-$tool.log" | tr '\n' ' ')"
                 done
                 for r in 1 2; do
-                    /usr/bin/time -f "wall %e s, user %U s, max RSS %M kB" "$bin/vmap" gi \
-                        scenes/cornell-two-models.json --backend cuda -o "$OUT/two-$r.png" \
-                        >"$OUT/two-$r.log" 2>&1 || rc=1
+                    TIMEFORMAT="wall %R s, user %U s, sys %S s"
+                    { time "$bin/vmap" gi scenes/cornell-two-models.json --backend cuda \
+                        -o "$OUT/two-$r.png" >"$OUT/two-$r.log" 2>&1 || rc=1; } 2>>"$OUT/two-$r.log"
                     echo "two-models run $r:"
                     grep -E "^(input|scene|mesh|backend|refinement|converged|gather|wall|note)" "$OUT/two-$r.log" |
-                        cut -c1-220
+                        cut -c1-220 || true
                 done
             } 2>&1 | tee "$OUT/gi-check.txt" ;;
+        full)
+            for sc in cornell-two-models cornell-dragon; do
+                for e in ${EPS:-0.05 0.1}; do
+                    "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 1000 \
+                        --ref-samples 1024 --backend cuda --no-brute --eps "$e" \
+                        >"$OUT/full-$sc-eps$e.log" 2>&1 || rc=1
+                    echo "$sc, eps $e:"
+                    grep -E "^(scene|vmap gi:)|converged \(|\| 1 \||V-map visibility vs|exact visibility between" \
+                        "$OUT/full-$sc-eps$e.log" | grep -v "reference noise" | cut -c1-200 || true
+                done
+            done 2>&1 | tee -a "$OUT/gi-check.txt" ;;
         two)
             "$bin/vmap" gi scenes/cornell-two-models.json -o "$OUT/gi-cornell-two-models.png" \
                 --size 640x640 --backend cuda 2>&1 | tee "$OUT/two-models.log" || rc=1 ;;

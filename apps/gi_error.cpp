@@ -3,6 +3,7 @@
 // hierarchical solution without the final gather, the brute-force gather over the same V-map),
 // by bounce count and by point set (all non-emitting points, model points).
 #include <fmt/format.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -10,8 +11,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <set>
-
-#include <tbb/parallel_for.h>
 
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"

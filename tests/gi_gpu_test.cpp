@@ -110,8 +110,8 @@ TEST_P(GiGpuMatchesCpu, RefinementAndFinalGatherAreBitIdentical) {
 // One point a leaf (the shipped scenes' octree setting) at the GI's default theta.
 TEST(GiGpu, OnePointALeafAtTheDefaults) {
     VMAP_REQUIRE_GPU();
-    const VisibilityMap vm = build_vmap(
-        test::sample(test::scene_path("cornell-bunny"), 6000, 4), test::cpu_params(8, 1));
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 6000, 4),
+                                        test::cpu_params(8, 1));
     expect_same_refinement_and_gather(vm, 1.0f);
 }
 

@@ -179,8 +179,9 @@ std::vector<Part> parts_of_node(const detail::GiTree& tree, float theta, int32_t
     for (uint64_t k = tree.link_offsets[x]; k < tree.link_offsets[x + 1]; ++k) {
         const int32_t y = tree.links[k];
         if (y > x)
-            detail::gi_link_blocks(tree, theta, x, y,
-                                   [&](uint64_t key, double w) { out.push_back({key, w}); });
+            detail::gi_link_blocks(tree, theta, x, y, [&](uint64_t key, double w) {
+                out.push_back({key, w});
+            });
     }
     std::stable_sort(out.begin(), out.end(),
                      [](const Part& p, const Part& q) { return p.key < q.key; });
@@ -398,15 +399,16 @@ bool RadiositySolver::Impl::refine_on_device() {
     if (!device || params.refine != "blocks") return false;
     try {
         device->upload_tree(tree, emits.data());
-        device->refine_blocks(params.theta, [&](uint64_t total) { check_total(total); }, row, src,
-                              coef);
+        device->refine_blocks(
+            params.theta, [&](uint64_t total) { check_total(total); }, row, src, coef);
         return true;
     } catch (const Error& e) {
         if (std::string_view(e.what()).starts_with("gi: theta")) throw;
         device.reset();
-        stats.note = fmt::format("backend {}: the GPU could not take the refinement ({}); using "
-                                 "the CPU",
-                                 params.backend, e.what());
+        stats.note = fmt::format(
+            "backend {}: the GPU could not take the refinement ({}); using "
+            "the CPU",
+            params.backend, e.what());
         return false;
     }
 }
@@ -418,13 +420,20 @@ void RadiositySolver::Impl::make_view() {
     stats.node_interactions = row[num_el] - stats.point_interactions;
     B.assign(num_el, Vec3{});
     G.assign(num_el, Vec3{});
-    view = detail::GiView{t.num_nodes(),  uint32_t(vm.points.size()),
-                          row.data(),     src.data(),
-                          coef.data(),    emission.data(),
-                          albedo.data(),  area.data(),
-                          point_leaf.data(), t.parent.data(),
-                          t.point_begin.data(), t.point_end.data(),
-                          inv_area.data(), B.data(),
+    view = detail::GiView{t.num_nodes(),
+                          uint32_t(vm.points.size()),
+                          row.data(),
+                          src.data(),
+                          coef.data(),
+                          emission.data(),
+                          albedo.data(),
+                          area.data(),
+                          point_leaf.data(),
+                          t.parent.data(),
+                          t.point_begin.data(),
+                          t.point_end.data(),
+                          inv_area.data(),
+                          B.data(),
                           G.data()};
     reset_host();
 }
@@ -434,8 +443,7 @@ void RadiositySolver::Impl::attach_device() {
     std::string why;
     device = detail::make_gi_cuda(&why);
     if (!device && params.backend == "cuda")
-        throw Error(
-            fmt::format("gi: backend cuda: {} (backend auto falls back to the CPU)", why));
+        throw Error(fmt::format("gi: backend cuda: {} (backend auto falls back to the CPU)", why));
 }
 
 // Step 3: the bounce arrays on the device (the interaction list is there already when the
@@ -448,8 +456,9 @@ void RadiositySolver::Impl::upload_bounces() {
     } catch (const Error& e) {
         // Too large for the device (or the device failed): the CPU gives the same answers.
         device.reset();
-        stats.note = fmt::format("backend {}: the GPU could not take the problem ({}); using the CPU",
-                                 params.backend, e.what());
+        stats.note =
+            fmt::format("backend {}: the GPU could not take the problem ({}); using the CPU",
+                        params.backend, e.what());
     }
 }
 
@@ -465,8 +474,8 @@ void RadiositySolver::Impl::setup() {
 }
 
 detail::GiGatherView RadiositySolver::Impl::gather_view(float theta) const {
-    return detail::GiGatherView{tree, B.data(), emits.data(), emission.data(), albedo.data(),
-                                theta};
+    return detail::GiGatherView{tree,          B.data(), emits.data(), emission.data(),
+                                albedo.data(), theta};
 }
 
 void RadiositySolver::Impl::reset_host() {

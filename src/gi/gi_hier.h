@@ -50,11 +50,11 @@ struct GiTree {
     const int32_t* parent = nullptr;     // per node, -1 for the root
     const uint32_t* point_begin = nullptr;
     const uint32_t* point_end = nullptr;
-    const NodeGeom* geom = nullptr;       // per node
-    const Vec3* position = nullptr;       // per point
-    const Vec3* normal = nullptr;         // per point
-    const float* area = nullptr;          // per point: pi r^2
-    const int32_t* point_leaf = nullptr;  // per point: its leaf's node
+    const NodeGeom* geom = nullptr;          // per node
+    const Vec3* position = nullptr;          // per point
+    const Vec3* normal = nullptr;            // per point
+    const float* area = nullptr;             // per point: pi r^2
+    const int32_t* point_leaf = nullptr;     // per point: its leaf's node
     const uint64_t* link_offsets = nullptr;  // per node + 1
     const int32_t* links = nullptr;          // both ends of every link
 };
@@ -113,8 +113,8 @@ VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t
             length(gb.center - ga.center) > theta * (ga.size + gb.size)) {
             const NodeGeom& pa = t.geom[ax ? a : x];
             const NodeGeom& pb = t.geom[by ? b : y];
-            const float k = gi_kernel_hd(pa.center, pa.normal, pa.point_area, pb.center,
-                                         pb.normal, pb.point_area);
+            const float k = gi_kernel_hd(pa.center, pa.normal, pa.point_area, pb.center, pb.normal,
+                                         pb.point_area);
             if (k > 0) out(gi_pair_key(uint32_t(a), uint32_t(b)), double(pa.area) * pb.area * k);
             parts += k > 0;
             continue;
@@ -124,8 +124,8 @@ VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t
             for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
                 for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
                     const float ai = t.area[i], aj = t.area[j];
-                    const float k =
-                        gi_kernel_hd(t.position[i], t.normal[i], ai, t.position[j], t.normal[j], aj);
+                    const float k = gi_kernel_hd(t.position[i], t.normal[i], ai, t.position[j],
+                                                 t.normal[j], aj);
                     if (k > 0) out(gi_pair_key(base + i, base + j), double(ai) * aj * k);
                     parts += k > 0;
                 }

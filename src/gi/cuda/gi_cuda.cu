@@ -2,12 +2,12 @@
 // end), the three bounce steps of gi_kernels.h (one thread per element, point or node) and the
 // final gather (gi_final_gather_point, one thread per point), with the CPU's bodies and
 // summation orders (bit-identical with --fmad=false; docs/gi.md).
-#include <cub/device/device_radix_sort.cuh>
-#include <cub/device/device_run_length_encode.cuh>
-#include <cub/device/device_scan.cuh>
 #include <cuda_runtime.h>
 
 #include <algorithm>
+#include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_run_length_encode.cuh>
+#include <cub/device/device_scan.cuh>
 #include <string>
 
 #include "gi/gi_device.h"
@@ -174,8 +174,7 @@ __global__ void rows_kernel(const uint64_t* ikey, uint64_t n, uint64_t num_el, u
 }
 
 // ---- final gather
-__global__ void final_gather_kernel(GiGatherView v, const uint32_t* points, uint64_t n,
-                                    Vec3* out) {
+__global__ void final_gather_kernel(GiGatherView v, const uint32_t* points, uint64_t n, Vec3* out) {
     const uint64_t k = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
     if (k < n) out[k] = gi_final_gather_point(v, points ? points[k] : uint32_t(k));
 }
@@ -218,7 +217,10 @@ class CudaGi final : public GiDevice {
                        std::vector<uint64_t>& row, std::vector<uint32_t>& src,
                        std::vector<float>& coef) override;
     void upload(const GiView& h, uint64_t num_interactions) override;
-    void set_radiosity(const Vec3* B) override { B_.from(B, elements_); d_.B = B_.p; }
+    void set_radiosity(const Vec3* B) override {
+        B_.from(B, elements_);
+        d_.B = B_.p;
+    }
     void bounce() override {
         gather_kernel<<<blocks(elements_), kThreads>>>(d_, elements_);
         VMAP_CUDA_CHECK(cudaGetLastError());
@@ -296,8 +298,7 @@ void CudaGi::make_blocks(float theta, DevBuf<uint64_t>& key, DevBuf<double>& w) 
     DevBuf<uint32_t> len(M);
     DevBuf<int64_t> runs(1);
     with_temp([&](void* t, size_t& b) {
-        return cub::DeviceRunLengthEncode::Encode(t, b, pkey.p, ukey.p, len.p, runs.p,
-                                                  int64_t(M));
+        return cub::DeviceRunLengthEncode::Encode(t, b, pkey.p, ukey.p, len.p, runs.p, int64_t(M));
     });
     const uint64_t nb = uint64_t(read_one(runs.p));
     with_temp([&](void* t, size_t& b) {
@@ -360,8 +361,7 @@ void CudaGi::upload(const GiView& h, uint64_t num_interactions) {
     G_.from(h.G, E), d_.G = G_.p;
 }
 
-void CudaGi::final_gather(float theta, const uint32_t* points, size_t n, bool listed,
-                          Vec3* out) {
+void CudaGi::final_gather(float theta, const uint32_t* points, size_t n, bool listed, Vec3* out) {
     DevBuf<uint32_t> pts;
     if (listed) pts.from(points, n);
     DevBuf<Vec3> res(n);

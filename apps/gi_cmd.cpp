@@ -82,7 +82,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                            build_s);
         return vm;
     }
-    if (o.max_height || o.leaf_points || o.K != 2 || o.eps != 0.05f)
+    if (o.max_height || o.leaf_points || o.K != kGiVmapK || o.eps != kGiVmapEps)
         throw Error(fmt::format(
             "{}: --max-height/--leaf-points/-K/--eps apply when the V-map is built, not to a .vmap",
             o.input));

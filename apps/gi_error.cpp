@@ -303,7 +303,7 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     const auto t0 = Clock::now();
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
-        if (o.K != 2 || o.eps != 0.05f)
+        if (o.K != kGiVmapK || o.eps != kGiVmapEps)
             throw Error(
                 fmt::format("{}: -K/--eps apply to a V-map built from a scene file", o.input));
         VisibilityMap vm = load_vmap(o.input);

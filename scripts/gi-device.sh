@@ -7,7 +7,8 @@
 #               compute-sanitizer memcheck and racecheck on it (small cases), then vmap gi on
 #               cornell-two-models twice (timing); one summary in $OUT/gi-check.txt
 #       full    vmap gi --reference on cornell-two-models and cornell-dragon at their full point
-#               counts, the V-map at each of EPS (default "0.05 0.1"), 1000 + 1000 points; the
+#               counts, the V-map at each of KS (default 2) and EPS (default "0.05 0.1"),
+#               1000 + 1000 points; the
 #               summary lines appended to $OUT/gi-check.txt
 #       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
@@ -59,13 +60,16 @@ for step in "$@"; do
             } 2>&1 | tee "$OUT/gi-check.txt" ;;
         full)
             for sc in cornell-two-models cornell-dragon; do
-                for e in ${EPS:-0.05 0.1}; do
-                    "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 1000 \
-                        --ref-samples 1024 --backend cuda --no-brute --eps "$e" \
-                        >"$OUT/full-$sc-eps$e.log" 2>&1 || rc=1
-                    echo "$sc, eps $e:"
-                    grep -E "^(scene|vmap gi:)|converged \(|\| 1 \||V-map visibility vs|exact visibility between" \
-                        "$OUT/full-$sc-eps$e.log" | grep -v "reference noise" | cut -c1-200 || true
+                for k in ${KS:-2}; do
+                    for e in ${EPS:-0.05 0.1}; do
+                        log="$OUT/full-$sc-K$k-eps$e.log"
+                        "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 1000 \
+                            --ref-samples 1024 --backend cuda --no-brute -K "$k" --eps "$e" \
+                            >"$log" 2>&1 || rc=1
+                        echo "$sc, K $k, eps $e:"
+                        grep -E "^(scene|vmap gi:)|converged \(|\| 1 \||V-map visibility vs|exact visibility between" \
+                            "$log" | grep -v "reference noise" | cut -c1-200 || true
+                    done
                 done
             done 2>&1 | tee -a "$OUT/gi-check.txt" ;;
         two)

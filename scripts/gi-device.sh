@@ -23,7 +23,8 @@ cd "$root"
 mkdir -p "$OUT"
 # The binaries find scenes and models from their own folder up (vmap::data_dir()).
 export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
+# The bundle compresses the large libraries and the test binaries.
+for f in .device/lib/*.xz .device/bin/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
 mkdir -p models
 for f in .device/models/*.gz; do
     n="models/$(basename "$f" .gz)"
@@ -57,7 +58,7 @@ for step in "$@"; do
                     grep -E "^(input|scene|mesh|backend|refinement|converged|gather|wall|note)" "$OUT/two-$r.log" |
                         cut -c1-220 || true
                 done
-            } 2>&1 | tee "$OUT/gi-check.txt" ;;
+            } > >(tee "$OUT/gi-check.txt") 2>&1 ;;
         full)
             for sc in cornell-two-models cornell-dragon; do
                 for k in ${KS:-2}; do
@@ -71,7 +72,7 @@ for step in "$@"; do
                             "$log" | grep -v "reference noise" | cut -c1-200 || true
                     done
                 done
-            done 2>&1 | tee -a "$OUT/gi-check.txt" ;;
+            done > >(tee -a "$OUT/gi-check.txt") 2>&1 ;;
         two)
             "$bin/vmap" gi scenes/cornell-two-models.json -o "$OUT/gi-cornell-two-models.png" \
                 --size 640x640 --backend cuda 2>&1 | tee "$OUT/two-models.log" || rc=1 ;;

@@ -559,10 +559,15 @@ std::vector<Vec3> RadiositySolver::final_gather(float theta,
         return out;
     }
     const detail::GiGatherView v = impl_->gather_view(theta);
+    // Progress for a gather of every point (the picture's), not for the reference's short lists.
+    const ProgressCallback* cb = points.empty() ? &impl_->params.progress : nullptr;
+    detail::Progress bar("gi final gather", n, cb && *cb ? cb : nullptr);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](auto r) {
         for (size_t k = r.begin(); k < r.end(); ++k)
             out[k] = detail::gi_final_gather_point(v, points.empty() ? uint32_t(k) : points[k]);
+        bar.add(r.size());
     });
+    bar.finish();
     return out;
 }
 

@@ -79,7 +79,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                            build_s);
         return vm;
     }
-    if (o.max_height || o.leaf_points || o.K != 2 || o.eps != 0.05f)
+    if (o.max_height || o.leaf_points || o.K != kGiVmapK || o.eps != kGiVmapEps)
         throw Error(fmt::format(
             "{}: --max-height/--leaf-points/-K/--eps apply when the V-map is built, not to a .vmap",
             o.input));
@@ -297,20 +297,18 @@ BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, con
     return bp;
 }
 
-GiCommands add_gi_commands(CLI::App& app) {
-    auto o = std::make_shared<GiOptions>();
-    GiCommands c;
-    auto* gi = app.add_subcommand(
-        "gi", "Diffuse global illumination over the V-map (hierarchical radiosity; paper §6.3)");
-    c.gi = gi;
-    gi->add_option("input", o->input,
-                   "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
-                   "file. Default: scenes/cornell-bunny.json");
+namespace {
+
+// The options, by group.
+void add_output_options(CLI::App* gi, GiOptions* o) {
     gi->add_option("-o,--output", o->image, "PNG of the lit scene (default: <input name>-gi.png)");
     gi->add_option("--ply", o->ply,
                    "Write the points with their display colours and linear radiosity "
                    "(float radiosity_r/g/b, W/m^2) as PLY");
     gi->add_option("--pfm", o->pfm, "Write the picture as linear radiosity (PFM, W/m^2)");
+}
+
+void add_solver_options(CLI::App* gi, GiOptions* o) {
     gi->add_option("--bounces", o->bounces,
                    "Exactly this many gather steps after B = E, the final gather included (1: "
                    "direct light). Default: until converged (--tolerance)")
@@ -337,6 +335,9 @@ GiCommands add_gi_commands(CLI::App& app) {
     cli::add_choice(gi, "--backend", o->gi.backend, "auto (GPU when present), cpu or cuda; for the V-map build and the bounces");
     cli::add_choice(gi, "--refine", o->gi.refine, "blocks: links summed into well-separated node pairs (fast); links: every "
                    "V-map link moves energy itself (exact visibility, slower)");
+}
+
+void add_picture_options(CLI::App* gi, GiOptions* o) {
     gi->add_option("--exposure", o->exposure,
                    "Display colour = clamp(exposure x radiosity) (linear, then sRGB); 0: "
                    "automatic (95th percentile of the lit points -> 0.8)")
@@ -355,6 +356,10 @@ GiCommands add_gi_commands(CLI::App& app) {
     gi->add_option("--supersample", o->render.supersample, "s x s samples per pixel (1..4)")
         ->check(CLI::Range(1, 4))
         ->capture_default_str();
+}
+
+// Sampling and the V-map built here.
+void add_build_options(CLI::App* gi, GiOptions* o) {
     gi->add_flag("--as-points", o->as_points,
                  "Take a mesh file's vertices as a point cloud instead of sampling its faces");
     gi->add_option("--points", o->points, "Override the scene's number of sample points")
@@ -372,6 +377,9 @@ GiCommands add_gi_commands(CLI::App& app) {
                    "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
         ->check(CLI::Range(0.0f, 0.49f))
         ->capture_default_str();
+}
+
+void add_reference_options(CLI::App* gi, GiOptions* o) {
     gi->add_flag("--compare-brute", o->compare,
                  "Also run the brute-force gather (every visible point pair) and print the "
                  "relative RMS difference per bounce (small scenes)");
@@ -401,6 +409,25 @@ GiCommands add_gi_commands(CLI::App& app) {
                    "| vmap gi | error) at every point")
         ->check(CLI::Range(2u, 1000000u))
         ->capture_default_str();
+}
+
+}  // namespace
+
+GiCommands add_gi_commands(CLI::App& app) {
+    auto o = std::make_shared<GiOptions>();
+    GiCommands c;
+    auto* gi = app.add_subcommand(
+        "gi", "Diffuse global illumination over the V-map (hierarchical radiosity; paper §6.3)");
+    c.gi = gi;
+    gi->add_option("input", o->input,
+                   "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
+                   "file. Default: scenes/cornell-bunny.json");
+    GiOptions* p = o.get();
+    add_output_options(gi, p);
+    add_solver_options(gi, p);
+    add_picture_options(gi, p);
+    add_build_options(gi, p);
+    add_reference_options(gi, p);
     c.run_gi = [o] { return run_gi(*o); };
     auto [bench, run_bench] = add_gi_bench_command(app);
     c.bench = bench;

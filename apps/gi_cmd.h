@@ -25,16 +25,19 @@ struct GiCommands {
 
 GiCommands add_gi_commands(CLI::App& app);
 
+// The predicate for a V-map built by `vmap gi` (docs/gi.md "The V-map for the GI"): the GI weighs
+// pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
+inline constexpr int kGiVmapK = 2;
+inline constexpr float kGiVmapEps = 0.05f;
+
 // The options of `vmap gi`.
 struct GiOptions {
     std::string input;
     std::string image, ply, pfm;
     std::optional<uint64_t> points, seed;
     std::optional<int> max_height, leaf_points;
-    // The predicate for a V-map built here (docs/gi.md "The V-map for the GI"): the GI weighs
-    // pairs by form factor, so near pairs, which the default eps hides too often, count most.
-    int K = 2;
-    float eps = 0.05f;
+    int K = kGiVmapK;  // the predicate for a V-map built here
+    float eps = kGiVmapEps;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power

@@ -3,7 +3,15 @@
 # sm_90 and gathers binaries, libraries and models into .device/). There (carry .device):
 #   scripts/gi-device.sh STEP...
 #       gpu     tests/gi_gpu_test (CPU vs CUDA radiosity, bit for bit)
-#       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points), PNG + log
+#       check   gi_gpu_test (refinement, bounces, final gather: CPU vs CUDA bit for bit), then
+#               compute-sanitizer memcheck and racecheck on it (small cases), then vmap gi on
+#               cornell-two-models twice (timing); one summary in $OUT/gi-check.txt
+#       full    vmap gi --reference on cornell-two-models and cornell-dragon at their full point
+#               counts, the V-map at each of KS (default 2) and EPS (default "0.05 0.1"),
+#               1000 + 1000 points; the
+#               summary lines appended to $OUT/gi-check.txt
+#       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points; GI_ARGS: more options),
+#               PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
 #       bench   vmap bench-gi (POINTS, default 5000..80000; BRUTE_MAX, default 40000)
 #       ref     vmap gi --reference on every shipped scene (the error table, docs/gi.md), CSVs,
@@ -16,7 +24,8 @@ cd "$root"
 mkdir -p "$OUT"
 # The binaries find scenes and models from their own folder up (vmap::data_dir()).
 export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
-for f in .device/lib/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
+# The bundle compresses the large libraries and the test binaries.
+for f in .device/lib/*.xz .device/bin/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
 mkdir -p models
 for f in .device/models/*.gz; do
     n="models/$(basename "$f" .gz)"
@@ -32,9 +41,44 @@ for step in "$@"; do
         gpu)
             "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
             tail -4 "$OUT/gi_gpu_test.log" ;;
+        check)
+            {
+                "$bin/gi_gpu_test" >"$OUT/gi_gpu_test.log" 2>&1 || rc=1
+                grep -E "^\[  (PASSED|FAILED) |FAILED|SKIPPED \]" "$OUT/gi_gpu_test.log" | head -20 || true
+                san=$(command -v compute-sanitizer || echo /usr/local/cuda/bin/compute-sanitizer)
+                for tool in memcheck racecheck; do
+                    "$san" --tool "$tool" --error-exitcode 9 "$bin/gi_gpu_test" \
+                        --gtest_filter='GiGpu.*:*cornell_empty*' >"$OUT/gi-$tool.log" 2>&1 || rc=1
+                    echo "$tool: $(grep -E "ERROR SUMMARY|PASSED|FAILED" "$OUT/gi-$tool.log" | tr '\n' ' ')"
+                done
+                for r in 1 2; do
+                    TIMEFORMAT="wall %R s, user %U s, sys %S s"
+                    { time "$bin/vmap" gi scenes/cornell-two-models.json --backend cuda \
+                        -o "$OUT/two-$r.png" >"$OUT/two-$r.log" 2>&1 || rc=1; } 2>>"$OUT/two-$r.log"
+                    echo "two-models run $r:"
+                    grep -E "^(input|scene|mesh|backend|refinement|converged|gather|wall|note)" "$OUT/two-$r.log" |
+                        cut -c1-220 || true
+                done
+            } > >(tee "$OUT/gi-check.txt") 2>&1 ;;
+        full)
+            for sc in cornell-two-models cornell-dragon; do
+                for k in ${KS:-2}; do
+                    for e in ${EPS:-0.05 0.1}; do
+                        log="$OUT/full-$sc-K$k-eps$e.log"
+                        "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 1000 \
+                            --ref-samples 1024 --backend cuda --no-brute -K "$k" --eps "$e" \
+                            >"$log" 2>&1 || rc=1
+                        echo "$sc, K $k, eps $e:"
+                        grep -E "^(scene|vmap gi:)|converged \(|\| 1 \||V-map visibility vs|exact visibility between" \
+                            "$log" | grep -v "reference noise" | cut -c1-200 || true
+                    done
+                done
+            done > >(tee -a "$OUT/gi-check.txt") 2>&1 ;;
         two)
+            # shellcheck disable=SC2086 # GI_ARGS: extra options, word-split on purpose
             "$bin/vmap" gi scenes/cornell-two-models.json -o "$OUT/gi-cornell-two-models.png" \
-                --size 640x640 --backend cuda 2>&1 | tee "$OUT/two-models.log" || rc=1 ;;
+                --size 640x640 --backend cuda ${GI_ARGS:-} 2>&1 | tee "$OUT/two-models.log" |
+                grep -vE "^bounce" || rc=1 ;;
         bunny)
             "$bin/vmap" gi scenes/cornell-bunny.json -o "$OUT/gi-cornell-bunny.png" \
                 --size 640x640 --backend cuda 2>&1 | tee "$OUT/bunny.log" || rc=1 ;;

@@ -1,7 +1,12 @@
-// The CUDA radiosity bounce against the CPU: the same interaction list, the same summation order
-// and no FMA contraction on either side, so the radiosity must be bit-identical after every
-// bounce. Labelled `gpu`; without a device every test reports SKIPPED.
+// The CUDA radiosity solver against the CPU. The refinement (gi_link_blocks per link, blocks
+// summed in one order on both sides), the bounces and the final gather (gi_final_gather_point)
+// run the same bodies in the same summation order with no FMA contraction and IEEE sqrt and
+// division on either side, so the interaction list, the radiosity after every bounce and the
+// final gather must be bit-identical, not merely close. Labelled `gpu`; without a device every
+// test reports SKIPPED.
 #include <gtest/gtest.h>
+
+#include <algorithm>
 
 #include "gi/gi_device.h"
 #include "test_util.h"
@@ -53,6 +58,61 @@ TEST_P(GiGpuMatchesCpu, RadiosityIsBitIdenticalEveryBounce) {
     gpu.bounce();
     cpu.bounce();
     EXPECT_EQ(relative_rms(gpu.radiosity(), cpu.radiosity()), 0.0);
+}
+
+// Counts the entries that differ (bitwise, as floats compare: no NaN is expected).
+template <class T>
+size_t differing(const std::vector<T>& x, const std::vector<T>& y) {
+    size_t d = x.size() == y.size() ? 0 : std::max(x.size(), y.size());
+    for (size_t i = 0; i < std::min(x.size(), y.size()); ++i) d += !(x[i] == y[i]);
+    return d;
+}
+
+// The device's refinement gives the CPU's interaction list, entry for entry, and the device's
+// final gather the CPU's, for all points and for a list of them.
+void expect_same_refinement_and_gather(const VisibilityMap& vm, float theta) {
+    GiParams p;
+    p.theta = theta;
+    p.backend = "cpu";
+    RadiositySolver cpu(vm, p);
+    p.backend = "cuda";
+    RadiositySolver gpu(vm, p);
+    ASSERT_EQ(gpu.stats().backend.rfind("cuda", 0), 0u) << gpu.stats().backend;
+    std::vector<uint64_t> rc, rg;
+    std::vector<uint32_t> sc, sg;
+    std::vector<float> cc, cg;
+    std::vector<double> ac, ag;
+    cpu.interaction_list(rc, sc, cc, ac);
+    gpu.interaction_list(rg, sg, cg, ag);
+    EXPECT_GT(sc.size(), 0u);
+    EXPECT_EQ(differing(rc, rg), 0u);
+    EXPECT_EQ(differing(sc, sg), 0u);
+    EXPECT_EQ(differing(cc, cg), 0u);
+    EXPECT_EQ(gpu.stats().node_interactions, cpu.stats().node_interactions);
+    for (int b = 0; b < 2; ++b) cpu.bounce(), gpu.bounce();
+    const auto fc = cpu.final_gather(2.0f), fgpu = gpu.final_gather(2.0f);
+    EXPECT_EQ(differing(fc, fgpu), 0u) << "relative RMS " << relative_rms(fgpu, fc);
+    std::vector<uint32_t> some;
+    for (uint32_t i = 0; i < vm.points.size(); i += 7) some.push_back(i);
+    const auto pc = cpu.final_gather(1e9f, some), pg = gpu.final_gather(1e9f, some);
+    EXPECT_EQ(differing(pc, pg), 0u);
+    EXPECT_EQ(pg.size(), some.size());
+}
+
+TEST_P(GiGpuMatchesCpu, RefinementAndFinalGatherAreBitIdentical) {
+    VMAP_REQUIRE_GPU();
+    const GiCase c = GetParam();
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path(c.scene), c.points, 4),
+                                        test::cpu_params(c.height, 4));
+    expect_same_refinement_and_gather(vm, c.theta);
+}
+
+// One point a leaf (the shipped scenes' octree setting) at the GI's default theta.
+TEST(GiGpu, OnePointALeafAtTheDefaults) {
+    VMAP_REQUIRE_GPU();
+    const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 6000, 4),
+                                        test::cpu_params(8, 1));
+    expect_same_refinement_and_gather(vm, 1.0f);
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, GiGpuMatchesCpu,

@@ -18,6 +18,7 @@
 
 #include "gi/gi_device.h"
 #include "util/device.h"
+#include "gi/gi_hier.h"
 #include "gi/gi_kernels.h"
 #include "util/progress.h"
 #include "vmap/error.h"
@@ -28,7 +29,6 @@ namespace {
 using Clock = std::chrono::steady_clock;
 constexpr float kPi = std::numbers::pi_v<float>;
 const Vec3 kDefaultAlbedo{0.8f, 0.8f, 0.8f};
-
 
 void check_points(const VisibilityMap& vm, const char* who) {
     const PointSet& ps = vm.points();
@@ -72,13 +72,7 @@ void for_point_pairs(const VisibilityMap& vm, int32_t a, int32_t b, F&& f) {
         }
 }
 
-// What refinement needs of a node: total area, area-weighted mean position and normal, and the
-// half-diagonal of its content box.
-struct NodeGeom {
-    Vec3 center, normal;
-    float area = 0, size = 0;
-    float point_area = 0;  // mean area of its points
-};
+using detail::NodeGeom;
 
 std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
     const Octree& t = vm.octree();
@@ -107,8 +101,9 @@ std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
     return g;
 }
 
-// Refines every V-map link into receiver/source interactions; calls emit(recv, src, F) for
-// each (both directions). Elements: nodes, then points at num_nodes + k.
+// `--refine links`: refines every V-map link into receiver/source interactions; calls
+// emit(recv, src, F, point_level) for each (both directions). Elements: nodes, then points at
+// num_nodes + k.
 struct Refiner {
     const VisibilityMap& vm;
     const std::vector<NodeGeom>& g;
@@ -160,194 +155,86 @@ struct Refiner {
     }
 };
 
-// Refinement by blocks (the default): every V-map link (x, y) is split along the partition of
-// the leaf-pair matrix that top-down refinement from (root, root) gives: a node pair (A, B)
-// (disjoint subtrees) is a block when well separated; otherwise the larger node is opened; two
-// leaves that are not well separated exchange point to point. A link reaches its blocks by
-// descending from (root, root) towards x and y (and over all children once inside them). Each
-// block accumulates W = the area products of the leaf pairs the links make visible in it, so a
-// block moves energy only between parts that see each other: receiver A gathers
-// K(A, B) W / A_A * B_B from B (fully visible blocks: K A_B B_B, as before). The blocks do not
-// grow with the number of links: the per-bounce work is that of classic hierarchical
-// radiosity, the visibility of a block is averaged over its parts (shadow edges blur at the
-// scale of the nodes, which theta keeps small against their distance).
-struct BlockRefiner {
-    const VisibilityMap& vm;
-    const std::vector<NodeGeom>& g;
-    float theta;
+// Refinement by blocks (the default; the partition and the weights are docs/gi.md's, one link's
+// share is detail::gi_link_blocks). The blocks, sorted by key, each with the sum of its parts'
+// weights W. Deterministic: each link end x's parts are stable-sorted by key and summed in
+// order (link order, then the walk's order), then the per-x sums of a key are added in x order;
+// the GPU (gi_cuda.cu) sums in exactly this order, so both give the same doubles.
+struct Blocks {
+    std::vector<uint64_t> key;
+    std::vector<double> w;
+};
 
-    struct Entry {
-        uint64_t key;  // (element e1 << 32) | element e2, e1 < e2
+struct Part {
+    uint64_t key;
+    double w;
+};
+
+// One link end's parts, reduced by key.
+std::vector<Part> parts_of_node(const detail::GiTree& tree, float theta, int32_t x) {
+    std::vector<Part> out;
+    for (uint64_t k = tree.link_offsets[x]; k < tree.link_offsets[x + 1]; ++k) {
+        const int32_t y = tree.links[k];
+        if (y > x)
+            detail::gi_link_blocks(tree, theta, x, y, [&](uint64_t key, double w) {
+                out.push_back({key, w});
+            });
+    }
+    std::stable_sort(out.begin(), out.end(),
+                     [](const Part& p, const Part& q) { return p.key < q.key; });
+    std::vector<Part> r;
+    for (const Part& e : out)
+        if (!r.empty() && r.back().key == e.key)
+            r.back().w += e.w;
+        else
+            r.push_back(e);
+    return r;
+}
+
+// The per-node sums of every key, added in node order.
+Blocks merge_node_parts(std::vector<std::vector<Part>>& per) {
+    struct Tagged {
+        uint64_t key;
+        int32_t node;
         double w;
     };
-
-    bool within(int32_t a, int32_t x) const { return x <= a && a < vm.octree().skip()[x]; }
-    bool separated(int32_t a, int32_t b) const {
-        if (within(a, b) || within(b, a)) return false;
-        if (!flat(a) || !flat(b)) return false;
-        return length(g[b].center - g[a].center) > theta * (g[a].size + g[b].size);
-    }
-    // A block spreads what its receiver gathers evenly over the receiver's area, which is right
-    // only for nearly flat content: a curved node (the bunny's ear) would give its points facing
-    // away the light of those facing the source. Internal nodes whose mean normal is shorter
-    // than 1 - kFlatness / theta (normals spread) are opened instead (leaves are taken as they
-    // are: opening them would pair single points with everything they see).
-    bool flat(int32_t a) const {
-        return vm.octree().is_leaf(a) || length(g[a].normal) >= 1.0f - kFlatness / theta;
-    }
-    static constexpr float kFlatness = 0.05f;
-    int32_t child_toward(int32_t a, int32_t x) const {
-        int32_t hit = -1;
-        vm.octree().for_each_child(a, [&](int32_t c) {
-            if (within(x, c)) hit = c;
-        });
-        return hit;
-    }
-    static uint64_t key(uint32_t e1, uint32_t e2) {
-        if (e1 > e2) std::swap(e1, e2);
-        return (uint64_t(e1) << 32) | e2;
-    }
-
-    void descend(int32_t a, int32_t b, int32_t x, int32_t y, std::vector<Entry>& out) const {
-        const Octree& t = vm.octree();
-        const bool ax = within(a, x), by = within(b, y);
-        if (separated(a, b)) {
-            // The part of the link inside the block: the finer of the two nodes on each side.
-            const NodeGeom& pa = g[ax ? a : x];
-            const NodeGeom& pb = g[by ? b : y];
-            const float k =
-                gi_kernel(pa.center, pa.normal, pa.point_area, pb.center, pb.normal, pb.point_area);
-            if (k > 0)
-                out.push_back({key(uint32_t(a), uint32_t(b)), double(pa.area) * pb.area * k});
-            return;
-        }
-        const bool la = t.is_leaf(a), lb = t.is_leaf(b);
-        if (la && lb) {  // both are inside their link ends: every point pair is visible
-            const uint32_t base = uint32_t(t.num_nodes());
-            for_point_pairs(vm, a, b, [&](uint32_t i, uint32_t j, float ai, float aj, float k) {
-                out.push_back({key(base + i, base + j), double(ai) * aj * k});
-            });
-            return;
-        }
-        // Open the node that is not flat enough if only one is, else the larger one.
-        const bool fa = flat(a), fb = flat(b);
-        const bool open_a = lb || (!la && (fa == fb ? g[a].size >= g[b].size : !fa));
-        if (open_a) {
-            if (ax)
-                t.for_each_child(a, [&](int32_t c) { descend(c, b, x, y, out); });
-            else
-                descend(child_toward(a, x), b, x, y, out);
+    const int32_t N = int32_t(per.size());
+    std::vector<uint64_t> first(size_t(N) + 1, 0);
+    for (int32_t x = 0; x < N; ++x) first[x + 1] = first[x] + per[x].size();
+    std::vector<Tagged> all(first[N]);
+    tbb::parallel_for(0, N, [&](int32_t x) {
+        for (size_t k = 0; k < per[x].size(); ++k)
+            all[first[x] + k] = {per[x][k].key, x, per[x][k].w};
+        std::vector<Part>().swap(per[x]);
+    });
+    tbb::parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
+        return p.key != q.key ? p.key < q.key : p.node < q.node;
+    });
+    Blocks b;
+    for (const Tagged& e : all)
+        if (!b.key.empty() && b.key.back() == e.key) {
+            b.w.back() += e.w;
         } else {
-            if (by)
-                t.for_each_child(b, [&](int32_t c) { descend(a, c, x, y, out); });
-            else
-                descend(a, child_toward(b, y), x, y, out);
+            b.key.push_back(e.key);
+            b.w.push_back(e.w);
         }
-    }
+    return b;
+}
 
-    // The blocks with their visible area products, sorted by key. Deterministic: each link
-    // end's entries are reduced in link order, then all are sorted by (key, node) and summed
-    // in that order.
-    std::vector<Entry> run(const ProgressCallback& progress) const {
-        const int32_t N = vm.octree().num_nodes();
-        std::vector<std::vector<Entry>> per(N);
-        detail::Progress bar("gi refinement", uint64_t(N), &progress);
-        std::mutex bar_mutex;
-        std::atomic<uint64_t> done{0};
-        tbb::parallel_for(0, N, [&](int32_t x) {
-            const uint64_t finished = ++done;
-            if (std::unique_lock lock(bar_mutex, std::try_to_lock); lock) bar.set(finished);
-            std::vector<Entry> out;
-            for (int32_t y : vm.links(x))
-                if (y > x) descend(0, 0, x, y, out);
-            std::stable_sort(out.begin(), out.end(),
-                             [](const Entry& p, const Entry& q) { return p.key < q.key; });
-            std::vector<Entry>& r = per[x];
-            for (const Entry& e : out)
-                if (!r.empty() && r.back().key == e.key)
-                    r.back().w += e.w;
-                else
-                    r.push_back(e);
-        });
-        struct Tagged {
-            uint64_t key;
-            int32_t node;
-            double w;
-        };
-        std::vector<uint64_t> first(size_t(N) + 1, 0);
-        for (int32_t x = 0; x < N; ++x) first[x + 1] = first[x] + per[x].size();
-        std::vector<Tagged> all(first[N]);
-        tbb::parallel_for(0, N, [&](int32_t x) {
-            for (size_t k = 0; k < per[x].size(); ++k)
-                all[first[x] + k] = {per[x][k].key, x, per[x][k].w};
-            std::vector<Entry>().swap(per[x]);
-        });
-        tbb::parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
-            return p.key != q.key ? p.key < q.key : p.node < q.node;
-        });
-        std::vector<Entry> blocks;
-        for (const Tagged& e : all)
-            if (!blocks.empty() && blocks.back().key == e.key)
-                blocks.back().w += e.w;
-            else
-                blocks.push_back({e.key, e.w});
-        return blocks;
-    }
-};
-
-// The final gather (per point, from the hierarchical solution): point i gathers from every node
-// the V-map links to its leaf or an ancestor (all of it sees all of that node), at node level
-// (the node's area-weighted mean radiosity, its summed area and mean normal, seen from the
-// point itself; a leaf of several points too) when the node is flat and more than theta times its
-// size away from the point, else from its children, down to point to point. The receiver is always
-// the point, so no block of receivers shares one value: the picture has no block grid, and each
-// point's visibility is that of its leaf's links.
-struct FinalGather {
-    const VisibilityMap& vm;
-    const std::vector<NodeGeom>& g;
-    const std::vector<uint8_t>& emits;  // per node: holds an emitting point
-    const Vec3* B;                      // per element: nodes then points
-    float theta;
-
-    Vec3 from_node(Vec3 x, Vec3 n, float a, int32_t L) const {
-        const Octree& t = vm.octree();
-        const NodeGeom& gl = g[L];
-        const bool leaf = t.is_leaf(L);
-        // Emitters are always gathered point by point: the direct light carries the shadows and
-        // most of the power, and the lights are a small share of the points.
-        const bool many = t.point_end()[L] - t.point_begin()[L] > 1;
-        if (many && !emits[L] && length(gl.normal) >= 1.0f - BlockRefiner::kFlatness / theta &&
-            length(gl.center - x) > theta * gl.size) {
-            const float k = gi_kernel(x, n, a, gl.center, gl.normal, gl.point_area);
-            return k > 0 ? B[L] * (k * gl.area) : Vec3{};
-        }
-        Vec3 h{0, 0, 0};
-        if (leaf) {
-            const PointSet& ps = vm.points();
-            const uint64_t base = uint64_t(t.num_nodes());
-            for (uint32_t j = t.point_begin()[L]; j < t.point_end()[L]; ++j) {
-                const float aj = area_of(ps, j);
-                const float k = gi_kernel(x, n, a, ps.positions[j], ps.normals[j], aj);
-                if (k > 0) h = h + B[base + j] * (k * aj);
-            }
-            return h;
-        }
-        t.for_each_child(L, [&](int32_t c) { h = h + from_node(x, n, a, c); });
-        return h;
-    }
-
-    Vec3 at(uint32_t i) const {
-        const Octree& t = vm.octree();
-        const PointSet& ps = vm.points();
-        const Vec3 x = ps.positions[i], n = ps.normals[i];
-        const float a = area_of(ps, i);
-        Vec3 h{0, 0, 0};
-        for (int32_t A = t.leaf_node()[t.leaf_of_point(i)]; A >= 0; A = t.parent()[A])
-            for (int32_t L : vm.links(A)) h = h + from_node(x, n, a, L);
-        const Vec3 E = emission_of(ps, i), rho = albedo_of(ps, i);
-        return Vec3{E.x + rho.x * h.x, E.y + rho.y * h.y, E.z + rho.z * h.z};
-    }
-};
+Blocks cpu_blocks(const detail::GiTree& tree, float theta, const ProgressCallback& progress) {
+    const int32_t N = tree.num_nodes;
+    std::vector<std::vector<Part>> per(N);
+    detail::Progress bar("gi refinement", uint64_t(N), &progress);
+    std::mutex bar_mutex;
+    std::atomic<uint64_t> done{0};
+    tbb::parallel_for(0, N, [&](int32_t x) {
+        const uint64_t finished = ++done;
+        if (std::unique_lock lock(bar_mutex, std::try_to_lock); lock) bar.set(finished);
+        per[x] = parts_of_node(tree, theta, x);
+    });
+    bar.finish();
+    return merge_node_parts(per);
+}
 
 std::string cpu_name() {
     return fmt::format("cpu ({} threads)", tbb::this_task_arena::max_concurrency());
@@ -356,15 +243,7 @@ std::string cpu_name() {
 }  // namespace
 
 float gi_kernel(Vec3 pr, Vec3 nr, float ar, Vec3 ps, Vec3 ns, float as) {
-    const Vec3 d = ps - pr;
-    const float d2 = dot(d, d);
-    if (!(d2 > 0)) return 0;
-    const float len = std::sqrt(d2);
-    // dot(ns, -d) is exactly -dot(ns, d): K(r, s) and K(s, r) are the same float.
-    const float cr = dot(nr, d) / len;
-    const float cs = -dot(ns, d) / len;
-    if (!(cr > 0) || !(cs > 0)) return 0;
-    return (cr * cs) / (kPi * d2 + std::max(ar, as));
+    return detail::gi_kernel_hd(pr, nr, ar, ps, ns, as);
 }
 
 struct RadiositySolver::Impl {
@@ -372,7 +251,7 @@ struct RadiositySolver::Impl {
     GiParams params;
     GiStats stats;
     int done = 0;
-    // Host arrays behind the view.
+    // Host arrays behind the views.
     std::vector<uint64_t> row;
     std::vector<uint32_t> src;
     std::vector<float> coef;
@@ -380,26 +259,35 @@ struct RadiositySolver::Impl {
     std::vector<float> area, inv_area;
     std::vector<double> node_area;  // for interaction_list()
     std::vector<int32_t> point_leaf;
+    std::vector<uint8_t> emits;  // per node: holds an emitting point
     std::vector<Vec3> B, G;
     std::vector<NodeGeom> geom;
+    detail::GiTree tree;
     detail::GiView view;
     std::unique_ptr<detail::GiDevice> device;
 
     explicit Impl(const VisibilityMap& m) : vm(m) {}
 
     void setup();
+    void prepare_arrays();
+    void attach_device();
+    bool refine_on_device();
+    void refine_on_host();
+    void check_total(uint64_t total) const;
+    void sort_rows();
+    void make_view();
+    void upload_bounces();
     void cpu_bounce();
     void reset_host();
+    detail::GiGatherView gather_view(float theta) const;
 };
 
-void RadiositySolver::Impl::setup() {
-    const auto t0 = Clock::now();
+// Step 1: per-point and per-node arrays, and the tree view the refinement and gather read.
+void RadiositySolver::Impl::prepare_arrays() {
     const Octree& t = vm.octree();
     const PointSet& ps = vm.points();
     const int32_t N = t.num_nodes();
     const uint32_t P = uint32_t(ps.size());
-    const uint64_t num_el = uint64_t(N) + P;
-
     geom = node_geometry(vm);
     emission.resize(P), albedo.resize(P), area.resize(P), point_leaf.resize(P);
     tbb::parallel_for(uint32_t(0), P, [&](uint32_t i) {
@@ -411,67 +299,87 @@ void RadiositySolver::Impl::setup() {
         const int32_t n = t.leaf_node()[l];
         for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) point_leaf[k] = n;
     }
-    inv_area.resize(N);
-    node_area.resize(N);
-    for (int32_t n = 0; n < N; ++n) {
+    inv_area.resize(N), node_area.resize(N), emits.assign(N, 0);
+    tbb::parallel_for(0, N, [&](int32_t n) {
         inv_area[n] = geom[n].area > 0 ? 1.0f / geom[n].area : 0.0f;
         node_area[n] = geom[n].area;
-    }
-
-    // Refinement in two passes: count per receiver, then fill at atomic cursors; rows are then
-    // sorted by source so the sums run in an order that does not depend on thread timing.
-    const Refiner ref{vm, geom, params.theta};
-    std::vector<BlockRefiner::Entry> blocks;
-    const bool by_links = params.refine == GiRefine::kLinks;
-    if (!by_links) blocks = BlockRefiner{vm, geom, params.theta}.run(params.progress);
-    auto element_area = [&](uint32_t e) {
-        return e < uint32_t(N) ? double(geom[e].area) : double(area_of(ps, e - uint32_t(N)));
-    };
-    auto run_refinement = [&](auto&& make_emit) {
-        if (by_links) return ref.run(make_emit);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.size(), 4096), [&](auto r) {
-            auto emit = make_emit();
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                const uint32_t e1 = uint32_t(blocks[k].key >> 32), e2 = uint32_t(blocks[k].key);
-                const double a1 = element_area(e1), a2 = element_area(e2);
-                if (!(a1 > 0) || !(a2 > 0)) continue;
-                const double kw = blocks[k].w;  // sum of A_x A_y K(x, y) over the visible parts
-                const bool pt = e1 >= uint32_t(N);
-                emit(e1, e2, float(std::min(1.0, kw / a1)), pt);
-                emit(e2, e1, float(std::min(1.0, kw / a2)), pt);
-            }
-        });
-    };
-    std::unique_ptr<std::atomic<uint64_t>[]> count(new std::atomic<uint64_t>[num_el + 1]);
-    for (uint64_t e = 0; e <= num_el; ++e) count[e].store(0, std::memory_order_relaxed);
-    std::atomic<uint64_t> n_node{0}, n_point{0};
-    run_refinement([&] {
-        return [&](uint32_t r, uint32_t, float, bool pt) {
-            count[r].fetch_add(1, std::memory_order_relaxed);
-            (pt ? n_point : n_node).fetch_add(1, std::memory_order_relaxed);
-        };
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n] && !emits[n]; ++k)
+            emits[n] = !(emission[k] == Vec3{});
     });
-    stats.node_interactions = n_node.load();
-    stats.point_interactions = n_point.load();
-    const uint64_t total = stats.interactions();
+    tree = detail::GiTree{N,
+                          P,
+                          t.skip().data(),
+                          t.node_leaf().data(),
+                          t.parent().data(),
+                          t.point_begin().data(),
+                          t.point_end().data(),
+                          geom.data(),
+                          ps.positions.data(),
+                          ps.normals.data(),
+                          area.data(),
+                          point_leaf.data(),
+                          vm.link_offsets().data(),
+                          vm.link_targets().data()};
+}
+
+void RadiositySolver::Impl::check_total(uint64_t total) const {
     if (total > params.max_interactions)
         throw Error(fmt::format(
             "gi: theta {}: the refinement has {} interactions (more than the limit {}); use a "
             "smaller theta",
             params.theta, total, params.max_interactions));
+}
+
+// Step 2 (host): the interactions in two passes, counted per receiver, then filled at atomic
+// cursors; sort_rows() then orders each row by source.
+void RadiositySolver::Impl::refine_on_host() {
+    const int32_t N = vm.octree().num_nodes();
+    const uint64_t num_el = uint64_t(N) + vm.points().size();
+    const bool by_links = params.refine == GiRefine::kLinks;
+    Blocks blocks;
+    if (!by_links) blocks = cpu_blocks(tree, params.theta, params.progress);
+    auto element_area = [&](uint32_t e) {
+        return e < uint32_t(N) ? double(geom[e].area) : double(area[e - uint32_t(N)]);
+    };
+    auto run_refinement = [&](auto&& make_emit) {
+        if (by_links) return Refiner{vm, geom, params.theta}.run(make_emit);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.key.size(), 4096), [&](auto r) {
+            auto emit = make_emit();
+            for (size_t k = r.begin(); k < r.end(); ++k) {
+                const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);
+                const double a1 = element_area(e1), a2 = element_area(e2);
+                if (!(a1 > 0) || !(a2 > 0)) continue;
+                const double kw = blocks.w[k];  // sum of A_x A_y K(x, y) over the visible parts
+                emit(e1, e2, float(std::min(1.0, kw / a1)));
+                emit(e2, e1, float(std::min(1.0, kw / a2)));
+            }
+        });
+    };
+    std::unique_ptr<std::atomic<uint64_t>[]> count(new std::atomic<uint64_t>[num_el + 1]);
+    for (uint64_t e = 0; e <= num_el; ++e) count[e].store(0, std::memory_order_relaxed);
+    run_refinement([&] {
+        return [&](uint32_t r, uint32_t, float, bool = false) {
+            count[r].fetch_add(1, std::memory_order_relaxed);
+        };
+    });
     row.assign(num_el + 1, 0);
     for (uint64_t e = 0; e < num_el; ++e) row[e + 1] = row[e] + count[e].load();
+    check_total(row[num_el]);
     for (uint64_t e = 0; e < num_el; ++e) count[e].store(row[e], std::memory_order_relaxed);
-    src.resize(total), coef.resize(total);
+    src.resize(row[num_el]), coef.resize(row[num_el]);
     run_refinement([&] {
-        return [&](uint32_t r, uint32_t s, float f, bool) {
+        return [&](uint32_t r, uint32_t s, float f, bool = false) {
             const uint64_t at = count[r].fetch_add(1, std::memory_order_relaxed);
             src[at] = s;
             coef[at] = f;
         };
     });
-    count.reset();
-    std::vector<BlockRefiner::Entry>().swap(blocks);
+    sort_rows();
+}
+
+// Rows sorted by source, so the sums run in an order that does not depend on thread timing.
+void RadiositySolver::Impl::sort_rows() {
+    const uint64_t num_el = row.size() - 1;
     tbb::parallel_for(uint64_t(0), num_el, [&](uint64_t e) {
         const uint64_t b = row[e], n = row[e + 1] - b;
         if (n < 2) return;
@@ -480,49 +388,90 @@ void RadiositySolver::Impl::setup() {
         std::sort(tmp.begin(), tmp.end());
         for (uint64_t k = 0; k < n; ++k) src[b + k] = tmp[k].first, coef[b + k] = tmp[k].second;
     });
+}
 
+// Step 2 (GPU): the same blocks and interactions made on the device (gi_cuda.cu), the list also
+// copied back here; false (with stats.note) when the device cannot take it.
+bool RadiositySolver::Impl::refine_on_device() {
+    if (!device || params.refine != GiRefine::kBlocks) return false;
+    try {
+        device->upload_tree(tree, emits.data());
+        device->refine_blocks(
+            params.theta, [&](uint64_t total) { check_total(total); }, row, src, coef);
+        return true;
+    } catch (const Error& e) {
+        if (std::string_view(e.what()).starts_with("gi: theta")) throw;
+        device.reset();
+        stats.note = fmt::format(
+            "backend {}: the GPU could not take the refinement ({}); using "
+            "the CPU",
+            name_of(params.backend), e.what());
+        return false;
+    }
+}
+
+void RadiositySolver::Impl::make_view() {
+    const Octree& t = vm.octree();
+    const uint64_t num_el = row.size() - 1;
+    stats.point_interactions = row[num_el] - row[uint64_t(t.num_nodes())];
+    stats.node_interactions = row[num_el] - stats.point_interactions;
     B.assign(num_el, Vec3{});
     G.assign(num_el, Vec3{});
-    view.num_nodes = N;
-    view.num_points = P;
-    view.row = row.data();
-    view.src = src.data();
-    view.coef = coef.data();
-    view.emission = emission.data();
-    view.albedo = albedo.data();
-    view.area = area.data();
-    view.point_leaf = point_leaf.data();
-    view.parent = t.parent().data();
-    view.point_begin = t.point_begin().data();
-    view.point_end = t.point_end().data();
-    view.inv_area = inv_area.data();
-    view.B = B.data();
-    view.G = G.data();
+    view = detail::GiView{t.num_nodes(),
+                          uint32_t(vm.points().size()),
+                          row.data(),
+                          src.data(),
+                          coef.data(),
+                          emission.data(),
+                          albedo.data(),
+                          area.data(),
+                          point_leaf.data(),
+                          t.parent().data(),
+                          t.point_begin().data(),
+                          t.point_end().data(),
+                          inv_area.data(),
+                          B.data(),
+                          G.data()};
     reset_host();
+}
 
-    if (params.backend != Backend::kCpu) {
-        std::string why;
-        device = detail::make_gi_cuda(&why);
-        if (!device) detail::fall_back_to_cpu(params.backend, "gi: backend", why, &stats.note);
+void RadiositySolver::Impl::attach_device() {
+    if (params.backend == Backend::kCpu) return;
+    std::string why;
+    device = detail::make_gi_cuda(&why);
+    if (!device) detail::fall_back_to_cpu(params.backend, "gi: backend", why, &stats.note);
+}
+
+// Step 3: the bounce arrays on the device (the interaction list is there already when the
+// device refined).
+void RadiositySolver::Impl::upload_bounces() {
+    if (!device) return;
+    try {
+        device->upload_tree(tree, emits.data());
+        device->upload(view, row.back());
+    } catch (const Error& e) {
+        // Too large for the device (or the device failed): the CPU gives the same answers.
+        device.reset();
+        stats.note =
+            fmt::format("backend {}: the GPU could not take the problem ({}); using the CPU",
+                        name_of(params.backend), e.what());
     }
-    if (device) {
-        try {
-            device->upload(view, total);
-        } catch (const Error& e) {
-            // Too large for the device (or the device failed): the CPU gives the same answers.
-            device.reset();
-            stats.note = fmt::format(
-                "backend {}: the GPU could not take the problem ({}); "
-                "using the CPU",
-                name_of(params.backend), e.what());
-        }
-    }
-    if (device) {
-        stats.backend = device->name();
-    } else {
-        stats.backend = cpu_name();
-    }
+}
+
+void RadiositySolver::Impl::setup() {
+    const auto t0 = Clock::now();
+    prepare_arrays();
+    attach_device();
+    if (!refine_on_device()) refine_on_host();
+    make_view();
+    upload_bounces();
+    stats.backend = device ? device->name() : cpu_name();
     stats.seconds_setup = seconds_since(t0);
+}
+
+detail::GiGatherView RadiositySolver::Impl::gather_view(float theta) const {
+    return detail::GiGatherView{tree,          B.data(), emits.data(), emission.data(),
+                                albedo.data(), theta};
 }
 
 void RadiositySolver::Impl::reset_host() {
@@ -593,23 +542,25 @@ std::vector<Vec3> RadiositySolver::final_gather(float theta,
                                                 std::span<const uint32_t> points) const {
     if (!(theta > 0) || !std::isfinite(theta))
         throw Error(fmt::format("gi: final gather: theta: {} (must be > 0)", theta));
-    if (impl_->device) impl_->device->download_radiosity(impl_->B.data());
-    const Impl& m = *impl_;
-    std::vector<uint8_t> emits(m.view.num_nodes, 0);
-    tbb::parallel_for(0, m.view.num_nodes, [&](int32_t n) {
-        for (uint32_t k = m.view.point_begin[n]; k < m.view.point_end[n] && !emits[n]; ++k)
-            emits[n] = !(m.emission[k] == Vec3{});
-    });
-    const FinalGather fg{m.vm, m.geom, emits, m.B.data(), theta};
     const uint32_t P = impl_->view.num_points;
     for (uint32_t i : points)
         if (i >= P) throw Error(fmt::format("gi: final gather: point {} of {}", i, P));
     const size_t n = points.empty() ? P : points.size();
     std::vector<Vec3> out(n);
+    if (impl_->device) {
+        impl_->device->final_gather(theta, points.data(), n, !points.empty(), out.data());
+        return out;
+    }
+    const detail::GiGatherView v = impl_->gather_view(theta);
+    // Progress for a gather of every point (the picture's), not for the reference's short lists.
+    const ProgressCallback* cb = points.empty() ? &impl_->params.progress : nullptr;
+    detail::Progress bar("gi final gather", n, cb && *cb ? cb : nullptr);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](auto r) {
         for (size_t k = r.begin(); k < r.end(); ++k)
-            out[k] = fg.at(points.empty() ? uint32_t(k) : points[k]);
+            out[k] = detail::gi_final_gather_point(v, points.empty() ? uint32_t(k) : points[k]);
+        bar.add(r.size());
     });
+    bar.finish();
     return out;
 }
 

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "octree/delta_rule.h"
+#include "validate/npz.h"
 #include "util/progress.h"
 #include "visibility/bresenham.h"
 #include "visibility/leaf_pair.h"
@@ -390,27 +391,28 @@ std::pair<double, double> normal_agreement(const ScoredPoints& sp) {
 // The sampled pairs of one validation, with their truth.
 struct PairSets {
     std::vector<Pair> pairs, model, eyes_model, eyes_all;
+    std::vector<uint32_t> eye_model, eye_all;  // the eyes (eyes_model: eye_model[k] vs all)
     std::vector<uint8_t> truth, facing, truth_model, truth_eyes_model, truth_eyes_all;
 };
 
-// One octree height: build the V-map (or the octree alone, direct mode) from the prediction's
-// points and score every pair set.
-HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
-                             const std::vector<uint8_t>& buried, const ValidateParams& params,
-                             int leaf_points, int max_height, const std::string& path) {
-    HeightResult row;
-    row.max_height = max_height;
-    row.leaf_points = leaf_points;
-    OctreeParams op;
-    op.max_height = max_height;
-    op.leaf_points = leaf_points;
-    const auto tb = Clock::now();
-    Predictor pr;
+// The predictions for the eye pair sets at one height (0 hidden, 1 visible, 2 same leaf).
+struct EyeAnswers {
+    std::vector<uint8_t> model, all;
+};
+
+// What answers a height's queries: the V-map, or the octree with the direct predicate.
+struct HeightPredictor {
     VisibilityMap vm;
     Octree t;
     std::vector<uint32_t> inverse;
     std::unique_ptr<detail::LeafGrid> grid;
     std::unique_ptr<DirectPredictor> direct;
+    Predictor pr;
+};
+
+void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pred_pts,
+                     const ValidateParams& params, const OctreeParams& op,
+                     const std::string& path) {
     if (params.predict == "vmap") {
         BuildParams bp;
         bp.octree = op;
@@ -418,33 +420,51 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
         bp.backend = params.backend;
         bp.occluders = params.occluders;
         BuildStats st;
-        vm = build_vmap(pred_pts, bp, &st, path);
-        row.height = vm.octree.height();
-        row.leaves = vm.octree.num_leaves();
-        row.links = vm.num_links();
+        hp.vm = build_vmap(pred_pts, bp, &st, path);
+        row.height = hp.vm.octree.height();
+        row.leaves = hp.vm.octree.num_leaves();
+        row.links = hp.vm.num_links();
         row.work = st.work;
         row.backend = st.backend;
-        pr.vm = &vm;
-    } else {
-        PointSet copy = pred_pts;
-        std::vector<uint32_t> order;
-        t = Octree::build(copy, op, order, path);
-        if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
-            apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
-        inverse.resize(order.size());
-        for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
-        if (params.occluders == "bresenham") grid = std::make_unique<detail::LeafGrid>(t);
-        row.height = t.height();
-        row.leaves = t.num_leaves();
-        row.backend =
-            params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
-        direct = std::make_unique<DirectPredictor>(DirectPredictor{t, params.visibility, grid.get()});
-        pr.tree = &t, pr.inverse = &inverse, pr.direct = direct.get();
+        hp.pr.vm = &hp.vm;
+        return;
     }
+    PointSet copy = pred_pts;
+    std::vector<uint32_t> order;
+    hp.t = Octree::build(copy, op, order, path);
+    if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
+        apply_delta_rule(hp.t, copy, params.delta_scale, floor_of(params));
+    hp.inverse.resize(order.size());
+    for (uint32_t k = 0; k < order.size(); ++k) hp.inverse[order[k]] = k;
+    if (params.occluders == "bresenham") hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
+    row.height = hp.t.height();
+    row.leaves = hp.t.num_leaves();
+    row.backend =
+        params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
+    hp.direct = std::make_unique<DirectPredictor>(
+        DirectPredictor{hp.t, params.visibility, hp.grid.get()});
+    hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
+}
+
+// One octree height: build the V-map (or the octree alone, direct mode) from the prediction's
+// points and score every pair set; the eye sets' answers go to `answers` when given.
+HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
+                             const std::vector<uint8_t>& buried, const ValidateParams& params,
+                             int leaf_points, int max_height, const std::string& path,
+                             EyeAnswers* answers) {
+    HeightResult row;
+    row.max_height = max_height;
+    row.leaf_points = leaf_points;
+    OctreeParams op;
+    op.max_height = max_height;
+    op.leaf_points = leaf_points;
+    const auto tb = Clock::now();
+    HeightPredictor hp;
+    build_predictor(hp, row, pred_pts, params, op, path);
     row.build_seconds = seconds_since(tb);
     const auto tq = Clock::now();
     WorkCounters work;
-    const std::vector<uint8_t> pred = predict_pairs(pr, ps.pairs, &work);
+    const std::vector<uint8_t> pred = predict_pairs(hp.pr, ps.pairs, &work);
     if (params.predict != "vmap") row.work = work;
     row.predict_seconds = seconds_since(tq);
     for (size_t k = 0; k < ps.pairs.size(); ++k) {
@@ -457,15 +477,64 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
         if (ps.facing[k]) row.facing.add(ps.truth[k], pred[k]);
         if (!buried[ps.pairs[k].i] && !buried[ps.pairs[k].j]) row.live.add(ps.truth[k], pred[k]);
     }
-    row.model = tally(ps.truth_model, predict_pairs(pr, ps.model, nullptr));
-    row.eyes_model = tally(ps.truth_eyes_model, predict_pairs(pr, ps.eyes_model, nullptr));
-    row.eyes_all = tally(ps.truth_eyes_all, predict_pairs(pr, ps.eyes_all, nullptr));
+    row.model = tally(ps.truth_model, predict_pairs(hp.pr, ps.model, nullptr));
+    EyeAnswers eyes{predict_pairs(hp.pr, ps.eyes_model, nullptr),
+                    predict_pairs(hp.pr, ps.eyes_all, nullptr)};
+    row.eyes_model = tally(ps.truth_eyes_model, eyes.model);
+    row.eyes_all = tally(ps.truth_eyes_all, eyes.all);
+    if (answers) *answers = std::move(eyes);
     return row;
+}
+
+// Eye-major answers (n - 1 an eye, skipping the eye) as an eyes x n array; the eye's own entry
+// is `self`.
+std::vector<uint8_t> eye_square(const std::vector<uint8_t>& flat,
+                                const std::vector<uint32_t>& eyes, uint32_t n, uint8_t self) {
+    std::vector<uint8_t> out(eyes.size() * size_t(n), self);
+    for (size_t k = 0; k < eyes.size(); ++k)
+        for (uint32_t j = 0; j < n; ++j)
+            if (j != eyes[k]) out[k * n + j] = flat[k * (n - 1) + (j < eyes[k] ? j : j - 1)];
+    return out;
+}
+
+// --dump-eyes (docs/validation.md "Hidden point removal"): the points, the eyes, the truth and
+// the V-map's answers of the first height, as an .npz.
+void write_eye_dump(const std::string& file, const ScoredPoints& sp, const PairSets& ps,
+                    const EyeAnswers& answers, const ValidationReport& r) {
+    using detail::npy_array;
+    const uint64_t n = sp.truth.size();
+    auto vec3 = [&](const char* name, const std::vector<Vec3>& v) {
+        return npy_array(name, "<f4", {n, 3}, &v[0].x, 3 * v.size());
+    };
+    auto u8 = [&](const char* name, const std::vector<uint8_t>& v, uint64_t rows) {
+        return npy_array(name, "|u1", {rows, n}, v.data(), v.size());
+    };
+    auto u32 = [&](const char* name, const std::vector<uint32_t>& v) {
+        return npy_array(name, "<u4", {v.size()}, v.data(), v.size());
+    };
+    const uint64_t e = ps.eye_model.size();
+    const HeightResult& h = r.rows.front();
+    const double offset = r.offset;
+    const int32_t ints[3] = {h.max_height, h.height, h.leaves};
+    detail::write_npz(
+        file,
+        {vec3("positions", sp.truth.positions), vec3("normals", sp.truth.normals),
+         vec3("pred_normals", sp.pred.normals), npy_array("on_model", "|u1", {n}, sp.on_model.data(), n),
+         u32("eyes_model", ps.eye_model), u32("eyes_all", ps.eye_all),
+         u8("truth_eyes_model", eye_square(ps.truth_eyes_model, ps.eye_model, n, 0), e),
+         u8("pred_eyes_model", eye_square(answers.model, ps.eye_model, n, 2), e),
+         u8("truth_eyes_all", eye_square(ps.truth_eyes_all, ps.eye_all, n, 0), e),
+         u8("pred_eyes_all", eye_square(answers.all, ps.eye_all, n, 2), e),
+         npy_array("offset", "<f8", {}, &offset, 1),
+         npy_array("octree", "<i4", {3}, ints, 3)});
 }
 
 }  // namespace
 
-ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+namespace {
+
+// The scene a validation takes its truth from: a scene file or a mesh, without point clouds.
+Scene validation_scene(const std::string& path, const ValidateParams& params) {
     check_params(params, path);
     if (!is_scene_input(path))
         throw Error(
@@ -479,31 +548,27 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                         "point cloud does not have",
                         path));
     if (params.points) sc.points = params.points;
-    ScoredPoints sp = scored_points(sc, params, path);
-    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
-    const auto t0 = Clock::now();
-    ExactVisibility exact(sc.surfaces, path);
-    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
-    auto is_buried = [&](size_t i) {
-        const Vec3 q = sp.truth.positions[i], nq = sp.truth.normals[i];
-        return exact.occluded(q, q + nq, float(offset), float(bury));
-    };
-    uint64_t dropped = 0;
-    if (params.drop_buried) {
-        // What not sampling covered surface would give: the same points less the buried ones.
-        std::vector<uint8_t> b(sp.truth.size());
-        tbb::parallel_for(size_t(0), sp.truth.size(), [&](size_t i) { b[i] = is_buried(i); });
-        dropped = drop_points(sp, b);
-    }
-    const PointSet& pts = sp.truth;
-    const uint64_t n = pts.size();
-    if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
+    return sc;
+}
 
+// Buried points: a triangle in front of the point within `bury` along its true normal.
+std::vector<uint8_t> buried_flags(const ExactVisibility& exact, const PointSet& truth,
+                                  double offset, double bury) {
+    std::vector<uint8_t> b(truth.size());
+    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+        const Vec3 q = truth.positions[i], nq = truth.normals[i];
+        b[i] = exact.occluded(q, q + nq, float(offset), float(bury));
+    });
+    return b;
+}
+
+// The report's description of the points and settings, before any pair is scored.
+ValidationReport report_header(const Scene& sc, const ScoredPoints& sp, const std::string& path,
+                               const ValidateParams& params) {
     ValidationReport r;
-    r.dropped_points = dropped;
     r.scene = sc.name;
     r.path = path;
-    r.points = n;
+    r.points = sp.truth.size();
     r.pairs = params.pairs;
     r.params = params;
     r.source = !params.cloud.empty()          ? "the cloud " + params.cloud
@@ -513,42 +578,72 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                                               : "the scene's samples";
     if (!r.params.leaf_points)
         r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
-    r.offset = offset;
     std::tie(r.normal_agreement, r.normal_agreement_model) = normal_agreement(sp);
     for (uint8_t m : sp.on_model) r.model_points += m;
+    return r;
+}
 
-    // Truth, once for all heights.
-    r.triangles = exact.triangles();
+// Every pair set of the validation with its truth: uniform pairs, model pairs and the eyes.
+PairSets sample_truth(const ExactVisibility& exact, const ScoredPoints& sp,
+                      const ValidateParams& params, ValidationReport& r) {
+    const PointSet& pts = sp.truth;
+    const uint32_t n = uint32_t(pts.size());
+    const float offset = float(r.offset);
     PairSets ps;
     ps.pairs = sample_pairs(n, params.pairs, params.pair_seed);
-    truth_of(exact, pts, ps.pairs, float(offset), ps.truth, &ps.facing);
+    truth_of(exact, pts, ps.pairs, offset, ps.truth, &ps.facing);
     for (size_t k = 0; k < ps.pairs.size(); ++k)
         r.truth_facing += ps.facing[k], r.truth_visible += ps.truth[k];
     ps.model = model_pair_sample(sp.on_model, params.pairs, params.pair_seed);
     r.model_pairs = ps.model.size();
-    truth_of(exact, pts, ps.model, float(offset), ps.truth_model, nullptr);
+    truth_of(exact, pts, ps.model, offset, ps.truth_model, nullptr);
     if (params.eyes && r.model_points) {
         auto on_model = [&](uint32_t i) { return bool(sp.on_model[i]); };
         auto any = [](uint32_t) { return true; };
-        ps.eyes_model = eye_pairs(
-            sample_indices(uint32_t(n), params.eyes, params.eye_seed, on_model), uint32_t(n));
-        ps.eyes_all = eye_pairs(
-            sample_indices(uint32_t(n), params.eyes, params.eye_seed + 1, any), uint32_t(n));
-        truth_of(exact, pts, ps.eyes_model, float(offset), ps.truth_eyes_model, nullptr);
-        truth_of(exact, pts, ps.eyes_all, float(offset), ps.truth_eyes_all, nullptr);
+        ps.eye_model = sample_indices(n, params.eyes, params.eye_seed, on_model);
+        ps.eye_all = sample_indices(n, params.eyes, params.eye_seed + 1, any);
+        ps.eyes_model = eye_pairs(ps.eye_model, n);
+        ps.eyes_all = eye_pairs(ps.eye_all, n);
+        truth_of(exact, pts, ps.eyes_model, offset, ps.truth_eyes_model, nullptr);
+        truth_of(exact, pts, ps.eyes_all, offset, ps.truth_eyes_all, nullptr);
         r.eyes = params.eyes;
     }
+    return ps;
+}
+
+}  // namespace
+
+ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+    const Scene sc = validation_scene(path, params);
+    ScoredPoints sp = scored_points(sc, params, path);
+    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
+    const auto t0 = Clock::now();
+    ExactVisibility exact(sc.surfaces, path);
+    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
+    // What not sampling covered surface would give: the same points less the buried ones.
+    const uint64_t dropped =
+        params.drop_buried ? drop_points(sp, buried_flags(exact, sp.truth, offset, bury)) : 0;
+    const uint64_t n = sp.truth.size();
+    if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
+
+    ValidationReport r = report_header(sc, sp, path, params);
+    r.dropped_points = dropped;
+    r.offset = offset;
+    r.triangles = exact.triangles();
+    const PairSets ps = sample_truth(exact, sp, params, r);
     r.bury_distance = bury;
-    std::vector<uint8_t> buried(n);
-    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) { buried[i] = is_buried(i); });
+    const std::vector<uint8_t> buried = buried_flags(exact, sp.truth, offset, bury);
     for (uint8_t b : buried) r.buried_points += b;
     for (const Pair& q : ps.pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
     detail::Progress progress("heights", params.heights.size(), &params.progress);
     for (size_t hi = 0; hi < params.heights.size(); ++hi) {
+        EyeAnswers answers;
+        const bool dump = hi == 0 && !params.dump_eyes.empty();
         r.rows.push_back(validate_height(sp.pred, ps, buried, params, r.params.leaf_points,
-                                         params.heights[hi], path));
+                                         params.heights[hi], path, dump ? &answers : nullptr));
+        if (dump) write_eye_dump(params.dump_eyes, sp, ps, answers, r);
         progress.set(hi + 1);
         progress.throw_if_cancelled();
     }

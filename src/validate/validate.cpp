@@ -175,6 +175,7 @@ namespace {
 struct ScoredPoints {
     PointSet truth, pred;
     std::vector<uint8_t> on_model;
+    std::vector<uint32_t> surface;  // the scene surface each point lies on (kNoSurface: none)
 };
 
 // Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
@@ -230,6 +231,7 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
     sp.truth.positions = sp.pred.positions;
     sp.truth.normals.resize(n);
     sp.on_model.resize(n);
+    sp.surface.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
         const Vec3 q = sp.pred.positions[i];
         const float qq[3] = {q.x, q.y, q.z};
@@ -238,6 +240,7 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
         tree.knnSearch(qq, 1, &k, &d2);
         sp.truth.normals[i] = ref.normals[k];
         sp.on_model[i] = surf[k] != kNoSurface && scene.surfaces[surf[k]].is_model;
+        sp.surface[i] = surf[k];
     });
     return sp;
 }
@@ -250,6 +253,7 @@ ScoredPoints scored_points(const Scene& sc, const ValidateParams& p, const std::
     sp.on_model.resize(surf.size());
     for (size_t i = 0; i < surf.size(); ++i)
         sp.on_model[i] = surf[i] != kNoSurface && sc.surfaces[surf[i]].is_model;
+    sp.surface = std::move(surf);
     if (p.as_cloud.empty())
         sp.pred = sp.truth;
     else
@@ -271,7 +275,7 @@ uint64_t drop_points(ScoredPoints& sp, const std::vector<uint8_t>& drop) {
         keep(ps->positions), keep(ps->normals), keep(ps->colors), keep(ps->radii);
         keep(ps->emission);
     }
-    keep(sp.on_model);
+    keep(sp.on_model), keep(sp.surface);
     for (uint8_t d : drop) dropped += d;
     return dropped;
 }
@@ -519,7 +523,10 @@ void write_eye_dump(const std::string& file, const ScoredPoints& sp, const PairS
     detail::write_npz(
         file,
         {vec3("positions", sp.truth.positions), vec3("normals", sp.truth.normals),
-         vec3("pred_normals", sp.pred.normals), npy_array("on_model", "|u1", {n}, sp.on_model.data(), n),
+         vec3("pred_normals", sp.pred.normals),
+         npy_array("pred_radii", "<f4", {sp.pred.radii.size()}, sp.pred.radii.data(),
+                   sp.pred.radii.size()),
+         npy_array("on_model", "|u1", {n}, sp.on_model.data(), n), u32("surface", sp.surface),
          u32("eyes_model", ps.eye_model), u32("eyes_all", ps.eye_all),
          u8("truth_eyes_model", eye_square(ps.truth_eyes_model, ps.eye_model, n, 0), e),
          u8("pred_eyes_model", eye_square(answers.model, ps.eye_model, n, 2), e),

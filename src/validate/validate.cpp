@@ -811,13 +811,137 @@ Spread spread(std::vector<double> v) {
 
 }  // namespace
 
-EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
+namespace {
+
+using LeafPairs = std::vector<std::pair<int32_t, int32_t>>;
+
+// Leaf pairs a < b: all of them when they fit the sample, else seeded blocks of 8 rows by 32
+// consecutive columns at uniform places above the diagonal: the access pattern of a V-map
+// build (one leaf against 32 neighbouring leaves, neighbouring rows after each other; the same
+// as `vmap bench` samples), so caches behave for both methods as in a real run.
+LeafPairs sample_leaf_pairs(int32_t L, uint64_t count) {
+    LeafPairs lp;
+    const uint64_t all = uint64_t(L) * (L - 1) / 2;
+    if (all <= count || L < 80) {
+        for (int32_t a = 0; a < L; ++a)
+            for (int32_t b = a + 1; b < L; ++b) lp.emplace_back(a, b);
+        return lp;
+    }
+    std::mt19937_64 rng(7);
+    while (lp.size() < count) {
+        int32_t a = int32_t(rng() % uint64_t(L - 40)), b = int32_t(rng() % uint64_t(L - 40));
+        if (a > b) std::swap(a, b);
+        if (b - a < 8) continue;
+        for (int32_t r = 0; r < 8; ++r)
+            for (int32_t c = 0; c < 32 && b + c < L; ++c) lp.emplace_back(a + r, b + c);
+    }
+    lp.resize(count);
+    return lp;
+}
+
+// The three timed methods over one leaf-pair sample, each writing its answers.
+struct TimedPasses {
+    const OctreeView v;
+    const VisibilityParams vp;
+    const ExactVisibility& exact;
+    const LeafPairs& lp;
+    std::vector<uint8_t> kern, ray, occ;
+    std::vector<Vec3> from, to;
+    std::vector<size_t> idx;  // the facing pairs, in packet order
+
+    float t0() const { return vp.eps; }
+    float t1() const { return 1.f - vp.eps; }
+    bool facing(size_t k, Vec3& a, Vec3& b) const {
+        const LeafDisc& la = v.leaves[lp[k].first];
+        const LeafDisc& lb = v.leaves[lp[k].second];
+        a = la.centroid, b = lb.centroid;
+        const Vec3 d = b - a;
+        const float len = length(d);
+        return len > 0 && detail::leaves_face(la, lb, d, len, vp);
+    }
+    // Work of one counted kernel pass (not timed).
+    WorkCounters counted_kernel() {
+        tbb::combinable<WorkCounters> c;
+        tbb::parallel_for(size_t(0), lp.size(), [&](size_t k) {
+            kern[k] = detail::leaf_pair_visible<true>(v, lp[k].first, lp[k].second, vp, &c.local());
+        });
+        WorkCounters w = c.combine([](WorkCounters x, const WorkCounters& y) {
+            x += y;
+            return x;
+        });
+        w.pairs = lp.size();
+        return w;
+    }
+    void kernel() {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k)
+                kern[k] = detail::leaf_pair_visible<false>(v, lp[k].first, lp[k].second, vp,
+                                                           static_cast<WorkCounters*>(nullptr));
+        });
+    }
+    void ray1() {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k) {
+                Vec3 a, b;
+                ray[k] = facing(k, a, b) && !exact.occluded(a, b, t0(), t1());
+            }
+        });
+    }
+    void ray16() {
+        from.clear(), to.clear(), idx.clear();
+        for (size_t k = 0; k < lp.size(); ++k) {
+            Vec3 a, b;
+            if (facing(k, a, b)) from.push_back(a), to.push_back(b), idx.push_back(k);
+        }
+        exact.occluded_packets(from, to, t0(), t1(), occ);
+    }
+};
+
+// Warm-up, then the three passes in turn in every run, so a change in machine load during the
+// measurement falls on all three alike; then the answers compared.
+void time_passes(TimedPasses& tp, int runs, EmbreeTiming& r, const std::string& path) {
+    tp.kernel(), tp.ray1(), tp.ray16();
+    std::vector<double> tk, t1s, t16;
+    auto time_of = [](auto&& f) {
+        const auto tb = Clock::now();
+        f();
+        return seconds_since(tb);
+    };
+    for (int k = 0; k < runs; ++k) {
+        tk.push_back(time_of([&] { tp.kernel(); }));
+        t1s.push_back(time_of([&] { tp.ray1(); }));
+        t16.push_back(time_of([&] { tp.ray16(); }));
+    }
+    r.kernel_s = spread(tk);
+    r.ray1_s = spread(t1s);
+    r.ray16_s = spread(t16);
+    r.facing = tp.idx.size();
+    for (size_t k = 0; k < tp.lp.size(); ++k) {
+        r.kernel_visible += tp.kern[k];
+        r.ray_visible += tp.ray[k];
+        r.agree += tp.kern[k] == tp.ray[k];
+    }
+    // The packet pass must give the single-ray answers.
+    for (size_t m = 0; m < tp.idx.size(); ++m)
+        if (!tp.occ[m] != bool(tp.ray[tp.idx[m]]))
+            throw Error(
+                fmt::format("{}: Embree rtcOccluded16 and rtcOccluded1 disagree on leaf pair {}",
+                            path, tp.idx[m]));
+}
+
+void check_timing_params(const EmbreeTimingParams& p, const std::string& path) {
     check_visibility(p.visibility, path);
     if (p.runs < 1 || p.runs > 100)
         throw Error(fmt::format("{}: runs {} out of range (1..100)", path, p.runs));
     if (p.sample_pairs < 1 || p.sample_pairs > 1000000000ull)
         throw Error(
             fmt::format("{}: --pairs {} out of range (1..1000000000)", path, p.sample_pairs));
+}
+
+}  // namespace
+
+EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
+    check_timing_params(p, path);
     Scene sc = load_scene(path);
     if (p.points) sc.points = p.points;
     PointSet pts = sample_scene(sc);
@@ -839,112 +963,14 @@ EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
     r.threads = int(std::min<size_t>(
         tbb::this_task_arena::max_concurrency(),
         tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
-    const int32_t L = t.num_leaves();
-    if (L < 2) throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
-
-    // Leaf pairs a < b: all of them when they fit the sample, else seeded blocks of 8 rows by 32
-    // consecutive columns at uniform places above the diagonal: the access pattern of a V-map
-    // build (one leaf against 32 neighbouring leaves, neighbouring rows after each other; the
-    // same as `vmap bench` samples), so caches behave for both methods as in a real run.
-    std::vector<std::pair<int32_t, int32_t>> lp;
-    const uint64_t all = uint64_t(L) * (L - 1) / 2;
-    if (all <= p.sample_pairs || L < 80) {
-        for (int32_t a = 0; a < L; ++a)
-            for (int32_t b = a + 1; b < L; ++b) lp.emplace_back(a, b);
-    } else {
-        std::mt19937_64 rng(7);
-        while (lp.size() < p.sample_pairs) {
-            int32_t a = int32_t(rng() % uint64_t(L - 40)), b = int32_t(rng() % uint64_t(L - 40));
-            if (a > b) std::swap(a, b);
-            if (b - a < 8) continue;
-            for (int32_t r = 0; r < 8; ++r)
-                for (int32_t c = 0; c < 32 && b + c < L; ++c) lp.emplace_back(a + r, b + c);
-        }
-        lp.resize(p.sample_pairs);
-    }
+    if (t.num_leaves() < 2)
+        throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
+    const LeafPairs lp = sample_leaf_pairs(t.num_leaves(), p.sample_pairs);
     r.pairs = lp.size();
-    const OctreeView v = t.view();
-    const VisibilityParams vp = p.visibility;
-    const float t0 = vp.eps, t1 = 1.f - vp.eps;
-    std::vector<uint8_t> kern(lp.size()), ray(lp.size());
-
-    // Work of one counted kernel pass (not timed).
-    {
-        tbb::combinable<WorkCounters> c;
-        tbb::parallel_for(size_t(0), lp.size(), [&](size_t k) {
-            kern[k] = detail::leaf_pair_visible<true>(v, lp[k].first, lp[k].second, vp, &c.local());
-        });
-        r.kernel_work = c.combine([](WorkCounters x, const WorkCounters& y) {
-            x += y;
-            return x;
-        });
-        r.kernel_work.pairs = lp.size();
-    }
-    auto kernel_pass = [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
-            for (size_t k = rg.begin(); k < rg.end(); ++k)
-                kern[k] = detail::leaf_pair_visible<false>(v, lp[k].first, lp[k].second, vp,
-                                                           static_cast<WorkCounters*>(nullptr));
-        });
-    };
-    auto ray1_pass = [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
-            for (size_t k = rg.begin(); k < rg.end(); ++k) {
-                const LeafDisc& a = v.leaves[lp[k].first];
-                const LeafDisc& b = v.leaves[lp[k].second];
-                const Vec3 d = b.centroid - a.centroid;
-                const float len = length(d);
-                ray[k] = len > 0 && detail::leaves_face(a, b, d, len, vp) &&
-                         !exact.occluded(a.centroid, b.centroid, t0, t1);
-            }
-        });
-    };
-    std::vector<Vec3> from, to;
-    std::vector<size_t> idx;
-    std::vector<uint8_t> occ;
-    auto ray16_pass = [&] {
-        from.clear(), to.clear(), idx.clear();
-        for (size_t k = 0; k < lp.size(); ++k) {
-            const LeafDisc& a = v.leaves[lp[k].first];
-            const LeafDisc& b = v.leaves[lp[k].second];
-            const Vec3 d = b.centroid - a.centroid;
-            const float len = length(d);
-            if (len > 0 && detail::leaves_face(a, b, d, len, vp)) {
-                from.push_back(a.centroid), to.push_back(b.centroid), idx.push_back(k);
-            }
-        }
-        exact.occluded_packets(from, to, t0, t1, occ);
-    };
-    // Warm-up, then the three passes in turn in every run, so a change in machine load during
-    // the measurement falls on all three alike.
-    kernel_pass(), ray1_pass(), ray16_pass();
-    std::vector<double> tk, t1s, t16;
-    auto time_of = [](auto&& f) {
-        const auto tb = Clock::now();
-        f();
-        return seconds_since(tb);
-    };
-    for (int k = 0; k < p.runs; ++k) {
-        tk.push_back(time_of(kernel_pass));
-        t1s.push_back(time_of(ray1_pass));
-        t16.push_back(time_of(ray16_pass));
-    }
-    r.kernel_s = spread(tk);
-    r.ray1_s = spread(t1s);
-    r.ray16_s = spread(t16);
-    r.facing = idx.size();
-    for (size_t k = 0; k < lp.size(); ++k) {
-        r.kernel_visible += kern[k];
-        r.ray_visible += ray[k];
-        r.agree += kern[k] == ray[k];
-    }
-    // The packet pass must give the single-ray answers.
-    for (size_t m = 0; m < idx.size(); ++m)
-        if (!occ[m] != bool(ray[idx[m]]))
-            throw Error(
-                fmt::format("{}: Embree rtcOccluded16 and rtcOccluded1 disagree on leaf "
-                            "pair {}",
-                            path, idx[m]));
+    TimedPasses tp{t.view(), p.visibility, exact, lp, {}, {}, {}, {}, {}, {}};
+    tp.kern.resize(lp.size()), tp.ray.resize(lp.size());
+    r.kernel_work = tp.counted_kernel();
+    time_passes(tp, p.runs, r, path);
     return r;
 }
 

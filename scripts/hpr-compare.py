@@ -13,7 +13,7 @@ HPR's one parameter is the radius of the spherical flip, R = max distance from t
 --sweep scores every g of --gammas on every dump and picks the one g with the best mean
 agreement over the scenes for eyes on models (the value most favourable to HPR, one for all);
 the table then gives that g per scene. Usage:
-  hpr-compare.py [--gammas 0.5,1,...] [--gamma G] DUMP.npz...
+  hpr-compare.py [--gammas 0.5,1,...] [--gamma G] [--max-eyes N] DUMP.npz...
 """
 import argparse
 import os
@@ -50,8 +50,9 @@ def score(truth, pred, keep):
     return np.array([(t == p).sum(), (~t & p).sum(), (t & ~p).sum()]) / n, keep.sum()
 
 
-def compare(path, gammas, sets):
-    """Scores of vmap and of HPR at each gamma for the eye sets `sets` of one dump."""
+def compare(path, gammas, sets, max_eyes):
+    """Scores of vmap and of HPR at each gamma for the eye sets `sets` of one dump (its first
+    max_eyes eyes)."""
     d = np.load(path)
     pts = d["positions"].astype(np.float64)
     nrm = d["pred_normals"].astype(np.float64)
@@ -59,7 +60,7 @@ def compare(path, gammas, sets):
     cloud = o3d.geometry.PointCloud(o3d.utility.Vector3dVector(pts))
     res = {}
     for s in sets:
-        eyes, truth, pred = d["eyes_" + s], d["truth_eyes_" + s], d["pred_eyes_" + s]
+        eyes, truth, pred = (d[k + s][:max_eyes] for k in ("eyes_", "truth_eyes_", "pred_eyes_"))
         tot_v = np.zeros(3)
         tot_h = np.zeros((len(gammas), 3))
         npairs = 0
@@ -84,18 +85,19 @@ def pct(x):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("dumps", nargs="+")
-    ap.add_argument("--gammas", default="0.5,1,1.5,1.75,2,2.25,2.5,3,4")
+    ap.add_argument("--gammas", default="1,1.5,2,2.5,3")
     ap.add_argument("--gamma", type=float, help="skip the sweep: use this g")
+    ap.add_argument("--max-eyes", type=int, default=None, help="score only each dump's first N eyes")
     a = ap.parse_args()
     gammas = [a.gamma] if a.gamma is not None else [float(g) for g in a.gammas.split(",")]
     rows = []
     for path in a.dumps:
-        rows.append(compare(path, gammas, ("model",)))
+        rows.append(compare(path, gammas, ("model",), a.max_eyes))
         print(f"{rows[-1][0]}: swept", file=sys.stderr)
     mean = np.mean([r["model"][1][:, 0] for _, r in rows], axis=0)
     best = int(np.argmax(mean))
     for path, (_, r) in zip(a.dumps, rows):  # the uniform eyes at the chosen radius only
-        r["all"] = compare(path, [gammas[best]], ("all",))[1]["all"]
+        r["all"] = compare(path, [gammas[best]], ("all",), a.max_eyes)[1]["all"]
         r["all"] = (r["all"][0], np.repeat(r["all"][1], len(gammas), axis=0), r["all"][2])
     if len(gammas) > 1:
         print("HPR radius sweep, R = (farthest point from the eye) * 10^g: mean agreement over "

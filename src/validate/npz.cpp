@@ -21,7 +21,12 @@ uint64_t NpyArray::count() const {
 }
 
 size_t NpyArray::item_size() const {
-    return descr.size() >= 3 ? size_t(std::stoul(descr.substr(2))) : 0;
+    size_t v = 0;
+    for (size_t i = 2; i < descr.size(); ++i) {
+        if (descr[i] < '0' || descr[i] > '9' || v > 64) return 0;
+        v = 10 * v + size_t(descr[i] - '0');
+    }
+    return v;
 }
 
 namespace {
@@ -103,8 +108,14 @@ NpyArray parse_npy(std::string_view data, const std::string& name, const std::st
         throw Error(fmt::format("{}: header: fortran_order: only C order is read", where));
     std::string sh = dict_value(dict, "shape", where);
     std::istringstream in(sh.substr(1, sh.size() - 2));
-    for (std::string tok; std::getline(in, tok, ',');)
-        if (tok.find_first_not_of(' ') != std::string::npos) a.shape.push_back(std::stoull(tok));
+    for (std::string tok; std::getline(in, tok, ',');) {
+        const size_t b = tok.find_first_not_of(' ');
+        if (b == std::string::npos) continue;
+        const size_t e = tok.find_last_not_of(' ') + 1;
+        if (tok.find_first_not_of("0123456789", b) < e || e - b > 15)
+            throw Error(fmt::format("{}: header: bad shape {}", where, sh));
+        a.shape.push_back(std::stoull(tok.substr(b, e - b)));
+    }
     a.bytes = std::string(data.substr(10 + hlen));
     if (a.item_size() == 0 || a.bytes.size() != a.count() * a.item_size())
         throw Error(fmt::format("{}: body: {} bytes for shape {} of '{}'", where, a.bytes.size(),

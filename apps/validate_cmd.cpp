@@ -146,8 +146,8 @@ int run_validate_command() {
     check_output(opt.md, "--md", opt.scenes);
     check_output(vp.dump_eyes, "--dump-eyes", opt.scenes);
     if (!vp.dump_eyes.empty() && opt.scenes.size() != 1)
-        throw Error(fmt::format("{}: --dump-eyes: give one scene (the file holds one)",
-                                vp.dump_eyes));
+        throw Error(
+            fmt::format("{}: --dump-eyes: give one scene (the file holds one)", vp.dump_eyes));
     if (opt.time_embree && !opt.json.empty())
         throw Error(
             fmt::format("{}: --json: --time-embree writes its table as Markdown only", opt.json));

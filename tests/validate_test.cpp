@@ -6,13 +6,12 @@
 
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <random>
 
-#include <fstream>
-
 #include "test_files.h"
-#include "validate/npz.h"
 #include "test_util.h"
+#include "validate/npz.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/scene.h"
@@ -359,8 +358,7 @@ TEST(Npz, RoundTripAndDamagedFilesAreErrorsNamingTheEntry) {
         detail::read_npz(bad);
         FAIL() << "no error";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("f.npy: CRC mismatch"), std::string::npos)
-            << e.what();
+        EXPECT_NE(std::string(e.what()).find("f.npy: CRC mismatch"), std::string::npos) << e.what();
     }
     std::ofstream(bad, std::ios::binary) << "not a zip";
     EXPECT_THROW(detail::read_npz(bad), Error);

@@ -317,7 +317,7 @@ class DiscCaster {
         const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
         const float lo[3] = {box.lo.x, box.lo.y, box.lo.z}, hi[3] = {box.hi.x, box.hi.y, box.hi.z};
         for (int a = 0; a < 3; ++a) {
-            const float ta = dd[a] > 0 ? (hi[a] - oo[a]) / dd[a]
+            const float ta = dd[a] > 0   ? (hi[a] - oo[a]) / dd[a]
                              : dd[a] < 0 ? (lo[a] - oo[a]) / dd[a]
                                          : std::numeric_limits<float>::max();
             if (ta < t) t = ta, face = a * 2 + (dd[a] > 0);

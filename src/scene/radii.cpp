@@ -105,7 +105,8 @@ void smooth_radii(std::vector<float>& radii, const std::vector<uint32_t>& same, 
     // An edge listed by both ends appears twice: drop the repeats, so the weights are symmetric.
     std::vector<uint32_t> deg(n);
     for (size_t i = 0; i < n; ++i) {
-        auto b = adj.begin() + std::ptrdiff_t(start[i]), e = adj.begin() + std::ptrdiff_t(start[i + 1]);
+        auto b = adj.begin() + std::ptrdiff_t(start[i]),
+             e = adj.begin() + std::ptrdiff_t(start[i + 1]);
         std::sort(b, e);
         deg[i] = uint32_t(std::unique(b, e) - b);
     }

@@ -71,7 +71,7 @@ std::string dict_value(const std::string& dict, const std::string& key, const st
     if (k == std::string::npos) throw Error(fmt::format("{}: header: no '{}'", where, key));
     size_t b = dict.find_first_not_of(' ', k + key.size() + 3);
     const char open = b < dict.size() ? dict[b] : 0;
-    const size_t e = open == '(' ? dict.find(')', b) + 1
+    const size_t e = open == '('    ? dict.find(')', b) + 1
                      : open == '\'' ? dict.find('\'', b + 1) + 1
                                     : dict.find_first_of(",}", b);
     if (b == std::string::npos || e == std::string::npos || e == 0)
@@ -133,7 +133,7 @@ void write_npz(const std::string& path, const std::vector<NpyArray>& arrays) {
         auto header = [&](uint32_t sig, bool central_entry) {
             std::string h;
             put(h, sig, 4);
-            if (central_entry) put(h, 20, 2);  // made by
+            if (central_entry) put(h, 20, 2);           // made by
             put(h, 20, 2), put(h, 0, 2), put(h, 0, 2);  // needed, flags, stored
             put(h, 0, 2), put(h, 0x21, 2);              // 1980-01-01 00:00
             put(h, crc, 4), put(h, body.size(), 4), put(h, body.size(), 4);

@@ -11,18 +11,18 @@
 namespace vmap::detail {
 
 struct NpyArray {
-    std::string name;            // entry name without ".npy"
-    std::string descr;           // NumPy dtype string: "<f4", "<f8", "<u4", "|u1", "<i4"
-    std::vector<uint64_t> shape; // empty: a scalar
-    std::string bytes;           // the elements, little-endian, C order
+    std::string name;             // entry name without ".npy"
+    std::string descr;            // NumPy dtype string: "<f4", "<f8", "<u4", "|u1", "<i4"
+    std::vector<uint64_t> shape;  // empty: a scalar
+    std::string bytes;            // the elements, little-endian, C order
 
     uint64_t count() const;
     size_t item_size() const;  // from descr's digits
 };
 
 template <class T>
-NpyArray npy_array(std::string name, std::string descr, std::vector<uint64_t> shape,
-                   const T* data, size_t n) {
+NpyArray npy_array(std::string name, std::string descr, std::vector<uint64_t> shape, const T* data,
+                   size_t n) {
     return NpyArray{std::move(name), std::move(descr), std::move(shape),
                     std::string(reinterpret_cast<const char*>(data), n * sizeof(T))};
 }

@@ -7,6 +7,7 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -14,11 +15,10 @@
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <random>
-#include <unistd.h>
 
 #include "octree/delta_rule.h"
-#include "validate/npz.h"
 #include "util/progress.h"
+#include "validate/npz.h"
 #include "visibility/bresenham.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
@@ -443,10 +443,9 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
     if (params.occluders == "bresenham") hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
     row.height = hp.t.height();
     row.leaves = hp.t.num_leaves();
-    row.backend =
-        params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
-    hp.direct = std::make_unique<DirectPredictor>(
-        DirectPredictor{hp.t, params.visibility, hp.grid.get()});
+    row.backend = params.occluders == "bresenham" ? "direct, cpu bresenham" : "direct, cpu spheres";
+    hp.direct =
+        std::make_unique<DirectPredictor>(DirectPredictor{hp.t, params.visibility, hp.grid.get()});
     hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
 }
 
@@ -492,8 +491,8 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
 
 // Eye-major answers (n - 1 an eye, skipping the eye) as an eyes x n array; the eye's own entry
 // is `self`.
-std::vector<uint8_t> eye_square(const std::vector<uint8_t>& flat,
-                                const std::vector<uint32_t>& eyes, uint32_t n, uint8_t self) {
+std::vector<uint8_t> eye_square(const std::vector<uint8_t>& flat, const std::vector<uint32_t>& eyes,
+                                uint32_t n, uint8_t self) {
     std::vector<uint8_t> out(eyes.size() * size_t(n), self);
     for (size_t k = 0; k < eyes.size(); ++k)
         for (uint32_t j = 0; j < n; ++j)
@@ -532,8 +531,7 @@ void write_eye_dump(const std::string& file, const ScoredPoints& sp, const PairS
          u8("pred_eyes_model", eye_square(answers.model, ps.eye_model, n, 2), e),
          u8("truth_eyes_all", eye_square(ps.truth_eyes_all, ps.eye_all, n, 0), e),
          u8("pred_eyes_all", eye_square(answers.all, ps.eye_all, n, 2), e),
-         npy_array("offset", "<f8", {}, &offset, 1),
-         npy_array("octree", "<i4", {3}, ints, 3)});
+         npy_array("offset", "<f8", {}, &offset, 1), npy_array("octree", "<i4", {3}, ints, 3)});
 }
 
 }  // namespace

@@ -94,6 +94,9 @@ CLI::App* add_validate_command(CLI::App& app) {
                   "Score this cloud file (PLY/OFF) against the scene's triangles instead of the "
                   "scene's samples")
         ->check(CLI::ExistingFile);
+    c->add_option("--dump-eyes", opt.vp.dump_eyes,
+                  "Write the eyes of the first height (points, eyes, truth and the V-map's "
+                  "answers) to this .npz, for scripts/hpr-compare.sh");
     c->add_flag("--drop-buried", opt.vp.drop_buried,
                 "Leave out buried points (covered surface) before sampling pairs");
     c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
@@ -113,7 +116,7 @@ CLI::App* add_validate_command(CLI::App& app) {
          {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
           "--parallel-tol", "--occluders", "--backend", "--predict", "--delta-scale",
           "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
-          "--eye-seed", "--as-cloud", "--cloud"})
+          "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return c;
 }
@@ -124,6 +127,10 @@ int run_validate_command() {
     for (const std::string& s : opt.scenes) io::check_input_path(s);
     check_output(opt.json, "--json", opt.scenes);
     check_output(opt.md, "--md", opt.scenes);
+    check_output(vp.dump_eyes, "--dump-eyes", opt.scenes);
+    if (!vp.dump_eyes.empty() && opt.scenes.size() != 1)
+        throw Error(
+            fmt::format("{}: --dump-eyes: give one scene (the file holds one)", vp.dump_eyes));
     if (opt.time_embree && !opt.json.empty())
         throw Error(
             fmt::format("{}: --json: --time-embree writes its table as Markdown only", opt.json));

@@ -5,10 +5,13 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
+#include <fstream>
 #include <random>
 
 #include "test_files.h"
 #include "test_util.h"
+#include "validate/npz.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/scene.h"
@@ -275,6 +278,90 @@ TEST(Validate, ACloudFileIsScoredAgainstTheScenesTriangles) {
     EXPECT_GT(r.rows[0].model.total(), 0u);
     p.as_cloud = "bare";
     EXPECT_THROW(validate_scene(kBlock, p), Error);  // one source of points, not two
+}
+
+// --dump-eyes: the file holds the points, the eyes, the truth and the V-map's answers, and the
+// report's eye figures follow from them (what scripts/hpr-compare.py scores HPR against).
+TEST(Validate, TheEyeDumpReadsBackAndReproducesTheReport) {
+    test::ScratchDir dir;
+    ValidateParams p;
+    p.pairs = 1000;
+    p.heights = {5};
+    p.eyes = 3;
+    p.predict = "direct";
+    p.dump_eyes = dir.path("eyes.npz");
+    const ValidationReport r = validate_scene(kBlock, p);
+    const std::vector<detail::NpyArray> arrays = detail::read_npz(p.dump_eyes);
+    auto get = [&](const std::string& name) -> const detail::NpyArray& {
+        for (const auto& a : arrays)
+            if (a.name == name) return a;
+        ADD_FAILURE() << "no array " << name;
+        return arrays.front();
+    };
+    const uint64_t n = r.points;
+    EXPECT_EQ(get("positions").shape, (std::vector<uint64_t>{n, 3}));
+    EXPECT_EQ(get("positions").descr, "<f4");
+    EXPECT_EQ(get("pred_radii").shape, (std::vector<uint64_t>{n}));
+    EXPECT_EQ(get("eyes_model").shape, (std::vector<uint64_t>{3}));
+    EXPECT_EQ(get("octree").shape, (std::vector<uint64_t>{3}));
+    EXPECT_TRUE(get("offset").shape.empty());
+    double offset = 0;
+    std::memcpy(&offset, get("offset").bytes.data(), 8);
+    EXPECT_EQ(offset, r.offset);
+    for (const char* set : {"model", "all"}) {
+        const detail::NpyArray& t = get(std::string("truth_eyes_") + set);
+        const detail::NpyArray& q = get(std::string("pred_eyes_") + set);
+        ASSERT_EQ(t.shape, (std::vector<uint64_t>{3, n}));
+        Confusion c;
+        for (size_t k = 0; k < t.bytes.size(); ++k)
+            if (q.bytes[k] != 2) c.add(t.bytes[k], q.bytes[k]);
+        const Confusion& want =
+            std::string(set) == "model" ? r.rows[0].eyes_model : r.rows[0].eyes_all;
+        EXPECT_EQ(c.true_visible, want.true_visible) << set;
+        EXPECT_EQ(c.false_visible, want.false_visible) << set;
+        EXPECT_EQ(c.false_hidden, want.false_hidden) << set;
+        EXPECT_EQ(c.true_hidden, want.true_hidden) << set;
+    }
+    // Each eye lies on the model, and its own entry is left out (2).
+    uint32_t e0 = 0;
+    std::memcpy(&e0, get("eyes_model").bytes.data(), 4);
+    EXPECT_EQ(get("on_model").bytes[e0], 1);
+    EXPECT_EQ(get("pred_eyes_model").bytes[e0], 2);
+}
+
+TEST(Npz, RoundTripAndDamagedFilesAreErrorsNamingTheEntry) {
+    test::ScratchDir dir;
+    const std::string path = dir.path("a.npz");
+    const float f[6] = {1, 2, 3, 4, 5, 6};
+    const uint8_t u[3] = {0, 1, 2};
+    detail::write_npz(path, {detail::npy_array("f", "<f4", {2, 3}, f, 6),
+                             detail::npy_array("u", "|u1", {3}, u, 3)});
+    const auto back = detail::read_npz(path);
+    ASSERT_EQ(back.size(), 2u);
+    EXPECT_EQ(back[0].name, "f");
+    EXPECT_EQ(back[0].shape, (std::vector<uint64_t>{2, 3}));
+    EXPECT_EQ(back[0].bytes, std::string(reinterpret_cast<const char*>(f), sizeof f));
+    EXPECT_EQ(back[1].descr, "|u1");
+    EXPECT_EQ(back[1].shape, (std::vector<uint64_t>{3}));
+    // A shape that does not match the bytes is refused before writing.
+    EXPECT_THROW(detail::write_npz(path, {detail::npy_array("u", "|u1", {4}, u, 3)}), Error);
+    // One flipped byte in the data: the CRC names the entry.
+    std::string bytes;
+    {
+        std::ifstream in(path, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), {});
+    }
+    bytes[bytes.find("NUMPY") + 130] ^= 1;
+    const std::string bad = dir.path("bad.npz");
+    std::ofstream(bad, std::ios::binary) << bytes;
+    try {
+        detail::read_npz(bad);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("f.npy: CRC mismatch"), std::string::npos) << e.what();
+    }
+    std::ofstream(bad, std::ios::binary) << "not a zip";
+    EXPECT_THROW(detail::read_npz(bad), Error);
 }
 
 TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {

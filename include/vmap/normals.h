@@ -55,15 +55,20 @@ void orient_toward(PointSet& points, const std::vector<Vec3>& sensors,
                    const char* source = "point cloud");
 
 struct RadiusEstimationParams {
-    size_t k = 8;            // same-surface neighbours the density is read from
+    size_t k = 8;            // same-sheet neighbours the density is read from
     size_t candidates = 32;  // nearest neighbours searched for them
+    // Then r^2 diffuses over the same-surface neighbour graph for this many passes, keeping
+    // its sum (src/scene/radii.cpp: the density varies slowly, one estimate scatters). 0: raw.
+    int smoothing_passes = 8;
 };
 
 // Fills points.radii with splat radii (scene units): the radius of the disc of area 1 / density,
-// the density counted over the k nearest neighbours on the same surface side, i.e. those near
-// the point's tangent plane and with a normal of the same axis, so that the other face of a
-// thin plate does not count. Needs points.normals (their signs do not matter). Throws
-// vmap::Error naming `source` for missing normals or fewer than 2 points.
+// the density counted over the k nearest neighbours on the point's own sheet, i.e. all but those
+// off its tangent plane with a normal of the same axis (the other face of a thin plate or part),
+// then r^2 diffused over those neighbours for RadiusEstimationParams::smoothing_passes passes.
+// A curved part's neighbours count (its normals turn), the other face of a plate does not.
+// Needs points.normals (their signs do not matter). Throws vmap::Error naming `source` for
+// missing normals or fewer than 2 points.
 void estimate_radii(PointSet& points, const RadiusEstimationParams& params = {},
                     const char* source = "point cloud");
 

@@ -81,6 +81,14 @@ struct ValidateParams {
     // A cloud file to score instead of the scene's samples (truth from the scene's triangles;
     // each point's true normal and model flag from the nearest point of a dense scene sample).
     std::string cloud;
+    // Write the eyes of the first height to this .npz (docs/validation.md "Against hidden point
+    // removal"): positions, normals, pred_normals (N x 3 float32), pred_radii (N float32),
+    // on_model (N uint8), surface (N uint32: each point's scene surface, 0xffffffff none),
+    // eyes_model, eyes_all (E uint32), truth_eyes_model, pred_eyes_model, truth_eyes_all,
+    // pred_eyes_all (E x N uint8: truth 0/1; prediction 0 hidden, 1 visible, 2 same leaf as the
+    // eye, which the figures leave out; the eye's own entry is 0 and 2), offset (the truth rays'
+    // end offset, float64) and octree (max_height, height, leaves; int32). "": none.
+    std::string dump_eyes;
     ProgressCallback progress;  // heights done (vmap/progress.h); false cancels
 
     // Throws vmap::Error naming `source` and the field for a value out of range.

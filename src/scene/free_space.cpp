@@ -310,6 +310,21 @@ class DiscCaster {
         return std::max(t, 0.0f);
     }
 
+    // The face of the bounding box that o + t d leaves through (axis * 2 + (d_axis > 0)).
+    static int exit_face(const Bounds& box, Vec3 o, Vec3 d) {
+        float t = std::numeric_limits<float>::max();
+        int face = 0;
+        const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+        const float lo[3] = {box.lo.x, box.lo.y, box.lo.z}, hi[3] = {box.hi.x, box.hi.y, box.hi.z};
+        for (int a = 0; a < 3; ++a) {
+            const float ta = dd[a] > 0   ? (hi[a] - oo[a]) / dd[a]
+                             : dd[a] < 0 ? (lo[a] - oo[a]) / dd[a]
+                                         : std::numeric_limits<float>::max();
+            if (ta < t) t = ta, face = a * 2 + (dd[a] > 0);
+        }
+        return face;
+    }
+
   private:
     void fill() {
         const size_t cells = grid_.size();
@@ -487,13 +502,20 @@ FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
 
 // The side that the regions make free (+1 along n, -1 against it), or 0 for no verdict.
 // plus, minus: the sides' states (1 free, 0 solid, -1 occupied all along the probe).
-int space_side(int plus, int minus, float box_exit_free_side, float r_med) {
-    if ((plus == 1 && minus == 0) || (minus == 1 && plus == 0)) return plus == 1 ? 1 : -1;
+int space_side(int plus, int minus, float box_exit_free_side, bool room_wall, float r_med) {
+    const bool on_box_face = box_exit_free_side <= 0.5f * r_med;
+    // Free space that is only the padding beyond a room's open-air wall (room_wall_faces: the
+    // outer side of its wall, floor or ceiling) is no evidence: nothing there was scanned.
+    // Without this, a wall point with an object a few millimetres in front of it (the probe
+    // crosses the gap's occupied cells into the object's solid) took the outside for its free
+    // side. A lone object's faces also lie on the box, but their inner side is solid.
+    if ((plus == 1 && minus == 0) || (minus == 1 && plus == 0))
+        return on_box_face && room_wall ? 0 : (plus == 1 ? 1 : -1);
     // Free on one side, occupied cells all along the other (the inside of a part too thin for
     // the grid, or a surface close to another): trusted unless the free side is the bounding
     // box's face itself (a floor under an object standing on it).
     if ((plus == 1 && minus < 0) || (minus == 1 && plus < 0))
-        return box_exit_free_side > 0.5f * r_med ? (plus == 1 ? 1 : -1) : 0;
+        return on_box_face ? 0 : (plus == 1 ? 1 : -1);
     // Solid on one side, occupied cells all along the other (a narrow gap, as under an object's
     // belly near the floor): the gap is the free side.
     if ((plus == 0 && minus < 0) || (minus == 0 && plus < 0)) return plus == 0 ? -1 : 1;
@@ -511,6 +533,28 @@ int ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r
         std::max(p.mean, m.mean) <= 1.5f * std::min(p.mean, m.mean) + 0.1f * r_med)
         return 0;
     return p.mean > m.mean ? 1 : -1;
+}
+
+// The faces of the bounding box (axis * 2 + (side > 0)) that are a room's open-air walls: most
+// points lying on the face (one side leaves the box within half a splat radius) are free on
+// both sides (the room's air, and the padding beyond the face, one region through the room's
+// opening). A lone object's faces or extreme points have solid on their inner side.
+std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>& pts,
+                                    const std::vector<Vec3>& normals, const DiscCaster& caster,
+                                    const Bounds& b, float r_med) {
+    std::array<uint64_t, 6> on{}, both{};
+    for (size_t i = 0; i < pts.size(); ++i) {
+        const bool free2 = fs.state(fs.sides[i][0]) == 1 && fs.state(fs.sides[i][1]) == 1;
+        for (const Vec3 d : {normals[i], -normals[i]}) {
+            if (caster.box_exit(pts[i], d) > 0.5f * r_med) continue;
+            const size_t f = size_t(DiscCaster::exit_face(b, pts[i], d));
+            ++on[f];
+            both[f] += free2;
+        }
+    }
+    std::array<bool, 6> wall{};
+    for (size_t f = 0; f < 6; ++f) wall[f] = on[f] >= 16 && 2 * both[f] > on[f];
+    return wall;
 }
 
 }  // namespace
@@ -534,11 +578,13 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
     v.method = fs.method;
     const DiscCaster caster(pts, normals, radii, b, r_med, 2 * g.h);
+    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, b, r_med);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const auto& range) {
         for (size_t i = range.begin(); i < range.end(); ++i) {
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
-            int side = space_side(plus, minus, caster.box_exit(pts[i], free_n), r_med);
+            const bool wall = room_wall[size_t(DiscCaster::exit_face(b, pts[i], free_n))];
+            int side = space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med);
             SideCue cue = SideCue::kSpace;
             if (side == 0) {
                 side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);

@@ -34,7 +34,9 @@ struct SideVotes {
 //    a shell around a cavity); otherwise (a lone object, an open room) the outside is free;
 // 4. a point with one side free and the other solid takes the free side (also free against
 //    occupied cells, unless the free side is the bounding box's face, and solid against
-//    occupied cells: a narrow gap);
+//    occupied cells: a narrow gap), unless the free side is only the padding beyond a room's
+//    open-air wall (a box face whose points are mostly free on both sides): nothing was
+//    scanned there, as behind a wall a few millimetres behind an object;
 // 5. otherwise cast rays into each hemisphere against the points' discs: the side whose rays
 //    travel clearly farther before meeting surface is free (a ray that escapes travels without
 //    end, unless it leaves the bounding box at once: a room's walls lie on the box and see

@@ -523,7 +523,11 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 PointSet tmp;
                 tmp.positions = pts;
                 tmp.normals = normals;
-                estimate_radii(tmp);
+                // Raw radii: the free-space grid's cell is one sample spacing, which duplicates
+                // and the smoothing's averaging would shrink (docs/validation.md).
+                RadiusEstimationParams rp;
+                rp.smoothing_passes = 0;
+                estimate_radii(tmp, rp);
                 radii = std::move(tmp.radii);
             }
             const detail::SideVotes votes = detail::vote_sides(pts, normals, radii);

@@ -8,6 +8,7 @@
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
@@ -15,10 +16,10 @@
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <random>
-#include <unistd.h>
 
 #include "octree/delta_rule.h"
 #include "util/progress.h"
+#include "validate/npz.h"
 #include "visibility/grid_walk.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
@@ -139,6 +140,7 @@ namespace {
 struct ScoredPoints {
     PointSet truth, pred;
     std::vector<uint8_t> on_model;
+    std::vector<uint32_t> surface;  // the scene surface each point lies on (kNoSurface: none)
 };
 
 // Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
@@ -194,6 +196,7 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
     sp.truth.positions = sp.pred.positions;
     sp.truth.normals.resize(n);
     sp.on_model.resize(n);
+    sp.surface.resize(n);
     tbb::parallel_for(size_t(0), n, [&](size_t i) {
         const Vec3 q = sp.pred.positions[i];
         const float qq[3] = {q.x, q.y, q.z};
@@ -202,6 +205,7 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
         tree.knnSearch(qq, 1, &k, &d2);
         sp.truth.normals[i] = ref.normals[k];
         sp.on_model[i] = surf[k] != kNoSurface && scene.surfaces[surf[k]].is_model;
+        sp.surface[i] = surf[k];
     });
     return sp;
 }
@@ -214,6 +218,7 @@ ScoredPoints scored_points(const Scene& sc, const ValidateParams& p, const std::
     sp.on_model.resize(surf.size());
     for (size_t i = 0; i < surf.size(); ++i)
         sp.on_model[i] = surf[i] != kNoSurface && sc.surfaces[surf[i]].is_model;
+    sp.surface = std::move(surf);
     if (p.as_cloud.empty())
         sp.pred = sp.truth;
     else
@@ -235,7 +240,7 @@ uint64_t drop_points(ScoredPoints& sp, const std::vector<uint8_t>& drop) {
         keep(ps->positions), keep(ps->normals), keep(ps->colors), keep(ps->radii);
         keep(ps->emission);
     }
-    keep(sp.on_model);
+    keep(sp.on_model), keep(sp.surface);
     for (uint8_t d : drop) dropped += d;
     return dropped;
 }
@@ -355,27 +360,28 @@ std::pair<double, double> normal_agreement(const ScoredPoints& sp) {
 // The sampled pairs of one validation, with their truth.
 struct PairSets {
     std::vector<Pair> pairs, model, eyes_model, eyes_all;
+    std::vector<uint32_t> eye_model, eye_all;  // the eyes (eyes_model: eye_model[k] vs all)
     std::vector<uint8_t> truth, facing, truth_model, truth_eyes_model, truth_eyes_all;
 };
 
-// One octree height: build the V-map (or the octree alone, direct mode) from the prediction's
-// points and score every pair set.
-HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
-                             const std::vector<uint8_t>& buried, const ValidateParams& params,
-                             int leaf_points, int max_height, const std::string& path) {
-    HeightResult row;
-    row.max_height = max_height;
-    row.leaf_points = leaf_points;
-    OctreeParams op;
-    op.max_height = max_height;
-    op.leaf_points = leaf_points;
-    const auto tb = Clock::now();
-    Predictor pr;
+// The predictions for the eye pair sets at one height (0 hidden, 1 visible, 2 same leaf).
+struct EyeAnswers {
+    std::vector<uint8_t> model, all;
+};
+
+// What answers a height's queries: the V-map, or the octree with the direct predicate.
+struct HeightPredictor {
     VisibilityMap vm;
     Octree t;
     std::vector<uint32_t> inverse;
     std::unique_ptr<detail::LeafGrid> grid;
     std::unique_ptr<DirectPredictor> direct;
+    Predictor pr;
+};
+
+void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pred_pts,
+                     const ValidateParams& params, const OctreeParams& op,
+                     const std::string& path) {
     if (params.predict == "vmap") {
         BuildParams bp;
         bp.octree = op;
@@ -383,33 +389,50 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
         bp.backend = params.backend;
         bp.occluders = params.occluders;
         BuildStats st;
-        vm = build_vmap(pred_pts, bp, &st, path);
-        row.height = vm.octree().height();
-        row.leaves = vm.octree().num_leaves();
-        row.links = vm.num_links();
+        hp.vm = build_vmap(pred_pts, bp, &st, path);
+        row.height = hp.vm.octree().height();
+        row.leaves = hp.vm.octree().num_leaves();
+        row.links = hp.vm.num_links();
         row.work = st.work;
         row.backend = st.backend;
-        pr.vm = &vm;
-    } else {
-        PointSet copy = pred_pts;
-        std::vector<uint32_t> order;
-        t = Octree::build(copy, op, order, path);
-        if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
-            apply_delta_rule(t, copy, params.delta_scale, floor_of(params));
-        inverse.resize(order.size());
-        for (uint32_t k = 0; k < order.size(); ++k) inverse[order[k]] = k;
-        if (params.occluders == OccluderSearch::kGridWalk) grid = std::make_unique<detail::LeafGrid>(t);
-        row.height = t.height();
-        row.leaves = t.num_leaves();
-        row.backend =
-            params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
-        direct = std::make_unique<DirectPredictor>(DirectPredictor{t, params.visibility, grid.get()});
-        pr.tree = &t, pr.inverse = &inverse, pr.direct = direct.get();
+        hp.pr.vm = &hp.vm;
+        return;
     }
+    PointSet copy = pred_pts;
+    std::vector<uint32_t> order;
+    hp.t = Octree::build(copy, op, order, path);
+    if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
+        apply_delta_rule(hp.t, copy, params.delta_scale, floor_of(params));
+    hp.inverse.resize(order.size());
+    for (uint32_t k = 0; k < order.size(); ++k) hp.inverse[order[k]] = k;
+    if (params.occluders == OccluderSearch::kGridWalk) hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
+    row.height = hp.t.height();
+    row.leaves = hp.t.num_leaves();
+    row.backend = params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
+    hp.direct =
+        std::make_unique<DirectPredictor>(DirectPredictor{hp.t, params.visibility, hp.grid.get()});
+    hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
+}
+
+// One octree height: build the V-map (or the octree alone, direct mode) from the prediction's
+// points and score every pair set; the eye sets' answers go to `answers` when given.
+HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
+                             const std::vector<uint8_t>& buried, const ValidateParams& params,
+                             int leaf_points, int max_height, const std::string& path,
+                             EyeAnswers* answers) {
+    HeightResult row;
+    row.max_height = max_height;
+    row.leaf_points = leaf_points;
+    OctreeParams op;
+    op.max_height = max_height;
+    op.leaf_points = leaf_points;
+    const auto tb = Clock::now();
+    HeightPredictor hp;
+    build_predictor(hp, row, pred_pts, params, op, path);
     row.build_seconds = seconds_since(tb);
     const auto tq = Clock::now();
     WorkCounters work;
-    const std::vector<uint8_t> pred = predict_pairs(pr, ps.pairs, &work);
+    const std::vector<uint8_t> pred = predict_pairs(hp.pr, ps.pairs, &work);
     if (params.predict != "vmap") row.work = work;
     row.predict_seconds = seconds_since(tq);
     for (size_t k = 0; k < ps.pairs.size(); ++k) {
@@ -422,15 +445,66 @@ HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
         if (ps.facing[k]) row.facing.add(ps.truth[k], pred[k]);
         if (!buried[ps.pairs[k].i] && !buried[ps.pairs[k].j]) row.live.add(ps.truth[k], pred[k]);
     }
-    row.model = tally(ps.truth_model, predict_pairs(pr, ps.model, nullptr));
-    row.eyes_model = tally(ps.truth_eyes_model, predict_pairs(pr, ps.eyes_model, nullptr));
-    row.eyes_all = tally(ps.truth_eyes_all, predict_pairs(pr, ps.eyes_all, nullptr));
+    row.model = tally(ps.truth_model, predict_pairs(hp.pr, ps.model, nullptr));
+    EyeAnswers eyes{predict_pairs(hp.pr, ps.eyes_model, nullptr),
+                    predict_pairs(hp.pr, ps.eyes_all, nullptr)};
+    row.eyes_model = tally(ps.truth_eyes_model, eyes.model);
+    row.eyes_all = tally(ps.truth_eyes_all, eyes.all);
+    if (answers) *answers = std::move(eyes);
     return row;
+}
+
+// Eye-major answers (n - 1 an eye, skipping the eye) as an eyes x n array; the eye's own entry
+// is `self`.
+std::vector<uint8_t> eye_square(const std::vector<uint8_t>& flat, const std::vector<uint32_t>& eyes,
+                                uint32_t n, uint8_t self) {
+    std::vector<uint8_t> out(eyes.size() * size_t(n), self);
+    for (size_t k = 0; k < eyes.size(); ++k)
+        for (uint32_t j = 0; j < n; ++j)
+            if (j != eyes[k]) out[k * n + j] = flat[k * (n - 1) + (j < eyes[k] ? j : j - 1)];
+    return out;
+}
+
+// --dump-eyes (docs/validation.md "Hidden point removal"): the points, the eyes, the truth and
+// the V-map's answers of the first height, as an .npz.
+void write_eye_dump(const std::string& file, const ScoredPoints& sp, const PairSets& ps,
+                    const EyeAnswers& answers, const ValidationReport& r) {
+    using detail::npy_array;
+    const uint64_t n = sp.truth.size();
+    auto vec3 = [&](const char* name, const std::vector<Vec3>& v) {
+        return npy_array(name, "<f4", {n, 3}, &v[0].x, 3 * v.size());
+    };
+    auto u8 = [&](const char* name, const std::vector<uint8_t>& v, uint64_t rows) {
+        return npy_array(name, "|u1", {rows, n}, v.data(), v.size());
+    };
+    auto u32 = [&](const char* name, const std::vector<uint32_t>& v) {
+        return npy_array(name, "<u4", {v.size()}, v.data(), v.size());
+    };
+    const uint64_t e = ps.eye_model.size();
+    const HeightResult& h = r.rows.front();
+    const double offset = r.offset;
+    const int32_t ints[3] = {h.max_height, h.height, h.leaves};
+    detail::write_npz(
+        file,
+        {vec3("positions", sp.truth.positions), vec3("normals", sp.truth.normals),
+         vec3("pred_normals", sp.pred.normals),
+         npy_array("pred_radii", "<f4", {sp.pred.radii.size()}, sp.pred.radii.data(),
+                   sp.pred.radii.size()),
+         npy_array("on_model", "|u1", {n}, sp.on_model.data(), n), u32("surface", sp.surface),
+         u32("eyes_model", ps.eye_model), u32("eyes_all", ps.eye_all),
+         u8("truth_eyes_model", eye_square(ps.truth_eyes_model, ps.eye_model, n, 0), e),
+         u8("pred_eyes_model", eye_square(answers.model, ps.eye_model, n, 2), e),
+         u8("truth_eyes_all", eye_square(ps.truth_eyes_all, ps.eye_all, n, 0), e),
+         u8("pred_eyes_all", eye_square(answers.all, ps.eye_all, n, 2), e),
+         npy_array("offset", "<f8", {}, &offset, 1), npy_array("octree", "<i4", {3}, ints, 3)});
 }
 
 }  // namespace
 
-ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+namespace {
+
+// The scene a validation takes its truth from: a scene file or a mesh, without point clouds.
+Scene validation_scene(const std::string& path, const ValidateParams& params) {
     params.check(path);
     if (!is_scene_input(path))
         throw Error(
@@ -444,31 +518,27 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                         "point cloud does not have",
                         path));
     if (params.points) sc.points = params.points;
-    ScoredPoints sp = scored_points(sc, params, path);
-    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
-    const auto t0 = Clock::now();
-    ExactVisibility exact(sc.surfaces, path);
-    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
-    auto is_buried = [&](size_t i) {
-        const Vec3 q = sp.truth.positions[i], nq = sp.truth.normals[i];
-        return exact.occluded(q, q + nq, float(offset), float(bury));
-    };
-    uint64_t dropped = 0;
-    if (params.drop_buried) {
-        // What not sampling covered surface would give: the same points less the buried ones.
-        std::vector<uint8_t> b(sp.truth.size());
-        tbb::parallel_for(size_t(0), sp.truth.size(), [&](size_t i) { b[i] = is_buried(i); });
-        dropped = drop_points(sp, b);
-    }
-    const PointSet& pts = sp.truth;
-    const uint64_t n = pts.size();
-    if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
+    return sc;
+}
 
+// Buried points: a triangle in front of the point within `bury` along its true normal.
+std::vector<uint8_t> buried_flags(const ExactVisibility& exact, const PointSet& truth,
+                                  double offset, double bury) {
+    std::vector<uint8_t> b(truth.size());
+    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+        const Vec3 q = truth.positions[i], nq = truth.normals[i];
+        b[i] = exact.occluded(q, q + nq, float(offset), float(bury));
+    });
+    return b;
+}
+
+// The report's description of the points and settings, before any pair is scored.
+ValidationReport report_header(const Scene& sc, const ScoredPoints& sp, const std::string& path,
+                               const ValidateParams& params) {
     ValidationReport r;
-    r.dropped_points = dropped;
     r.scene = sc.name;
     r.path = path;
-    r.points = n;
+    r.points = sp.truth.size();
     r.pairs = params.pairs;
     r.params = params;
     r.source = !params.cloud.empty()          ? "the cloud " + params.cloud
@@ -478,42 +548,72 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
                                               : "the scene's samples";
     if (!r.params.leaf_points)
         r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
-    r.offset = offset;
     std::tie(r.normal_agreement, r.normal_agreement_model) = normal_agreement(sp);
     for (uint8_t m : sp.on_model) r.model_points += m;
+    return r;
+}
 
-    // Truth, once for all heights.
-    r.triangles = exact.triangles();
+// Every pair set of the validation with its truth: uniform pairs, model pairs and the eyes.
+PairSets sample_truth(const ExactVisibility& exact, const ScoredPoints& sp,
+                      const ValidateParams& params, ValidationReport& r) {
+    const PointSet& pts = sp.truth;
+    const uint32_t n = uint32_t(pts.size());
+    const float offset = float(r.offset);
     PairSets ps;
     ps.pairs = sample_pairs(n, params.pairs, params.pair_seed);
-    truth_of(exact, pts, ps.pairs, float(offset), ps.truth, &ps.facing);
+    truth_of(exact, pts, ps.pairs, offset, ps.truth, &ps.facing);
     for (size_t k = 0; k < ps.pairs.size(); ++k)
         r.truth_facing += ps.facing[k], r.truth_visible += ps.truth[k];
     ps.model = model_pair_sample(sp.on_model, params.pairs, params.pair_seed);
     r.model_pairs = ps.model.size();
-    truth_of(exact, pts, ps.model, float(offset), ps.truth_model, nullptr);
+    truth_of(exact, pts, ps.model, offset, ps.truth_model, nullptr);
     if (params.eyes && r.model_points) {
         auto on_model = [&](uint32_t i) { return bool(sp.on_model[i]); };
         auto any = [](uint32_t) { return true; };
-        ps.eyes_model = eye_pairs(
-            sample_indices(uint32_t(n), params.eyes, params.eye_seed, on_model), uint32_t(n));
-        ps.eyes_all = eye_pairs(
-            sample_indices(uint32_t(n), params.eyes, params.eye_seed + 1, any), uint32_t(n));
-        truth_of(exact, pts, ps.eyes_model, float(offset), ps.truth_eyes_model, nullptr);
-        truth_of(exact, pts, ps.eyes_all, float(offset), ps.truth_eyes_all, nullptr);
+        ps.eye_model = sample_indices(n, params.eyes, params.eye_seed, on_model);
+        ps.eye_all = sample_indices(n, params.eyes, params.eye_seed + 1, any);
+        ps.eyes_model = eye_pairs(ps.eye_model, n);
+        ps.eyes_all = eye_pairs(ps.eye_all, n);
+        truth_of(exact, pts, ps.eyes_model, offset, ps.truth_eyes_model, nullptr);
+        truth_of(exact, pts, ps.eyes_all, offset, ps.truth_eyes_all, nullptr);
         r.eyes = params.eyes;
     }
+    return ps;
+}
+
+}  // namespace
+
+ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+    const Scene sc = validation_scene(path, params);
+    ScoredPoints sp = scored_points(sc, params, path);
+    const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
+    const auto t0 = Clock::now();
+    ExactVisibility exact(sc.surfaces, path);
+    const double offset = params.ray_offset * room, bury = params.bury_distance * room;
+    // What not sampling covered surface would give: the same points less the buried ones.
+    const uint64_t dropped =
+        params.drop_buried ? drop_points(sp, buried_flags(exact, sp.truth, offset, bury)) : 0;
+    const uint64_t n = sp.truth.size();
+    if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
+
+    ValidationReport r = report_header(sc, sp, path, params);
+    r.dropped_points = dropped;
+    r.offset = offset;
+    r.triangles = exact.triangles();
+    const PairSets ps = sample_truth(exact, sp, params, r);
     r.bury_distance = bury;
-    std::vector<uint8_t> buried(n);
-    tbb::parallel_for(size_t(0), size_t(n), [&](size_t i) { buried[i] = is_buried(i); });
+    const std::vector<uint8_t> buried = buried_flags(exact, sp.truth, offset, bury);
     for (uint8_t b : buried) r.buried_points += b;
     for (const Pair& q : ps.pairs) r.live_pairs += !buried[q.i] && !buried[q.j];
     r.truth_seconds = seconds_since(t0);
 
     detail::Progress progress("heights", params.heights.size(), &params.progress);
     for (size_t hi = 0; hi < params.heights.size(); ++hi) {
+        EyeAnswers answers;
+        const bool dump = hi == 0 && !params.dump_eyes.empty();
         r.rows.push_back(validate_height(sp.pred, ps, buried, params, r.params.leaf_points,
-                                         params.heights[hi], path));
+                                         params.heights[hi], path, dump ? &answers : nullptr));
+        if (dump) write_eye_dump(params.dump_eyes, sp, ps, answers, r);
         progress.set(hi + 1);
         progress.throw_if_cancelled();
     }
@@ -674,13 +774,137 @@ Spread spread(std::vector<double> v) {
 
 }  // namespace
 
-EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
+namespace {
+
+using LeafPairs = std::vector<std::pair<int32_t, int32_t>>;
+
+// Leaf pairs a < b: all of them when they fit the sample, else seeded blocks of 8 rows by 32
+// consecutive columns at uniform places above the diagonal: the access pattern of a V-map
+// build (one leaf against 32 neighbouring leaves, neighbouring rows after each other; the same
+// as `vmap bench` samples), so caches behave for both methods as in a real run.
+LeafPairs sample_leaf_pairs(int32_t L, uint64_t count) {
+    LeafPairs lp;
+    const uint64_t all = uint64_t(L) * (L - 1) / 2;
+    if (all <= count || L < 80) {
+        for (int32_t a = 0; a < L; ++a)
+            for (int32_t b = a + 1; b < L; ++b) lp.emplace_back(a, b);
+        return lp;
+    }
+    std::mt19937_64 rng(7);
+    while (lp.size() < count) {
+        int32_t a = int32_t(rng() % uint64_t(L - 40)), b = int32_t(rng() % uint64_t(L - 40));
+        if (a > b) std::swap(a, b);
+        if (b - a < 8) continue;
+        for (int32_t r = 0; r < 8; ++r)
+            for (int32_t c = 0; c < 32 && b + c < L; ++c) lp.emplace_back(a + r, b + c);
+    }
+    lp.resize(count);
+    return lp;
+}
+
+// The three timed methods over one leaf-pair sample, each writing its answers.
+struct TimedPasses {
+    const OctreeView v;
+    const VisibilityParams vp;
+    const ExactVisibility& exact;
+    const LeafPairs& lp;
+    std::vector<uint8_t> kern, ray, occ;
+    std::vector<Vec3> from, to;
+    std::vector<size_t> idx;  // the facing pairs, in packet order
+
+    float t0() const { return vp.eps; }
+    float t1() const { return 1.f - vp.eps; }
+    bool facing(size_t k, Vec3& a, Vec3& b) const {
+        const LeafDisc& la = v.leaves[lp[k].first];
+        const LeafDisc& lb = v.leaves[lp[k].second];
+        a = la.centroid, b = lb.centroid;
+        const Vec3 d = b - a;
+        const float len = length(d);
+        return len > 0 && detail::leaves_face(la, lb, d, len, vp);
+    }
+    // Work of one counted kernel pass (not timed).
+    WorkCounters counted_kernel() {
+        tbb::combinable<WorkCounters> c;
+        tbb::parallel_for(size_t(0), lp.size(), [&](size_t k) {
+            kern[k] = detail::leaf_pair_visible<true>(v, lp[k].first, lp[k].second, vp, &c.local());
+        });
+        WorkCounters w = c.combine([](WorkCounters x, const WorkCounters& y) {
+            x += y;
+            return x;
+        });
+        w.pairs = lp.size();
+        return w;
+    }
+    void kernel() {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k)
+                kern[k] = detail::leaf_pair_visible<false>(v, lp[k].first, lp[k].second, vp,
+                                                           static_cast<WorkCounters*>(nullptr));
+        });
+    }
+    void ray1() {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
+            for (size_t k = rg.begin(); k < rg.end(); ++k) {
+                Vec3 a, b;
+                ray[k] = facing(k, a, b) && !exact.occluded(a, b, t0(), t1());
+            }
+        });
+    }
+    void ray16() {
+        from.clear(), to.clear(), idx.clear();
+        for (size_t k = 0; k < lp.size(); ++k) {
+            Vec3 a, b;
+            if (facing(k, a, b)) from.push_back(a), to.push_back(b), idx.push_back(k);
+        }
+        exact.occluded_packets(from, to, t0(), t1(), occ);
+    }
+};
+
+// Warm-up, then the three passes in turn in every run, so a change in machine load during the
+// measurement falls on all three alike; then the answers compared.
+void time_passes(TimedPasses& tp, int runs, EmbreeTiming& r, const std::string& path) {
+    tp.kernel(), tp.ray1(), tp.ray16();
+    std::vector<double> tk, t1s, t16;
+    auto time_of = [](auto&& f) {
+        const auto tb = Clock::now();
+        f();
+        return seconds_since(tb);
+    };
+    for (int k = 0; k < runs; ++k) {
+        tk.push_back(time_of([&] { tp.kernel(); }));
+        t1s.push_back(time_of([&] { tp.ray1(); }));
+        t16.push_back(time_of([&] { tp.ray16(); }));
+    }
+    r.kernel_s = spread(tk);
+    r.ray1_s = spread(t1s);
+    r.ray16_s = spread(t16);
+    r.facing = tp.idx.size();
+    for (size_t k = 0; k < tp.lp.size(); ++k) {
+        r.kernel_visible += tp.kern[k];
+        r.ray_visible += tp.ray[k];
+        r.agree += tp.kern[k] == tp.ray[k];
+    }
+    // The packet pass must give the single-ray answers.
+    for (size_t m = 0; m < tp.idx.size(); ++m)
+        if (!tp.occ[m] != bool(tp.ray[tp.idx[m]]))
+            throw Error(
+                fmt::format("{}: Embree rtcOccluded16 and rtcOccluded1 disagree on leaf pair {}",
+                            path, tp.idx[m]));
+}
+
+void check_timing_params(const EmbreeTimingParams& p, const std::string& path) {
     p.visibility.check(path);
     if (p.runs < 1 || p.runs > 100)
         throw Error(fmt::format("{}: runs {} out of range (1..100)", path, p.runs));
     if (p.sample_pairs < 1 || p.sample_pairs > 1000000000ull)
         throw Error(
             fmt::format("{}: --pairs {} out of range (1..1000000000)", path, p.sample_pairs));
+}
+
+}  // namespace
+
+EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
+    check_timing_params(p, path);
     Scene sc = load_scene(path);
     if (p.points) sc.points = p.points;
     PointSet pts = sample_scene(sc);
@@ -702,112 +926,14 @@ EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
     r.threads = int(std::min<size_t>(
         tbb::this_task_arena::max_concurrency(),
         tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
-    const int32_t L = t.num_leaves();
-    if (L < 2) throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
-
-    // Leaf pairs a < b: all of them when they fit the sample, else seeded blocks of 8 rows by 32
-    // consecutive columns at uniform places above the diagonal: the access pattern of a V-map
-    // build (one leaf against 32 neighbouring leaves, neighbouring rows after each other; the
-    // same as `vmap bench` samples), so caches behave for both methods as in a real run.
-    std::vector<std::pair<int32_t, int32_t>> lp;
-    const uint64_t all = uint64_t(L) * (L - 1) / 2;
-    if (all <= p.sample_pairs || L < 80) {
-        for (int32_t a = 0; a < L; ++a)
-            for (int32_t b = a + 1; b < L; ++b) lp.emplace_back(a, b);
-    } else {
-        std::mt19937_64 rng(7);
-        while (lp.size() < p.sample_pairs) {
-            int32_t a = int32_t(rng() % uint64_t(L - 40)), b = int32_t(rng() % uint64_t(L - 40));
-            if (a > b) std::swap(a, b);
-            if (b - a < 8) continue;
-            for (int32_t r = 0; r < 8; ++r)
-                for (int32_t c = 0; c < 32 && b + c < L; ++c) lp.emplace_back(a + r, b + c);
-        }
-        lp.resize(p.sample_pairs);
-    }
+    if (t.num_leaves() < 2)
+        throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
+    const LeafPairs lp = sample_leaf_pairs(t.num_leaves(), p.sample_pairs);
     r.pairs = lp.size();
-    const OctreeView v = octree_view(t);
-    const VisibilityParams vp = p.visibility;
-    const float t0 = vp.eps, t1 = 1.f - vp.eps;
-    std::vector<uint8_t> kern(lp.size()), ray(lp.size());
-
-    // Work of one counted kernel pass (not timed).
-    {
-        tbb::combinable<WorkCounters> c;
-        tbb::parallel_for(size_t(0), lp.size(), [&](size_t k) {
-            kern[k] = detail::leaf_pair_visible<true>(v, lp[k].first, lp[k].second, vp, &c.local());
-        });
-        r.kernel_work = c.combine([](WorkCounters x, const WorkCounters& y) {
-            x += y;
-            return x;
-        });
-        r.kernel_work.pairs = lp.size();
-    }
-    auto kernel_pass = [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
-            for (size_t k = rg.begin(); k < rg.end(); ++k)
-                kern[k] = detail::leaf_pair_visible<false>(v, lp[k].first, lp[k].second, vp,
-                                                           static_cast<WorkCounters*>(nullptr));
-        });
-    };
-    auto ray1_pass = [&] {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, lp.size(), 256), [&](const auto& rg) {
-            for (size_t k = rg.begin(); k < rg.end(); ++k) {
-                const LeafDisc& a = v.leaves[lp[k].first];
-                const LeafDisc& b = v.leaves[lp[k].second];
-                const Vec3 d = b.centroid - a.centroid;
-                const float len = length(d);
-                ray[k] = len > 0 && detail::leaves_face(a, b, d, len, vp) &&
-                         !exact.occluded(a.centroid, b.centroid, t0, t1);
-            }
-        });
-    };
-    std::vector<Vec3> from, to;
-    std::vector<size_t> idx;
-    std::vector<uint8_t> occ;
-    auto ray16_pass = [&] {
-        from.clear(), to.clear(), idx.clear();
-        for (size_t k = 0; k < lp.size(); ++k) {
-            const LeafDisc& a = v.leaves[lp[k].first];
-            const LeafDisc& b = v.leaves[lp[k].second];
-            const Vec3 d = b.centroid - a.centroid;
-            const float len = length(d);
-            if (len > 0 && detail::leaves_face(a, b, d, len, vp)) {
-                from.push_back(a.centroid), to.push_back(b.centroid), idx.push_back(k);
-            }
-        }
-        exact.occluded_packets(from, to, t0, t1, occ);
-    };
-    // Warm-up, then the three passes in turn in every run, so a change in machine load during
-    // the measurement falls on all three alike.
-    kernel_pass(), ray1_pass(), ray16_pass();
-    std::vector<double> tk, t1s, t16;
-    auto time_of = [](auto&& f) {
-        const auto tb = Clock::now();
-        f();
-        return seconds_since(tb);
-    };
-    for (int k = 0; k < p.runs; ++k) {
-        tk.push_back(time_of(kernel_pass));
-        t1s.push_back(time_of(ray1_pass));
-        t16.push_back(time_of(ray16_pass));
-    }
-    r.kernel_s = spread(tk);
-    r.ray1_s = spread(t1s);
-    r.ray16_s = spread(t16);
-    r.facing = idx.size();
-    for (size_t k = 0; k < lp.size(); ++k) {
-        r.kernel_visible += kern[k];
-        r.ray_visible += ray[k];
-        r.agree += kern[k] == ray[k];
-    }
-    // The packet pass must give the single-ray answers.
-    for (size_t m = 0; m < idx.size(); ++m)
-        if (!occ[m] != bool(ray[idx[m]]))
-            throw Error(
-                fmt::format("{}: Embree rtcOccluded16 and rtcOccluded1 disagree on leaf "
-                            "pair {}",
-                            path, idx[m]));
+    TimedPasses tp{octree_view(t), p.visibility, exact, lp, {}, {}, {}, {}, {}, {}};
+    tp.kern.resize(lp.size()), tp.ray.resize(lp.size());
+    r.kernel_work = tp.counted_kernel();
+    time_passes(tp, p.runs, r, path);
     return r;
 }
 

@@ -91,6 +91,7 @@ class HostBackend : public Backend {
     }
 
     double busy_seconds() const override { return busy_; }
+    bool counts_progress() const override { return true; }
     // About 2.5e6 leaf pairs per second per core (docs/results.md; 2-4e6 by scene).
     double expected_pairs_per_second() const override {
         return 2.5e6 * tbb::this_task_arena::max_concurrency();

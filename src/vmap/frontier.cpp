@@ -1,0 +1,304 @@
+// The bounded frontier of node pairs (frontier.h).
+#include "vmap/frontier.h"
+
+#include <fmt/format.h>
+#include <tbb/combinable.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <chrono>
+#include <numeric>
+
+#include "vmap/error.h"
+
+namespace vmap::detail {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+// Pairs with fewer leaf pairs are walked untested: a node-pair test costs a few walks.
+constexpr uint64_t kMinTestPairs = 2;
+
+struct Batch {
+    size_t begin, end;
+    uint64_t words;
+};
+
+// Consecutive jobs up to batch_words each; sets the jobs' word offsets.
+std::vector<Batch> make_batches(std::vector<PairJob>& jobs, uint64_t batch_words) {
+    std::vector<Batch> batches;
+    for (size_t j = 0; j < jobs.size();) {
+        Batch b{j, j, 0};
+        while (b.end < jobs.size() &&
+               (b.end == b.begin || b.words + job_words(jobs[b.end]) <= batch_words)) {
+            jobs[b.end].word_offset = b.words;
+            b.words += job_words(jobs[b.end]);
+            ++b.end;
+        }
+        batches.push_back(b);
+        j = b.end;
+    }
+    return batches;
+}
+
+}  // namespace
+
+Frontier::Frontier(const Octree& t, const NodePairContext* ctx, Backend& backend,
+                   const BuildParams& params, const FrontierParams& fp, BuildStats& st)
+    : arrays(t.num_nodes()),
+      t_(t),
+      ctx_(ctx),
+      backend_(backend),
+      params_(params),
+      fp_(fp),
+      st_(st),
+      leafy_(leafy_nodes(t)),
+      walked_diff_(size_t(t.num_leaves()) + 1, 0) {
+    fp_.max_level_pairs = std::max<size_t>(fp_.max_level_pairs, 1);
+}
+
+uint32_t Frontier::num_kids(NodePairRef p) const {
+    uint32_t ka = 0, kb = 0;
+    t_.for_each_child(p.a, [&](int32_t) { ++ka; });
+    t_.for_each_child(p.b, [&](int32_t) { ++kb; });
+    return (ka ? ka : 1) * (kb ? kb : 1);
+}
+
+void Frontier::run(const std::vector<NodePairRef>& roots) {
+    st_.levels.assign(size_t(t_.height()) + 1, {});
+    st_.leaf_pairs = uint64_t(t_.num_leaves()) * (t_.num_leaves() - 1) / 2;
+    // The first report says the job's size and an estimate (as if every pair were walked).
+    const double rate = backend_.expected_pairs_per_second();
+    Progress progress("leaf pairs", st_.leaf_pairs, &params_.progress, st_.backend, st_.note,
+                      rate > 0 ? double(st_.leaf_pairs) / rate : 0.0);
+    progress_ = &progress;
+    backend_.set_progress(&progress);
+    for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
+        const std::vector<NodePairRef> slice(
+            roots.begin() + s, roots.begin() + std::min(roots.size(), s + fp_.max_level_pairs));
+        const std::vector<uint8_t> full = resolve(slice);
+        // A sibling pair has no parent pair: a full one is a link.
+        LinkSink& out = sinks_.local();
+        for (size_t i = 0; i < slice.size(); ++i)
+            if (full[i]) out.push(slice[i].a, slice[i].b);
+        collect_sinks();
+    }
+    backend_.set_progress(nullptr);
+    progress_ = nullptr;
+    progress.finish();
+    st_.leaf_walked.resize(t_.num_leaves());
+    int64_t run = 0;
+    for (int32_t l = 0; l < t_.num_leaves(); ++l) st_.leaf_walked[l] = uint64_t(run += walked_diff_[l]);
+    for (const ConstructionLevel& l : st_.levels) {
+        st_.node_pairs_tested += l.tested;
+        st_.leaf_pairs_walked += l.leaf_pairs_walked;
+    }
+}
+
+// One level (or a slice of it): full[i] says whether every leaf pair under level[i] is visible;
+// the links under the pairs that are not full are made.
+std::vector<uint8_t> Frontier::resolve(const std::vector<NodePairRef>& level) {
+    const std::vector<Kind> kinds = classify(level);
+    std::vector<uint8_t> full(level.size(), 0);
+    for (size_t i = 0; i < level.size(); ++i) full[i] = kinds[i] == Kind::kFull;
+    walk(level, kinds, full);
+    split(level, kinds, full);
+    return full;
+}
+
+// The kind of each pair: the node tests' decision where they run, else walked or split by size.
+std::vector<Frontier::Kind> Frontier::classify(const std::vector<NodePairRef>& level) {
+    const auto t0 = Clock::now();
+    std::vector<NodePairRef> tests;
+    std::vector<size_t> at;
+    if (ctx_)
+        for (size_t i = 0; i < level.size(); ++i)
+            if (area(level[i]) >= kMinTestPairs) tests.push_back(level[i]), at.push_back(i);
+    std::vector<uint8_t> d(tests.size(), uint8_t(PairDecision::kUndecided));
+    if (!tests.empty()) decide(tests, d);
+    std::vector<Kind> kinds(level.size());
+    for (size_t i = 0; i < level.size(); ++i)
+        kinds[i] = area(level[i]) <= fp_.max_job_pairs ? Kind::kJob : Kind::kSplit;
+    const uint64_t walk_max = std::min(fp_.walk_pairs, fp_.max_job_pairs);
+    for (size_t k = 0; k < tests.size(); ++k) {
+        const auto dk = PairDecision(d[k]);
+        kinds[at[k]] = dk == PairDecision::kAllVisible    ? Kind::kFull
+                       : dk == PairDecision::kNoneVisible ? Kind::kEmpty
+                       : area(tests[k]) <= walk_max       ? Kind::kJob
+                                                          : Kind::kSplit;
+    }
+    count_level(level, kinds);
+    // A tested pair is counted as such in its level (count_level counts every pair met).
+    for (size_t k = 0; k < tests.size(); ++k)
+        st_.levels[std::max(t_.level[tests[k].a], t_.level[tests[k].b])].tested++;
+    st_.seconds_decide += seconds_since(t0);
+    return kinds;
+}
+
+// decide_node_pair for every pair of `tests`: on the backend when it can, else on all cores.
+void Frontier::decide(const std::vector<NodePairRef>& tests, std::vector<uint8_t>& out) {
+    uint64_t shaft = 0;
+    if (!backend_.decide(tests, out.data(), &shaft)) {
+        struct NodeCounters {
+            uint64_t shaft_node_tests = 0;
+        };
+        tbb::combinable<NodeCounters> ncs;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, tests.size(), 64), [&](const auto& r) {
+            NodeCounters& nc = ncs.local();
+            for (size_t i = r.begin(); i < r.end(); ++i)
+                out[i] = uint8_t(decide_node_pair(*ctx_, tests[i].a, tests[i].b, &nc));
+        });
+        ncs.combine_each([&](const NodeCounters& c) { shaft += c.shaft_node_tests; });
+    }
+    st_.shaft_node_tests += shaft;
+}
+
+// The per-level counters (the deeper level of the pair's nodes) and the progress of decisions.
+void Frontier::count_level(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds) {
+    uint64_t decided = 0;
+    for (size_t i = 0; i < level.size(); ++i) {
+        ConstructionLevel& l = st_.levels[std::max(t_.level[level[i].a], t_.level[level[i].b])];
+        const uint64_t a = area(level[i]);
+        l.pairs++;
+        switch (kinds[i]) {
+            case Kind::kFull:
+                l.visible++, l.leaf_pairs_decided += a, l.leaf_pairs_visible += a, decided += a;
+                break;
+            case Kind::kEmpty:
+                l.invisible++, l.leaf_pairs_decided += a, decided += a;
+                break;
+            case Kind::kSplit:
+                l.split++;
+                break;
+            case Kind::kJob:
+                l.walked++, l.leaf_pairs_walked += a;
+                break;
+        }
+    }
+    if (decided) progress_->add(decided);
+}
+
+// The walked pairs of a level as rectangles, in batches through the backend, double buffered
+// (paper §6.2): while the backend evaluates batch i + 1 the host extracts links from batch i.
+// A job whose table is all set is full: its link (or one at a level above) is made later.
+void Frontier::walk(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
+                    std::vector<uint8_t>& full) {
+    std::vector<PairJob> jobs;
+    std::vector<size_t> owner;
+    for (size_t i = 0; i < level.size(); ++i) {
+        if (kinds[i] != Kind::kJob) continue;
+        PairJob j;
+        j.a = level[i].a, j.b = level[i].b;
+        j.row0 = t_.leaf_begin[j.a], j.rows = t_.leaf_end[j.a] - j.row0;
+        j.col0 = t_.leaf_begin[j.b], j.cols = t_.leaf_end[j.b] - j.col0;
+        walked_diff_[j.row0] += j.cols, walked_diff_[j.row0 + j.rows] -= j.cols;
+        walked_diff_[j.col0] += j.rows, walked_diff_[j.col0 + j.cols] -= j.rows;
+        jobs.push_back(j);
+        owner.push_back(i);
+    }
+    if (jobs.empty()) return;
+    const std::vector<Batch> batches = make_batches(jobs, fp_.batch_words);
+    std::vector<uint8_t> job_full(jobs.size(), 0);
+    auto submit = [&](size_t i) {
+        const Batch& b = batches[i];
+        backend_.submit(std::span<const PairJob>(jobs.data() + b.begin, b.end - b.begin), b.words,
+                        int(st_.batches++ % 2));
+    };
+    const size_t slot0 = st_.batches;
+    auto tw = Clock::now();
+    submit(0);
+    for (size_t i = 0; i < batches.size(); ++i) {
+        if (i + 1 < batches.size()) submit(i + 1);
+        const uint32_t* bits = backend_.wait(int((slot0 + i) % 2), st_.work);
+        st_.seconds_wait += seconds_since(tw);
+        const auto te = Clock::now();
+        extract(jobs, batches[i].begin, batches[i].end, bits, job_full);
+        if (!backend_.counts_progress()) {
+            uint64_t done = 0;
+            for (size_t k = batches[i].begin; k < batches[i].end; ++k)
+                done += uint64_t(jobs[k].rows) * jobs[k].cols;
+            progress_->add(done);
+        }
+        progress_->throw_if_cancelled();
+        st_.seconds_extract += seconds_since(te);
+        tw = Clock::now();
+    }
+    for (size_t k = 0; k < jobs.size(); ++k) full[owner[k]] = job_full[k];
+}
+
+// Extracts jobs [begin, end) of one batch in parallel, each thread into its own sink.
+void Frontier::extract(const std::vector<PairJob>& jobs, size_t begin, size_t end,
+                       const uint32_t* bits, std::vector<uint8_t>& job_full) {
+    tbb::parallel_for(begin, end, [&](size_t j) {
+        const PairJob& job = jobs[j];
+        job_full[j] = Extractor{t_, leafy_, job, bits + job.word_offset, sinks_}.run();
+    });
+    collect_sinks();
+}
+
+// Moves the sinks' blocks to the pieces and counts their link ends (or only counts the links).
+void Frontier::collect_sinks() {
+    const size_t first = pieces.size();
+    for (LinkSink& sk : sinks_) {
+        for (auto& blk : sk.blocks) pieces.push_back(std::move(blk));
+        sk.blocks.clear();
+    }
+    if (params_.keep_links) {
+        std::vector<std::span<const Link>> fresh;
+        for (size_t c = first; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
+        arrays.count(fresh);
+    } else {
+        for (size_t c = first; c < pieces.size(); ++c) counted_links += pieces[c].size();
+        pieces.resize(first);
+    }
+}
+
+// The split pairs' children, a slice of at most about max_level_pairs children at a time
+// (the children of one pair are never cut apart), each slice resolved and then settled.
+void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
+                     std::vector<uint8_t>& full) {
+    std::vector<size_t> parents;
+    std::vector<uint64_t> first{0};
+    auto flush = [&] {
+        if (parents.empty()) return;
+        std::vector<NodePairRef> kids(first.back());
+        tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
+            NodePairRef* out = kids.data() + first[k];
+            for_each_child_pair(t_, level[parents[k]].a, level[parents[k]].b,
+                                [&](int32_t x, int32_t y) { *out++ = NodePairRef{x, y}; });
+        });
+        const std::vector<uint8_t> kid_full = resolve(kids);
+        settle(kids, kid_full, parents, first, full);
+        parents.clear();
+        first.assign(1, 0);
+    };
+    for (size_t i = 0; i < level.size(); ++i) {
+        if (kinds[i] != Kind::kSplit) continue;
+        const uint32_t nk = num_kids(level[i]);
+        if (first.back() + nk > fp_.max_level_pairs) flush();
+        parents.push_back(i);
+        first.push_back(first.back() + nk);
+    }
+    flush();
+}
+
+// A split pair is full when all its children are; otherwise each full child makes its link.
+void Frontier::settle(const std::vector<NodePairRef>& kids, const std::vector<uint8_t>& kid_full,
+                      const std::vector<size_t>& parents, const std::vector<uint64_t>& first,
+                      std::vector<uint8_t>& full) {
+    tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
+        bool f = true;
+        for (uint64_t c = first[k]; c < first[k + 1] && f; ++c) f = kid_full[c];
+        full[parents[k]] = f;
+        if (f) return;
+        LinkSink& out = sinks_.local();
+        for (uint64_t c = first[k]; c < first[k + 1]; ++c)
+            if (kid_full[c]) out.push(kids[c].a, kids[c].b);
+    });
+    collect_sinks();
+}
+
+}  // namespace vmap::detail

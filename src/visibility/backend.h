@@ -55,7 +55,8 @@ class Backend {
     // use them to restrict each job's walk to its shaft (same answers). Called after prepare.
     virtual void set_node_context(const NodePairContext*) {}
     // Decides node pairs with decide_node_pair (node_pair.h) under the context given to
-    // set_node_context: out[i] is the PairDecision of pairs[i], as a byte; adds the tree nodes
+    // set_node_context: out[i] is the PairDecision of pairs[i], as a byte (undecided for a pair
+    // not worth_deciding); adds the tree nodes
     // tested to *shaft_node_tests. False (nothing written) when the backend leaves the
     // decisions to the host (the CPU); the answers are the host's, bit for bit.
     virtual bool decide(std::span<const NodePairRef> /*pairs*/, uint8_t* /*out*/,

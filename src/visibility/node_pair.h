@@ -411,6 +411,12 @@ inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         w.skip = int32_t(std::lower_bound(orig.begin(), orig.end(), w.skip) - orig.begin());
 }
 
+// Whether the construction tests (A, B) at all: a pair of two leaves is one leaf pair, walked
+// untested (a node-pair test costs a few walks).
+VMAP_HD bool worth_deciding(const NodePairContext& c, int32_t A, int32_t B) {
+    return c.margin > 0 && (c.tree.walk[A].leaf < 0 || c.tree.walk[B].leaf < 0);
+}
+
 // The decision for node pair (A, B), A before B in preorder (see the top of this file).
 template <class Counters>
 VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32_t B,

@@ -128,9 +128,9 @@ detail::FrontierParams frontier_params(const BuildParams& params, bool gpu) {
     fp.max_job_pairs = std::max<uint64_t>(1, params.max_batch_pairs / 16);
     fp.walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 4096);
     fp.max_level_pairs = size_t(params.max_level_pairs);
-    // Words per batch: a batch's rows are padded to 32 bits, so allow for that; a job of
-    // max_job_pairs leaf pairs in one column takes that many words.
-    fp.batch_words = std::max(params.max_batch_pairs / 32 + 1, fp.max_job_pairs);
+    // Words per batch (a batch's rows are padded to 32 bits); a job with more words than this
+    // makes a batch of its own, and the backend's buffers grow to fit it.
+    fp.batch_words = params.max_batch_pairs / 32 + 1;
     return fp;
 }
 
@@ -153,6 +153,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     auto fr = std::make_unique<detail::Frontier>(t, nt.on ? &nt.ctx : nullptr, *backend, params,
                                                  fp, st);
     fr->run(sibling_pairs(t));
+    st.seconds_plan += st.seconds_decide;  // "plan and node tests"
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();
     return fr;

@@ -19,9 +19,6 @@ double seconds_since(Clock::time_point t0) {
     return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
-// Pairs with fewer leaf pairs are walked untested: a node-pair test costs a few walks.
-constexpr uint64_t kMinTestPairs = 2;
-
 struct Batch {
     size_t begin, end;
     uint64_t words;
@@ -112,44 +109,39 @@ std::vector<uint8_t> Frontier::resolve(const std::vector<NodePairRef>& level) {
 // The kind of each pair: the node tests' decision where they run, else walked or split by size.
 std::vector<Frontier::Kind> Frontier::classify(const std::vector<NodePairRef>& level) {
     const auto t0 = Clock::now();
-    std::vector<NodePairRef> tests;
-    std::vector<size_t> at;
-    if (ctx_)
-        for (size_t i = 0; i < level.size(); ++i)
-            if (area(level[i]) >= kMinTestPairs) tests.push_back(level[i]), at.push_back(i);
-    std::vector<uint8_t> d(tests.size(), uint8_t(PairDecision::kUndecided));
-    if (!tests.empty()) decide(tests, d);
+    std::vector<uint8_t> d(level.size(), uint8_t(PairDecision::kUndecided));
+    if (ctx_) decide(level, d);
     std::vector<Kind> kinds(level.size());
-    for (size_t i = 0; i < level.size(); ++i)
-        kinds[i] = area(level[i]) <= fp_.max_job_pairs ? Kind::kJob : Kind::kSplit;
     const uint64_t walk_max = std::min(fp_.walk_pairs, fp_.max_job_pairs);
-    for (size_t k = 0; k < tests.size(); ++k) {
-        const auto dk = PairDecision(d[k]);
-        kinds[at[k]] = dk == PairDecision::kAllVisible    ? Kind::kFull
-                       : dk == PairDecision::kNoneVisible ? Kind::kEmpty
-                       : area(tests[k]) <= walk_max       ? Kind::kJob
-                                                          : Kind::kSplit;
-    }
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 4096), [&](const auto& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            const uint64_t a = area(level[i]);
+            const bool tested = ctx_ && worth_deciding(*ctx_, level[i].a, level[i].b);
+            const auto dk = PairDecision(d[i]);
+            kinds[i] = dk == PairDecision::kAllVisible                  ? Kind::kFull
+                       : dk == PairDecision::kNoneVisible               ? Kind::kEmpty
+                       : a <= (tested ? walk_max : fp_.max_job_pairs) ? Kind::kJob
+                                                                        : Kind::kSplit;
+        }
+    });
     count_level(level, kinds);
-    // A tested pair is counted as such in its level (count_level counts every pair met).
-    for (size_t k = 0; k < tests.size(); ++k)
-        st_.levels[std::max(t_.level[tests[k].a], t_.level[tests[k].b])].tested++;
     st_.seconds_decide += seconds_since(t0);
     return kinds;
 }
 
-// decide_node_pair for every pair of `tests`: on the backend when it can, else on all cores.
-void Frontier::decide(const std::vector<NodePairRef>& tests, std::vector<uint8_t>& out) {
+// decide_node_pair for every pair worth deciding: on the backend when it can, else on all cores.
+void Frontier::decide(const std::vector<NodePairRef>& level, std::vector<uint8_t>& out) {
     uint64_t shaft = 0;
-    if (!backend_.decide(tests, out.data(), &shaft)) {
+    if (!backend_.decide(level, out.data(), &shaft)) {
         struct NodeCounters {
             uint64_t shaft_node_tests = 0;
         };
         tbb::combinable<NodeCounters> ncs;
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, tests.size(), 64), [&](const auto& r) {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 64), [&](const auto& r) {
             NodeCounters& nc = ncs.local();
             for (size_t i = r.begin(); i < r.end(); ++i)
-                out[i] = uint8_t(decide_node_pair(*ctx_, tests[i].a, tests[i].b, &nc));
+                if (worth_deciding(*ctx_, level[i].a, level[i].b))
+                    out[i] = uint8_t(decide_node_pair(*ctx_, level[i].a, level[i].b, &nc));
         });
         ncs.combine_each([&](const NodeCounters& c) { shaft += c.shaft_node_tests; });
     }
@@ -158,26 +150,36 @@ void Frontier::decide(const std::vector<NodePairRef>& tests, std::vector<uint8_t
 
 // The per-level counters (the deeper level of the pair's nodes) and the progress of decisions.
 void Frontier::count_level(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds) {
-    uint64_t decided = 0;
-    for (size_t i = 0; i < level.size(); ++i) {
-        ConstructionLevel& l = st_.levels[std::max(t_.level[level[i].a], t_.level[level[i].b])];
-        const uint64_t a = area(level[i]);
-        l.pairs++;
-        switch (kinds[i]) {
-            case Kind::kFull:
-                l.visible++, l.leaf_pairs_decided += a, l.leaf_pairs_visible += a, decided += a;
-                break;
-            case Kind::kEmpty:
-                l.invisible++, l.leaf_pairs_decided += a, decided += a;
-                break;
-            case Kind::kSplit:
-                l.split++;
-                break;
-            case Kind::kJob:
-                l.walked++, l.leaf_pairs_walked += a;
-                break;
+    using Levels = std::vector<ConstructionLevel>;
+    tbb::combinable<Levels> per_thread([&] { return Levels(st_.levels.size()); });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 4096), [&](const auto& r) {
+        Levels& lv = per_thread.local();
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            const NodePairRef p = level[i];
+            ConstructionLevel& l = lv[std::max(t_.level[p.a], t_.level[p.b])];
+            const uint64_t a = area(p);
+            l.pairs++;
+            l.tested += ctx_ && worth_deciding(*ctx_, p.a, p.b);
+            if (kinds[i] == Kind::kFull) l.visible++, l.leaf_pairs_visible += a;
+            if (kinds[i] == Kind::kFull || kinds[i] == Kind::kEmpty) l.leaf_pairs_decided += a;
+            l.invisible += kinds[i] == Kind::kEmpty;
+            l.split += kinds[i] == Kind::kSplit;
+            if (kinds[i] == Kind::kJob) l.walked++, l.leaf_pairs_walked += a;
         }
-    }
+    });
+    uint64_t decided = 0;
+    per_thread.combine_each([&](const Levels& lv) {
+        for (size_t k = 0; k < lv.size(); ++k) {
+            ConstructionLevel& o = st_.levels[k];
+            const ConstructionLevel& x = lv[k];
+            o.pairs += x.pairs, o.tested += x.tested, o.visible += x.visible;
+            o.invisible += x.invisible, o.split += x.split, o.walked += x.walked;
+            o.leaf_pairs_decided += x.leaf_pairs_decided;
+            o.leaf_pairs_visible += x.leaf_pairs_visible;
+            o.leaf_pairs_walked += x.leaf_pairs_walked;
+            decided += x.leaf_pairs_decided;
+        }
+    });
     if (decided) progress_->add(decided);
 }
 
@@ -275,9 +277,14 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         parents.clear();
         first.assign(1, 0);
     };
+    std::vector<uint8_t> nks(level.size(), 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 4096), [&](const auto& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i)
+            if (kinds[i] == Kind::kSplit) nks[i] = uint8_t(num_kids(level[i]));
+    });
     for (size_t i = 0; i < level.size(); ++i) {
         if (kinds[i] != Kind::kSplit) continue;
-        const uint32_t nk = num_kids(level[i]);
+        const uint32_t nk = nks[i];
         if (first.back() + nk > fp_.max_level_pairs) flush();
         parents.push_back(i);
         first.push_back(first.back() + nk);

@@ -45,7 +45,7 @@ class Frontier {
     enum class Kind : uint8_t { kFull, kEmpty, kSplit, kJob };
     std::vector<uint8_t> resolve(const std::vector<NodePairRef>& level);
     std::vector<Kind> classify(const std::vector<NodePairRef>& level);
-    void decide(const std::vector<NodePairRef>& tests, std::vector<uint8_t>& out);
+    void decide(const std::vector<NodePairRef>& level, std::vector<uint8_t>& out);
     void count_level(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds);
     void walk(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
               std::vector<uint8_t>& full);

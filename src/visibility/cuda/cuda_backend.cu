@@ -163,8 +163,8 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     flush_counters(wc, lane, counters);
 }
 
-// Node-pair decisions (node_pair.h), one thread a pair: the host's decide_node_pair on the
-// device (the same double arithmetic, no contraction: the same decisions bit for bit).
+// Node-pair decisions (node_pair.h), one thread a pair (those worth_deciding; the others stay
+// undecided): the host's decide_node_pair on the device (the same double arithmetic, no contraction: the same decisions bit for bit).
 struct ShaftCounters {
     unsigned long long shaft_node_tests = 0;
 };
@@ -173,7 +173,11 @@ __global__ void __launch_bounds__(128)
                   uint8_t* __restrict__ out, unsigned long long* shaft_node_tests) {
     const uint64_t i = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
     ShaftCounters wc;
-    if (i < n) out[i] = uint8_t(decide_node_pair(c, pairs[i].a, pairs[i].b, &wc));
+    if (i < n) {
+        const NodePairRef p = pairs[i];
+        out[i] = uint8_t(worth_deciding(c, p.a, p.b) ? decide_node_pair(c, p.a, p.b, &wc)
+                                                     : PairDecision::kUndecided);
+    }
     unsigned long long v = wc.shaft_node_tests;
     for (int o = 16; o > 0; o >>= 1) v += __shfl_down_sync(0xffffffffu, v, o);
     if ((threadIdx.x & 31) == 0 && v) atomicAdd(shaft_node_tests, v);

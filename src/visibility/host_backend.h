@@ -44,8 +44,10 @@ class HostBackend : public Backend {
                 if (progress_ && progress_->cancelled()) return;
                 WorkCounters& wc = counters.local();
                 uint64_t range_pairs = 0;
+                // The state of the job this thread worked on last carries over to the next
+                // range of the same job (a job's shaft is prepared once per thread, not once
+                // per 16 words).
                 State& st = states.local();
-                st.job = -1;
                 size_t j =
                     std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
                 for (uint64_t item = range.begin(); item < range.end(); ++item) {

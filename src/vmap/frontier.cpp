@@ -6,6 +6,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <numeric>
 
@@ -81,8 +82,10 @@ void Frontier::run(const std::vector<NodePairRef>& roots) {
         LinkSink& out = sinks_.local();
         for (size_t i = 0; i < slice.size(); ++i)
             if (full[i]) out.push(slice[i].a, slice[i].b);
-        collect_sinks();
+        collect_sinks(sinks_);
     }
+    finish_extraction(0);
+    finish_extraction(1);
     backend_.set_progress(nullptr);
     progress_ = nullptr;
     progress.finish();
@@ -183,41 +186,57 @@ void Frontier::count_level(const std::vector<NodePairRef>& level, const std::vec
     if (decided) progress_->add(decided);
 }
 
-// The walked pairs of a level as rectangles, in batches through the backend, double buffered
-// (paper §6.2): while the backend evaluates batch i + 1 the host extracts links from batch i.
-// A job whose table is all set is full: its link (or one at a level above) is made later.
+// The walked pairs of a level as rectangles (in level order), each with its pair's index.
+std::vector<PairJob> Frontier::make_jobs(const std::vector<NodePairRef>& level,
+                                         const std::vector<Kind>& kinds,
+                                         std::vector<size_t>& owner) {
+    for (size_t i = 0; i < level.size(); ++i)
+        if (kinds[i] == Kind::kJob) owner.push_back(i);
+    std::vector<PairJob> jobs(owner.size());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, jobs.size(), 4096), [&](const auto& r) {
+        for (size_t k = r.begin(); k < r.end(); ++k) {
+            PairJob& j = jobs[k];
+            j.a = level[owner[k]].a, j.b = level[owner[k]].b;
+            j.row0 = t_.leaf_begin[j.a], j.rows = t_.leaf_end[j.a] - j.row0;
+            j.col0 = t_.leaf_begin[j.b], j.cols = t_.leaf_end[j.b] - j.col0;
+            auto add = [&](int32_t at, int64_t v) {
+                std::atomic_ref<int64_t>(walked_diff_[at]).fetch_add(v, std::memory_order_relaxed);
+            };
+            add(j.row0, j.cols), add(j.row0 + j.rows, -j.cols);
+            add(j.col0, j.rows), add(j.col0 + j.cols, -j.rows);
+        }
+    });
+    return jobs;
+}
+
+// The walked pairs of a level in batches through the backend, double buffered (paper §6.2):
+// while the backend evaluates batch i + 1 the host extracts links from batch i, and that
+// extraction may still run when the frontier moves on. A job whose table is all set is full:
+// its link (or one at a level above) is made when its parent is settled.
 void Frontier::walk(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
                     std::vector<uint8_t>& full) {
-    std::vector<PairJob> jobs;
     std::vector<size_t> owner;
-    for (size_t i = 0; i < level.size(); ++i) {
-        if (kinds[i] != Kind::kJob) continue;
-        PairJob j;
-        j.a = level[i].a, j.b = level[i].b;
-        j.row0 = t_.leaf_begin[j.a], j.rows = t_.leaf_end[j.a] - j.row0;
-        j.col0 = t_.leaf_begin[j.b], j.cols = t_.leaf_end[j.b] - j.col0;
-        walked_diff_[j.row0] += j.cols, walked_diff_[j.row0 + j.rows] -= j.cols;
-        walked_diff_[j.col0] += j.rows, walked_diff_[j.col0 + j.cols] -= j.rows;
-        jobs.push_back(j);
-        owner.push_back(i);
-    }
+    std::vector<PairJob> jobs = make_jobs(level, kinds, owner);
     if (jobs.empty()) return;
     const std::vector<Batch> batches = make_batches(jobs, fp_.batch_words);
     std::vector<uint8_t> job_full(jobs.size(), 0);
+    const uint64_t slot0 = st_.batches;
+    auto slot = [&](size_t i) { return int((slot0 + i) % 2); };
     auto submit = [&](size_t i) {
         const Batch& b = batches[i];
+        finish_extraction(slot(i));  // the slot's table is read until then
         backend_.submit(std::span<const PairJob>(jobs.data() + b.begin, b.end - b.begin), b.words,
-                        int(st_.batches++ % 2));
+                        slot(i));
+        st_.batches++;
     };
-    const size_t slot0 = st_.batches;
     auto tw = Clock::now();
     submit(0);
     for (size_t i = 0; i < batches.size(); ++i) {
         if (i + 1 < batches.size()) submit(i + 1);
-        const uint32_t* bits = backend_.wait(int((slot0 + i) % 2), st_.work);
+        const uint32_t* bits = backend_.wait(slot(i), st_.work);
         st_.seconds_wait += seconds_since(tw);
         const auto te = Clock::now();
-        extract(jobs, batches[i].begin, batches[i].end, bits, job_full);
+        extract(slot(i), jobs, batches[i].begin, batches[i].end, bits, job_full);
         if (!backend_.counts_progress()) {
             uint64_t done = 0;
             for (size_t k = batches[i].begin; k < batches[i].end; ++k)
@@ -231,20 +250,49 @@ void Frontier::walk(const std::vector<NodePairRef>& level, const std::vector<Kin
     for (size_t k = 0; k < jobs.size(); ++k) full[owner[k]] = job_full[k];
 }
 
-// Extracts jobs [begin, end) of one batch in parallel, each thread into its own sink.
-void Frontier::extract(const std::vector<PairJob>& jobs, size_t begin, size_t end,
+// Which jobs [begin, end) of one batch are full, at once; the links of the partly visible ones
+// are extracted in the background, each thread into its own sink.
+void Frontier::extract(int slot, const std::vector<PairJob>& jobs, size_t begin, size_t end,
                        const uint32_t* bits, std::vector<uint8_t>& job_full) {
-    tbb::parallel_for(begin, end, [&](size_t j) {
-        const PairJob& job = jobs[j];
-        job_full[j] = Extractor{t_, leafy_, job, bits + job.word_offset, sinks_}.run();
+    std::vector<uint8_t> partial(end - begin, 0);
+    tbb::parallel_for(tbb::blocked_range<size_t>(begin, end, 256), [&](const auto& r) {
+        for (size_t j = r.begin(); j < r.end(); ++j) {
+            const PairJob& job = jobs[j];
+            const uint64_t n = Extractor{t_, leafy_, job, bits + job.word_offset, sinks_}.visible();
+            job_full[j] = n == uint64_t(job.rows) * uint64_t(job.cols);
+            partial[j - begin] = n > 0 && !job_full[j];
+        }
     });
-    collect_sinks();
+    Extraction& x = extraction_[slot];
+    x.jobs.clear();
+    for (size_t j = begin; j < end; ++j)
+        if (partial[j - begin]) x.jobs.push_back(jobs[j]);
+    if (x.jobs.empty()) return;
+    x.bits = bits;
+    x.busy = true;
+    x.group.run([this, &x] {
+        tbb::parallel_for(size_t(0), x.jobs.size(), [&](size_t j) {
+            const PairJob& job = x.jobs[j];
+            Extractor{t_, leafy_, job, x.bits + job.word_offset, x.sinks}.run();
+        });
+    });
+}
+
+// Waits for the slot's background extraction and takes its links.
+void Frontier::finish_extraction(int slot) {
+    Extraction& x = extraction_[slot];
+    if (!x.busy) return;
+    const auto te = Clock::now();
+    x.group.wait();
+    x.busy = false;
+    collect_sinks(x.sinks);
+    st_.seconds_extract += seconds_since(te);
 }
 
 // Moves the sinks' blocks to the pieces and counts their link ends (or only counts the links).
-void Frontier::collect_sinks() {
+void Frontier::collect_sinks(Sinks& sinks) {
     const size_t first = pieces.size();
-    for (LinkSink& sk : sinks_) {
+    for (LinkSink& sk : sinks) {
         for (auto& blk : sk.blocks) pieces.push_back(std::move(blk));
         sk.blocks.clear();
     }
@@ -305,7 +353,7 @@ void Frontier::settle(const std::vector<NodePairRef>& kids, const std::vector<ui
         for (uint64_t c = first[k]; c < first[k + 1]; ++c)
             if (kid_full[c]) out.push(kids[c].a, kids[c].b);
     });
-    collect_sinks();
+    collect_sinks(sinks_);
 }
 
 }  // namespace vmap::detail

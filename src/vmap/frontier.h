@@ -11,6 +11,8 @@
 // as DESIGN.md "The V-map" asks, and the links go straight into the per-node link arrays.
 #pragma once
 
+#include <tbb/task_group.h>
+
 #include <cstdint>
 #include <vector>
 
@@ -49,14 +51,17 @@ class Frontier {
     void count_level(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds);
     void walk(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
               std::vector<uint8_t>& full);
-    void extract(const std::vector<PairJob>& jobs, size_t begin, size_t end, const uint32_t* bits,
-                 std::vector<uint8_t>& job_full);
+    std::vector<PairJob> make_jobs(const std::vector<NodePairRef>& level,
+                                   const std::vector<Kind>& kinds, std::vector<size_t>& owner);
+    void extract(int slot, const std::vector<PairJob>& jobs, size_t begin, size_t end,
+                 const uint32_t* bits, std::vector<uint8_t>& job_full);
+    void finish_extraction(int slot);
     void split(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
                std::vector<uint8_t>& full);
     void settle(const std::vector<NodePairRef>& kids, const std::vector<uint8_t>& kid_full,
                 const std::vector<size_t>& parents, const std::vector<uint64_t>& first,
                 std::vector<uint8_t>& full);
-    void collect_sinks();
+    void collect_sinks(Sinks& sinks);
     uint64_t area(NodePairRef p) const {
         return uint64_t(t_.leaf_end[p.a] - t_.leaf_begin[p.a]) *
                uint64_t(t_.leaf_end[p.b] - t_.leaf_begin[p.b]);
@@ -72,6 +77,17 @@ class Frontier {
     std::vector<uint8_t> leafy_;
     std::vector<int64_t> walked_diff_;  // per leaf, the walked leaf pairs (difference array)
     Sinks sinks_;
+    // The links of a batch's partly visible jobs, extracted while the backend evaluates the
+    // next batches (and the frontier moves on); the slot's table stays valid until its next
+    // submit, which waits for this first.
+    struct Extraction {
+        tbb::task_group group;
+        std::vector<PairJob> jobs;
+        const uint32_t* bits = nullptr;
+        Sinks sinks;
+        bool busy = false;
+    };
+    Extraction extraction_[2];
     Progress* progress_ = nullptr;
 };
 

@@ -48,6 +48,8 @@ struct Extractor {
     // The job's own pair: true when it is fully visible (its one link is then made by the
     // caller, which may replace it by one at the parents' level), else its links go to sinks.
     bool run();
+    // The set bits of the job's table.
+    uint64_t visible() const { return count(0, job.rows, 0, job.cols); }
 
   private:
     uint64_t count(int32_t r0, int32_t r1, int32_t c0, int32_t c1) const;

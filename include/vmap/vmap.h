@@ -68,7 +68,7 @@ struct BuildParams {
     uint64_t walk_pairs = 0;
     // Node pairs of one level of the construction's frontier held at once (vmap/frontier.h):
     // bounds the memory of the node-pair decisions; any value gives the same V-map.
-    uint64_t max_level_pairs = uint64_t(1) << 20;
+    uint64_t max_level_pairs = uint64_t(1) << 18;
 };
 
 // Node pairs of the construction at one octree level (the deeper level of the pair's nodes).

@@ -100,24 +100,13 @@ INSTANTIATE_TEST_SUITE_P(Scenes, GpuMatchesCpu,
                              return test::case_name(i.param, false);
                          });
 
-TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
-    VMAP_REQUIRE_GPU();
-    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 5000, 9);
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(ps, {8, 3}, order);
-    const int32_t L = t.num_leaves();
-    // Odd-sized rectangles, so rows end mid-word and jobs start at odd offsets.
-    std::vector<detail::PairJob> jobs;
-    uint64_t words = 0;
-    for (int32_t r0 = 0; r0 + 37 < L / 2; r0 += 301) {
-        detail::PairJob j;
-        j.row0 = r0, j.rows = 37, j.col0 = L / 2 + r0 % 97, j.cols = std::min(L - j.col0, 1001);
-        j.word_offset = words;
-        words += detail::job_words(j);
-        jobs.push_back(j);
-    }
+// The GPU's table and counts for `jobs` (kernel VMAP_CUDA_VARIANT = variant) against the CPU's.
+void expect_same_tables(const Octree& t, const std::vector<detail::PairJob>& jobs,
+                        uint64_t words, const char* variant) {
+    setenv("VMAP_CUDA_VARIANT", variant, 1);
     std::string why;
     auto gpu = detail::make_cuda_backend(&why);
+    unsetenv("VMAP_CUDA_VARIANT");
     auto cpu = detail::make_cpu_backend();
     VisibilityParams vp;
     gpu->prepare(t, vp, words);
@@ -127,10 +116,36 @@ TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
     WorkCounters gw, cw;
     const uint32_t* g = gpu->wait(1, gw);
     const uint32_t* c = cpu->wait(1, cw);
-    ASSERT_EQ(std::vector<uint32_t>(g, g + words), std::vector<uint32_t>(c, c + words));
-    EXPECT_EQ(gw.node_tests, cw.node_tests);
+    ASSERT_EQ(std::vector<uint32_t>(g, g + words), std::vector<uint32_t>(c, c + words))
+        << variant;
+    EXPECT_EQ(gw.pairs, cw.pairs) << variant;
+    EXPECT_EQ(gw.node_tests, cw.node_tests) << variant;
+    EXPECT_EQ(gw.occluder_tests, cw.occluder_tests) << variant;
     EXPECT_GT(cw.visible_pairs, 0u);
     EXPECT_GT(gpu->peak_device_bytes(), 0u);
+}
+
+void add_job(std::vector<detail::PairJob>& jobs, uint64_t& words, int32_t row0, int32_t rows,
+             int32_t col0, int32_t cols) {
+    detail::PairJob j;
+    j.row0 = row0, j.rows = rows, j.col0 = col0, j.cols = cols;
+    j.word_offset = words;
+    words += detail::job_words(j);
+    jobs.push_back(j);
+}
+
+TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 5000, 9);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(ps, {8, 3}, order);
+    const int32_t L = t.num_leaves();
+    // Odd-sized rectangles, so rows end mid-word and jobs start at odd offsets.
+    std::vector<detail::PairJob> jobs;
+    uint64_t words = 0;
+    for (int32_t r0 = 0; r0 + 37 < L / 2; r0 += 301)
+        add_job(jobs, words, r0, 37, L / 2 + r0 % 97, std::min(L - (L / 2 + r0 % 97), 1001));
+    expect_same_tables(t, jobs, words, "packet");
 }
 
 // Rectangles of every small shape, packed 32 leaf pairs to a warp across rows and jobs.
@@ -143,36 +158,9 @@ TEST(GpuBackend, SmallRectanglesPackedIntoWarpsAreBitIdenticalToTheCpu) {
     std::vector<detail::PairJob> jobs;
     uint64_t words = 0;
     int k = 0;
-    for (int32_t r0 = 0; r0 + 40 < L / 2; r0 += 13, ++k) {
-        detail::PairJob j;
-        j.row0 = r0, j.rows = 1 + k % 7;
-        j.col0 = L / 2 + (r0 * 7) % (L / 2 - 70), j.cols = 1 + (k * 5) % 67;
-        j.word_offset = words;
-        words += detail::job_words(j);
-        jobs.push_back(j);
-    }
-    std::string why;
-    auto gpu = detail::make_cuda_backend(&why);
-    auto cpu = detail::make_cpu_backend();
-    VisibilityParams vp;
-    for (const char* variant : {"packet", "lane"}) {
-        setenv("VMAP_CUDA_VARIANT", variant, 1);
-        gpu = detail::make_cuda_backend(&why);
-        unsetenv("VMAP_CUDA_VARIANT");
-        gpu->prepare(t, vp, words);
-        cpu->prepare(t, vp, words);
-        gpu->submit(jobs, words, 0);
-        cpu->submit(jobs, words, 0);
-        WorkCounters gw, cw;
-        const uint32_t* g = gpu->wait(0, gw);
-        const uint32_t* c = cpu->wait(0, cw);
-        ASSERT_EQ(std::vector<uint32_t>(g, g + words), std::vector<uint32_t>(c, c + words))
-            << variant;
-        EXPECT_EQ(gw.pairs, cw.pairs) << variant;
-        EXPECT_EQ(gw.node_tests, cw.node_tests) << variant;
-        EXPECT_EQ(gw.occluder_tests, cw.occluder_tests) << variant;
-        EXPECT_GT(cw.visible_pairs, 0u);
-    }
+    for (int32_t r0 = 0; r0 + 40 < L / 2; r0 += 13, ++k)
+        add_job(jobs, words, r0, 1 + k % 7, L / 2 + (r0 * 7) % (L / 2 - 70), 1 + (k * 5) % 67);
+    for (const char* variant : {"packet", "lane"}) expect_same_tables(t, jobs, words, variant);
 }
 
 // decide_node_pair on the device against the host, pair by pair, counts included.

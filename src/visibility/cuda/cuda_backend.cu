@@ -361,8 +361,11 @@ class CudaBackend final : public Backend {
         const int32_t nn = ctx->tree.num_nodes;
         const NodeBounds& last = ctx->nb[nn - 1];
         nb_.upload(ctx->nb, size_t(nn), s, held_, peak_);
-        cones_.upload(ctx->cones, std::max<size_t>(1, last.cone_begin + last.cone_count), s,
-                      held_, peak_);
+        const size_t num_cones = size_t(last.cone_begin) + last.cone_count;
+        if (num_cones > 0)
+            cones_.upload(ctx->cones, num_cones, s, held_, peak_);
+        else
+            cones_.reserve(1, held_, peak_);  // every leaf flagged: no cone is ever read
         skip_.upload(ctx->skip, size_t(nn), s, held_, peak_);
         d_shaft_.reserve(1, held_, peak_);
         h_shaft_.reserve(1);

@@ -92,6 +92,17 @@ NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones)
         cones.push_back(bin[k]);
         b.cone_count++;
     }
+    // One leaf below: its cone is the node's own bounds (the same sums and roundings), which
+    // num_cones and cone_at (node_pair.h) stand in for; kept only if a bit differed.
+    if (b.flat == 1 && b.ndeg == 0 && cones.size() == 1) {
+        const NormalCone& k = cones[0];
+        auto same = [](Vec3 u, Vec3 v) { return u.x == v.x && u.y == v.y && u.z == v.z; };
+        if (same(k.axis, b.axis) && k.chord == b.chord && same(k.clo, b.clo) &&
+            same(k.chi, b.chi)) {
+            cones.clear();
+            b.cone_count = 0;
+        }
+    }
     return b;
 }
 

@@ -58,7 +58,8 @@ struct NodeBounds {
     int32_t ndeg = 0;  // leaves below flagged kLeafNormalDegenerate
     // The same leaves binned by the direction of their normal (cone_of: 26 bins, the faces,
     // edges and corners of a cube), each bin a cone with the box of its leaves' centroids, in
-    // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count): a node holding two walls of a
+    // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count) (see num_cones for a node with
+    // one leaf below, which may store none): a node holding two walls of a
     // room and the leaves along their edge has three tight cones where one would span 90
     // degrees, each over its own part. For the facing tests.
     uint32_t cone_begin = 0, cone_count = 0;
@@ -182,14 +183,25 @@ VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s
     return {{double(blo.x) - ahi.x, double(blo.y) - ahi.y, double(blo.z) - ahi.z},
             {double(bhi.x) - alo.x, double(bhi.y) - alo.y, double(bhi.z) - alo.z}};
 }
+// X's cones: those stored, or, when none is stored for a node with one leaf below (a leaf, or a
+// chain of single children down to one), that leaf's own cone, which is X's own axis, chord and
+// centroid box (node_bounds.cpp stores it only where the two differ: a cone per leaf less, in
+// host and device memory).
+VMAP_HD uint32_t num_cones(const NodeBounds& X) {
+    return X.cone_count > 0 ? X.cone_count : (X.flat + X.ndeg == 1 ? uint32_t(X.flat) : 0u);
+}
+VMAP_HD NormalCone cone_at(const NormalCone* cones, const NodeBounds& X, uint32_t i) {
+    return X.cone_count > 0 ? cones[X.cone_begin + i] : NormalCone{X.axis, X.chord, X.clo, X.chi};
+}
+
 // Does every leaf with a normal under X (X = A with s = 1, X = B with s = -1; direction s n_x)
 // face every leaf at the other end, n_x . y - tol |y| > E (e2)? Cone by cone. Leaves without a
 // normal face everything.
 VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B, double s,
                       double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
-    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
-        const NormalCone& k = cones[i];
+    for (uint32_t i = 0; i < num_cones(X); ++i) {
+        const NormalCone k = cone_at(cones, X, i);
         const Corners c = corners_of(cone_diff_box(A, B, s, k));
         const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
         if (!(min_lin_minus_norm(c, n, k.chord + tol) > E)) return false;
@@ -202,8 +214,8 @@ VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeB
                        double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
     if (X.ndeg > 0 || X.flat == 0) return false;
-    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
-        const NormalCone& k = cones[i];
+    for (uint32_t i = 0; i < num_cones(X); ++i) {
+        const NormalCone k = cone_at(cones, X, i);
         const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
         if (!(max_lin_plus_norm(cone_diff_box(A, B, s, k), n, k.chord - tol) < -E)) return false;
     }

@@ -123,14 +123,17 @@ VisibilityMap octree_step(PointSet points, const BuildParams& params, BuildStats
 
 // The sizes of the frontier: jobs and batches bounded by max_batch_pairs, walks by walk_pairs
 // (the backend's choice when 0: wider on the GPU, whose warps take 32 leaf pairs at once).
-detail::FrontierParams frontier_params(const BuildParams& params, bool gpu) {
+detail::FrontierParams frontier_params(const BuildParams& params, bool gpu, bool nodes) {
     detail::FrontierParams fp;
     fp.max_job_pairs = std::max<uint64_t>(1, params.max_batch_pairs / 16);
     fp.walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 4096);
     fp.max_level_pairs = size_t(params.max_level_pairs);
     // Words per batch (a batch's rows are padded to 32 bits); a job with more words than this
-    // makes a batch of its own, and the backend's buffers grow to fit it.
-    fp.batch_words = params.max_batch_pairs / 32 + 1;
+    // makes a batch of its own, and the backend's buffers grow to fit it. The node path's
+    // batches hold one level slice's walks (jobs of at most walk_pairs leaf pairs): a quarter
+    // of the words serves them (8 MB a buffer by default), which keeps the device memory of a
+    // large scene in bounds (the node bounds take their share there).
+    fp.batch_words = (nodes ? params.max_batch_pairs / 4 : params.max_batch_pairs) / 32 + 1;
     return fp;
 }
 
@@ -146,7 +149,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     const bool gpu = st.backend.rfind("cuda", 0) == 0;
     prepare_node_tests(t, params, gpu, nt);
     st.construction = nt.on ? "nodes" : "leaf-pairs";
-    const detail::FrontierParams fp = frontier_params(params, gpu);
+    const detail::FrontierParams fp = frontier_params(params, gpu, nt.on);
     backend->prepare(t, params.visibility, fp.batch_words);
     backend->set_node_context(nt.on ? &nt.ctx : nullptr);
     st.seconds_plan = seconds_since(t1);

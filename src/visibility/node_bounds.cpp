@@ -11,19 +11,9 @@
 namespace vmap::detail {
 namespace {
 
-// Float rounding of a double bound, outward: never below (down) or above (up) the double value,
-// after first widening by `slack` to absorb the double arithmetic's own rounding.
-float round_up(double v, double slack) {
-    const float f = float(v + slack);
-    return double(f) >= v + slack ? f : std::nextafter(f, INFINITY);
-}
-float round_down(double v, double slack) {
-    const float f = float(v - slack);
-    return double(f) <= v - slack ? f : std::nextafter(f, -INFINITY);
-}
-
 // Node n's bounds; its cones (one per normal bin present, in bin order) go to `cones`.
 NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones) {
+    if (t.is_leaf(n)) return leaf_bounds(t.leaves[t.node_leaf[n]]);
     NodeBounds b;
     const int32_t l0 = t.leaf_begin[n], l1 = t.leaf_end[n];
     double sx = 0, sy = 0, sz = 0;

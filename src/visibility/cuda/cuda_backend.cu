@@ -360,7 +360,18 @@ class CudaBackend final : public Backend {
         cudaStream_t s = slots_[0].stream;
         const int32_t nn = ctx->tree.num_nodes;
         const NodeBounds& last = ctx->nb[nn - 1];
-        nb_.upload(ctx->nb, size_t(nn), s, held_, peak_);
+        // Only the internal nodes' bounds travel (a leaf's are computed from its disc,
+        // leaf_bounds), with each node's index among them.
+        std::vector<NodeBounds> inner;
+        std::vector<int32_t> index(size_t(nn), -1);
+        for (int32_t n = 0; n < nn; ++n) {
+            if (ctx->tree.walk[n].leaf >= 0) continue;
+            index[n] = int32_t(inner.size());
+            inner.push_back(ctx->nb[n]);
+        }
+        if (inner.empty()) inner.emplace_back();
+        nb_.upload(inner.data(), inner.size(), s, held_, peak_);
+        index_.upload(index.data(), index.size(), s, held_, peak_);
         const size_t num_cones = size_t(last.cone_begin) + last.cone_count;
         if (num_cones > 0)
             cones_.upload(ctx->cones, num_cones, s, held_, peak_);
@@ -375,6 +386,7 @@ class CudaBackend final : public Backend {
         ctx_.nb = nb_.ptr;
         ctx_.cones = cones_.ptr;
         ctx_.skip = skip_.ptr;
+        ctx_.bounds_index = index_.ptr;
     }
 
     bool decide(std::span<const NodePairRef> pairs, uint8_t* out,
@@ -437,6 +449,7 @@ class CudaBackend final : public Backend {
     DeviceBuffer<NodeBounds> nb_;
     DeviceBuffer<NormalCone> cones_;
     DeviceBuffer<int32_t> skip_;
+    DeviceBuffer<int32_t> index_;  // per node: its bounds in nb_ (-1 for a leaf)
     DeviceBuffer<NodePairRef> d_pairs_;
     DeviceBuffer<uint8_t> d_dec_;
     DeviceBuffer<unsigned long long> d_shaft_;

@@ -58,9 +58,9 @@ struct BuildParams {
     // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
     // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte);
     // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
-    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (measured at 988ae85,
-    // when its node tests ran on the host and narrow rectangles wasted lanes: 2x slower on the
-    // dragon, H200; the device frontier and packed warps are to be measured against it).
+    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (with the node tests
+    // on the device and packed warps the node path ties it on the dragon at lp 1 and is 15%
+    // slower at lp 4, H200, f333ad1).
     std::string construction = "auto";
     // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32

@@ -10,10 +10,14 @@
 #        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
 #        embree    vmap validate --time-embree (Embree rays vs the leaf-pair kernel, all cores)
 #        construction  issue 15's targets: cornell-dragon h10 at CONS_LEAF_POINTS (default 8 4 1),
-#                  CONS_RUNS runs each (default 3), end to end with the saved file; for the
+#                  CONS_RUNS runs each (default 3), end to end with the saved file, with
+#                  --construction CONS_METHOD (default: the build's own, auto) and
+#                  --walk-pairs CONS_WALK_PAIRS (default: the backend's); for the
 #                  leaf_points in CONS_ORACLE also once with --construction leaf-pairs, and the
 #                  two files compared; growth over CONS_POINTS (lp 1, h 12, --count-links);
-#                  the 1.1M-point --count-links run when CONS_BIG=1
+#                  the 1.1M-point --count-links run when CONS_BIG=1 (stopped after
+#                  CONS_BIG_TIMEOUT s, default 300); a one-line-a-run summary in
+#                  $OUT/construction.txt
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #      Logs and tables go to $OUT.
 set -euo pipefail
@@ -88,7 +92,7 @@ if [[ "$cmd" == run ]]; then
                     > "$OUT/memcheck.log" 2>&1 || rc=1
                 tail -5 "$OUT/memcheck.log"
                 "$san" --tool racecheck --error-exitcode 9 "$bin/gpu_test" \
-                    --gtest_filter='GpuBackend.Rect*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
+                    --gtest_filter='GpuBackend.Rect*:GpuBackend.Small*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
                 tail -5 "$OUT/racecheck.log"
                 if [[ -x "$bin/gi_gpu_test" ]]; then
                     "$san" --tool memcheck --error-exitcode 9 "$bin/gi_gpu_test" \
@@ -119,34 +123,37 @@ if [[ "$cmd" == run ]]; then
                     rm -f /tmp/dragon.vmap
                 done ;;
             construction)
+                meth=(${CONS_METHOD:+--construction "$CONS_METHOD"} ${CONS_WALK_PAIRS:+--walk-pairs "$CONS_WALK_PAIRS"})
                 cons() {  # name, then vmap build arguments: one log per run, wall seconds too
                     local name=$1; shift
                     for r in $(seq "${CONS_RUNS:-3}"); do
                         local t0; t0=$(date +%s.%N)
-                        "$bin/vmap" build "$@" > "$OUT/cons-$name-$r.log" 2>&1 || { rc=1; echo "FAILED $name"; }
+                        timeout "${CONS_TIMEOUT:-590}" "$bin/vmap" -v build "$@" > "$OUT/cons-$name-$r.log" 2>&1 ||
+                            { rc=1; echo "FAILED $name (rc $?)"; }
                         echo "wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{print b - a}')" >> "$OUT/cons-$name-$r.log"
-                        grep -E "^construction|^time:|^wall|^device" "$OUT/cons-$name-$r.log" | tr '\n' ' '
-                        echo " [$name $r]"
+                        { grep -E "^construction|^time:|^ +plan|^wall|^device|^throughput" "$OUT/cons-$name-$r.log" |
+                            tr '\n' ' '; echo " [$name $r]"; } | tee -a "$OUT/construction.txt"
                     done
                 }
                 for lp in ${CONS_LEAF_POINTS:-8 4 1}; do
                     cons "lp$lp" scenes/cornell-dragon.json --backend cuda --max-height 10 \
-                        --leaf-points "$lp" -o /tmp/cons.vmap
+                        --leaf-points "$lp" -o /tmp/cons.vmap "${meth[@]}"
                     if [[ " ${CONS_ORACLE:-} " == *" $lp "* ]]; then
                         CONS_RUNS=1 cons "lp$lp-oracle" scenes/cornell-dragon.json --backend cuda --max-height 10 \
                             --leaf-points "$lp" -o /tmp/cons-o.vmap --construction leaf-pairs
-                        cmp /tmp/cons.vmap /tmp/cons-o.vmap && echo "lp$lp: byte-identical" || rc=1
+                        { cmp /tmp/cons.vmap /tmp/cons-o.vmap && echo "lp$lp: byte-identical" ||
+                            { rc=1; echo "lp$lp: FILES DIFFER"; }; } | tee -a "$OUT/construction.txt"
                         rm -f /tmp/cons-o.vmap
                     fi
                     rm -f /tmp/cons.vmap
                 done
                 for n in ${CONS_POINTS:-}; do
                     cons "n$n" scenes/cornell-dragon.json --backend cuda --max-height 12 \
-                        --leaf-points 1 --points "$n" --count-links
+                        --leaf-points 1 --points "$n" --count-links "${meth[@]}"
                 done
                 if [[ "${CONS_BIG:-0}" == 1 ]]; then
-                    CONS_RUNS=1 cons big scenes/cornell-dragon.json --backend cuda --max-height 12 \
-                        --leaf-points 1 --points 1100000 --count-links
+                    CONS_RUNS=1 CONS_TIMEOUT=${CONS_BIG_TIMEOUT:-300} cons big scenes/cornell-dragon.json \
+                        --backend cuda --max-height 12 --leaf-points 1 --points 1100000 --count-links "${meth[@]}"
                 fi ;;
             ab)
                 for v in ${VARIANTS:-packet lane}; do

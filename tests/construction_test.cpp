@@ -16,9 +16,11 @@ namespace {
 
 void expect_same_vmap(const PointSet& ps, BuildParams bp, const std::string& what,
                       BuildStats* nodes_stats = nullptr) {
-    bp.construction = Construction::kLeafPairs;
+    BuildParams ref_bp = bp;  // the oracle holds each level of the frontier whole
+    ref_bp.construction = Construction::kLeafPairs;
+    ref_bp.max_level_pairs = BuildParams{}.max_level_pairs;
     BuildStats ls, ns;
-    const VisibilityMap ref = build_vmap(ps, bp, &ls);
+    const VisibilityMap ref = build_vmap(ps, ref_bp, &ls);
     bp.construction = Construction::kNodes;
     const VisibilityMap got = build_vmap(ps, bp, &ns);
     ASSERT_EQ(ns.construction, "nodes");
@@ -186,12 +188,36 @@ TEST(Construction, RandomScenesGiveTheLeafPairVmap) {
         bp.visibility.eps = std::array<float, 4>{0.f, 0.001f, 0.01f, 0.05f}[r() % 4];
         bp.visibility.facing_tol = std::array<float, 3>{0.f, 0.005f, 0.05f}[r() % 3];
         bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
+        // Frontier slices of a few pairs: pairs settled across slices and levels.
+        bp.max_level_pairs = std::array<uint64_t, 4>{1, 7, 64, 1u << 20}[r() % 4];
         BuildStats st;
         expect_same_vmap(ps, bp, "seed " + std::to_string(seed), &st);
         if (HasFailure()) return;
         decided_scenes += st.leaf_pairs_walked < st.leaf_pairs;
     }
     EXPECT_GT(decided_scenes, 150u) << "the node tests should decide something in most scenes";
+}
+
+// The frontier held a pair at a time per level (the bound on memory) gives the same V-map and
+// the same counts as the frontier held whole, on both constructions.
+TEST(Construction, SlicedFrontierGivesTheSameVmap) {
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2500, 4);
+    for (const Construction method : {Construction::kLeafPairs, Construction::kNodes}) {
+        BuildParams bp = test::cpu_params(7, 2);
+        bp.construction = method;
+        bp.walk_pairs = 64;
+        BuildStats ws, ss;
+        const VisibilityMap whole = build_vmap(ps, bp, &ws);
+        bp.max_level_pairs = 1;
+        const VisibilityMap sliced = build_vmap(ps, bp, &ss);
+        EXPECT_EQ(sliced.link_offsets(), whole.link_offsets()) << name_of(method);
+        EXPECT_TRUE(std::ranges::equal(sliced.link_targets(), whole.link_targets())) << name_of(method);
+        EXPECT_EQ(ss.leaf_pairs_walked, ws.leaf_pairs_walked) << name_of(method);
+        EXPECT_EQ(ss.node_pairs_tested, ws.node_pairs_tested) << name_of(method);
+        EXPECT_EQ(ss.work.visible_pairs, ws.work.visible_pairs) << name_of(method);
+        EXPECT_EQ(ss.leaf_walked, ws.leaf_walked) << name_of(method);
+        EXPECT_GT(ss.batches, ws.batches) << name_of(method);
+    }
 }
 
 // Every node pair of disjoint subtrees, not only those the builder meets: a decision must hold

@@ -2,11 +2,13 @@
 // counts, byte-identical V-maps. Labelled `gpu`; without a device every test reports SKIPPED.
 #include <gtest/gtest.h>
 
+#include <cstdlib>
 #include <filesystem>
 
 #include "test_files.h"
 #include "test_util.h"
 #include "visibility/backend.h"
+#include "visibility/node_pair.h"
 
 namespace vmap {
 namespace {
@@ -77,6 +79,14 @@ TEST_P(GpuMatchesCpu, NodePathGivesTheSameVmap) {
     EXPECT_EQ(gpu.link_offsets(), ref.link_offsets());
     EXPECT_TRUE(std::ranges::equal(gpu.link_targets(), ref.link_targets()));
     EXPECT_TRUE(std::ranges::equal(cpu.link_targets(), ref.link_targets()));
+    // The device decides exactly what the host decides.
+    EXPECT_EQ(gs.node_pairs_tested, cs.node_pairs_tested);
+    EXPECT_EQ(gs.shaft_node_tests, cs.shaft_node_tests);
+    EXPECT_EQ(gs.leaf_pairs_walked, cs.leaf_pairs_walked);
+    // The frontier in slices of a few pairs: the same map.
+    bp.max_level_pairs = 5;
+    const VisibilityMap sliced = build_vmap(ps, bp);
+    EXPECT_TRUE(std::ranges::equal(sliced.link_targets(), ref.link_targets()));
 }
 
 INSTANTIATE_TEST_SUITE_P(Scenes, GpuMatchesCpu,
@@ -90,24 +100,13 @@ INSTANTIATE_TEST_SUITE_P(Scenes, GpuMatchesCpu,
                              return test::case_name(i.param, false);
                          });
 
-TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
-    VMAP_REQUIRE_GPU();
-    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 5000, 9);
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(ps, {8, 3}, order);
-    const int32_t L = t.num_leaves();
-    // Odd-sized rectangles, so rows end mid-word and jobs start at odd offsets.
-    std::vector<detail::PairJob> jobs;
-    uint64_t words = 0;
-    for (int32_t r0 = 0; r0 + 37 < L / 2; r0 += 301) {
-        detail::PairJob j;
-        j.row0 = r0, j.rows = 37, j.col0 = L / 2 + r0 % 97, j.cols = std::min(L - j.col0, 1001);
-        j.word_offset = words;
-        words += detail::job_words(j);
-        jobs.push_back(j);
-    }
+// The GPU's table and counts for `jobs` (kernel VMAP_CUDA_VARIANT = variant) against the CPU's.
+void expect_same_tables(const Octree& t, const std::vector<detail::PairJob>& jobs,
+                        uint64_t words, const char* variant) {
+    setenv("VMAP_CUDA_VARIANT", variant, 1);
     std::string why;
     auto gpu = detail::make_cuda_backend(&why);
+    unsetenv("VMAP_CUDA_VARIANT");
     auto cpu = detail::make_cpu_backend();
     VisibilityParams vp;
     gpu->prepare(t, vp, words);
@@ -117,10 +116,84 @@ TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
     WorkCounters gw, cw;
     const uint32_t* g = gpu->wait(1, gw);
     const uint32_t* c = cpu->wait(1, cw);
-    ASSERT_EQ(std::vector<uint32_t>(g, g + words), std::vector<uint32_t>(c, c + words));
-    EXPECT_EQ(gw.node_tests, cw.node_tests);
+    ASSERT_EQ(std::vector<uint32_t>(g, g + words), std::vector<uint32_t>(c, c + words))
+        << variant;
+    EXPECT_EQ(gw.pairs, cw.pairs) << variant;
+    EXPECT_EQ(gw.node_tests, cw.node_tests) << variant;
+    EXPECT_EQ(gw.occluder_tests, cw.occluder_tests) << variant;
     EXPECT_GT(cw.visible_pairs, 0u);
     EXPECT_GT(gpu->peak_device_bytes(), 0u);
+}
+
+void add_job(std::vector<detail::PairJob>& jobs, uint64_t& words, int32_t row0, int32_t rows,
+             int32_t col0, int32_t cols) {
+    detail::PairJob j;
+    j.row0 = row0, j.rows = rows, j.col0 = col0, j.cols = cols;
+    j.word_offset = words;
+    words += detail::job_words(j);
+    jobs.push_back(j);
+}
+
+TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 5000, 9);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(ps, {8, 3}, order);
+    const int32_t L = t.num_leaves();
+    // Odd-sized rectangles, so rows end mid-word and jobs start at odd offsets.
+    std::vector<detail::PairJob> jobs;
+    uint64_t words = 0;
+    for (int32_t r0 = 0; r0 + 37 < L / 2; r0 += 301)
+        add_job(jobs, words, r0, 37, L / 2 + r0 % 97, std::min(L - (L / 2 + r0 % 97), 1001));
+    expect_same_tables(t, jobs, words, "packet");
+}
+
+// Rectangles of every small shape, packed 32 leaf pairs to a warp across rows and jobs.
+TEST(GpuBackend, SmallRectanglesPackedIntoWarpsAreBitIdenticalToTheCpu) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 4000, 9);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(ps, {8, 2}, order);
+    const int32_t L = t.num_leaves();
+    std::vector<detail::PairJob> jobs;
+    uint64_t words = 0;
+    int k = 0;
+    for (int32_t r0 = 0; r0 + 40 < L / 2; r0 += 13, ++k)
+        add_job(jobs, words, r0, 1 + k % 7, L / 2 + (r0 * 7) % (L / 2 - 70), 1 + (k * 5) % 67);
+    for (const char* variant : {"packet", "lane"}) expect_same_tables(t, jobs, words, variant);
+}
+
+// decide_node_pair on the device against the host, pair by pair, counts included.
+TEST(GpuBackend, NodeDecisionsOnTheDeviceAreTheHosts) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-two-models"), 5000, 5);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(ps, {8, 2}, order);
+    const auto nb = detail::node_bounds(t);
+    VisibilityParams vp;
+    const detail::NodePairContext c{t.view(),      nb.nodes.data(), nb.cones.data(),
+                                    t.skip.data(), vp,              detail::node_pair_margin(t.boxes[0])};
+    std::vector<detail::NodePairRef> pairs;
+    for (int32_t a = 0; a < t.num_nodes(); a += 3)
+        for (int32_t b = t.skip[a]; b < t.num_nodes(); b += 17) pairs.push_back({a, b});
+    std::vector<uint8_t> host(pairs.size()), dev(pairs.size(), 99);
+    struct {
+        uint64_t shaft_node_tests = 0;
+    } wc;
+    for (size_t i = 0; i < pairs.size(); ++i)
+        if (detail::worth_deciding(c, pairs[i].a, pairs[i].b))
+            host[i] = uint8_t(detail::decide_node_pair(c, pairs[i].a, pairs[i].b, &wc));
+    std::string why;
+    auto gpu = detail::make_cuda_backend(&why);
+    gpu->prepare(t, vp, 1024);
+    gpu->set_node_context(&c);
+    uint64_t shaft = 0;
+    ASSERT_TRUE(gpu->decide(pairs, dev.data(), &shaft));
+    EXPECT_EQ(dev, host);
+    EXPECT_EQ(shaft, wc.shaft_node_tests);
+    uint64_t decided = 0;
+    for (uint8_t d : host) decided += d != 0;
+    EXPECT_GT(decided, pairs.size() / 10);
 }
 
 TEST(GpuBackend, AutoPicksTheGpuAndSaysSo) {

@@ -36,13 +36,17 @@ struct BuildParams {
     // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
     // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte);
     // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
-    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (whose node tests run
-    // on the host and whose narrow rectangles waste lanes: 2x slower on the dragon, H200).
+    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (with the node tests
+    // on the device and packed warps the node path ties it on the dragon at lp 1 and is 15%
+    // slower at lp 4, H200, f333ad1).
     Construction construction = Construction::kAuto;
     // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
     // columns of a row at once).
     uint64_t walk_pairs = 0;
+    // Node pairs of one level of the construction's frontier held at once (vmap/frontier.h):
+    // bounds the memory of the node-pair decisions; any value gives the same V-map.
+    uint64_t max_level_pairs = uint64_t(1) << 18;
 
     // Throws vmap::Error naming `source` and the field for a value out of range (octree and
     // visibility included), or the grid walk with backend cuda.

@@ -29,6 +29,11 @@ struct PairJob {
 inline uint64_t row_words(int32_t cols) { return (static_cast<uint64_t>(cols) + 31) / 32; }
 inline uint64_t job_words(const PairJob& j) { return j.rows * row_words(j.cols); }
 
+// A node pair of the construction's frontier, a before b in preorder.
+struct NodePairRef {
+    int32_t a = 0, b = 0;
+};
+
 class Backend {
   public:
     virtual ~Backend() = default;
@@ -50,6 +55,17 @@ class Backend {
     // Node bounds of the build (construction "nodes"), valid until the last wait; a backend may
     // use them to restrict each job's walk to its shaft (same answers). Called after prepare.
     virtual void set_node_context(const NodePairContext*) {}
+    // Decides node pairs with decide_node_pair (node_pair.h) under the context given to
+    // set_node_context: out[i] is the PairDecision of pairs[i], as a byte (undecided for a pair
+    // not worth_deciding); adds the tree nodes
+    // tested to *shaft_node_tests. False (nothing written) when the backend leaves the
+    // decisions to the host (the CPU); the answers are the host's, bit for bit.
+    virtual bool decide(std::span<const NodePairRef> /*pairs*/, uint8_t* /*out*/,
+                        uint64_t* /*shaft_node_tests*/) {
+        return false;
+    }
+    // Whether the backend itself adds evaluated leaf pairs to the progress while a batch runs.
+    virtual bool counts_progress() const { return false; }
     // Leaf pairs per second to expect, for the estimate reported before the work starts (0:
     // no idea).
     virtual double expected_pairs_per_second() const { return 0; }

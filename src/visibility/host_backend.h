@@ -44,8 +44,10 @@ class HostBackend : public Backend {
                 if (progress_ && progress_->cancelled()) return;
                 WorkCounters& wc = counters.local();
                 uint64_t range_pairs = 0;
+                // The state of the job this thread worked on last carries over to the next
+                // range of the same job (a job's shaft is prepared once per thread, not once
+                // per 16 words).
                 State& st = states.local();
-                st.job = -1;
                 size_t j =
                     std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
                 for (uint64_t item = range.begin(); item < range.end(); ++item) {
@@ -91,6 +93,7 @@ class HostBackend : public Backend {
     }
 
     double busy_seconds() const override { return busy_; }
+    bool counts_progress() const override { return true; }
     // About 2.5e6 leaf pairs per second per core (docs/results.md; 2-4e6 by scene).
     double expected_pairs_per_second() const override {
         return 2.5e6 * tbb::this_task_arena::max_concurrency();

@@ -12,19 +12,9 @@
 namespace vmap::detail {
 namespace {
 
-// Float rounding of a double bound, outward: never below (down) or above (up) the double value,
-// after first widening by `slack` to absorb the double arithmetic's own rounding.
-float round_up(double v, double slack) {
-    const float f = float(v + slack);
-    return double(f) >= v + slack ? f : std::nextafter(f, INFINITY);
-}
-float round_down(double v, double slack) {
-    const float f = float(v - slack);
-    return double(f) <= v - slack ? f : std::nextafter(f, -INFINITY);
-}
-
 // Node n's bounds; its cones (one per normal bin present, in bin order) go to `cones`.
 NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones) {
+    if (t.is_leaf(n)) return leaf_bounds(leaf_discs(t)[t.node_leaf()[n]]);
     NodeBounds b;
     const int32_t l0 = t.leaf_begin()[n], l1 = t.leaf_end()[n];
     double sx = 0, sy = 0, sz = 0;
@@ -92,6 +82,17 @@ NodeBounds bounds_of(const Octree& t, int32_t n, std::vector<NormalCone>& cones)
         bin[k].chord = round_up(bin_chord[k], 1e-12);
         cones.push_back(bin[k]);
         b.cone_count++;
+    }
+    // One leaf below: its cone is the node's own bounds (the same sums and roundings), which
+    // num_cones and cone_at (node_pair.h) stand in for; kept only if a bit differed.
+    if (b.flat == 1 && b.ndeg == 0 && cones.size() == 1) {
+        const NormalCone& k = cones[0];
+        auto same = [](Vec3 u, Vec3 v) { return u.x == v.x && u.y == v.y && u.z == v.z; };
+        if (same(k.axis, b.axis) && k.chord == b.chord && same(k.clo, b.clo) &&
+            same(k.chi, b.chi)) {
+            cones.clear();
+            b.cone_count = 0;
+        }
     }
     return b;
 }

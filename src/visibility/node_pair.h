@@ -59,7 +59,8 @@ struct NodeBounds {
     int32_t ndeg = 0;  // leaves below flagged kLeafNormalDegenerate
     // The same leaves binned by the direction of their normal (cone_of: 26 bins, the faces,
     // edges and corners of a cube), each bin a cone with the box of its leaves' centroids, in
-    // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count): a node holding two walls of a
+    // NodeBoundsSet::cones[cone_begin, cone_begin + cone_count) (see num_cones for a node with
+    // one leaf below, which may store none): a node holding two walls of a
     // room and the leaves along their edge has three tight cones where one would span 90
     // degrees, each over its own part. For the facing tests.
     uint32_t cone_begin = 0, cone_count = 0;
@@ -90,12 +91,26 @@ enum class PairDecision : uint8_t { kUndecided = 0, kAllVisible = 1, kNoneVisibl
 // What the node tests read: the walk array, the bounds, the predicate's parameters.
 struct NodePairContext {
     OctreeView tree;
+    // The bounds of the internal nodes, at node index n, or at bounds_index[n] when that is
+    // given (the device keeps only the internal nodes'); a leaf's are leaf_bounds of its disc.
     const NodeBounds* nb = nullptr;
     const NormalCone* cones = nullptr;
     const int32_t* skip = nullptr;  // per node: end of its subtree (preorder)
     VisibilityParams vp;
     double margin = 0;  // E above; 0 disables every decision (all undecided)
+    const int32_t* bounds_index = nullptr;
 };
+
+// Float rounding of a double bound, outward: never below (down) or above (up) the double value,
+// after first widening by `slack` to absorb the double arithmetic's own rounding.
+VMAP_HD float round_up(double v, double slack) {
+    const float f = float(v + slack);
+    return double(f) >= v + slack ? f : nextafterf(f, INFINITY);
+}
+VMAP_HD float round_down(double v, double slack) {
+    const float f = float(v - slack);
+    return double(f) <= v - slack ? f : nextafterf(f, -INFINITY);
+}
 
 // E for a tree whose root content box is `root`, or 0 where the analysis does not hold (float
 // products that could overflow or lose precision to underflow).
@@ -115,6 +130,41 @@ VMAP_HD double dot3(D3 a, D3 b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
 VMAP_HD double norm3(D3 a) { return sqrt(dot3(a, a)); }
 VMAP_HD double min_d(double a, double b) { return a < b ? a : b; }
 VMAP_HD double max_d(double a, double b) { return a > b ? a : b; }
+
+// The bounds of one leaf (node_bounds.cpp's sums over a single leaf, written out): its centroid
+// as the box, its normal (normalised in double) as the axis with the chord to the float normal,
+// no stored cone (num_cones stands in for it). Computed where they are needed, on the host and
+// the device alike, so neither stores a leaf's bounds.
+VMAP_HD NodeBounds leaf_bounds(const LeafDisc& d) {
+    NodeBounds b;
+    b.clo = b.chi = d.centroid;
+    b.pad = round_up(1e-3 * double(d.delta), 0);
+    b.axis = Vec3{0, 0, 1};
+    const D3 nv = d3(d.normal);
+    if (d.flags & kLeafNormalDegenerate) {
+        b.ndeg = 1;
+    } else {
+        b.flat = 1;
+        const double len = sqrt(nv.x * nv.x + nv.y * nv.y + nv.z * nv.z);
+        b.axis = len > 1e-3 ? Vec3{float(nv.x / len), float(nv.y / len), float(nv.z / len)}
+                            : d.normal;
+    }
+    const D3 ax = d3(b.axis), c = d3(d.centroid);
+    const double s = dot3(ax, c);
+    const double scale = fabs(ax.x * c.x) + fabs(ax.y * c.y) + fabs(ax.z * c.z);
+    const double chord = b.flat ? norm3({nv.x - ax.x, nv.y - ax.y, nv.z - ax.z}) : 0.0;
+    b.chord = round_up(chord, 1e-12);
+    b.s_lo = round_down(s, 1e-12 * scale);
+    b.s_hi = round_up(s, 1e-12 * scale);
+    return b;
+}
+
+// The bounds of node n.
+VMAP_HD NodeBounds bounds_at(const NodePairContext& c, int32_t n) {
+    const int32_t leaf = c.tree.walk[n].leaf;
+    if (leaf >= 0) return leaf_bounds(c.tree.leaves[leaf]);
+    return c.nb[c.bounds_index ? c.bounds_index[n] : n];
+}
 
 // Box of differences q - p, q in [blo, bhi], p in [alo, ahi].
 struct DiffBox {
@@ -183,14 +233,25 @@ VMAP_HD DiffBox cone_diff_box(const NodeBounds& A, const NodeBounds& B, double s
     return {{double(blo.x) - ahi.x, double(blo.y) - ahi.y, double(blo.z) - ahi.z},
             {double(bhi.x) - alo.x, double(bhi.y) - alo.y, double(bhi.z) - alo.z}};
 }
+// X's cones: those stored, or, when none is stored for a node with one leaf below (a leaf, or a
+// chain of single children down to one), that leaf's own cone, which is X's own axis, chord and
+// centroid box (node_bounds.cpp stores it only where the two differ: a cone per leaf less, in
+// host and device memory).
+VMAP_HD uint32_t num_cones(const NodeBounds& X) {
+    return X.cone_count > 0 ? X.cone_count : (X.flat + X.ndeg == 1 ? uint32_t(X.flat) : 0u);
+}
+VMAP_HD NormalCone cone_at(const NormalCone* cones, const NodeBounds& X, uint32_t i) {
+    return X.cone_count > 0 ? cones[X.cone_begin + i] : NormalCone{X.axis, X.chord, X.clo, X.chi};
+}
+
 // Does every leaf with a normal under X (X = A with s = 1, X = B with s = -1; direction s n_x)
 // face every leaf at the other end, n_x . y - tol |y| > E (e2)? Cone by cone. Leaves without a
 // normal face everything.
 VMAP_HD bool all_face(const NormalCone* cones, const NodeBounds& A, const NodeBounds& B, double s,
                       double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
-    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
-        const NormalCone& k = cones[i];
+    for (uint32_t i = 0; i < num_cones(X); ++i) {
+        const NormalCone k = cone_at(cones, X, i);
         const Corners c = corners_of(cone_diff_box(A, B, s, k));
         const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
         if (!(min_lin_minus_norm(c, n, k.chord + tol) > E)) return false;
@@ -203,8 +264,8 @@ VMAP_HD bool none_face(const NormalCone* cones, const NodeBounds& A, const NodeB
                        double tol, double E) {
     const NodeBounds& X = s > 0 ? A : B;
     if (X.ndeg > 0 || X.flat == 0) return false;
-    for (uint32_t i = X.cone_begin; i < X.cone_begin + X.cone_count; ++i) {
-        const NormalCone& k = cones[i];
+    for (uint32_t i = 0; i < num_cones(X); ++i) {
+        const NormalCone k = cone_at(cones, X, i);
         const D3 n{s * k.axis.x, s * k.axis.y, s * k.axis.z};
         if (!(max_lin_plus_norm(cone_diff_box(A, B, s, k), n, k.chord - tol) < -E)) return false;
     }
@@ -342,8 +403,8 @@ VMAP_HD bool shaft_clear_of_disc(const Shaft& s, const LeafDisc& x, double E) {
 template <class Counters, class Enter>
 VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool flat_a, bool flat_b,
                         Counters* wc, Enter&& enter) {
-    const NodeBounds& na = c.nb[A];
-    const NodeBounds& nbb = c.nb[B];
+    const NodeBounds na = bounds_at(c, A);
+    const NodeBounds nbb = bounds_at(c, B);
     const Shaft s =
         make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
     const double E = c.margin;
@@ -353,7 +414,7 @@ VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool fla
         wc->shaft_node_tests++;
         const WalkNode w = c.tree.walk[n];
         const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
-        const NodeBounds& x = c.nb[n];
+        const NodeBounds x = bounds_at(c, n);
         if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
             (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
             (in_b && (b_leaf || (flat_b && x.ndeg == 0))) || shaft_clear_of_planes(s, x, E) ||
@@ -368,9 +429,10 @@ VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool fla
 
 // Whether each end is flat for the other (flat_end), for walk_shaft.
 VMAP_HD void flat_ends(const NodePairContext& c, int32_t A, int32_t B, bool* fa, bool* fb) {
-    const DiffBox db = diff_box(c.nb[A], c.nb[B]);
-    *fa = flat_end(c.nb[A], 1, db, c.vp.eps, c.margin);
-    *fb = flat_end(c.nb[B], -1, db, c.vp.eps, c.margin);
+    const NodeBounds na = bounds_at(c, A), nbb = bounds_at(c, B);
+    const DiffBox db = diff_box(na, nbb);
+    *fa = flat_end(na, 1, db, c.vp.eps, c.margin);
+    *fb = flat_end(nbb, -1, db, c.vp.eps, c.margin);
 }
 
 // The leaves that may be actual occluders of some segment from A's centroids to B's, counted up
@@ -412,13 +474,19 @@ inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         w.skip = int32_t(std::lower_bound(orig.begin(), orig.end(), w.skip) - orig.begin());
 }
 
+// Whether the construction tests (A, B) at all: a pair of two leaves is one leaf pair, walked
+// untested (a node-pair test costs a few walks).
+VMAP_HD bool worth_deciding(const NodePairContext& c, int32_t A, int32_t B) {
+    return c.margin > 0 && (c.tree.walk[A].leaf < 0 || c.tree.walk[B].leaf < 0);
+}
+
 // The decision for node pair (A, B), A before B in preorder (see the top of this file).
 template <class Counters>
 VMAP_HD PairDecision decide_node_pair(const NodePairContext& c, int32_t A, int32_t B,
                                       Counters* wc) {
     if (!(c.margin > 0)) return PairDecision::kUndecided;
-    const NodeBounds& na = c.nb[A];
-    const NodeBounds& nbb = c.nb[B];
+    const NodeBounds na = bounds_at(c, A);
+    const NodeBounds nbb = bounds_at(c, B);
     const DiffBox db = diff_box(na, nbb);
     const double E = c.margin, tol = c.vp.facing_tol;
     // Facing fails for every pair when it fails for every leaf of one end.

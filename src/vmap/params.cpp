@@ -27,6 +27,8 @@ void VisibilityParams::check(const std::string& source) const {
 void BuildParams::check(const std::string& source) const {
     octree.check(source);
     visibility.check(source);
+    if (max_level_pairs < 1)
+        throw Error(fmt::format("{}: max_level_pairs must be at least 1", source));
     if (max_batch_pairs < 1024)
         throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
                                 max_batch_pairs));

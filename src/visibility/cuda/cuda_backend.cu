@@ -1,12 +1,13 @@
 // Leaf-pair visibility on a CUDA GPU (paper §4.3: the GPU fills the leaf visibility status table
 // while the host extracts links). The predicate is leaf_pair.h, the same code the CPU runs.
 //
-// Work decomposition: an item is one 32-bit word of a job's table, i.e. one row leaf a against
-// 32 consecutive column leaves. One warp evaluates one item, a lane per column; a ballot packs
-// the 32 answers and lane 0 stores the word. Neighbouring lanes walk nearly the same segment, so
-// the warp walks the tree once for all 32 (leaf_pairs_packet_kernel, the default). The per-lane
-// walk of leaf_pair.h (leaf_pairs_kernel, VMAP_CUDA_VARIANT=lane) is kept as the on-device
-// oracle: the GPU tests check that both give the same bits and counts.
+// Work decomposition: the leaf pairs of a batch are numbered across its jobs (row by row inside
+// a job), and a warp evaluates 32 consecutive ones, a lane per pair, whatever the jobs' shapes
+// (locate_pair). Neighbouring lanes walk nearly the same segment, so the warp walks the tree
+// once for all 32 (leaf_pairs_packet_kernel, the default). The per-lane walk of leaf_pair.h
+// (leaf_pairs_kernel, VMAP_CUDA_VARIANT=lane) is kept as the on-device oracle: the GPU tests
+// check that both give the same bits and counts. The node-pair tests of the construction's
+// frontier (node_pair.h, decide_kernel) run here too, one thread a node pair.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -19,6 +20,7 @@
 #include "util/device.h"
 #include "visibility/backend.h"
 #include "visibility/leaf_pair.h"
+#include "visibility/node_pair.h"
 #include "vmap/error.h"
 
 namespace vmap::detail {
@@ -35,30 +37,49 @@ struct SmallCounters {
     uint32_t pairs = 0, facing_pairs = 0, visible_pairs = 0, node_tests = 0, occluder_tests = 0;
 };
 
-// Where a work item lies: its job (the last j with first[j] <= item), the item's word within
-// the job, and the row leaf and first column of that word.
-struct ItemPos {
-    PairJob job;
-    uint64_t local;
-    int32_t row, col0;
+// Where a leaf pair of the batch lies: pairs are numbered across the batch's jobs, row by row
+// inside a job (first[j] is the number of pairs before job j), so a warp takes 32 consecutive
+// pairs whatever the jobs' shapes: a job of 3 x 5 leaf pairs fills 15 lanes and the next job
+// the rest, where one row per warp would leave 27 of 32 lanes idle on it (issue 15). The pairs
+// of a job are neighbours in space, and so are consecutive jobs (children of one pair), so the
+// 32 segments still form a thin bundle for the packet walk.
+struct PairPos {
+    int32_t a = 0, b = 0;  // the leaves (a == b when the lane has no pair)
+    bool in = false;
+    uint64_t word = ~0ull;  // the bit's word in the batch's table
+    uint32_t bit = 0;
 };
-__device__ inline ItemPos locate_item(const PairJob* jobs, const uint64_t* first, int32_t num_jobs,
-                                      uint64_t item) {
+__device__ inline PairPos locate_pair(const PairJob* jobs, const uint64_t* first, int32_t num_jobs,
+                                      uint64_t pair, uint64_t num_pairs) {
+    PairPos at;
+    if (pair >= num_pairs) return at;
     int32_t lo = 0, hi = num_jobs;
     while (hi - lo > 1) {
         const int32_t mid = (lo + hi) >> 1;
-        if (first[mid] <= item)
+        if (first[mid] <= pair)
             lo = mid;
         else
             hi = mid;
     }
-    ItemPos at;
-    at.job = jobs[lo];
-    const uint64_t rw = (uint64_t(at.job.cols) + 31) / 32;
-    at.local = item - first[lo];
-    at.row = at.job.row0 + int32_t(at.local / rw);
-    at.col0 = int32_t(at.local % rw) * 32;
+    const PairJob job = jobs[lo];
+    const uint64_t local = pair - first[lo];
+    const int32_t r = int32_t(local / uint64_t(job.cols)), c = int32_t(local % uint64_t(job.cols));
+    at.a = job.row0 + r;
+    at.b = job.col0 + c;
+    at.in = true;
+    at.word = job.word_offset + uint64_t(r) * ((uint64_t(job.cols) + 31) / 32) + uint64_t(c / 32);
+    at.bit = 1u << (c % 32);
     return at;
+}
+
+// The warp's answers into the table (zeroed before the kernel): the lanes of one word OR their
+// bits together and one of them stores them; a word split between two warps (a row that ends
+// mid-warp) is ORed by both, hence the atomic.
+__device__ inline void store_bits(const PairPos& at, bool vis, uint32_t* bits) {
+    const unsigned peers = __match_any_sync(0xffffffffu, at.word);
+    const unsigned v = __reduce_or_sync(peers, vis ? at.bit : 0u);
+    const int lane = threadIdx.x & 31;
+    if (at.in && v && lane == __ffs(peers) - 1) atomicOr(bits + at.word, v);
 }
 
 // Warp-reduces the counters; one atomic per warp and counter.
@@ -77,57 +98,52 @@ __device__ inline void flush_counters(const SmallCounters& wc, int lane, DeviceC
     }
 }
 
-// One lane, one pair: leaf_pair_visible as the CPU runs it.
+// One lane, one pair: leaf_pair_visible as the CPU runs it (the on-device oracle).
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
-                      const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_items,
+                      const uint64_t* __restrict__ first, int32_t num_jobs, uint64_t num_pairs,
                       uint32_t* __restrict__ bits, DeviceCounters* counters) {
     const int lane = threadIdx.x & 31;
     const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
     const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
     SmallCounters wc;
-    for (uint64_t item = warp; item < num_items; item += warps) {
-        const ItemPos at = locate_item(jobs, first, num_jobs, item);
-        const int32_t c = at.col0 + lane;
+    for (uint64_t w = warp; w * 32 < num_pairs; w += warps) {
+        const PairPos at = locate_pair(jobs, first, num_jobs, w * 32 + lane, num_pairs);
         bool vis = false;
-        if (c < at.job.cols) {
-            vis = leaf_pair_visible<true>(t, at.row, at.job.col0 + c, vp, &wc);
+        if (at.in) {
+            vis = leaf_pair_visible<true>(t, at.a, at.b, vp, &wc);
             wc.pairs++;
         }
-        const uint32_t word = __ballot_sync(0xffffffffu, vis);
-        if (lane == 0) bits[at.job.word_offset + at.local] = word;
+        store_bits(at, vis, bits);
         wc.visible_pairs += vis;
     }
-    // (A thread sees at most a few thousand items of 32 pairs and ~100 node tests a pair:
+    // (A thread sees at most a few thousand warps of 32 pairs and ~100 node tests a pair:
     // far below 2^32.)
     flush_counters(wc, lane, counters);
 }
 
-// The same walk for the warp as a packet. The 32 lanes hold one row leaf a against 32
-// neighbouring column leaves, so their segments form a thin fan. The warp walks the preorder
-// tree once, entering a node when any lane's own walk would enter it; node and leaf records are
-// then warp-uniform loads (one broadcast instead of 32 gathers). Each lane tests only the nodes
-// on its own path (n >= resume: it has not skipped past the node's subtree), so it makes exactly
-// the tests, counts and answer of leaf_pair_visible, from the same pieces (pair_segment,
-// slab_meets_box, occluder_reached).
+// The same walk for the warp as a packet. The 32 lanes hold 32 neighbouring leaf pairs, so
+// their segments form a thin bundle. The warp walks the preorder tree once, entering a node
+// when any lane's own walk would enter it; node and leaf records are then warp-uniform loads
+// (one broadcast instead of 32 gathers). Each lane tests only the nodes on its own path
+// (n >= resume: it has not skipped past the node's subtree), so it makes exactly the tests,
+// counts and answer of leaf_pair_visible, from the same pieces (pair_segment, slab_meets_box,
+// occluder_reached), whichever pairs share the warp.
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                              const uint64_t* __restrict__ first, int32_t num_jobs,
-                             uint64_t num_items, uint32_t* __restrict__ bits,
+                             uint64_t num_pairs, uint32_t* __restrict__ bits,
                              DeviceCounters* counters) {
     const int lane = threadIdx.x & 31;
     const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
     const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
     SmallCounters wc;
-    for (uint64_t item = warp; item < num_items; item += warps) {
-        const ItemPos at = locate_item(jobs, first, num_jobs, item);
-        const int32_t a = at.row;
-        const int32_t c = at.col0 + lane;
-        const bool in = c < at.job.cols;
-        const int32_t b = in ? at.job.col0 + c : a;
+    for (uint64_t wi = warp; wi * 32 < num_pairs; wi += warps) {
+        const PairPos at = locate_pair(jobs, first, num_jobs, wi * 32 + lane, num_pairs);
+        const int32_t a = at.in ? at.a : 0, b = at.in ? at.b : 0;
         const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
-        bool vis = in && s.faces;
-        wc.pairs += in;
+        bool vis = at.in && s.faces;
+        wc.pairs += at.in;
         wc.facing_pairs += vis;
         int occluders = 0;
         int32_t resume = 0;  // this lane's own walk skipped everything below this index
@@ -143,11 +159,30 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
             if (hit && occluder_reached<true>(t, s, w.leaf, a, b, vp, occluders, &wc)) vis = false;
             n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
         }
-        const uint32_t word = __ballot_sync(0xffffffffu, vis);
-        if (lane == 0) bits[at.job.word_offset + at.local] = word;
+        store_bits(at, vis, bits);
         wc.visible_pairs += vis;
     }
     flush_counters(wc, lane, counters);
+}
+
+// Node-pair decisions (node_pair.h), one thread a pair (those worth_deciding; the others stay
+// undecided): the host's decide_node_pair on the device (the same double arithmetic, no contraction: the same decisions bit for bit).
+struct ShaftCounters {
+    unsigned long long shaft_node_tests = 0;
+};
+__global__ void __launch_bounds__(128)
+    decide_kernel(NodePairContext c, const NodePairRef* __restrict__ pairs, uint64_t n,
+                  uint8_t* __restrict__ out, unsigned long long* shaft_node_tests) {
+    const uint64_t i = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
+    ShaftCounters wc;
+    if (i < n) {
+        const NodePairRef p = pairs[i];
+        out[i] = uint8_t(worth_deciding(c, p.a, p.b) ? decide_node_pair(c, p.a, p.b, &wc)
+                                                     : PairDecision::kUndecided);
+    }
+    unsigned long long v = wc.shaft_node_tests;
+    for (int o = 16; o > 0; o >>= 1) v += __shfl_down_sync(0xffffffffu, v, o);
+    if ((threadIdx.x & 31) == 0 && v) atomicAdd(shaft_node_tests, v);
 }
 
 template <class T>
@@ -263,8 +298,8 @@ class CudaBackend final : public Backend {
         std::copy(jobs.begin(), jobs.end(), sl.h_jobs.ptr);
         sl.h_first.ptr[0] = 0;
         for (size_t i = 0; i < nj; ++i)
-            sl.h_first.ptr[i + 1] = sl.h_first.ptr[i] + job_words(jobs[i]);
-        const uint64_t items = sl.h_first.ptr[nj];
+            sl.h_first.ptr[i + 1] = sl.h_first.ptr[i] + uint64_t(jobs[i].rows) * jobs[i].cols;
+        const uint64_t pairs = sl.h_first.ptr[nj];
         sl.d_jobs.upload(sl.h_jobs.ptr, nj, sl.stream, held_, peak_);
         sl.d_first.upload(sl.h_first.ptr, nj + 1, sl.stream, held_, peak_);
         sl.d_bits.reserve(std::max<uint64_t>(words, 1), held_, peak_);
@@ -272,17 +307,19 @@ class CudaBackend final : public Backend {
         sl.h_bits.reserve(std::max<uint64_t>(words, 1));
         sl.h_counters.reserve(1);
         VMAP_CUDA_CHECK(cudaMemsetAsync(sl.d_counters.ptr, 0, sizeof(DeviceCounters), sl.stream));
+        VMAP_CUDA_CHECK(cudaMemsetAsync(sl.d_bits.ptr, 0, words * sizeof(uint32_t), sl.stream));
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k0, sl.stream));
-        if (items > 0) {
+        if (pairs > 0) {
             const int threads = kWarpsPerBlock * 32;
-            const uint64_t want = (items + kWarpsPerBlock - 1) / kWarpsPerBlock;
+            const uint64_t warps = (pairs + 31) / 32;
+            const uint64_t want = (warps + kWarpsPerBlock - 1) / kWarpsPerBlock;
             const int blocks =
                 int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
             // VMAP_CUDA_VARIANT=lane runs the per-lane walk (the on-device oracle; same answers)
             // instead of the default packet walk.
             auto launch = [&](auto kernel) {
                 kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr,
-                                                          int32_t(nj), items, sl.d_bits.ptr,
+                                                          int32_t(nj), pairs, sl.d_bits.ptr,
                                                           sl.d_counters.ptr);
             };
             if (variant_ == "lane")
@@ -318,6 +355,69 @@ class CudaBackend final : public Backend {
         return sl.h_bits.ptr;
     }
 
+    // The node bounds go to the device once; decide() runs the node tests there.
+    void set_node_context(const NodePairContext* ctx) override {
+        have_ctx_ = ctx != nullptr && ctx->margin > 0;
+        if (!have_ctx_) return;
+        cudaStream_t s = slots_[0].stream;
+        const int32_t nn = ctx->tree.num_nodes;
+        const NodeBounds& last = ctx->nb[nn - 1];
+        // Only the internal nodes' bounds travel (a leaf's are computed from its disc,
+        // leaf_bounds), with each node's index among them.
+        std::vector<NodeBounds> inner;
+        std::vector<int32_t> index(size_t(nn), -1);
+        for (int32_t n = 0; n < nn; ++n) {
+            if (ctx->tree.walk[n].leaf >= 0) continue;
+            index[n] = int32_t(inner.size());
+            inner.push_back(ctx->nb[n]);
+        }
+        if (inner.empty()) inner.emplace_back();
+        nb_.upload(inner.data(), inner.size(), s, held_, peak_);
+        index_.upload(index.data(), index.size(), s, held_, peak_);
+        const size_t num_cones = size_t(last.cone_begin) + last.cone_count;
+        if (num_cones > 0)
+            cones_.upload(ctx->cones, num_cones, s, held_, peak_);
+        else
+            cones_.reserve(1, held_, peak_);  // every leaf flagged: no cone is ever read
+        skip_.upload(ctx->skip, size_t(nn), s, held_, peak_);
+        d_shaft_.reserve(1, held_, peak_);
+        h_shaft_.reserve(1);
+        VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
+        ctx_ = *ctx;
+        ctx_.tree = view_;
+        ctx_.nb = nb_.ptr;
+        ctx_.cones = cones_.ptr;
+        ctx_.skip = skip_.ptr;
+        ctx_.bounds_index = index_.ptr;
+    }
+
+    bool decide(std::span<const NodePairRef> pairs, uint8_t* out,
+                uint64_t* shaft_node_tests) override {
+        if (!have_ctx_) return false;
+        const size_t n = pairs.size();
+        if (n == 0) return true;
+        // Called between batches (the builder has waited for every batch), so slot 0's stream
+        // is idle.
+        cudaStream_t s = slots_[0].stream;
+        h_pairs_.reserve(n);
+        h_dec_.reserve(n);
+        std::copy(pairs.begin(), pairs.end(), h_pairs_.ptr);
+        d_pairs_.upload(h_pairs_.ptr, n, s, held_, peak_);
+        d_dec_.reserve(n, held_, peak_);
+        VMAP_CUDA_CHECK(cudaMemsetAsync(d_shaft_.ptr, 0, sizeof(unsigned long long), s));
+        const int threads = 128;
+        decide_kernel<<<unsigned((n + threads - 1) / threads), threads, 0, s>>>(
+            ctx_, d_pairs_.ptr, n, d_dec_.ptr, d_shaft_.ptr);
+        VMAP_CUDA_CHECK(cudaGetLastError());
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(h_dec_.ptr, d_dec_.ptr, n, cudaMemcpyDeviceToHost, s));
+        VMAP_CUDA_CHECK(cudaMemcpyAsync(h_shaft_.ptr, d_shaft_.ptr, sizeof(unsigned long long),
+                                        cudaMemcpyDeviceToHost, s));
+        VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
+        std::copy(h_dec_.ptr, h_dec_.ptr + n, out);
+        *shaft_node_tests += *h_shaft_.ptr;
+        return true;
+    }
+
     uint64_t peak_device_bytes() const override { return peak_; }
     double busy_seconds() const override { return busy_; }
     // The kernel on one H100 (docs/results.md); link extraction on the host adds to it.
@@ -345,6 +445,19 @@ class CudaBackend final : public Backend {
     DeviceBuffer<WalkNode> walk_;
     DeviceBuffer<LeafDisc> leaves_;
     Slot slots_[2];
+    // The node tests (set_node_context, decide).
+    bool have_ctx_ = false;
+    NodePairContext ctx_;  // with device pointers
+    DeviceBuffer<NodeBounds> nb_;
+    DeviceBuffer<NormalCone> cones_;
+    DeviceBuffer<int32_t> skip_;
+    DeviceBuffer<int32_t> index_;  // per node: its bounds in nb_ (-1 for a leaf)
+    DeviceBuffer<NodePairRef> d_pairs_;
+    DeviceBuffer<uint8_t> d_dec_;
+    DeviceBuffer<unsigned long long> d_shaft_;
+    PinnedBuffer<NodePairRef> h_pairs_;
+    PinnedBuffer<uint8_t> h_dec_;
+    PinnedBuffer<unsigned long long> h_shaft_;
     uint64_t held_ = 0, peak_ = 0;
     double busy_ = 0;
     cudaEvent_t origin_ = nullptr;  // recorded in prepare(): kernel times are measured from it

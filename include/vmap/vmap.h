@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
 #include <string>
 #include <utility>
@@ -65,6 +66,14 @@ struct BuildParams {
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
     // columns of a row at once).
     uint64_t walk_pairs = 0;
+    // The CUDA device (an index among those CUDA_VISIBLE_DEVICES leaves visible); -1: device 0
+    // (under mpirun, src/mpi/ sets the local rank's). Out of range: vmap::Error.
+    int device = -1;
+    // The node pairs the construction starts from, given the octree; empty function: every
+    // pair of sibling nodes (the whole V-map). Pairs (a, b) of disjoint subtrees, a before b in
+    // preorder, each covering its leaves(a) x leaves(b) once: the map then holds the links of
+    // those rectangles only (the MPI build, src/mpi/, gives each process a share).
+    std::function<std::vector<std::pair<int32_t, int32_t>>(const Octree&)> top_pairs;
 };
 
 // Node pairs of the construction at one octree level (the deeper level of the pair's nodes).

@@ -31,6 +31,7 @@
 #include <type_traits>
 
 #include "io/atomic_file.h"
+#include "mpi/shard_file.h"
 #include "vmap/error.h"
 #include "vmap/vmap.h"
 
@@ -286,6 +287,7 @@ VisibilityMap load_vmap(const std::string& path) {
     if (!std::filesystem::exists(path, ec)) throw Error(fmt::format("{}: no such file", path));
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
+    if (mpi::is_shard_index(path)) return mpi::load_sharded(path);  // src/mpi/shard_file.h
     std::ifstream in(path, std::ios::binary | std::ios::ate);
     if (!in) throw Error(fmt::format("{}: cannot open", path));
     const auto size = static_cast<uint64_t>(in.tellg());

@@ -61,11 +61,15 @@ class Backend {
 };
 
 std::unique_ptr<Backend> make_cpu_backend();
-// nullptr with *why set when CUDA is not built in or no device is present.
-std::unique_ptr<Backend> make_cuda_backend(std::string* why);
+// nullptr with *why set when CUDA is not built in or no device is present. `device` indexes the
+// devices CUDA_VISIBLE_DEVICES leaves visible (-1: 0); one past them throws vmap::Error.
+std::unique_ptr<Backend> make_cuda_backend(std::string* why, int device = 0);
+// CUDA devices visible to this process (0 without CUDA or without a device).
+int cuda_device_count();
 
 // "auto" (CUDA when a device is present, else CPU), "cpu" or "cuda". For "cuda" without a
 // device, falls back to the CPU and puts the reason in *note. Throws vmap::Error for other names.
-std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note);
+std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note,
+                                      int device = -1);
 
 }  // namespace vmap::detail

@@ -482,7 +482,8 @@ void check_params(const BuildParams& params, const std::string& source) {
 
 std::unique_ptr<detail::Backend> pick_backend(const BuildParams& params, std::string* note,
                                               const std::string& source) {
-    if (params.occluders != "bresenham") return detail::make_backend(params.backend, note);
+    if (params.occluders != "bresenham")
+        return detail::make_backend(params.backend, note, params.device);
     if (params.backend == "cuda")
         throw Error(
             fmt::format("{}: backend cuda: the GPU does occluders spheres only "
@@ -588,7 +589,7 @@ Planner plan_pairs(const Octree& t, const BuildParams& params, const NodeTests& 
                  {},
                  {},
                  {}};
-    plan.run(sibling_pairs(t));
+    plan.run(params.top_pairs ? params.top_pairs(t) : sibling_pairs(t));
     st.levels = plan.levels;
     for (const ConstructionLevel& l : plan.levels) {
         st.node_pairs_tested += l.tested;
@@ -665,7 +666,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     st.seconds_links = seconds_since(tl);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
-    detail::check_facing(st);
+    if (!params.top_pairs) detail::check_facing(st);  // a share cannot judge the whole
     if (stats) *stats = std::move(st);
     return vm;
 }

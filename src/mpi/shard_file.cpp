@@ -113,7 +113,8 @@ std::unique_ptr<io::AtomicFile> write_shard(const std::string& path, int k, cons
 
 void write_index(const std::string& path, const std::vector<ShardInfo>& shards, uint64_t links,
                  int32_t nodes) {
-    nlohmann::json j{{"format", "vmap-shards"}, {"version", kVersion},
+    // "format" first: is_shard_index() looks for it at the start.
+    nlohmann::ordered_json j{{"format", "vmap-shards"}, {"version", kVersion},
                      {"base", fs::path(base_name(path)).filename().string()},
                      {"nodes", nodes}, {"links", links}};
     for (const ShardInfo& s : shards)

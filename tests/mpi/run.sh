@@ -36,8 +36,8 @@ no_output() {  # the output and no temporary of it
 
 scenes=("$src/scenes/cornell-bunny.json --points 3000 --max-height 6"
         "$src/scenes/test/test-many.json --max-height 5"
-        "$src/scenes/test/test-plates.json --max-height 6"
-        "$src/scenes/test/test-tight.json --max-height 6 --leaf-points 2")
+        "$src/scenes/test/test-plates.json --points 4000 --max-height 6"
+        "$src/scenes/test/test-tight.json --points 4000 --max-height 6 --leaf-points 2")
 for k in "${!scenes[@]}"; do
     read -r -a args <<< "${scenes[$k]}"
     one="$tmp/one-$k.vmap"

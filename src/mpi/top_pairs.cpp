@@ -98,7 +98,7 @@ std::vector<std::vector<uint32_t>> guided_chunks(const TopPairs& tp, int ranks) 
         if (chunks.empty() || in_chunk >= want) {
             chunks.emplace_back();
             in_chunk = 0;
-            want = std::max(floor, left / (2 * p));
+            want = std::max(floor, left / p);
         }
         chunks.back().push_back(j);
         in_chunk += tp.pairs[j].area;

@@ -47,8 +47,8 @@ TopPairs make_top_pairs_for(const Octree& t, int ranks);
 std::vector<std::vector<uint32_t>> static_shares(const TopPairs& tp, int ranks);
 
 // Chunks for handing out on demand (guided self-scheduling): jobs largest first, each chunk
-// about the remaining work / (2 ranks), none below 1/(16 ranks) of it, so that early chunks are
-// large (few rounds) and the last ones small (an even finish).
+// about the remaining work / ranks, none below 1/(16 ranks) of all, so that early chunks are
+// large (few rounds: about 4 a rank) and the last ones small (an even finish).
 std::vector<std::vector<uint32_t>> guided_chunks(const TopPairs& tp, int ranks);
 
 // The node pairs of the given jobs, for BuildParams::top_pairs.

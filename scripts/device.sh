@@ -268,6 +268,8 @@ if [[ "$cmd" == run ]]; then
                 mrun shards-4 4 4 cpu dynamic --shards
                 mrun gpu-1 1 16 cuda dynamic
                 mrun gpu-2-shared 2 8 cuda dynamic
+                "$bin/gpu_test" --gtest_filter='GpuDevice.*' > "$OUT/mpi-gpu-device.log" 2>&1 || rc=1
+                echo "--device test: $(grep -E 'PASSED|FAILED|SKIPPED \]' "$OUT/mpi-gpu-device.log" | tail -1)" >> "$sum"
                 # Strong scaling at T threads a rank: speedup and efficiency against P = 1.
                 awk -F'|' '$2 ~ /cpu-[1248] / {w[$3+0] = $7; c[$3+0] = $8}
                     END {print "\n| P | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";

@@ -245,6 +245,8 @@ int run_build(BuildOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
     if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
     io::check_input_path(o.input);
+    if (o.shards && !mpi::launched())
+        throw cli::UsageError("--shards: one file per rank, under mpirun only");
     if (!o.count_links) cli::check_output(o.output, "-o", {o.input});
     std::string what;
     PointSet pts = load_input(o, what);
@@ -268,7 +270,6 @@ int run_build(BuildOptions& o) {
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
         ranks = std::move(r.summary);
     } else {
-        if (o.shards) throw cli::UsageError("--shards: one file per rank, under mpirun only");
         vm = build_vmap(std::move(pts), bp, &st, o.input);
         const auto ts = std::chrono::steady_clock::now();
         if (!o.count_links) save_vmap(o.output, vm);

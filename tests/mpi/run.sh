@@ -34,6 +34,11 @@ no_output() {  # the output and no temporary of it
     [[ ! -e "$1" ]] && ! ls -a "$(dirname "$1")" | grep -q "^\.$(basename "$1")\..*\.tmp$"
 }
 
+# Without mpirun, --shards is a usage error (exit 2) and nothing is written.
+check "--shards without mpirun" bash -c "'$vmap' build '$src/scenes/cornell-bunny.json' --points 500 \
+    --max-height 4 --shards -o '$tmp/s.vmap' 2> '$tmp/err'; [[ \$? -eq 2 ]] &&
+    grep -q 'under mpirun only' '$tmp/err' && [[ ! -e '$tmp/s.vmap' ]]"
+
 scenes=("$src/scenes/cornell-bunny.json --points 3000 --max-height 6"
         "$src/scenes/test/test-many.json --max-height 5"
         "$src/scenes/test/test-plates.json --points 4000 --max-height 6"

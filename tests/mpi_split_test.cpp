@@ -20,7 +20,8 @@ struct Case {
     const char* scene;
     int points, height, leaf_points;
 };
-const Case kCases[] = {{"cornell-bunny", 1500, 6, 1}, {"test/test-plates", 1200, 6, 2},
+const Case kCases[] = {{"cornell-bunny", 1500, 6, 1},
+                       {"test/test-plates", 1200, 6, 2},
                        {"test/test-many", 1500, 5, 1}};
 
 // What `ranks` processes of an MPI build would give, each part built on its own, merged as
@@ -36,7 +37,8 @@ std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, i
     std::vector<uint8_t> full(tp.pairs.size(), 0);
     for (size_t k = 0; k < parts.size(); ++k) {
         mpi::build_round(pts, bp, tp, parts[k], true, "test", got[k]);
-        for (size_t i = 0; i < full.size(); ++i) full[i] |= got[k].full.size() > i && got[k].full[i];
+        for (size_t i = 0; i < full.size(); ++i)
+            full[i] |= got[k].full.size() > i && got[k].full[i];
     }
     const mpi::Merge m = mpi::merge_full(tp, full);
     std::vector<NodePair> links = m.add;
@@ -107,10 +109,9 @@ TEST(MpiSplit, SimulatedRanksGiveTheSingleProcessMap) {
         const PointSet pts = test::sample(test::scene_path(c.scene), c.points);
         const BuildParams bp = test::cpu_params(c.height, c.leaf_points);
         const VisibilityMap want = build_vmap(pts, bp);
-        for (auto [ranks, guided, max_area] : {std::tuple{2, false, uint64_t(0)},
-                                               std::tuple{3, true, uint64_t(0)},
-                                               std::tuple{5, false, uint64_t(1)},
-                                               std::tuple{4, true, uint64_t(37)}}) {
+        for (auto [ranks, guided, max_area] :
+             {std::tuple{2, false, uint64_t(0)}, std::tuple{3, true, uint64_t(0)},
+              std::tuple{5, false, uint64_t(1)}, std::tuple{4, true, uint64_t(37)}}) {
             VisibilityMap vm;
             set_links(vm, {});  // replaced below
             std::vector<NodePair> links = shared_links(pts, bp, ranks, guided, max_area, vm);
@@ -145,15 +146,15 @@ TEST(MpiSplit, NodeRangesConcatenateToTheLinkArrays) {
             tg.insert(tg.end(), r.targets.begin(), r.targets.end());
         }
         EXPECT_EQ(off, want.link_offsets);
-        EXPECT_TRUE(std::equal(tg.begin(), tg.end(), want.link_targets.begin(),
-                               want.link_targets.end()));
+        EXPECT_TRUE(
+            std::equal(tg.begin(), tg.end(), want.link_targets.begin(), want.link_targets.end()));
     }
 }
 
 class ShardFiles : public ::testing::Test {
   protected:
-    std::filesystem::path dir = std::filesystem::temp_directory_path() /
-                                ("vmap-shards-" + std::to_string(::getpid()));
+    std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / ("vmap-shards-" + std::to_string(::getpid()));
     void SetUp() override { std::filesystem::create_directories(dir); }
     void TearDown() override { std::filesystem::remove_all(dir); }
 
@@ -180,8 +181,8 @@ class ShardFiles : public ::testing::Test {
 };
 
 TEST_F(ShardFiles, ReadBackAsTheOneFileMap) {
-    const VisibilityMap want = build_vmap(test::sample(test::scene_path("cornell-bunny"), 1500),
-                                          test::cpu_params(6, 1));
+    const VisibilityMap want =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 1500), test::cpu_params(6, 1));
     const std::string index = write(want, 3);
     EXPECT_TRUE(mpi::is_shard_index(index));
     const VisibilityMap got = load_vmap(index);
@@ -192,8 +193,8 @@ TEST_F(ShardFiles, ReadBackAsTheOneFileMap) {
 }
 
 TEST_F(ShardFiles, MissingOrCorruptShardIsNamed) {
-    const VisibilityMap want = build_vmap(test::sample(test::scene_path("cornell-bunny"), 1200),
-                                          test::cpu_params(5, 1));
+    const VisibilityMap want =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 1200), test::cpu_params(5, 1));
     const std::string index = write(want, 2);
     const std::string shard = mpi::shard_name(index, 1, 2);
     {  // one byte flipped in the targets

@@ -29,8 +29,8 @@ Result build(PointSet, BuildParams, const Options&, const std::string&) {
 #include <numeric>
 #include <thread>
 
-#include "mpi/shard_file.h"
 #include "io/vmap_file.h"
+#include "mpi/shard_file.h"
 #include "visibility/backend.h"
 #include "vmap/build_checks.h"
 
@@ -104,8 +104,8 @@ void exchange_bytes(const void* send, size_t ns, int to, void* recv, size_t nr, 
     auto* r = static_cast<uint8_t*>(recv);
     for (size_t is = 0, ir = 0; is < ns || ir < nr;) {
         const size_t cs = std::min(kChunkBytes, ns - is), cr = std::min(kChunkBytes, nr - ir);
-        MPI_Sendrecv(s + is, int(cs), MPI_BYTE, cs ? to : MPI_PROC_NULL, kTagData, r + ir,
-                     int(cr), MPI_BYTE, cr ? from : MPI_PROC_NULL, kTagData, MPI_COMM_WORLD,
+        MPI_Sendrecv(s + is, int(cs), MPI_BYTE, cs ? to : MPI_PROC_NULL, kTagData, r + ir, int(cr),
+                     MPI_BYTE, cr ? from : MPI_PROC_NULL, kTagData, MPI_COMM_WORLD,
                      MPI_STATUS_IGNORE);
         is += cs, ir += cr;
         moved += cs;
@@ -119,7 +119,7 @@ std::vector<NodePair> redistribute(const Comm& c, const std::vector<NodePair>& l
     auto owner = [&](int32_t n) {
         return int(std::upper_bound(bounds.begin(), bounds.end(), n) - bounds.begin()) - 1;
     };
-    std::vector<std::vector<NodePair>> out(size_t(c.size));
+    std::vector<std::vector<NodePair> > out(size_t(c.size));
     for (const NodePair& l : links) {
         const int oa = owner(l.first), ob = owner(l.second);
         out[oa].push_back(l);
@@ -215,8 +215,11 @@ uint64_t input_hash(const VisibilityMap& vm) {
     };
     const VisibilityParams& vp = vm.visibility_params;
     const std::vector<float> params{float(vm.octree_params.max_height),
-                                    float(vm.octree_params.leaf_points), float(vp.K), vp.eps,
-                                    vp.facing_tol, vp.parallel_tol};
+                                    float(vm.octree_params.leaf_points),
+                                    float(vp.K),
+                                    vp.eps,
+                                    vp.facing_tol,
+                                    vp.parallel_tol};
     uint64_t x = h(vm.points.positions) ^ h(vm.points.normals) * 3 ^ h(vm.points.radii) * 5 ^
                  h(vm.order) * 7 ^ h(params) * 11;
     return x ^ uint64_t(vm.octree.num_nodes()) * 0x9e3779b97f4a7c15ULL;
@@ -230,9 +233,10 @@ std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
     if (lo == hi) return "";
     uint64_t first = mine;
     MPI_Bcast(&first, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
-    return c.agree(mine == first ? "" : "its input (points, octree or parameters) differs from "
-                                        "rank 0's: every rank must read the same scene with the "
-                                        "same options");
+    return c.agree(mine == first ? ""
+                                 : "its input (points, octree or parameters) differs from "
+                                   "rank 0's: every rank must read the same scene with the "
+                                   "same options");
 }
 
 std::string run_static(Run& r) {
@@ -325,10 +329,9 @@ BuildStats reduce_stats(Run& r) {
     const size_t levels = size_t(t.height()) + 1, leaves = size_t(t.num_leaves());
     const std::vector<uint64_t> mine = counters_of(r.share.stats, levels, leaves);
     std::vector<uint64_t> sum(mine.size(), 0);
-    MPI_Reduce(mine.data(), sum.data(), int(mine.size()), MPI_UINT64_T, MPI_SUM, 0,
-               MPI_COMM_WORLD);
+    MPI_Reduce(mine.data(), sum.data(), int(mine.size()), MPI_UINT64_T, MPI_SUM, 0, MPI_COMM_WORLD);
     const BuildStats& s = r.share.stats;
-    const double t_mine[6] = {s.seconds_plan, s.seconds_wait, s.seconds_backend,
+    const double t_mine[6] = {s.seconds_plan,    s.seconds_wait,  s.seconds_backend,
                               s.seconds_extract, s.seconds_links, double(s.peak_device_bytes)};
     double t_max[6] = {};
     MPI_Reduce(t_mine, t_max, 6, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
@@ -353,9 +356,8 @@ std::string own_range(Run& r, LinkRange& range, std::vector<int32_t>& bounds) {
     bounds = split_nodes(all, r.c.size);
     std::vector<NodePair> got = redistribute(r.c, r.share.links, bounds, r.moved);
     std::vector<NodePair>().swap(r.share.links);
-    return r.c.agree(attempt([&] {
-        range = link_range(got, bounds[r.c.rank], bounds[r.c.rank + 1]);
-    }));
+    return r.c.agree(
+        attempt([&] { range = link_range(got, bounds[r.c.rank], bounds[r.c.rank + 1]); }));
 }
 
 std::string write_single(Run& r, LinkRange& range) {
@@ -395,7 +397,11 @@ std::string write_shards(Run& r, const LinkRange& range) {
         for (int k = 0; k < r.c.size; ++k) {
             const uint64_t* x = rows.data() + 5 * k;
             shards[k] = {std::filesystem::path(shard_name(out, k, r.c.size)).filename().string(),
-                         int32_t(x[0]), int32_t(x[1]), x[2], x[3], x[4]};
+                         int32_t(x[0]),
+                         int32_t(x[1]),
+                         x[2],
+                         x[3],
+                         x[4]};
         }
         write_index(out, shards, r.links, r.vm.octree.num_nodes());
     }));
@@ -443,8 +449,8 @@ void configure(Run& r) {
     if (r.c.rank != 0) r.params.progress = nullptr;
     r.schedule = r.opt.schedule;
     if (r.schedule != "static" && r.schedule != "dynamic")
-        throw Error(fmt::format("--schedule: unknown schedule '{}' (static or dynamic)",
-                                r.schedule));
+        throw Error(
+            fmt::format("--schedule: unknown schedule '{}' (static or dynamic)", r.schedule));
     int level = 0;
     MPI_Query_thread(&level);
     if (r.schedule == "dynamic" && level < MPI_THREAD_SERIALIZED && r.c.size > 1) {

@@ -25,9 +25,9 @@ namespace vmap::mpi {
 bool launched();
 
 struct Options {
-    std::string output;      // .vmap (or the index, with shards)
-    bool shards = false;     // one file of links per rank and an index (shard_file.h)
-    bool count_links = false;  // count, write nothing (BuildParams::keep_links false)
+    std::string output;                // .vmap (or the index, with shards)
+    bool shards = false;               // one file of links per rank and an index (shard_file.h)
+    bool count_links = false;          // count, write nothing (BuildParams::keep_links false)
     std::string schedule = "dynamic";  // static | dynamic
     int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
 };

@@ -61,15 +61,18 @@ std::vector<uint8_t> read_all(const std::string& path, const std::string& what) 
 void read_shard(const std::string& path, const ShardInfo& want, int k, VisibilityMap& vm) {
     const std::vector<uint8_t> d = read_all(path, fmt::format("shard {}", k));
     if (d.size() != want.bytes)
-        throw Error(fmt::format("{}: {} bytes, the index says {} (truncated, or from another "
-                                "build)", path, d.size(), want.bytes));
+        throw Error(
+            fmt::format("{}: {} bytes, the index says {} (truncated, or from another "
+                        "build)",
+                        path, d.size(), want.bytes));
     if (d.size() < kHead || std::memcmp(d.data(), kMagic, 8) != 0)
         throw Error(fmt::format("{}: not a vmap shard (bad magic)", path));
     const uint8_t* p = d.data() + 8;
     const uint32_t version = get<uint32_t>(p), kk = get<uint32_t>(p);
     const int32_t n0 = get<int32_t>(p), n1 = get<int32_t>(p);
     const uint64_t ends = get<uint64_t>(p), sum = get<uint64_t>(p);
-    if (version != kVersion) throw Error(fmt::format("{}: shard version {} not supported", path, version));
+    if (version != kVersion)
+        throw Error(fmt::format("{}: shard version {} not supported", path, version));
     if (kk != uint32_t(k) || n0 != want.n0 || n1 != want.n1 || ends != want.ends ||
         sum != want.checksum || n1 < n0)
         throw Error(fmt::format("{}: header does not match the index (from another build?)", path));
@@ -79,7 +82,8 @@ void read_shard(const std::string& path, const ShardInfo& want, int k, Visibilit
     LinkTargets tg(ends);
     std::memcpy(off.data(), p, off.size() * 8);
     std::memcpy(tg.data(), p + off.size() * 8, ends * 4);
-    if (range_hash(off, tg) != sum) throw Error(fmt::format("{}: checksum mismatch: the shard is corrupt", path));
+    if (range_hash(off, tg) != sum)
+        throw Error(fmt::format("{}: checksum mismatch: the shard is corrupt", path));
     const uint64_t base = vm.link_targets.size();
     bool ok = off[0] == 0 && off.back() == ends;
     for (size_t i = 0; ok && i + 1 < off.size(); ++i) ok = off[i] <= off[i + 1];
@@ -114,12 +118,17 @@ std::unique_ptr<io::AtomicFile> write_shard(const std::string& path, int k, cons
 void write_index(const std::string& path, const std::vector<ShardInfo>& shards, uint64_t links,
                  int32_t nodes) {
     // "format" first: is_shard_index() looks for it at the start.
-    nlohmann::ordered_json j{{"format", "vmap-shards"}, {"version", kVersion},
-                     {"base", fs::path(base_name(path)).filename().string()},
-                     {"nodes", nodes}, {"links", links}};
+    nlohmann::ordered_json j{{"format", "vmap-shards"},
+                             {"version", kVersion},
+                             {"base", fs::path(base_name(path)).filename().string()},
+                             {"nodes", nodes},
+                             {"links", links}};
     for (const ShardInfo& s : shards)
-        j["shards"].push_back({{"file", s.file}, {"nodes", {s.n0, s.n1}}, {"ends", s.ends},
-                               {"bytes", s.bytes}, {"checksum", fmt::format("{:016x}", s.checksum)}});
+        j["shards"].push_back({{"file", s.file},
+                               {"nodes", {s.n0, s.n1}},
+                               {"ends", s.ends},
+                               {"bytes", s.bytes},
+                               {"checksum", fmt::format("{:016x}", s.checksum)}});
     io::write_file_atomic(path, j.dump(1) + "\n");
 }
 
@@ -178,7 +187,8 @@ VisibilityMap load_sharded(const std::string& path) {
     if (next != nodes)
         throw Error(fmt::format("{}: the shards cover nodes 0..{} of {}", path, next, nodes));
     for (int32_t x : vm.link_targets)
-        if (x < 0 || x >= nodes) throw Error(fmt::format("{}: a link target is out of range", path));
+        if (x < 0 || x >= nodes)
+            throw Error(fmt::format("{}: a link target is out of range", path));
     return vm;
 }
 

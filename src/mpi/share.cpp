@@ -90,8 +90,10 @@ std::vector<uint64_t> counters_of(const BuildStats& st, size_t levels, size_t le
         c.insert(c.end(), {x.pairs, x.tested, x.visible, x.invisible, x.split, x.walked,
                            x.leaf_pairs_decided, x.leaf_pairs_visible, x.leaf_pairs_walked});
     }
-    c.insert(c.end(), {st.leaf_pairs_walked, st.node_pairs_tested, st.shaft_node_tests, st.batches});
-    for (size_t l = 0; l < leaves; ++l) c.push_back(l < st.leaf_walked.size() ? st.leaf_walked[l] : 0);
+    c.insert(c.end(),
+             {st.leaf_pairs_walked, st.node_pairs_tested, st.shaft_node_tests, st.batches});
+    for (size_t l = 0; l < leaves; ++l)
+        c.push_back(l < st.leaf_walked.size() ? st.leaf_walked[l] : 0);
     return c;
 }
 
@@ -128,9 +130,8 @@ LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1)
     r.n0 = n0, r.n1 = n1;
     r.offsets.assign(size_t(n1 - n0) + 1, 0);
     r.targets.resize(keys.size());
-    tbb::parallel_for(size_t(0), keys.size(), [&](size_t i) {
-        r.targets[i] = int32_t(uint32_t(keys[i]));
-    });
+    tbb::parallel_for(size_t(0), keys.size(),
+                      [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
     for (uint64_t k : keys) r.offsets[size_t(int32_t(k >> 32) - n0) + 1]++;
     for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
     return r;

@@ -19,7 +19,8 @@ void push_kids(const Octree& t, int32_t a, int32_t b, uint32_t parent, TopPairs&
         tp.pairs.push_back({x, y, int32_t(parent), 0, 0, leaves_under(t, x) * leaves_under(t, y)});
     };
     if (!t.is_leaf(a) && !t.is_leaf(b)) {
-        t.for_each_child(a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { put(ca, cb); }); });
+        t.for_each_child(
+            a, [&](int32_t ca) { t.for_each_child(b, [&](int32_t cb) { put(ca, cb); }); });
     } else if (t.is_leaf(a)) {
         t.for_each_child(b, [&](int32_t cb) { put(a, cb); });
     } else {
@@ -66,9 +67,8 @@ TopPairs make_top_pairs_for(const Octree& t, int ranks) {
 // Jobs by decreasing area, ties by index (deterministic).
 static std::vector<uint32_t> largest_first(const TopPairs& tp) {
     std::vector<uint32_t> order = tp.jobs;
-    std::stable_sort(order.begin(), order.end(), [&](uint32_t x, uint32_t y) {
-        return tp.pairs[x].area > tp.pairs[y].area;
-    });
+    std::stable_sort(order.begin(), order.end(),
+                     [&](uint32_t x, uint32_t y) { return tp.pairs[x].area > tp.pairs[y].area; });
     return order;
 }
 

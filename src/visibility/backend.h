@@ -69,7 +69,6 @@ int cuda_device_count();
 
 // "auto" (CUDA when a device is present, else CPU), "cpu" or "cuda". For "cuda" without a
 // device, falls back to the CPU and puts the reason in *note. Throws vmap::Error for other names.
-std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note,
-                                      int device = -1);
+std::unique_ptr<Backend> make_backend(const std::string& name, std::string* note, int device = -1);
 
 }  // namespace vmap::detail

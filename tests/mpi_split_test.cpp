@@ -20,9 +20,9 @@ struct Case {
     const char* scene;
     int points, height, leaf_points;
 };
-const Case kCases[] = {{"cornell-bunny", 1500, 6, 1},
-                       {"test/test-plates", 1200, 6, 2},
-                       {"test/test-many", 1500, 5, 1}};
+const Case kCases[] = {{"cornell-bunny", 1000, 6, 1},
+                       {"test/test-plates", 1000, 6, 2},
+                       {"test/test-many", 1000, 5, 1}};
 
 // What `ranks` processes of an MPI build would give, each part built on its own, merged as
 // mpi_build.cpp does (jobs: 0 the probe's split for `ranks`, else that largest job area).

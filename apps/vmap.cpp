@@ -100,7 +100,7 @@ struct BuildOptions {
     bool as_points = false;
     bool json = false;
     bool shards = false;                // under mpirun: src/mpi/mpi_build.h
-    std::string schedule = "dynamic";
+    std::string schedule = "static";
     int threads = 0;
     BuildParams params;
 };
@@ -456,8 +456,8 @@ int main(int argc, char** argv) {
                     "Under mpirun: one file of links per rank and -o an index of them (for maps "
                     "beyond one host's memory; load and the queries read it as one map)");
     build->add_option("--schedule", bo.schedule,
-                      "Under mpirun: dynamic (rank 0 hands out jobs) or static (a share each by "
-                      "a work estimate)")
+                      "Under mpirun: static (a share each by a work estimate: balanced better, "
+                      "docs/scaling.md) or dynamic (rank 0 hands out chunks of jobs)")
         ->check(CLI::IsMember({"static", "dynamic"}))
         ->capture_default_str();
 

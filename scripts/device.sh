@@ -113,7 +113,8 @@ if [[ "$cmd" == bundle ]]; then
         gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
     done
     cp build-device/tests/vmap_equal .device/bin/ 2>/dev/null || true
-    if ldd build-device/vmap | grep -q libmpi.so; then bundle_mpi .device/mpi; fi
+    # (grep -q would close the pipe early: ldd's SIGPIPE fails the test under pipefail)
+    if ldd build-device/vmap | grep libmpi.so >/dev/null; then bundle_mpi .device/mpi; fi
     git rev-parse --short HEAD > .device/commit
     du -sh .device
     exit 0

@@ -32,7 +32,7 @@ std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, i
     BuildStats st;
     vm = mpi::probe(pts, bp, ranks, tp, st, "test");
     if (max_area) tp = mpi::make_top_pairs(vm.octree, max_area);
-    const auto parts = guided ? mpi::guided_chunks(tp, ranks) : mpi::static_shares(tp, ranks);
+    const auto parts = guided ? mpi::dynamic_chunks(tp, ranks) : mpi::static_shares(tp, ranks);
     std::vector<mpi::ShareResult> got(parts.size());
     std::vector<uint8_t> full(tp.pairs.size(), 0);
     for (size_t k = 0; k < parts.size(); ++k) {
@@ -84,7 +84,7 @@ TEST(MpiSplit, SharesAndChunksHoldEveryJobOnce) {
     std::vector<uint32_t> order;
     const Octree t = Octree::build_in_unit_frame(pts, {6, 1}, order);
     const mpi::TopPairs tp = mpi::make_top_pairs_for(t, 4);
-    for (const auto& parts : {mpi::static_shares(tp, 4), mpi::guided_chunks(tp, 4)}) {
+    for (const auto& parts : {mpi::static_shares(tp, 4), mpi::dynamic_chunks(tp, 4)}) {
         std::vector<uint32_t> all;
         for (const auto& p : parts) all.insert(all.end(), p.begin(), p.end());
         std::sort(all.begin(), all.end());

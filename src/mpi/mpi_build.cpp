@@ -273,7 +273,7 @@ void dispatch(const Comm& c, int chunks, std::atomic<int>& next, std::atomic<boo
 }
 
 std::string run_dynamic(Run& r) {
-    const auto chunks = guided_chunks(r.tp, r.c.size);
+    const auto chunks = dynamic_chunks(r.tp, r.c.size);
     r.chunks = int(chunks.size());
     const int n = r.chunks;
     auto round = [&](int k) {

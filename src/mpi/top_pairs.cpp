@@ -87,25 +87,8 @@ std::vector<std::vector<uint32_t>> static_shares(const TopPairs& tp, int ranks) 
     return shares;
 }
 
-std::vector<std::vector<uint32_t>> guided_chunks(const TopPairs& tp, int ranks) {
-    const uint64_t p = uint64_t(std::max(1, ranks));
-    uint64_t left = 0;
-    for (uint32_t j : tp.jobs) left += tp.pairs[j].area;
-    const uint64_t floor = std::max<uint64_t>(1, left / (16 * p));
-    std::vector<std::vector<uint32_t>> chunks;
-    uint64_t in_chunk = 0, want = 0;
-    for (uint32_t j : largest_first(tp)) {
-        if (chunks.empty() || in_chunk >= want) {
-            chunks.emplace_back();
-            in_chunk = 0;
-            want = std::max(floor, left / p);
-        }
-        chunks.back().push_back(j);
-        in_chunk += tp.pairs[j].area;
-        left -= tp.pairs[j].area;
-    }
-    for (auto& c : chunks) std::sort(c.begin(), c.end());
-    return chunks;
+std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks) {
+    return static_shares(tp, kChunksPerRank * std::max(1, ranks));
 }
 
 std::vector<NodePair> job_pairs(const TopPairs& tp, const std::vector<uint32_t>& jobs) {

@@ -27,6 +27,7 @@
 #include "apps/validate_cmd.h"
 #include "bench/bench.h"
 #include "io/atomic_file.h"
+#include "mpi/mpi_build.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/scene.h"
@@ -92,6 +93,9 @@ struct BuildOptions {
     bool count_links = false;
     bool as_points = false;
     bool json = false;
+    bool shards = false;                // under mpirun: src/mpi/mpi_build.h
+    std::string schedule = "static";
+    int threads = 0;
     BuildParams params;
 };
 
@@ -224,8 +228,7 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
         fmt::print("links:      {} counted, not kept (as link ends they would take {:.2f} GiB)\n",
                    st.links, st.links * 8 / 1073741824.0);
     else
-        fmt::print("links:      {} ({} bytes as link ends)\n", vm.num_links(),
-                   vm.link_targets().size() * 4);
+        fmt::print("links:      {} ({} bytes as link ends)\n", st.links, st.links * 8);
     fmt::print("time:       {:.3f} s total{}\n", st.seconds_total,
                verbose ? "" : " (-v for the breakdown and the links per level)");
     if (verbose) print_build_details(vm, st, save_s);
@@ -236,6 +239,8 @@ int run_build(BuildOptions& o) {
     if (o.input.empty()) o.input = default_scene_path();
     if (o.output.empty()) o.output = fs::path(o.input).stem().string() + ".vmap";
     io::check_input_path(o.input);
+    if (o.shards && !mpi::launched())
+        throw cli::UsageError("--shards: one file per rank, under mpirun only");
     if (!o.count_links) cli::check_output(o.output, "-o", {o.input});
     std::string what;
     PointSet pts = load_input(o, what);
@@ -248,16 +253,29 @@ int run_build(BuildOptions& o) {
 
     BuildStats st;
     const size_t npts = pts.size();
-    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, o.input);
+    VisibilityMap vm;
+    double save_s = 0;
+    std::vector<std::string> ranks;
+    if (mpi::launched()) {  // mpirun -np N vmap build: the ranks share the work, rank 0 reports
+        mpi::Result r = mpi::build(std::move(pts), bp,
+                                   {o.output, o.shards, o.count_links, o.schedule, o.threads},
+                                   o.input);
+        if (!r.root) return r.exit_code;
+        vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
+        ranks = std::move(r.summary);
+    } else {
+        vm = build_vmap(std::move(pts), bp, &st, o.input);
+        const auto ts = std::chrono::steady_clock::now();
+        if (!o.count_links) save_vmap(o.output, vm);
+        save_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
+    }
     for (const std::string& w : st.warnings) fmt::print(stderr, "vmap build: warning: {}\n", w);
-    const auto ts = std::chrono::steady_clock::now();
-    if (!o.count_links) save_vmap(o.output, vm);
-    const double save_s =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - ts).count();
     if (o.json)
         fmt::print("{}\n", build_json(o, vm, st, npts, save_s).dump(2));
     else if (cli::verbosity() != cli::Verbosity::kQuiet)
         print_build_summary(o, what, vm, st, npts, save_s);
+    if (!o.json && cli::verbosity() != cli::Verbosity::kQuiet)
+        for (const std::string& line : ranks) fmt::print("{}\n", line);
     return 0;
 }
 
@@ -320,7 +338,7 @@ bool report_unknown_command(CLI::App& app, int argc, char** argv) {
 }
 
 // `vmap build`: a scene, mesh or cloud (or the default scene) into a .vmap.
-cli::Command add_build_command(CLI::App& app) {
+cli::Command add_build_command(CLI::App& app, const int* threads) {
     auto bo = std::make_shared<BuildOptions>();
     auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
     build->add_option("input", bo->input,
@@ -380,8 +398,21 @@ cli::Command add_build_command(CLI::App& app) {
                     "too large for memory");
 
     build->add_flag("--json", bo->json, "Print the summary as one JSON object (for scripts)");
+    build->add_option("--device", bo->params.device,
+                      "CUDA device (of those CUDA_VISIBLE_DEVICES leaves); default 0, under "
+                      "mpirun the rank's local rank")
+        ->check(CLI::Range(0, 1023));
+    build->add_flag("--shards", bo->shards,
+                    "Under mpirun: one file of links per rank and -o an index of them (for maps "
+                    "beyond one host's memory; load and the queries read it as one map)");
+    build->add_option("--schedule", bo->schedule,
+                      "Under mpirun: static (a share each by a work estimate: balanced better, "
+                      "docs/scaling.md) or dynamic (rank 0 hands out chunks of jobs)")
+        ->check(CLI::IsMember({"static", "dynamic"}))
+        ->capture_default_str();
     return {
-        build, [bo]() {
+        build, [bo, threads]() {
+            bo->threads = *threads;  // under mpirun: per rank
             const bool sampled = bo->input.empty() || cli::sampled_input(bo->input, bo->as_points);
             if (sampled && (bo->normals != "keep" || !bo->viewpoint.empty())) {
                 fmt::print(
@@ -476,7 +507,7 @@ int main(int argc, char** argv) {
     app.add_flag("-q,--quiet", quiet, "Say nothing but errors and the output asked for")
         ->excludes(vflag);
 
-    const cli::Command build = add_build_command(app), info = add_info_command(app),
+    const cli::Command build = add_build_command(app, &threads), info = add_info_command(app),
                        query = cli::add_query_command(app), render = cli::add_render_command(app),
                        bench_query = cli::add_bench_query_command(app),
                        view = cli::add_view_command(app);

@@ -18,6 +18,11 @@
 #                  the 1.1M-point --count-links run when CONS_BIG=1 (stopped after
 #                  CONS_BIG_TIMEOUT s, default 300); a one-line-a-run summary in
 #                  $OUT/construction.txt
+#        mpi       the MPI build (bundled Open MPI, OPAL_PREFIX): CPU backend at 1, 2, 4, 8 ranks x
+#                  MPI_THREADS threads (default 2: strong scaling), the 16 cores as 1x16, 2x8,
+#                  4x4, 8x2, static against dynamic, shards, and 2 ranks sharing the GPU; every
+#                  .vmap compared with the single-process build; one table in mpi-summary.md
+#                  (MPI_SCENE, default cornell-bunny at 30000 points)
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #      Logs and tables go to $OUT.
 set -euo pipefail
@@ -25,6 +30,69 @@ root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
 cmd="${1:-}"
 shift || true
+
+# Debian's Open MPI runtime for `run mpi` (the GPU machine has no MPI): mpirun (orterun), orted,
+# the components a one-host run loads (no InfiniBand, UCX, OFI, PSM, Slurm, MPI-IO or Java), their
+# libraries and the help texts, laid out as under /usr so that OPAL_PREFIX relocates it (and
+# PMIX_PREFIX, PMIx's). Into DEST (a prefix) and DEST/../lib (the libraries).
+bundle_mpi() {
+    local dest=$1 ompi=/usr/lib/x86_64-linux-gnu/openmpi pmix=/usr/lib/x86_64-linux-gnu/pmix2
+    local mca=$dest/lib/x86_64-linux-gnu/openmpi/lib/openmpi3
+    mkdir -p "$dest/bin" "$mca" "$dest/share/openmpi" "$dest/lib/x86_64-linux-gnu/pmix2/lib/pmix" \
+        "$dest/lib/x86_64-linux-gnu/pmix2/share/pmix" "$dest/../lib"
+    cp -L /usr/bin/orterun "$dest/bin/mpirun"
+    cp -L /usr/bin/orted "$dest/bin/orted"
+    for f in "$ompi"/lib/openmpi3/mca_*.so; do
+        case $(basename "$f") in
+            *ucx*|*ofi*|*psm*|*openib*|*verbs*|*slurm*|*flux*|*jsm*|*gridengine*|*monitoring*|\
+            *romio*|*fcoll*|*fbtl*|*fs_ufs*|*sharedfp*|*io_ompio*|*memheap*|*scoll*|*spml*|\
+            *sshmem*|*atomic_*|*vprotocol*|*treematch*|*bzip*|*crs_*|*simulator*|*netlink*) ;;
+            *) cp "$f" "$mca/" ;;
+        esac
+    done
+    cp "$pmix"/lib/pmix/*.so "$dest/lib/x86_64-linux-gnu/pmix2/lib/pmix/"
+    cp /usr/share/openmpi/help-*.txt "$dest/share/openmpi/"
+    cp "$pmix"/share/pmix/help-*.txt "$dest/lib/x86_64-linux-gnu/pmix2/share/pmix/"
+    for so in libmpi.so.40 libopen-rte.so.40 libopen-pal.so.40 libhwloc.so.15 libpmix.so.2 \
+              libevent_core-2.1.so.7 libevent_pthreads-2.1.so.7 libudev.so.1 libmunge.so.2 \
+              libmca_common_sm.so.40; do
+        cp -L "$(ldconfig -p | awk -v n="$so" '$1 == n {print $NF; exit}')" "$dest/../lib/$so"
+    done
+}
+# The environment that runs the bundled Open MPI from PREFIX, as root, on this host only.
+mpi_env() {
+    export OPAL_PREFIX=$1 PMIX_PREFIX=$1/lib/x86_64-linux-gnu/pmix2 PATH=$1/bin:$PATH
+    export PMIX_MCA_mca_base_component_path=$1/lib/x86_64-linux-gnu/pmix2/lib/pmix
+    # PMIx of mpirun itself still looks in /usr for its three plugins: none of them is needed
+    # on one host (compression, Slurm), so none is used here or there.
+    export PMIX_MCA_pcompress=^zlib PMIX_MCA_prm=^default,slurm PMIX_MCA_pcompress_base_silence_warning=1
+    export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+    export OMPI_MCA_btl=self,vader,tcp OMPI_MCA_pml=ob1 OMPI_MCA_btl_vader_single_copy_mechanism=none
+}
+
+if [[ "$cmd" == mpi-selftest ]]; then
+    # The relocated runtime here, before it travels: copied to a fresh prefix, run with a clean
+    # environment, and every file Open MPI opens must come from that prefix, not from /usr.
+    t=$(mktemp -d)
+    bundle_mpi "$t/mpi"
+    cp "${1:-build-cpu/vmap}" "$t/vmap"
+    env -i HOME="$t" bash -c "set -e; cd '$t'; $(declare -f mpi_env); mpi_env '$t/mpi'
+        export LD_LIBRARY_PATH='$t/lib'
+        strace -f -e trace=openat -o '$t/trace' mpirun -np 2 --oversubscribe ./vmap build \
+            '$root/scenes/cornell-bunny.json' --points 2000 --max-height 5 --backend cpu -q -o a.vmap
+        ./vmap build '$root/scenes/cornell-bunny.json' --points 2000 --max-height 5 --backend cpu \
+            -q -o b.vmap
+        cmp a.vmap b.vmap && echo 'relocated mpirun -np 2: byte-identical'"
+    rc=$?
+    echo "files under /usr/lib/x86_64-linux-gnu/{openmpi,pmix2} or /usr/share/openmpi opened:"
+    grep -v ENOENT "$t/trace" | grep -E '"/usr/(lib/x86_64-linux-gnu/(openmpi|pmix2)|share/openmpi)' |
+        grep -oE '"[^"]*"' | sort | uniq -c | head -20
+    grep -v ENOENT "$t/trace" | grep -oE '"/[^"]*(libmpi|libopen-|libpmix|libhwloc|libevent|mca_)[^"]*"' |
+        sed 's|^"'"$t"'|"PREFIX|' | sort | uniq -c | sort -rn | head -5
+    du -sh "$t/mpi" "$t/lib"
+    rm -rf "$t"
+    exit $rc
+fi
 
 if [[ "$cmd" == bundle ]]; then
     cmake --preset device >/dev/null
@@ -48,6 +116,9 @@ if [[ "$cmd" == bundle ]]; then
     for f in models/dragon.ply models/bunny.off models/armadillo.off; do
         gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
     done
+    cp build-device/tests/vmap_equal .device/bin/ 2>/dev/null || true
+    # (grep -q would close the pipe early: ldd's SIGPIPE fails the test under pipefail)
+    if ldd build-device/vmap | grep libmpi.so >/dev/null; then bundle_mpi .device/mpi; fi
     git rev-parse --short HEAD > .device/commit
     du -sh .device
     exit 0
@@ -168,6 +239,55 @@ if [[ "$cmd" == run ]]; then
                     "$bin/vmap" bench ${BENCH_ARGS:-} --leaf-points "$lp" --out "$OUT/lp$lp" 2>&1 |
                         tee "$OUT/bench-lp$lp.log" | tail -12
                 done ;;
+            mpi)
+                mpi_env "$root/.device/mpi"
+                read -r -a scene <<< "${MPI_SCENE:-scenes/cornell-bunny.json --points 30000}"
+                sum="$OUT/mpi-summary.md"
+                ref=/tmp/mpi-ref.vmap
+                "$bin/vmap" build "${scene[@]}" --backend cpu -o "$ref" > "$OUT/mpi-ref.log" 2>&1 || rc=1
+                { echo "# mpirun -np P vmap --threads T build ${scene[*]}, $(nproc) cores, $(date -u +%F)"
+                  grep -E "^(points|octree|links):" "$OUT/mpi-ref.log"
+                  echo
+                  echo "| run | P | T | backend | schedule | wall s | slowest rank s | slowest/mean | identical |"
+                  echo "|---|---:|---:|---|---|---:|---:|---:|---|"; } > "$sum"
+                mrun() {  # label P T backend schedule [more build args]
+                    local label=$1 np=$2 th=$3 be=$4 sc=$5; shift 5
+                    local out=/tmp/mpi-$label.vmap t0; t0=$(date +%s.%N)
+                    mpirun -np "$np" --oversubscribe --bind-to none "$bin/vmap" --threads "$th" build "${scene[@]}" \
+                        --backend "$be" --schedule "$sc" -o "$out" "$@" > "$OUT/mpi-$label.log" 2>&1 ||
+                        { rc=1; echo "FAILED $label"; tail -5 "$OUT/mpi-$label.log"; }
+                    local wall; wall=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{printf "%.2f", b - a}')
+                    local cons imb same=NO
+                    cons=$(grep -oE 'per rank [0-9.]+-[0-9.]+' "$OUT/mpi-$label.log" | sed 's/.*-//' || true)
+                    imb=$(grep -oE 'slowest / mean [0-9.]+' "$OUT/mpi-$label.log" | awk '{print $4}' || true)
+                    if [[ " $* " == *" --shards "* ]]; then
+                        "$bin/vmap_equal" "$ref" "$out" && same="yes (shards)"
+                        rm -f "$out".*
+                    else cmp -s "$ref" "$out" && same=yes; fi
+                    [[ "$same" == NO ]] && rc=1
+                    echo "| $label | $np | $th | $be | $sc | $wall | $cons | $imb | $same |" >> "$sum"
+                    rm -f "$out"
+                }
+                th=${MPI_THREADS:-2}
+                for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                mrun cpu-8-static 8 "$th" cpu static
+                mrun cpu-4-static 4 "$th" cpu static
+                for np in 1 2 4; do mrun "cores-$np" "$np" $((16 / np)) cpu dynamic; done
+                mrun shards-4 4 4 cpu dynamic --shards
+                mrun gpu-1 1 16 cuda dynamic
+                mrun gpu-2-shared 2 8 cuda dynamic
+                "$bin/gpu_test" --gtest_filter='GpuDevice.*' > "$OUT/mpi-gpu-device.log" 2>&1 || rc=1
+                echo "--device test: $(grep -E 'PASSED|FAILED|SKIPPED \]' "$OUT/mpi-gpu-device.log" | tail -1)" >> "$sum"
+                # Strong scaling at T threads a rank: speedup and efficiency against P = 1.
+                awk -F'|' '$2 ~ /cpu-[1248] / {w[$3+0] = $7; c[$3+0] = $8}
+                    END {print "\n| P | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";
+                         print "|---:|---:|---:|---:|---:|";
+                         for (p = 1; p <= 8; p *= 2) if (w[p] > 0)
+                             printf "| %d | %.2f | %.2f | %.2f | %.2f |\n", p, w[1] / w[p], w[1] / w[p] / p, c[1] / c[p], c[1] / c[p] / p}' \
+                    "$sum" >> "$sum.tail" && cat "$sum.tail" >> "$sum" && rm -f "$sum.tail"
+                grep -h "^mpi:\|^note:" "$OUT"/mpi-cpu-8.log "$OUT"/mpi-gpu-2-shared.log >> "$sum" || true
+                rm -f "$ref"
+                cat "$sum" ;;
             profile)
                 # Nsight Compute on one batch of the leaf-pair kernel (VARIANTS, default scene).
                 ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1 || true)

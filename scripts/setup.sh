@@ -11,7 +11,8 @@ pkgs=(build-essential cmake ninja-build pkg-config
       libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates
       libcpp-httplib-dev chromium  # `vmap view` serves with cpp-httplib; its test drives chromium
       python3-dev python3-pybind11 pybind11-dev python3-numpy python3-pytest  # the Python module
-      clang-14 libclang-rt-14-dev)  # clang's libFuzzer and sanitizer runtimes (scripts/fuzz.sh)
+      clang-14 libclang-rt-14-dev  # clang's libFuzzer and sanitizer runtimes (scripts/fuzz.sh)
+      libopenmpi-dev openmpi-bin)  # mpirun -np N vmap build (src/mpi/; optional at build time)
 # npm fetches the dragon; the Debian package conflicts with a NodeSource nodejs, so only when absent.
 command -v npm >/dev/null || pkgs+=(npm)
 

@@ -23,6 +23,32 @@ bool have_device(std::string* why) { return detail::make_cuda_backend(why) != nu
 
 using test::BuildCase;
 
+// --device picks among the visible devices; one past them is an error naming the option, and
+// the last one builds the same map as device 0.
+TEST(GpuDevice, DeviceIndexIsCheckedAndUsed) {
+    VMAP_REQUIRE_GPU();
+    const int n = detail::cuda_device_count();
+    ASSERT_GT(n, 0);
+    std::string why;
+    try {
+        detail::make_cuda_backend(&why, n);
+        FAIL() << "device " << n << " of " << n << " accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("--device " + std::to_string(n)), std::string::npos)
+            << e.what();
+    }
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500);
+    BuildParams bp = test::cpu_params(6, 1);
+    bp.backend = "cuda";
+    bp.device = n - 1;
+    const VisibilityMap last = build_vmap(ps, bp);
+    bp.device = 0;
+    const VisibilityMap first = build_vmap(ps, bp);
+    EXPECT_EQ(last.link_offsets, first.link_offsets);
+    EXPECT_TRUE(std::equal(last.link_targets.begin(), last.link_targets.end(),
+                           first.link_targets.begin(), first.link_targets.end()));
+}
+
 class GpuMatchesCpu : public ::testing::TestWithParam<BuildCase> {};
 
 // Every leaf pair walked on both (construction leaf-pairs): the same bits, counts and V-map.

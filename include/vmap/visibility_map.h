@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <span>
 #include <string>
@@ -47,6 +48,14 @@ struct BuildParams {
     // Node pairs of one level of the construction's frontier held at once (vmap/frontier.h):
     // bounds the memory of the node-pair decisions; any value gives the same V-map.
     uint64_t max_level_pairs = uint64_t(1) << 18;
+    // The CUDA device (an index among those CUDA_VISIBLE_DEVICES leaves visible); -1: device 0
+    // (under mpirun, src/mpi/ sets the local rank's). Out of range: vmap::Error.
+    int device = -1;
+    // The node pairs the construction starts from, given the octree; empty function: every
+    // pair of sibling nodes (the whole V-map). Pairs (a, b) of disjoint subtrees, a before b in
+    // preorder, each covering its leaves(a) x leaves(b) once: the map then holds the links of
+    // those rectangles only (the MPI build, src/mpi/, gives each process a share).
+    std::function<std::vector<std::pair<int32_t, int32_t>>(const Octree&)> top_pairs;
 
     // Throws vmap::Error naming `source` and the field for a value out of range (octree and
     // visibility included), or the grid walk with backend cuda.

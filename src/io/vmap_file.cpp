@@ -34,6 +34,7 @@
 #include <type_traits>
 
 #include "io/atomic_file.h"
+#include "mpi/shard_file.h"
 #include "vmap/error.h"
 #include "octree/records.h"
 #include "vmap/map_access.h"
@@ -334,6 +335,7 @@ VisibilityMap load_vmap(const std::string& path) {
     if (!std::filesystem::exists(path, ec)) throw Error(fmt::format("{}: no such file", path));
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
+    if (mpi::is_shard_index(path)) return mpi::load_sharded(path);  // src/mpi/shard_file.h
     const MappedFile data(path);
     const uint64_t size = data.size();
     if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));

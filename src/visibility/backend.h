@@ -78,11 +78,16 @@ class Backend {
 };
 
 std::unique_ptr<Backend> make_cpu_backend();
-// nullptr with *why set when CUDA is not built in or no device is present.
-std::unique_ptr<Backend> make_cuda_backend(std::string* why);
+// nullptr with *why set when CUDA is not built in or no device is present. `device` indexes the
+// devices CUDA_VISIBLE_DEVICES leaves visible (-1: 0); one past them throws vmap::Error.
+std::unique_ptr<Backend> make_cuda_backend(std::string* why, int device = 0);
+// CUDA devices visible to this process (0 without CUDA or without a device).
+int cuda_device_count();
 
 // The backend for `requested`: cpu; cuda (vmap::Error without a usable device); auto (the GPU
-// when usable, else the CPU with the reason in *note). The rule is util/device.h's.
-std::unique_ptr<Backend> make_backend(vmap::Backend requested, std::string* note);
+// when usable, else the CPU with the reason in *note). The rule is util/device.h's. `device`:
+// the CUDA device index (-1: 0); one past those visible is vmap::Error.
+std::unique_ptr<Backend> make_backend(vmap::Backend requested, std::string* note,
+                                      int device = -1);
 
 }  // namespace vmap::detail

@@ -37,7 +37,7 @@ std::unique_ptr<detail::Backend> pick_backend(const BuildParams& params, std::st
                                               const std::string& source) {
     (void)source;  // BuildParams::check refused the grid walk with backend cuda
     if (params.occluders != OccluderSearch::kGridWalk)
-        return detail::make_backend(params.backend, note);
+        return detail::make_backend(params.backend, note, params.device);
     return detail::make_grid_walk_backend();
 }
 
@@ -51,6 +51,14 @@ std::vector<detail::NodePairRef> sibling_pairs(const Octree& t) {
         for (size_t i = 0; i < ch.size(); ++i)
             for (size_t j = i + 1; j < ch.size(); ++j) roots.push_back({ch[i], ch[j]});
     }
+    return roots;
+}
+
+// The node pairs a caller gave (BuildParams::top_pairs: the MPI build's share) as frontier roots.
+std::vector<detail::NodePairRef> given_pairs(const std::vector<std::pair<int32_t, int32_t>>& pairs) {
+    std::vector<detail::NodePairRef> roots;
+    roots.reserve(pairs.size());
+    for (const auto& [a, b] : pairs) roots.push_back({a, b});
     return roots;
 }
 
@@ -121,7 +129,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     st.seconds_plan = seconds_since(t1);
     auto fr = std::make_unique<detail::Frontier>(t, nt.on ? &nt.ctx : nullptr, *backend, params,
                                                  fp, st);
-    fr->run(sibling_pairs(t));
+    fr->run(params.top_pairs ? given_pairs(params.top_pairs(t)) : sibling_pairs(t));
     st.seconds_plan += st.seconds_decide;  // "plan and node tests"
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();
@@ -155,7 +163,7 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
     links_step(vm, *fr, params, st);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
-    detail::check_facing(st);
+    if (!params.top_pairs) detail::check_facing(st);  // a share cannot judge the whole
     if (stats) *stats = std::move(st);
     return vm;
 }

@@ -466,12 +466,25 @@ class CudaBackend final : public Backend {
 
 }  // namespace
 
-std::unique_ptr<Backend> make_cuda_backend(std::string* why) {
+int cuda_device_count() {
+    int count = 0;
+    return cudaGetDeviceCount(&count) == cudaSuccess ? count : 0;
+}
+
+std::unique_ptr<Backend> make_cuda_backend(std::string* why, int device) {
     if (!cuda_device(why)) return nullptr;
+    const int count = cuda_device_count();
+    if (device < 0) device = 0;
+    if (device >= count) {
+        const char* vis = getenv("CUDA_VISIBLE_DEVICES");
+        throw Error("device " + std::to_string(device) + ": " + std::to_string(count) +
+                    " CUDA device(s) visible (0.." + std::to_string(count - 1) + ")" +
+                    (vis ? std::string(", CUDA_VISIBLE_DEVICES=") + vis : std::string()));
+    }
     // A device that is present but unusable (busy in exclusive mode, out of memory) is reported
     // like an absent one, so auto and cuda fall back to the CPU with the reason.
     try {
-        return std::make_unique<CudaBackend>(0);
+        return std::make_unique<CudaBackend>(device);
     } catch (const Error& e) {
         if (why) *why = e.what();
         return nullptr;

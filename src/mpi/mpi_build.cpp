@@ -1,0 +1,509 @@
+// The V-map build across MPI processes (src/mpi/mpi_build.h).
+#include "mpi/mpi_build.h"
+
+#include <cstdlib>
+
+#include "vmap/error.h"
+#include "vmap/map_access.h"
+
+#ifndef VMAP_HAVE_MPI
+
+namespace vmap::mpi {
+bool launched() { return false; }
+Result build(PointSet, BuildParams, const Options&, const std::string&) {
+    throw Error("this vmap was built without MPI (libopenmpi-dev was not found at build time)");
+}
+}  // namespace vmap::mpi
+
+#else
+
+#include <fmt/format.h>
+#include <mpi.h>
+#include <sched.h>
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstring>
+#include <filesystem>
+#include <numeric>
+#include <thread>
+
+#include "io/vmap_file.h"
+#include "mpi/shard_file.h"
+#include "visibility/backend.h"
+#include "vmap/build_checks.h"
+
+namespace vmap::mpi {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+double seconds_since(Clock::time_point t0) {
+    return std::chrono::duration<double>(Clock::now() - t0).count();
+}
+
+constexpr int kTagAsk = 11, kTagGive = 12, kTagData = 13;
+constexpr size_t kChunkBytes = size_t(256) << 20;  // one message at most (int counts)
+
+// MPI for the length of one build: initialised (threads: one at a time, which the dispatcher of
+// the dynamic schedule needs) and finalised on every path out.
+struct Comm {
+    int rank = 0, size = 1, local_rank = 0, local_size = 1;
+    bool finalize = false;
+    Comm() {
+        int inited = 0;
+        MPI_Initialized(&inited);
+        if (!inited) {
+            int provided = 0;
+            MPI_Init_thread(nullptr, nullptr, MPI_THREAD_SERIALIZED, &provided);
+            finalize = true;
+        }
+        MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+        MPI_Comm_size(MPI_COMM_WORLD, &size);
+        MPI_Comm local;
+        MPI_Comm_split_type(MPI_COMM_WORLD, MPI_COMM_TYPE_SHARED, rank, MPI_INFO_NULL, &local);
+        MPI_Comm_rank(local, &local_rank);
+        MPI_Comm_size(local, &local_size);
+        MPI_Comm_free(&local);
+    }
+    ~Comm() {
+        if (finalize) MPI_Finalize();
+    }
+    // Everyone's error, agreed: "" when every rank succeeded, else the lowest failing rank's
+    // message, prefixed with its rank, on every rank.
+    std::string agree(const std::string& err) const {
+        int mine = err.empty() ? size : rank, first = size;
+        MPI_Allreduce(&mine, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+        if (first == size) return "";
+        std::string msg = rank == first ? err : std::string();
+        uint64_t n = msg.size();
+        MPI_Bcast(&n, 1, MPI_UINT64_T, first, MPI_COMM_WORLD);
+        msg.resize(n);
+        MPI_Bcast(msg.data(), int(n), MPI_CHAR, first, MPI_COMM_WORLD);
+        return size > 1 ? fmt::format("rank {} of {}: {}", first, size, msg) : msg;
+    }
+};
+
+// Runs f, returning its error message ("" when it succeeded).
+template <class F>
+std::string attempt(F&& f) {
+    try {
+        f();
+        return "";
+    } catch (const std::bad_alloc&) {
+        return "out of memory";
+    } catch (const std::exception& e) {
+        return e.what();
+    }
+}
+
+// Large buffers in messages of at most kChunkBytes, with a partner that does the same.
+void exchange_bytes(const void* send, size_t ns, int to, void* recv, size_t nr, int from,
+                    uint64_t& moved) {
+    const auto* s = static_cast<const uint8_t*>(send);
+    auto* r = static_cast<uint8_t*>(recv);
+    for (size_t is = 0, ir = 0; is < ns || ir < nr;) {
+        const size_t cs = std::min(kChunkBytes, ns - is), cr = std::min(kChunkBytes, nr - ir);
+        MPI_Sendrecv(s + is, int(cs), MPI_BYTE, cs ? to : MPI_PROC_NULL, kTagData, r + ir, int(cr),
+                     MPI_BYTE, cr ? from : MPI_PROC_NULL, kTagData, MPI_COMM_WORLD,
+                     MPI_STATUS_IGNORE);
+        is += cs, ir += cr;
+        moved += cs;
+    }
+}
+
+// Every rank's links to the ranks that own either end (bounds: node ranges per rank), each
+// link once per owner; returns the links this rank owns an end of.
+std::vector<NodePair> redistribute(const Comm& c, const std::vector<NodePair>& links,
+                                   const std::vector<int32_t>& bounds, uint64_t& moved) {
+    auto owner = [&](int32_t n) {
+        return int(std::upper_bound(bounds.begin(), bounds.end(), n) - bounds.begin()) - 1;
+    };
+    std::vector<std::vector<NodePair> > out(size_t(c.size));
+    for (const NodePair& l : links) {
+        const int oa = owner(l.first), ob = owner(l.second);
+        out[oa].push_back(l);
+        if (ob != oa) out[ob].push_back(l);
+    }
+    std::vector<NodePair> mine = std::move(out[c.rank]);
+    for (int s = 1; s < c.size; ++s) {
+        const int to = (c.rank + s) % c.size, from = (c.rank - s + c.size) % c.size;
+        uint64_t ns = out[to].size(), nr = 0;
+        MPI_Sendrecv(&ns, 1, MPI_UINT64_T, to, kTagData, &nr, 1, MPI_UINT64_T, from, kTagData,
+                     MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        const size_t at = mine.size();
+        mine.resize(at + nr);
+        exchange_bytes(out[to].data(), ns * sizeof(NodePair), to, mine.data() + at,
+                       nr * sizeof(NodePair), from, moved);
+        std::vector<NodePair>().swap(out[to]);
+    }
+    return mine;
+}
+
+// Rank 0 receives every rank's range into vm's link arrays (in rank order, which is node order).
+void gather_ranges(const Comm& c, const LinkRange& r, VisibilityMap& vm, uint64_t& moved) {
+    uint64_t n = r.targets.size();
+    std::vector<uint64_t> sizes(size_t(c.size));
+    MPI_Gather(&n, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    if (c.rank != 0) {
+        const int32_t range[2] = {r.n0, r.n1};
+        MPI_Send(range, 2, MPI_INT32_T, 0, kTagData, MPI_COMM_WORLD);
+        exchange_bytes(r.offsets.data(), r.offsets.size() * 8, 0, nullptr, 0, 0, moved);
+        exchange_bytes(r.targets.data(), n * 4, 0, nullptr, 0, 0, moved);
+        return;
+    }
+    detail::MapData& d = detail::MapAccess::data(vm);
+    d.link_offsets.assign(size_t(vm.octree().num_nodes()) + 1, 0);
+    int32_t* out = detail::allocate_link_targets(
+        d, std::accumulate(sizes.begin(), sizes.end(), uint64_t(0)));
+    std::copy(r.targets.begin(), r.targets.end(), out);
+    uint64_t base = 0;
+    for (int k = 0; k < c.size; ++k) {
+        LinkRange got;
+        if (k != 0) {
+            int32_t range[2];
+            MPI_Recv(range, 2, MPI_INT32_T, k, kTagData, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+            got.n0 = range[0], got.n1 = range[1];
+            got.offsets.resize(size_t(got.n1 - got.n0) + 1);
+            exchange_bytes(nullptr, 0, k, got.offsets.data(), got.offsets.size() * 8, k, moved);
+            exchange_bytes(nullptr, 0, k, out + base, sizes[k] * 4, k, moved);
+        }
+        const LinkRange& g = k == 0 ? r : got;
+        for (size_t i = 1; i < g.offsets.size(); ++i)
+            d.link_offsets[size_t(g.n0) + i] = base + g.offsets[i];
+        base += sizes[k];
+    }
+}
+
+// One rank's state through the build.
+struct Run {
+    const Comm& c;
+    const Options& opt;
+    BuildParams params;
+    const PointSet& points;
+    std::string source;
+    VisibilityMap vm;  // the probe's: points and octree (rank 0 adds the links)
+    BuildStats probe_stats;
+    TopPairs tp;
+    ShareResult share;
+    uint64_t links = 0, moved = 0;
+    int threads = 0, chunks = 0;
+    std::string schedule, note;
+    Run(const Comm& comm, const Options& o, BuildParams p, const PointSet& pts, std::string src)
+        : c(comm), opt(o), params(std::move(p)), points(pts), source(std::move(src)) {}
+};
+
+// CPU threads for this rank: as asked, else the host's cores shared by its ranks (within the
+// cores mpirun bound the rank to).
+int threads_for(const Comm& c, int requested, std::string& note) {
+    const int hw = std::max(1u, std::thread::hardware_concurrency());
+    cpu_set_t set;
+    const int bound = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : hw;
+    if (requested > 0) return requested;
+    const int share = std::max(1, hw / c.local_size);
+    if (bound < share)
+        note = fmt::format(
+            "mpirun bound rank {} to {} cores of the {} its share would be: it runs {} threads "
+            "(mpirun --bind-to none, or --map-by slot:PE={}, gives it its share)",
+            c.rank, bound, share, bound, share);
+    return std::min(share, bound);
+}
+
+// A fingerprint of the input as the probe read it: every rank must build the same map.
+uint64_t input_hash(const VisibilityMap& vm) {
+    auto h = [](const auto& v) {
+        return detail::payload_hash(reinterpret_cast<const uint8_t*>(v.data()),
+                                    v.size() * sizeof(v[0]));
+    };
+    const VisibilityParams& vp = vm.visibility_params();
+    const std::vector<float> params{float(vm.octree_params().max_height),
+                                    float(vm.octree_params().leaf_points),
+                                    float(vp.K),
+                                    vp.eps,
+                                    vp.facing_tol,
+                                    vp.parallel_tol};
+    uint64_t x = h(vm.points().positions) ^ h(vm.points().normals) * 3 ^ h(vm.points().radii) * 5 ^
+                 h(vm.order()) * 7 ^ h(params) * 11;
+    return x ^ uint64_t(vm.octree().num_nodes()) * 0x9e3779b97f4a7c15ULL;
+}
+
+std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
+    const uint64_t mine = input_hash(vm);
+    uint64_t lo = 0, hi = 0;
+    MPI_Allreduce(&mine, &lo, 1, MPI_UINT64_T, MPI_MIN, MPI_COMM_WORLD);
+    MPI_Allreduce(&mine, &hi, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
+    if (lo == hi) return "";
+    uint64_t first = mine;
+    MPI_Bcast(&first, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    return c.agree(mine == first ? ""
+                                 : "its input (points, octree or parameters) differs from "
+                                   "rank 0's: every rank must read the same scene with the "
+                                   "same options");
+}
+
+std::string run_static(Run& r) {
+    const auto shares = static_shares(r.tp, r.c.size);
+    r.chunks = r.c.size;
+    return attempt([&] {
+        build_round(r.points, r.params, r.tp, shares[r.c.rank], !r.opt.count_links, r.source,
+                    r.share);
+    });
+}
+
+// Rank 0's thread of the dynamic schedule: answers each rank's ask with the next chunk (-1:
+// none left, or a rank failed), until every other rank has had its -1 or said it failed.
+void dispatch(const Comm& c, int chunks, std::atomic<int>& next, std::atomic<bool>& failed) {
+    for (int remote = c.size - 1; remote > 0;) {
+        int flag = 0;
+        MPI_Status st;
+        MPI_Iprobe(MPI_ANY_SOURCE, kTagAsk, MPI_COMM_WORLD, &flag, &st);
+        if (!flag) {  // asks come seconds apart: poll lightly instead of spinning a core
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+            continue;
+        }
+        int msg = 0;
+        MPI_Recv(&msg, 1, MPI_INT, st.MPI_SOURCE, kTagAsk, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+        if (msg != 0) {
+            failed = true;
+            --remote;
+            continue;
+        }
+        int k = failed ? chunks : next.fetch_add(1);
+        if (k >= chunks) k = -1, --remote;
+        MPI_Send(&k, 1, MPI_INT, st.MPI_SOURCE, kTagGive, MPI_COMM_WORLD);
+    }
+}
+
+std::string run_dynamic(Run& r) {
+    const auto chunks = dynamic_chunks(r.tp, r.c.size);
+    r.chunks = int(chunks.size());
+    const int n = r.chunks;
+    auto round = [&](int k) {
+        build_round(r.points, r.params, r.tp, chunks[k], !r.opt.count_links, r.source, r.share);
+    };
+    if (r.c.rank == 0) {
+        std::atomic<int> next{0};
+        std::atomic<bool> failed{false};
+        std::thread t([&] { dispatch(r.c, n, next, failed); });
+        std::string err = attempt([&] {
+            for (int k; !failed && (k = next.fetch_add(1)) < n;) round(k);
+        });
+        if (!err.empty()) failed = true;
+        t.join();
+        return err;
+    }
+    std::string err = attempt([&] {
+        for (;;) {
+            int ask = 0, k = -1;
+            MPI_Send(&ask, 1, MPI_INT, 0, kTagAsk, MPI_COMM_WORLD);
+            MPI_Recv(&k, 1, MPI_INT, 0, kTagGive, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
+            if (k < 0) return;
+            round(k);
+        }
+    });
+    if (!err.empty()) {
+        int quit = 1;
+        MPI_Send(&quit, 1, MPI_INT, 0, kTagAsk, MPI_COMM_WORLD);
+    }
+    return err;
+}
+
+// Which jobs came back whole, from every rank; their merges; the links this rank keeps.
+void settle(Run& r) {
+    const size_t n = r.tp.pairs.size();
+    std::vector<uint8_t> mine = r.share.full, all(n, 0);
+    mine.resize(n, 0);
+    MPI_Allreduce(mine.data(), all.data(), int(n), MPI_UNSIGNED_CHAR, MPI_MAX, MPI_COMM_WORLD);
+    const Merge m = merge_full(r.tp, all);
+    uint64_t dropped = 0;
+    for (size_t i = 0; i < n; ++i) dropped += m.drop[i] && mine[i];
+    if (!r.opt.count_links) {
+        drop_merged(r.tp, m, r.share.links);
+        if (r.c.rank == 0) r.share.links.insert(r.share.links.end(), m.add.begin(), m.add.end());
+    }
+    const uint64_t local = r.share.links_counted - dropped + (r.c.rank == 0 ? m.add.size() : 0);
+    MPI_Allreduce(&local, &r.links, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
+}
+
+// The counters of all ranks summed into rank 0's stats (times: the slowest rank's).
+BuildStats reduce_stats(Run& r) {
+    const Octree& t = r.vm.octree();
+    const size_t levels = size_t(t.height()) + 1, leaves = size_t(t.num_leaves());
+    const std::vector<uint64_t> mine = counters_of(r.share.stats, levels, leaves);
+    std::vector<uint64_t> sum(mine.size(), 0);
+    MPI_Reduce(mine.data(), sum.data(), int(mine.size()), MPI_UINT64_T, MPI_SUM, 0, MPI_COMM_WORLD);
+    const BuildStats& s = r.share.stats;
+    const double t_mine[6] = {s.seconds_plan,    s.seconds_wait,  s.seconds_backend,
+                              s.seconds_extract, s.seconds_links, double(s.peak_device_bytes)};
+    double t_max[6] = {};
+    MPI_Reduce(t_mine, t_max, 6, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    BuildStats st = r.probe_stats;
+    if (r.c.rank != 0) return st;
+    add_counters(st, sum, levels, leaves);
+    if (!r.share.stats.construction.empty()) st.construction = r.share.stats.construction;
+    st.seconds_plan = st.seconds_decide = t_max[0], st.seconds_wait = t_max[1];
+    st.seconds_backend = t_max[2], st.seconds_extract = t_max[3], st.seconds_links = t_max[4];
+    st.peak_device_bytes = uint64_t(t_max[5]);
+    st.links = r.links;
+    detail::check_facing(st);
+    return st;
+}
+
+// The links of this rank's node range, every link sent to the owners of its ends.
+std::string own_range(Run& r, LinkRange& range, std::vector<int32_t>& bounds) {
+    const int32_t nodes = r.vm.octree().num_nodes();
+    std::vector<uint32_t> deg(size_t(nodes), 0), all(size_t(nodes), 0);
+    for (const auto& [a, b] : r.share.links) deg[a]++, deg[b]++;
+    MPI_Allreduce(deg.data(), all.data(), nodes, MPI_UINT32_T, MPI_SUM, MPI_COMM_WORLD);
+    bounds = split_nodes(all, r.c.size);
+    std::vector<NodePair> got = redistribute(r.c, r.share.links, bounds, r.moved);
+    std::vector<NodePair>().swap(r.share.links);
+    return r.c.agree(
+        attempt([&] { range = link_range(got, bounds[r.c.rank], bounds[r.c.rank + 1]); }));
+}
+
+std::string write_single(Run& r, LinkRange& range) {
+    gather_ranges(r.c, range, r.vm, r.moved);
+    range = LinkRange{};
+    return r.c.agree(attempt([&] {
+        if (r.c.rank == 0) save_vmap(r.opt.output, r.vm);
+    }));
+}
+
+// Shards: every rank writes its file; all are committed once all are written, then rank 0
+// writes the index (last: an index on disk means its shards are whole). A failure removes what
+// this build committed.
+std::string write_shards(Run& r, const LinkRange& range) {
+    const std::string& out = r.opt.output;
+    const std::string mine = shard_name(out, r.c.rank, r.c.size), base = base_name(out);
+    ShardInfo info;
+    std::unique_ptr<io::AtomicFile> f;
+    auto undo = [&] {
+        std::error_code ec;
+        std::filesystem::remove(mine, ec);
+        if (r.c.rank == 0) std::filesystem::remove(base, ec);
+    };
+    std::string err = r.c.agree(attempt([&] {
+        f = write_shard(mine, r.c.rank, range, info);
+        if (r.c.rank == 0) save_base(base, r.vm);
+    }));
+    if (err.empty()) err = r.c.agree(attempt([&] { f->commit(); }));
+    if (!err.empty()) return undo(), err;
+    const uint64_t row[5] = {uint64_t(info.n0), uint64_t(info.n1), info.ends, info.bytes,
+                             info.checksum};
+    std::vector<uint64_t> rows(size_t(r.c.size) * 5);
+    MPI_Gather(row, 5, MPI_UINT64_T, rows.data(), 5, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    err = r.c.agree(attempt([&] {
+        if (r.c.rank != 0) return;
+        std::vector<ShardInfo> shards(size_t(r.c.size));
+        for (int k = 0; k < r.c.size; ++k) {
+            const uint64_t* x = rows.data() + 5 * k;
+            shards[k] = {std::filesystem::path(shard_name(out, k, r.c.size)).filename().string(),
+                         int32_t(x[0]),
+                         int32_t(x[1]),
+                         x[2],
+                         x[3],
+                         x[4]};
+        }
+        write_index(out, shards, r.links, r.vm.octree().num_nodes());
+    }));
+    if (!err.empty()) undo();
+    return err;
+}
+
+// Per-rank construction times and rounds, gathered into lines for rank 0's summary.
+std::vector<std::string> summary(const Run& r, double output_s) {
+    const double mine[3] = {r.share.seconds, double(r.share.rounds), double(r.c.local_rank == 0)};
+    std::vector<double> all(size_t(r.c.size) * 3);
+    MPI_Gather(mine, 3, MPI_DOUBLE, all.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    if (r.c.rank != 0) return {};
+    double lo = 1e300, hi = 0, sum = 0, rlo = 1e300, rhi = 0, hosts = 0;
+    for (int k = 0; k < r.c.size; ++k) {
+        const double s = all[3 * k], n = all[3 * k + 1];
+        lo = std::min(lo, s), hi = std::max(hi, s), sum += s;
+        rlo = std::min(rlo, n), rhi = std::max(rhi, n), hosts += all[3 * k + 2];
+    }
+    const double mean = sum / r.c.size;
+    std::vector<std::string> lines{
+        fmt::format("mpi:        {} ranks on {} host(s), {} threads each{}, schedule {} ({} "
+                    "chunks of {} jobs)",
+                    r.c.size, int(hosts), r.threads,
+                    r.params.backend == Backend::kCpu ? std::string() : fmt::format(", device {}", r.params.device),
+                    r.schedule, r.chunks, r.tp.jobs.size()),
+        fmt::format("            construction per rank {:.3f}-{:.3f} s (mean {:.3f}, slowest / "
+                    "mean {:.3f}), {}-{} rounds",
+                    lo, hi, mean, hi / std::max(1e-9, mean), int(rlo), int(rhi)),
+        fmt::format("            links moved between ranks {:.1f} MiB; output {:.3f} s{}",
+                    double(r.moved) / 1048576.0, output_s,
+                    r.opt.shards ? fmt::format(" ({} shards + index)", r.c.size) : "")};
+    if (!r.note.empty()) lines.push_back("note:       " + r.note);
+    return lines;
+}
+
+// Threads, device and progress of this rank.
+void configure(Run& r) {
+    r.threads = threads_for(r.c, r.opt.threads, r.note);
+    r.params.threads = r.threads;
+    if (r.params.device < 0 && r.params.backend != Backend::kCpu) {
+        const int gpus = detail::cuda_device_count();
+        r.params.device = gpus > 0 ? r.c.local_rank % gpus : 0;
+    }
+    if (r.c.rank != 0) r.params.progress = nullptr;
+    r.schedule = r.opt.schedule;
+    if (r.schedule != "static" && r.schedule != "dynamic")
+        throw Error(
+            fmt::format("--schedule: unknown schedule '{}' (static or dynamic)", r.schedule));
+    int level = 0;
+    MPI_Query_thread(&level);
+    if (r.schedule == "dynamic" && level < MPI_THREAD_SERIALIZED && r.c.size > 1) {
+        r.schedule = "static";
+        r.note = "this MPI gives no thread support: the static schedule instead of dynamic";
+    }
+}
+
+}  // namespace
+
+bool launched() { return std::getenv("OMPI_COMM_WORLD_SIZE") || std::getenv("PMIX_RANK"); }
+
+Result build(PointSet points, BuildParams params, const Options& opt, const std::string& source) {
+    const auto t0 = Clock::now();
+    Comm c;
+    Run r(c, opt, std::move(params), points, source);
+    Result res;
+    res.root = c.rank == 0;
+    auto fail = [&](const std::string& e) {
+        if (c.rank == 0) throw Error(e);
+        res.exit_code = 1;
+        return std::move(res);
+    };
+    std::string err = c.agree(attempt([&] {
+        configure(r);
+        r.vm = probe(points, r.params, c.size, r.tp, r.probe_stats, source);
+    }));
+    if (err.empty()) err = check_same_input(c, r.vm);
+    if (err.empty()) err = c.agree(r.schedule == "static" ? run_static(r) : run_dynamic(r));
+    if (!err.empty()) return fail(err);
+    settle(r);
+    res.stats = reduce_stats(r);
+    const auto tw = Clock::now();
+    if (!opt.count_links) {
+        LinkRange range;
+        std::vector<int32_t> bounds;
+        err = own_range(r, range, bounds);
+        if (err.empty()) err = opt.shards ? write_shards(r, range) : write_single(r, range);
+        if (!err.empty()) return fail(err);
+    }
+    res.save_seconds = seconds_since(tw);
+    res.summary = summary(r, res.save_seconds);
+    if (c.rank != 0) return res;
+    res.stats.seconds_total = seconds_since(t0) - res.save_seconds;
+    res.stats.seconds_visibility = res.stats.seconds_total - res.stats.seconds_octree;
+    if (opt.count_links || opt.shards) detail::MapAccess::data(r.vm).link_offsets.clear();
+    res.vm = std::move(r.vm);
+    return res;
+}
+
+}  // namespace vmap::mpi
+
+#endif

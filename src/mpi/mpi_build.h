@@ -1,0 +1,48 @@
+// `mpirun -np N vmap build`: the V-map construction shared over N processes with MPI, each on
+// its own GPU or its share of the CPU cores, the links gathered into one .vmap byte for byte
+// that of a single-process build (or left as shards: src/mpi/shard_file.h).
+//
+// How the work is cut and put back together: src/mpi/top_pairs.h (no MPI) and src/mpi/share.h.
+// Every rank reads the input and builds the same octree; ranks whose inputs differ stop the job.
+// Schedules: "static" (the default: each rank its share of the jobs by a work estimate, fixed in
+// advance) or "dynamic" (rank 0 hands out chunks of jobs to whichever rank asks; a thread of
+// rank 0 answers while rank 0 builds too). A failure on one rank (bad input, out of memory,
+// a write error) ends every rank with that rank's message; nothing is written unless every
+// rank got that far, and the output appears whole (io::AtomicFile) or not at all.
+//
+// A vmap built without MPI (VMAP_HAVE_MPI unset) has launched() false: mpirun then starts N
+// independent single-process builds, as before.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "vmap/vmap.h"
+
+namespace vmap::mpi {
+
+// Built with MPI, and this process was started by mpirun (Open MPI's environment).
+bool launched();
+
+struct Options {
+    std::string output;               // .vmap (or the index, with shards)
+    bool shards = false;              // one file of links per rank and an index (shard_file.h)
+    bool count_links = false;         // count, write nothing (BuildParams::keep_links false)
+    std::string schedule = "static";  // static | dynamic (docs/scaling.md: static balanced better)
+    int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
+};
+
+struct Result {
+    bool root = true;   // rank 0: vm, stats and summary are its, and it printed nothing yet
+    int exit_code = 0;  // other ranks: what to exit with (rank 0 throws instead)
+    VisibilityMap vm;   // the points and octree; the links unless shards or count_links
+    BuildStats stats;   // summed over the ranks (times: the slowest rank's)
+    double save_seconds = 0;
+    std::vector<std::string> summary;  // lines about the ranks, for the build summary
+};
+
+// The shared build: every rank calls it with its own reading of the same input. Rank 0 throws
+// vmap::Error with the failing rank's message; the others return exit_code 1.
+Result build(PointSet points, BuildParams params, const Options& opt, const std::string& source);
+
+}  // namespace vmap::mpi

@@ -1,0 +1,157 @@
+// One process's part of a shared build (src/mpi/share.h).
+#include "mpi/share.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
+#include <algorithm>
+#include <chrono>
+#include <unordered_set>
+
+namespace vmap::mpi {
+namespace {
+
+double seconds_since(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
+
+}  // namespace
+
+VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks, TopPairs& tp,
+                    BuildStats& stats, const std::string& source) {
+    BuildParams p = params;
+    p.progress = nullptr;
+    p.top_pairs = [&](const Octree& t) {
+        tp = make_top_pairs_for(t, ranks);
+        return std::vector<NodePair>{};
+    };
+    return build_vmap(points, p, &stats, source);
+}
+
+void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+                 const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
+                 ShareResult& out) {
+    const auto t0 = std::chrono::steady_clock::now();
+    BuildParams p = params;
+    p.keep_links = true;  // a job's own link says whether it came back fully visible
+    p.top_pairs = [&](const Octree&) { return job_pairs(tp, jobs); };
+    BuildStats st;
+    const VisibilityMap vm = build_vmap(points, p, &st, source);
+    out.full.resize(tp.pairs.size(), 0);
+    for (uint32_t j : jobs) {
+        const auto l = vm.links(tp.pairs[j].a);
+        out.full[j] = std::binary_search(l.begin(), l.end(), tp.pairs[j].b);
+    }
+    const Octree& t = vm.octree();
+    for (int32_t n = 0; n < t.num_nodes(); ++n)
+        for (int32_t m : vm.links(n))
+            if (m > n) {
+                ++out.links_counted;
+                if (keep) out.links.emplace_back(n, m);
+            }
+    const size_t levels = size_t(t.height()) + 1, leaves = size_t(t.num_leaves());
+    if (out.rounds == 0) {
+        out.stats = st;
+    } else {
+        add_counters(out.stats, counters_of(st, levels, leaves), levels, leaves);
+        out.stats.seconds_plan += st.seconds_plan, out.stats.seconds_wait += st.seconds_wait;
+        out.stats.seconds_backend += st.seconds_backend;
+        out.stats.seconds_extract += st.seconds_extract;
+        out.stats.seconds_links += st.seconds_links;
+        out.stats.peak_device_bytes = std::max(out.stats.peak_device_bytes, st.peak_device_bytes);
+    }
+    out.rounds++;
+    out.seconds += seconds_since(t0);
+}
+
+void drop_merged(const TopPairs& tp, const Merge& m, std::vector<NodePair>& links) {
+    std::unordered_set<uint64_t> gone;
+    auto key = [](int32_t a, int32_t b) { return uint64_t(uint32_t(a)) << 32 | uint32_t(b); };
+    for (size_t i = 0; i < m.drop.size(); ++i)
+        if (m.drop[i]) gone.insert(key(tp.pairs[i].a, tp.pairs[i].b));
+    if (gone.empty()) return;
+    std::erase_if(links, [&](const NodePair& l) { return gone.count(key(l.first, l.second)); });
+}
+
+size_t counter_count(size_t levels, size_t leaves) {
+    return kWork + kLevel * levels + kScalars + leaves;
+}
+
+std::vector<uint64_t> counters_of(const BuildStats& st, size_t levels, size_t leaves) {
+    std::vector<uint64_t> c;
+    c.reserve(counter_count(levels, leaves));
+    const WorkCounters& w = st.work;
+    c.insert(c.end(), {w.pairs, w.facing_pairs, w.visible_pairs, w.node_tests, w.occluder_tests,
+                       w.cells_stepped});
+    for (size_t l = 0; l < levels; ++l) {
+        const ConstructionLevel x = l < st.levels.size() ? st.levels[l] : ConstructionLevel{};
+        c.insert(c.end(), {x.pairs, x.tested, x.visible, x.invisible, x.split, x.walked,
+                           x.leaf_pairs_decided, x.leaf_pairs_visible, x.leaf_pairs_walked});
+    }
+    c.insert(c.end(),
+             {st.leaf_pairs_walked, st.node_pairs_tested, st.shaft_node_tests, st.batches});
+    for (size_t l = 0; l < leaves; ++l)
+        c.push_back(l < st.leaf_walked.size() ? st.leaf_walked[l] : 0);
+    return c;
+}
+
+void add_counters(BuildStats& st, const std::vector<uint64_t>& c, size_t levels, size_t leaves) {
+    const uint64_t* p = c.data();
+    WorkCounters w{p[0], p[1], p[2], p[3], p[4], p[5]};
+    st.work += w;
+    p += kWork;
+    st.levels.resize(std::max(st.levels.size(), levels));
+    for (size_t l = 0; l < levels; ++l, p += kLevel) {
+        ConstructionLevel& x = st.levels[l];
+        x.pairs += p[0], x.tested += p[1], x.visible += p[2], x.invisible += p[3];
+        x.split += p[4], x.walked += p[5], x.leaf_pairs_decided += p[6];
+        x.leaf_pairs_visible += p[7], x.leaf_pairs_walked += p[8];
+    }
+    st.leaf_pairs_walked += p[0], st.node_pairs_tested += p[1], st.shaft_node_tests += p[2];
+    st.batches += p[3];
+    p += kScalars;
+    st.leaf_walked.resize(std::max(st.leaf_walked.size(), leaves), 0);
+    for (size_t l = 0; l < leaves; ++l) st.leaf_walked[l] += p[l];
+}
+
+LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1) {
+    // Each end in range as one 64-bit key (node, target): sorting the keys sorts by node, then
+    // by target, which is the arrays' order.
+    std::vector<uint64_t> keys;
+    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
+    for (const auto& [a, b] : links) {
+        if (in(a)) keys.push_back(uint64_t(uint32_t(a)) << 32 | uint32_t(b));
+        if (in(b)) keys.push_back(uint64_t(uint32_t(b)) << 32 | uint32_t(a));
+    }
+    tbb::parallel_sort(keys.begin(), keys.end());
+    LinkRange r;
+    r.n0 = n0, r.n1 = n1;
+    r.offsets.assign(size_t(n1 - n0) + 1, 0);
+    r.targets.resize(keys.size());
+    tbb::parallel_for(size_t(0), keys.size(),
+                      [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
+    for (uint64_t k : keys) r.offsets[size_t(int32_t(k >> 32) - n0) + 1]++;
+    for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
+    return r;
+}
+
+std::vector<int32_t> split_nodes(const std::vector<uint32_t>& degree, int parts) {
+    const int32_t nodes = int32_t(degree.size());
+    uint64_t total = 0;
+    for (uint32_t d : degree) total += d;
+    std::vector<int32_t> b{0};
+    uint64_t run = 0;
+    for (int32_t n = 0; n < nodes && int(b.size()) < parts; ++n) {
+        run += degree[n];
+        // Cut after n once the ends so far reach the next share, leaving a node for each part.
+        const uint64_t want = total * uint64_t(b.size()) / uint64_t(parts);
+        if (run >= want && run > 0 && nodes - (n + 1) >= parts - int(b.size())) b.push_back(n + 1);
+    }
+    while (int(b.size()) < parts) b.push_back(std::min(nodes, b.back() + (b.back() < nodes)));
+    b.push_back(nodes);
+    return b;
+}
+
+}  // namespace vmap::mpi

@@ -1,0 +1,221 @@
+// The MPI build's cutting and merging (src/mpi/top_pairs.h, share.h, shard_file.h), with the
+// ranks simulated in one process: no MPI needed. The oracle is the single-process build_vmap.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "mpi/shard_file.h"
+#include "mpi/share.h"
+#include "mpi/top_pairs.h"
+#include "test_util.h"
+#include "vmap/error.h"
+
+namespace vmap {
+namespace {
+
+using mpi::NodePair;
+
+struct Case {
+    const char* scene;
+    int points, height, leaf_points;
+};
+const Case kCases[] = {{"cornell-bunny", 1000, 6, 1},
+                       {"test/test-plates", 1000, 6, 2},
+                       {"test/test-many", 1000, 5, 1}};
+
+// What `ranks` processes of an MPI build would give, each part built on its own, merged as
+// mpi_build.cpp does (jobs: 0 the probe's split for `ranks`, else that largest job area).
+std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, int ranks,
+                                   bool guided, uint64_t max_area, VisibilityMap& vm) {
+    mpi::TopPairs tp;
+    BuildStats st;
+    vm = mpi::probe(pts, bp, ranks, tp, st, "test");
+    if (max_area) tp = mpi::make_top_pairs(vm.octree(), max_area);
+    const auto parts = guided ? mpi::dynamic_chunks(tp, ranks) : mpi::static_shares(tp, ranks);
+    std::vector<mpi::ShareResult> got(parts.size());
+    std::vector<uint8_t> full(tp.pairs.size(), 0);
+    for (size_t k = 0; k < parts.size(); ++k) {
+        mpi::build_round(pts, bp, tp, parts[k], true, "test", got[k]);
+        for (size_t i = 0; i < full.size(); ++i)
+            full[i] |= got[k].full.size() > i && got[k].full[i];
+    }
+    const mpi::Merge m = mpi::merge_full(tp, full);
+    std::vector<NodePair> links = m.add;
+    for (auto& g : got) {
+        mpi::drop_merged(tp, m, g.links);
+        links.insert(links.end(), g.links.begin(), g.links.end());
+    }
+    return links;
+}
+
+void expect_same_links(const VisibilityMap& want, const VisibilityMap& got) {
+    ASSERT_EQ(want.link_offsets(), got.link_offsets());
+    ASSERT_TRUE(std::equal(want.link_targets().begin(), want.link_targets().end(),
+                           got.link_targets().begin(), got.link_targets().end()));
+}
+
+TEST(MpiSplit, JobsCoverEveryLeafPairOnce) {
+    const Case& c = kCases[0];
+    PointSet pts = test::sample(test::scene_path(c.scene), c.points);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build_in_unit_frame(pts, {c.height, c.leaf_points}, order);
+    for (uint64_t max_area : {uint64_t(1), uint64_t(100), uint64_t(1) << 40}) {
+        const mpi::TopPairs tp = mpi::make_top_pairs(t, max_area);
+        const int32_t l = t.num_leaves();
+        std::vector<uint8_t> seen(size_t(l) * l, 0);
+        for (uint32_t j : tp.jobs) {
+            const mpi::TopPair& p = tp.pairs[j];
+            EXPECT_TRUE(p.area <= max_area || (t.is_leaf(p.a) && t.is_leaf(p.b)));
+            for (int32_t r = t.leaf_begin()[p.a]; r < t.leaf_end()[p.a]; ++r)
+                for (int32_t q = t.leaf_begin()[p.b]; q < t.leaf_end()[p.b]; ++q) {
+                    ASSERT_LT(r, q);
+                    ASSERT_EQ(seen[size_t(r) * l + q]++, 0) << "leaf pair in two jobs";
+                }
+        }
+        uint64_t covered = 0;
+        for (uint8_t s : seen) covered += s;
+        EXPECT_EQ(covered, uint64_t(l) * (l - 1) / 2);
+    }
+}
+
+TEST(MpiSplit, SharesAndChunksHoldEveryJobOnce) {
+    PointSet pts = test::sample(test::scene_path("cornell-bunny"), 2000);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build_in_unit_frame(pts, {6, 1}, order);
+    const mpi::TopPairs tp = mpi::make_top_pairs_for(t, 4);
+    for (const auto& parts : {mpi::static_shares(tp, 4), mpi::dynamic_chunks(tp, 4)}) {
+        std::vector<uint32_t> all;
+        for (const auto& p : parts) all.insert(all.end(), p.begin(), p.end());
+        std::sort(all.begin(), all.end());
+        EXPECT_EQ(all, tp.jobs);
+    }
+    // The estimate splits evenly: no share far above the mean.
+    const auto shares = mpi::static_shares(tp, 4);
+    uint64_t hi = 0;
+    for (const auto& s : shares) {
+        uint64_t a = 0;
+        for (uint32_t j : s) a += tp.pairs[j].area;
+        hi = std::max(hi, a);
+    }
+    EXPECT_LT(double(hi), 1.1 * double(tp.total_area) / 4);
+}
+
+// Every split of the work, merged, gives the single-process map exactly; max_area 1 splits
+// every pair down to leaf pairs, so every full node pair is rebuilt by merges alone.
+TEST(MpiSplit, SimulatedRanksGiveTheSingleProcessMap) {
+    for (const Case& c : kCases) {
+        SCOPED_TRACE(c.scene);
+        const PointSet pts = test::sample(test::scene_path(c.scene), c.points);
+        const BuildParams bp = test::cpu_params(c.height, c.leaf_points);
+        const VisibilityMap want = build_vmap(pts, bp);
+        for (auto [ranks, guided, max_area] :
+             {std::tuple{2, false, uint64_t(0)}, std::tuple{3, true, uint64_t(0)},
+              std::tuple{5, false, uint64_t(1)}, std::tuple{4, true, uint64_t(37)}}) {
+            VisibilityMap vm;
+            set_links(vm, {});  // replaced below
+            std::vector<NodePair> links = shared_links(pts, bp, ranks, guided, max_area, vm);
+            set_links(vm, std::move(links));
+            expect_same_links(want, vm);
+        }
+    }
+}
+
+// The node ranges of the sharded output, laid end to end, are the one-file arrays.
+TEST(MpiSplit, NodeRangesConcatenateToTheLinkArrays) {
+    const PointSet pts = test::sample(test::scene_path("cornell-bunny"), 1500);
+    const VisibilityMap want = build_vmap(pts, test::cpu_params(6, 1));
+    std::vector<NodePair> links;
+    std::vector<uint32_t> deg(size_t(want.octree().num_nodes()), 0);
+    for (int32_t n = 0; n < want.octree().num_nodes(); ++n)
+        for (int32_t m : want.links(n)) {
+            deg[n]++;
+            if (m > n) links.emplace_back(m, n);  // either orientation
+        }
+    for (int parts : {1, 2, 7}) {
+        const std::vector<int32_t> b = mpi::split_nodes(deg, parts);
+        ASSERT_EQ(b.size(), size_t(parts) + 1);
+        EXPECT_EQ(b.front(), 0);
+        EXPECT_EQ(b.back(), want.octree().num_nodes());
+        std::vector<uint64_t> off{0};
+        std::vector<int32_t> tg;
+        for (int k = 0; k < parts; ++k) {
+            ASSERT_LE(b[k], b[k + 1]);
+            const mpi::LinkRange r = mpi::link_range(links, b[k], b[k + 1]);
+            for (size_t i = 1; i < r.offsets.size(); ++i) off.push_back(tg.size() + r.offsets[i]);
+            tg.insert(tg.end(), r.targets.begin(), r.targets.end());
+        }
+        EXPECT_EQ(off, want.link_offsets());
+        EXPECT_TRUE(
+            std::equal(tg.begin(), tg.end(), want.link_targets().begin(), want.link_targets().end()));
+    }
+}
+
+class ShardFiles : public ::testing::Test {
+  protected:
+    std::filesystem::path dir =
+        std::filesystem::temp_directory_path() / ("vmap-shards-" + std::to_string(::getpid()));
+    void SetUp() override { std::filesystem::create_directories(dir); }
+    void TearDown() override { std::filesystem::remove_all(dir); }
+
+    // want's links as `parts` shards and an index; returns the index's path.
+    std::string write(const VisibilityMap& want, int parts) {
+        const std::string index = (dir / "m.vmap").string();
+        std::vector<NodePair> links;
+        std::vector<uint32_t> deg(size_t(want.octree().num_nodes()), 0);
+        for (int32_t n = 0; n < want.octree().num_nodes(); ++n)
+            for (int32_t m : want.links(n)) {
+                deg[n]++;
+                if (m > n) links.emplace_back(n, m);
+            }
+        const std::vector<int32_t> b = mpi::split_nodes(deg, parts);
+        std::vector<mpi::ShardInfo> info(static_cast<size_t>(parts));
+        for (int k = 0; k < parts; ++k)
+            mpi::write_shard(mpi::shard_name(index, k, parts), k,
+                             mpi::link_range(links, b[k], b[k + 1]), info[k])
+                ->commit();
+        mpi::save_base(mpi::base_name(index), want);
+        mpi::write_index(index, info, want.num_links(), want.octree().num_nodes());
+        return index;
+    }
+};
+
+TEST_F(ShardFiles, ReadBackAsTheOneFileMap) {
+    const VisibilityMap want =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 1500), test::cpu_params(6, 1));
+    const std::string index = write(want, 3);
+    EXPECT_TRUE(mpi::is_shard_index(index));
+    const VisibilityMap got = load_vmap(index);
+    expect_same_links(want, got);
+    EXPECT_EQ(want.order(), got.order());
+    EXPECT_EQ(want.octree().skip(), got.octree().skip());
+    EXPECT_EQ(got.query(0, 700), want.query(0, 700));
+}
+
+TEST_F(ShardFiles, MissingOrCorruptShardIsNamed) {
+    const VisibilityMap want =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 1200), test::cpu_params(5, 1));
+    const std::string index = write(want, 2);
+    const std::string shard = mpi::shard_name(index, 1, 2);
+    {  // one byte flipped in the targets
+        std::fstream f(shard, std::ios::in | std::ios::out | std::ios::binary);
+        f.seekg(-3, std::ios::end);
+        char x = 0;
+        f.read(&x, 1);
+        f.seekp(-3, std::ios::end);
+        x ^= 1;
+        f.write(&x, 1);
+    }
+    try {
+        load_vmap(index);
+        FAIL() << "a corrupt shard loaded";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("shard-1-of-2: checksum mismatch"), std::string::npos)
+            << e.what();
+    }
+    std::filesystem::remove(shard);
+    EXPECT_THROW(load_vmap(index), Error);
+}
+
+}  // namespace
+}  // namespace vmap

@@ -2,7 +2,8 @@
 //
 //   normals_accuracy [--objects-only] [--points N] [--orientation auto|outward|inward]
 //                    [--write-ply DIR] SCENE.json...
-//   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N] SCENE.json...
+//   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
+//                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
 //
 // Samples each scene (true normals and radii), strips both, re-estimates them as `vmap build`
 // does for a raw cloud, and prints one table row per scene: the share of the area (points are
@@ -20,7 +21,10 @@
 // spacing sqrt(area / points) = sqrt(pi) * splat radius), scored against the noise-free true
 // normals. --floor adds what a fit cannot beat on faceted meshes: the angle between each point's
 // true (face) normal and the plane fit of its 12 nearest in a sample 16 times denser, i.e. the
-// smooth surface's normal, where the mesh's faces are smaller than the spacing.
+// smooth surface's normal, where the mesh's faces are smaller than the spacing. With
+// --write-ply DIR it writes DIR/SCENE-estimated.ply (and -smooth.ply with --floor): positions
+// and those normals, each signed like the true one, to score directions alone with `vmap
+// validate SCENE.json --cloud FILE`.
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
@@ -49,6 +53,7 @@ struct Options {
     bool angles = false, floor = false;
     bool orientation_given = false;
     double noise = 0;  // Gaussian, in sample spacings
+    NormalEstimationParams fit;  // --fit-neighbours, --refits
     uint64_t points = 0;
     Orientation orientation = Orientation::kAuto;
     std::string write_dir;
@@ -209,13 +214,31 @@ void add_noise(PointSet& ps, const PointSet& truth, double f) {
     }
 }
 
+// For `vmap validate --cloud`: the estimated normals (and with --floor the smooth surface's),
+// each signed to agree with the true normal, so that the fit's directions are scored alone.
+void write_signed(const std::string& stem, const PointSet& est, const std::vector<Vec3>& smooth,
+                  const PointSet& truth) {
+    PointSet out;
+    out.positions = est.positions;
+    auto signed_like_truth = [&](const std::vector<Vec3>& n) {
+        out.normals.resize(n.size());
+        for (size_t i = 0; i < n.size(); ++i)
+            out.normals[i] = dot(n[i], truth.normals[i]) < 0 ? -n[i] : n[i];
+    };
+    signed_like_truth(est.normals);
+    write_ply(stem + "-estimated.ply", out);
+    if (smooth.empty()) return;
+    signed_like_truth(smooth);
+    write_ply(stem + "-smooth.ply", out);
+}
+
 void run_angles(const std::string& path, Scene sc, const PointSet& truth,
                 const std::vector<uint32_t>& surf, const Options& o) {
     const std::vector<uint8_t> thin = thin_parts(truth, surf);
     PointSet raw;
     raw.positions = truth.positions;
     if (o.noise > 0) add_noise(raw, truth, o.noise);
-    NormalEstimationParams np;
+    NormalEstimationParams np = o.fit;
     np.orientation = o.orientation_given ? o.orientation : Orientation::kOutward;
     const auto t0 = std::chrono::steady_clock::now();
     estimate_normals(raw, np, path.c_str());
@@ -230,6 +253,7 @@ void run_angles(const std::string& path, Scene sc, const PointSet& truth,
         if (thin[i]) thn.push_back(a);
         if (o.floor && model) floor_obj.push_back(axis_angle(smooth[i], truth.normals[i]));
     }
+    if (!o.write_dir.empty()) write_signed(o.write_dir + "/" + sc.name, raw, smooth, truth);
     fmt::print("| {} | {} | {:.2f} | {} | {} | {} | {} | {} | {:.2f} s |\n",
                sc.name + (o.objects_only ? " (objects only)" : ""), truth.size(), o.noise,
                percentiles(all), percentiles(room), percentiles(obj),
@@ -290,7 +314,7 @@ int usage() {
                "usage: normals_accuracy [--objects-only] [--points N] "
                "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n"
                "       normals_accuracy --angles [--noise F] [--floor] [--objects-only] "
-               "[--points N] SCENE.json...\n");
+               "[--points N] [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...\n");
     return 2;
 }
 
@@ -307,6 +331,10 @@ int main(int argc, char** argv) {
             o.angles = true;
         } else if (a == "--floor") {
             o.floor = true;
+        } else if (a == "--fit-neighbours" && more) {
+            o.fit.fit_neighbours = std::stoull(argv[++i]);
+        } else if (a == "--refits" && more) {
+            o.fit.refits = std::stoi(argv[++i]);
         } else if (a == "--noise" && more) {
             o.noise = std::stod(argv[++i]);
         } else if (a == "--points" && more) {

@@ -52,7 +52,7 @@ struct Options {
     bool objects_only = false;
     bool angles = false, floor = false;
     bool orientation_given = false;
-    double noise = 0;  // Gaussian, in sample spacings
+    double noise = 0;            // Gaussian, in sample spacings
     NormalEstimationParams fit;  // --fit-neighbours, --refits
     uint64_t points = 0;
     Orientation orientation = Orientation::kAuto;
@@ -366,10 +366,10 @@ int main(int argc, char** argv) {
             "|---|---|---|---|---|---|---|---|---|\n");
     else
         fmt::print(
-        "| cloud | points | signs right (area) | not hidden | on objects | objects, not hidden | "
-        "on thin parts (points) | radius ratio, new / old | on objects | on thin parts | time: "
-        "normals + radii |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n");
+            "| cloud | points | signs right (area) | not hidden | on objects | objects, not hidden "
+            "| on thin parts (points) | radius ratio, new / old | on objects | on thin parts | "
+            "time: normals + radii |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|\n");
     try {
         for (const std::string& s : o.scenes) run_scene(s, o);
     } catch (const vmap::Error& e) {

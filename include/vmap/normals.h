@@ -40,9 +40,9 @@ struct OrientationReport {
 };
 
 // Fills points.normals: a local plane fit of the nearest neighbours (nanoflann k-d tree; see
-// NormalEstimationParams::fit_neighbours) gives each normal, then orient_normals chooses the signs. Existing normals are replaced.
-// Throws vmap::Error (naming `source`) when it cannot: fewer than 3 points, all points collinear
-// or coincident, or non-finite coordinates.
+// NormalEstimationParams::fit_neighbours) gives each normal, then orient_normals chooses the signs.
+// Existing normals are replaced. Throws vmap::Error (naming `source`) when it cannot: fewer than 3
+// points, all points collinear or coincident, or non-finite coordinates.
 void estimate_normals(PointSet& points, const NormalEstimationParams& params = {},
                       const char* source = "point cloud", OrientationReport* report = nullptr);
 

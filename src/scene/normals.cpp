@@ -174,7 +174,7 @@ void check_not_degenerate(const std::vector<Vec3>& pts, Dvec c, const char* sour
 struct LocalFits {
     size_t k = 0;
     std::vector<uint32_t> neighbours;  // k per point
-    std::vector<Vec3> normals;  // the weighted fit over all candidates: oriented
+    std::vector<Vec3> normals;         // the weighted fit over all candidates: oriented
     // The re-fits on the point's own sheet (estimate_normals' result). Orientation runs on
     // `normals`, whose axes turn smoothly across an edge, where the sheet fits turn by the
     // edge's full angle and leave the free-space probes and rays of a point right at the edge
@@ -257,16 +257,14 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             size_t kept = 0;
             for (size_t j = 0; j < c; ++j) {
                 w[j] = h2 > 0 ? std::exp(-d2[i * c + j] / h2) : 1.0f;
-                if (prev && nb[j] != i &&
-                    !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]]))
+                if (prev && nb[j] != i && !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]]))
                     w[j] = 0;
                 kept += w[j] > 0;
             }
             // A re-fit on fewer than 3 neighbours besides the point (one right at an edge,
             // whose fit leans between the faces, keeps almost none) is no plane to trust.
-            const std::optional<Vec3> normal = prev && kept <= kMinK
-                                                   ? std::nullopt
-                                                   : plane_normal(pts, nb, c, w.data());
+            const std::optional<Vec3> normal =
+                prev && kept <= kMinK ? std::nullopt : plane_normal(pts, nb, c, w.data());
             if (!prev) {
                 fits.degenerate[i] = !normal;
                 out[i] = normal.value_or(Vec3{0, 0, 1});

@@ -2,6 +2,8 @@
 //
 //   normals_accuracy [--objects-only] [--points N] [--orientation auto|outward|inward]
 //                    [--write-ply DIR] SCENE.json...
+//   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
+//                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
 //
 // Samples each scene (true normals and radii), strips both, re-estimates them as `vmap build`
 // does for a raw cloud, and prints one table row per scene: the share of the area (points are
@@ -11,6 +13,18 @@
 // median ratio of estimated to true splat radius on the same sets, beside the old estimate (d_8 /
 // sqrt 8 over all neighbours). --objects-only drops the room (a lone object or several).
 // --write-ply writes the stripped cloud, for `vmap build`.
+//
+// --angles prints instead the unsigned angle between each estimated normal's axis and the true
+// one (so orientation is left out: it orients outward unless --orientation is given, which is
+// quick), median and 90th percentile in degrees, over all points, the room, the objects and the
+// thin parts. --noise F moves every point by Gaussian noise of F sample spacings per axis (the
+// spacing sqrt(area / points) = sqrt(pi) * splat radius), scored against the noise-free true
+// normals. --floor adds what a fit cannot beat on faceted meshes: the angle between each point's
+// true (face) normal and the plane fit of its 12 nearest in a sample 16 times denser, i.e. the
+// smooth surface's normal, where the mesh's faces are smaller than the spacing. With
+// --write-ply DIR it writes DIR/SCENE-estimated.ply (and -smooth.ply with --floor): positions
+// and those normals, each signed like the true one, to score directions alone with `vmap
+// validate SCENE.json --cloud FILE`.
 #include <fmt/format.h>
 #include <tbb/parallel_for.h>
 
@@ -19,6 +33,7 @@
 #include <cmath>
 #include <filesystem>
 #include <nanoflann.hpp>
+#include <random>
 #include <set>
 #include <string>
 #include <vector>
@@ -35,6 +50,10 @@ using namespace vmap;
 
 struct Options {
     bool objects_only = false;
+    bool angles = false, floor = false;
+    bool orientation_given = false;
+    double noise = 0;            // Gaussian, in sample spacings
+    NormalEstimationParams fit;  // --fit-neighbours, --refits
     uint64_t points = 0;
     Orientation orientation = Orientation::kAuto;
     std::string write_dir;
@@ -144,6 +163,103 @@ struct Tally {
     }
 };
 
+// Degrees between the axes of a and b (unit vectors; signs ignored).
+float axis_angle(Vec3 a, Vec3 b) {
+    return float(std::acos(std::min(1.0, double(std::fabs(dot(a, b))))) * 180.0 / M_PI);
+}
+
+// "p50 / p90" of v in degrees, or "-".
+std::string percentiles(std::vector<float> v) {
+    if (v.empty()) return "-";
+    auto at = [&](double q) {
+        const size_t k = std::min(v.size() - 1, size_t(q * double(v.size())));
+        std::nth_element(v.begin(), v.begin() + k, v.end());
+        return v[k];
+    };
+    const float p50 = at(0.5), p90 = at(0.9);
+    return fmt::format("{:.1f} / {:.1f}", p50, p90);
+}
+
+// Per point, the estimated normal (12 neighbours) of the nearest sample of a 16 times denser
+// sample of the scene: the smooth surface's normal at the point, for --floor.
+std::vector<Vec3> dense_fit_normals(Scene sc, const PointSet& truth) {
+    sc.points = 16 * truth.size();
+    sc.seed += 1000;
+    PointSet dense;
+    dense.positions = sample_scene(sc).positions;
+    NormalEstimationParams np;
+    np.orientation = Orientation::kOutward;
+    estimate_normals(dense, np, "dense sample");
+    const detail::CloudAdaptor ad{dense.positions};
+    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    std::vector<Vec3> out(truth.size());
+    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+        const Vec3 p = truth.positions[i];
+        uint32_t idx = 0;
+        float d2 = 0;
+        const float q[3] = {p.x, p.y, p.z};
+        tree.knnSearch(q, 1, &idx, &d2);
+        out[i] = dense.normals[idx];
+    });
+    return out;
+}
+
+// Gaussian noise of `f` sample spacings (sqrt(pi) * the true splat radius) per axis, seeded.
+void add_noise(PointSet& ps, const PointSet& truth, double f) {
+    std::mt19937_64 rng(12345);
+    std::normal_distribution<float> g(0.f, 1.f);
+    for (size_t i = 0; i < ps.size(); ++i) {
+        const float s = float(f * std::sqrt(M_PI)) * truth.radii[i];
+        ps.positions[i] += Vec3{g(rng), g(rng), g(rng)} * s;
+    }
+}
+
+// For `vmap validate --cloud`: the estimated normals (and with --floor the smooth surface's),
+// each signed to agree with the true normal, so that the fit's directions are scored alone.
+void write_signed(const std::string& stem, const PointSet& est, const std::vector<Vec3>& smooth,
+                  const PointSet& truth) {
+    PointSet out;
+    out.positions = est.positions;
+    auto signed_like_truth = [&](const std::vector<Vec3>& n) {
+        out.normals.resize(n.size());
+        for (size_t i = 0; i < n.size(); ++i)
+            out.normals[i] = dot(n[i], truth.normals[i]) < 0 ? -n[i] : n[i];
+    };
+    signed_like_truth(est.normals);
+    write_ply(stem + "-estimated.ply", out);
+    if (smooth.empty()) return;
+    signed_like_truth(smooth);
+    write_ply(stem + "-smooth.ply", out);
+}
+
+void run_angles(const std::string& path, Scene sc, const PointSet& truth,
+                const std::vector<uint32_t>& surf, const Options& o) {
+    const std::vector<uint8_t> thin = thin_parts(truth, surf);
+    PointSet raw;
+    raw.positions = truth.positions;
+    if (o.noise > 0) add_noise(raw, truth, o.noise);
+    NormalEstimationParams np = o.fit;
+    np.orientation = o.orientation_given ? o.orientation : Orientation::kOutward;
+    const auto t0 = std::chrono::steady_clock::now();
+    estimate_normals(raw, np, path.c_str());
+    const double sec = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    std::vector<float> all, room, obj, thn, floor_obj;
+    const std::vector<Vec3> smooth = o.floor ? dense_fit_normals(sc, truth) : std::vector<Vec3>{};
+    for (size_t i = 0; i < truth.size(); ++i) {
+        const float a = axis_angle(raw.normals[i], truth.normals[i]);
+        const bool model = !is_room(sc.surfaces[surf[i]].name);
+        all.push_back(a);
+        (model ? obj : room).push_back(a);
+        if (thin[i]) thn.push_back(a);
+        if (o.floor && model) floor_obj.push_back(axis_angle(smooth[i], truth.normals[i]));
+    }
+    if (!o.write_dir.empty()) write_signed(o.write_dir + "/" + sc.name, raw, smooth, truth);
+    fmt::print("| {} | {} | {:.2f} | {} | {} | {} | {} | {} | {:.2f} s |\n",
+               sc.name + (o.objects_only ? " (objects only)" : ""), truth.size(), o.noise,
+               percentiles(all), percentiles(room), percentiles(obj),
+               percentiles(thn) + fmt::format(" ({})", thn.size()), percentiles(floor_obj), sec);
+}
+
 void run_scene(const std::string& path, const Options& o) {
     Scene sc = load_scene(path);
     if (o.objects_only)
@@ -151,6 +267,7 @@ void run_scene(const std::string& path, const Options& o) {
     if (o.points) sc.points = o.points;
     const PointSet truth = sample_scene(sc);
     const std::vector<uint32_t> surf = surface_of(sc);
+    if (o.angles) return run_angles(path, sc, truth, surf, o);
     const std::vector<uint8_t> thin = thin_parts(truth, surf);
     const std::vector<uint8_t> inside = buried(truth);
 
@@ -195,7 +312,9 @@ void run_scene(const std::string& path, const Options& o) {
 int usage() {
     fmt::print(stderr,
                "usage: normals_accuracy [--objects-only] [--points N] "
-               "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n");
+               "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n"
+               "       normals_accuracy --angles [--noise F] [--floor] [--objects-only] "
+               "[--points N] [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...\n");
     return 2;
 }
 
@@ -208,12 +327,23 @@ int main(int argc, char** argv) {
         const bool more = i + 1 < argc;
         if (a == "--objects-only") {
             o.objects_only = true;
+        } else if (a == "--angles") {
+            o.angles = true;
+        } else if (a == "--floor") {
+            o.floor = true;
+        } else if (a == "--fit-neighbours" && more) {
+            o.fit.fit_neighbours = std::stoull(argv[++i]);
+        } else if (a == "--refits" && more) {
+            o.fit.refits = std::stoi(argv[++i]);
+        } else if (a == "--noise" && more) {
+            o.noise = std::stod(argv[++i]);
         } else if (a == "--points" && more) {
             o.points = std::stoull(argv[++i]);
         } else if (a == "--write-ply" && more) {
             o.write_dir = argv[++i];
         } else if (a == "--orientation" && more) {
             const std::string v = argv[++i];
+            o.orientation_given = true;
             if (v == "auto")
                 o.orientation = Orientation::kAuto;
             else if (v == "outward")
@@ -229,11 +359,17 @@ int main(int argc, char** argv) {
         }
     }
     if (o.scenes.empty()) return usage();
-    fmt::print(
-        "| cloud | points | signs right (area) | not hidden | on objects | objects, not hidden | "
-        "on thin parts (points) | radius ratio, new / old | on objects | on thin parts | time: "
-        "normals + radii |\n"
-        "|---|---|---|---|---|---|---|---|---|---|---|\n");
+    if (o.angles)
+        fmt::print(
+            "| cloud | points | noise (spacings) | angle to the true normal, p50 / p90 (deg): all "
+            "| room | objects | thin parts (points) | floor on objects | time: normals |\n"
+            "|---|---|---|---|---|---|---|---|---|\n");
+    else
+        fmt::print(
+            "| cloud | points | signs right (area) | not hidden | on objects | objects, not hidden "
+            "| on thin parts (points) | radius ratio, new / old | on objects | on thin parts | "
+            "time: normals + radii |\n"
+            "|---|---|---|---|---|---|---|---|---|---|---|\n");
     try {
         for (const std::string& s : o.scenes) run_scene(s, o);
     } catch (const vmap::Error& e) {

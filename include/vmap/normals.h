@@ -19,7 +19,14 @@ enum class Orientation {
 };
 
 struct NormalEstimationParams {
-    size_t k = 12;  // neighbours for the local plane fit (PCA)
+    size_t k = 12;  // neighbours linked for orientation (the spanning tree, the sign checks)
+    // The plane fit (weighted PCA, src/scene/normals.cpp): this many nearest candidates, weighted
+    // by distance on the scale of the local spacing (the 6th nearest's distance), then re-fitted
+    // `refits` times on the candidates of the point's own sheet (normals within 37 degrees and
+    // the chord between the points consistent with both tangent planes), which drops the other
+    // face of a thin part or an edge and a surface a few millimetres away. 0: one weighted fit.
+    size_t fit_neighbours = 24;
+    int refits = 2;
     Orientation orientation = Orientation::kAuto;
     Vec3 viewpoint{};  // for Orientation::kViewpoint
 };
@@ -32,10 +39,10 @@ struct OrientationReport {
     size_t by_neighbours = 0;  // ray-decided points flipped to agree with their surface
 };
 
-// Fills points.normals: the local plane of the k nearest neighbours (nanoflann k-d tree) gives
-// each normal, then orient_normals chooses the signs. Existing normals are replaced.
-// Throws vmap::Error (naming `source`) when it cannot: fewer than 3 points, all points collinear
-// or coincident, or non-finite coordinates.
+// Fills points.normals: a local plane fit of the nearest neighbours (nanoflann k-d tree; see
+// NormalEstimationParams::fit_neighbours) gives each normal, then orient_normals chooses the signs.
+// Existing normals are replaced. Throws vmap::Error (naming `source`) when it cannot: fewer than 3
+// points, all points collinear or coincident, or non-finite coordinates.
 void estimate_normals(PointSet& points, const NormalEstimationParams& params = {},
                       const char* source = "point cloud", OrientationReport* report = nullptr);
 

@@ -30,6 +30,7 @@ namespace {
 
 constexpr size_t kMinK = 3;
 constexpr size_t kMaxK = 1000;
+constexpr int kMaxRefits = 10;
 
 // Spreads at or below this fraction of the coordinates' magnitude are rounding noise, not
 // geometry: a plane fitted through them would be arbitrary. Storing a coordinate as float moves
@@ -173,28 +174,39 @@ void check_not_degenerate(const std::vector<Vec3>& pts, Dvec c, const char* sour
 struct LocalFits {
     size_t k = 0;
     std::vector<uint32_t> neighbours;  // k per point
-    std::vector<Vec3> normals;
+    std::vector<Vec3> normals;         // the weighted fit over all candidates: oriented
+    // The re-fits on the point's own sheet (estimate_normals' result). Orientation runs on
+    // `normals`, whose axes turn smoothly across an edge, where the sheet fits turn by the
+    // edge's full angle and leave the free-space probes and rays of a point right at the edge
+    // grazing the other face; each sheet normal then takes the sign of its smooth one.
+    std::vector<Vec3> sheet_normals;
     std::vector<uint8_t> degenerate;  // neighbourhood coincident or collinear: normal unknown
 };
 
-// The least-squares plane normal of the given points, or nothing if they span no plane.
-std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* idx, size_t m) {
+// The weighted least-squares plane normal of the given points (weights w, or all 1 when null),
+// or nothing if they span no plane.
+std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* idx, size_t m,
+                                 const float* w = nullptr) {
     Dvec mean;
-    double scale = 0;
+    double scale = 0, wsum = 0;
     for (size_t j = 0; j < m; ++j) {
         const Vec3 p = pts[idx[j]];
-        mean.x += p.x;
-        mean.y += p.y;
-        mean.z += p.z;
+        const double wj = w ? w[j] : 1.0;
+        mean.x += wj * p.x;
+        mean.y += wj * p.y;
+        mean.z += wj * p.z;
+        wsum += wj;
         scale = std::max(scale, max_abs(p));
     }
-    mean = {mean.x / double(m), mean.y / double(m), mean.z / double(m)};
+    if (!(wsum > 0)) return std::nullopt;
+    mean = {mean.x / wsum, mean.y / wsum, mean.z / wsum};
     double cov[3][3] = {};
     for (size_t j = 0; j < m; ++j) {
         const Dvec d = to_d(pts[idx[j]]) - mean;
+        const double wj = w ? w[j] : 1.0;
         const double dv[3] = {d.x, d.y, d.z};
         for (int a = 0; a < 3; ++a)
-            for (int b = a; b < 3; ++b) cov[a][b] += dv[a] * dv[b];
+            for (int b = a; b < 3; ++b) cov[a][b] += wj * dv[a] * dv[b];
     }
     for (int a = 0; a < 3; ++a)
         for (int b = 0; b < a; ++b) cov[a][b] = cov[b][a];
@@ -202,40 +214,103 @@ std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* i
     const Eigen3 e = symmetric_eigen(cov);
     // The middle eigenvalue is the spread across the points' main direction; if that is
     // rounding noise they lie on a line or coincide, and the smallest eigenvector is arbitrary.
-    const double across = std::sqrt(std::max(e.values[1], 0.0) / double(m));
+    const double across = std::sqrt(std::max(e.values[1], 0.0) / wsum);
     if (across <= kRoundingUlps * scale) return std::nullopt;
     const Dvec v = e.vectors[0];
     return Vec3{float(v.x), float(v.y), float(v.z)};
 }
 
-// The k nearest neighbours of every point and, when `fit` is set, the plane through them
-// (otherwise fits.normals is left to the caller).
-LocalFits fit_local_planes(const std::vector<Vec3>& pts, size_t k, bool fit = true) {
+// Fit weights fall off as exp(-d^2 / h^2), h the distance to the point's 6th nearest
+// neighbour: about 1.4 sample spacings, wherever the density, so that the nearest points
+// dominate the fit on a tight curve or a thin part, and the farther candidates still steady it
+// on a flat or noisy one.
+constexpr size_t kBandwidthNeighbour = 6;
+
+// Is q (fitted normal nq) on p's own sheet, for the re-fit? Their normal axes within about 37
+// degrees (an edge's other face fails), and the chord from p to q consistent with both tangent
+// planes: the mean of the two normals (signs aligned) within 0.25 of the chord's length off
+// perpendicular (the other face of a thin part or plate, and another surface a few millimetres
+// away, fail). On a curve the two planes tilt opposite ways and their offsets cancel, so a
+// small sphere keeps its neighbours, which a test against p's plane alone would drop.
+bool on_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq) {
+    const float c = dot(np, nq);
+    if (std::fabs(c) < 0.8f) return false;
+    const Vec3 d = q - p;
+    const float off = 0.5f * std::fabs(dot(np + (c < 0 ? -nq : nq), d));
+    return off * off <= 0.0625f * length2(d);
+}
+
+// One pass of weighted plane fits over every point's `c` candidates (cand, d2: c per point,
+// nearest first). Without `prev` all candidates count by distance; with it, only those on the
+// point's sheet by the previous pass's normals (and the point itself), and a point whose
+// re-fit spans no plane keeps its previous normal. Reads prev only, so the order of the
+// points does not matter.
+void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
+              const std::vector<float>& d2, size_t c, const std::vector<Vec3>* prev,
+              LocalFits& fits, std::vector<Vec3>& out) {
+    const size_t n = pts.size(), band = std::min(c - 1, kBandwidthNeighbour);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
+        std::vector<float> w(c);
+        for (size_t i = range.begin(); i < range.end(); ++i) {
+            const uint32_t* nb = &cand[i * c];
+            const float h2 = d2[i * c + band];
+            size_t kept = 0;
+            for (size_t j = 0; j < c; ++j) {
+                w[j] = h2 > 0 ? std::exp(-d2[i * c + j] / h2) : 1.0f;
+                if (prev && nb[j] != i && !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]]))
+                    w[j] = 0;
+                kept += w[j] > 0;
+            }
+            // A re-fit on fewer than 3 neighbours besides the point (one right at an edge,
+            // whose fit leans between the faces, keeps almost none) is no plane to trust.
+            const std::optional<Vec3> normal =
+                prev && kept <= kMinK ? std::nullopt : plane_normal(pts, nb, c, w.data());
+            if (!prev) {
+                fits.degenerate[i] = !normal;
+                out[i] = normal.value_or(Vec3{0, 0, 1});
+            } else {
+                out[i] = fits.degenerate[i] ? (*prev)[i] : normal.value_or((*prev)[i]);
+            }
+        }
+    });
+}
+
+// The k nearest neighbours of every point (fits.neighbours: the graph orientation runs on)
+// and, when `fit` is set, each point's normal: a weighted plane fit of its params.fit_neighbours
+// nearest, re-fitted params.refits times on the neighbours of its own sheet (otherwise
+// fits.normals is left to the caller).
+LocalFits fit_local_planes(const std::vector<Vec3>& pts, const NormalEstimationParams& params,
+                           bool fit = true) {
     const size_t n = pts.size();
     LocalFits fits;
-    const size_t kk = fits.k = std::min(k, n);
+    const size_t kk = fits.k = std::min(params.k, n);
+    const size_t c = fit ? std::min(std::max(params.k, params.fit_neighbours), n) : kk;
     fits.neighbours.resize(n * kk);
-    if (fit) fits.normals.resize(n);
     fits.degenerate.assign(n, 0);
+    std::vector<uint32_t> cand(n * c);
+    std::vector<float> d2(n * c);
 
     const detail::CloudAdaptor adaptor{pts};
     const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
-        std::vector<float> dist2(kk);
         for (size_t i = range.begin(); i < range.end(); ++i) {
-            uint32_t* nb = &fits.neighbours[i * kk];
+            uint32_t* nb = &cand[i * c];
             const float query[3] = {pts[i].x, pts[i].y, pts[i].z};
-            const size_t found = tree.knnSearch(query, kk, nb, dist2.data());
-            // The tree holds n >= kk points so it always finds kk; fill defensively regardless.
-            for (size_t j = found; j < kk; ++j) nb[j] = uint32_t(i);
-            if (!fit) continue;
-
-            const std::optional<Vec3> normal = plane_normal(pts, nb, kk);
-            fits.degenerate[i] = !normal;
-            fits.normals[i] = normal.value_or(Vec3{0, 0, 1});
+            const size_t found = tree.knnSearch(query, c, nb, &d2[i * c]);
+            // The tree holds n >= c points so it always finds c; fill defensively regardless.
+            for (size_t j = found; j < c; ++j) nb[j] = uint32_t(i), d2[i * c + j] = 0;
+            std::copy(nb, nb + kk, &fits.neighbours[i * kk]);
         }
     });
+    if (!fit) return fits;
+    fits.normals.resize(n);
+    fit_pass(pts, cand, d2, c, nullptr, fits, fits.normals);
+    fits.sheet_normals = fits.normals;
+    std::vector<Vec3> next(n);
+    for (int pass = 0; pass < params.refits; ++pass) {
+        fit_pass(pts, cand, d2, c, &fits.sheet_normals, fits, next);
+        fits.sheet_normals.swap(next);
+    }
     return fits;
 }
 
@@ -545,7 +620,9 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
     propagate(pts, centroid, symmetrise(fits, n), fits.degenerate, fixed, normals);
 }
 
-void check_cloud(const std::vector<Vec3>& pts, size_t k, const char* source) {
+void check_cloud(const std::vector<Vec3>& pts, const NormalEstimationParams& params,
+                 const char* source) {
+    const size_t k = params.k;
     const size_t n = pts.size();
     if (n < 3) {
         throw Error(prefix(source) + "normal estimation needs at least 3 points, got " +
@@ -555,6 +632,15 @@ void check_cloud(const std::vector<Vec3>& pts, size_t k, const char* source) {
         throw Error(
             prefix(source) + "normal estimation: k (neighbours per plane fit) must be in [" +
             std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " + std::to_string(k));
+    }
+    if (params.fit_neighbours < kMinK || params.fit_neighbours > kMaxK) {
+        throw Error(prefix(source) + "normal estimation: fit_neighbours must be in [" +
+                    std::to_string(kMinK) + ", " + std::to_string(kMaxK) + "], got " +
+                    std::to_string(params.fit_neighbours));
+    }
+    if (params.refits < 0 || params.refits > kMaxRefits) {
+        throw Error(prefix(source) + "normal estimation: refits must be in [0, " +
+                    std::to_string(kMaxRefits) + "], got " + std::to_string(params.refits));
     }
     if (n > size_t(std::numeric_limits<uint32_t>::max())) {
         throw Error(prefix(source) + "normal estimation supports at most " +
@@ -584,17 +670,27 @@ void estimate_normals(PointSet& points, const NormalEstimationParams& params, co
                       OrientationReport* report) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
-    check_cloud(pts, params.k, source);
+    check_cloud(pts, params, source);
     const Dvec centroid = centroid_of(pts);
     check_not_degenerate(pts, centroid, source);
 
     const std::vector<uint32_t> order = spatial_order(pts);
     const std::vector<Vec3> sorted = permuted(pts, order);
-    LocalFits fits = fit_local_planes(sorted, params.k);
+    LocalFits fits = fit_local_planes(sorted, params);
     OrientationReport rep;
-    orient_fits(sorted, centroid, fits, permuted(points.radii, order), params, rep);
+    if (params.orientation == Orientation::kAuto)
+        orient_fits(sorted, centroid, fits, permuted(points.radii, order), params, rep);
     points.normals.resize(n);
-    for (size_t r = 0; r < n; ++r) points.normals[order[r]] = fits.normals[r];
+    // Rules that sign each point by its position alone sign the sheet normals directly.
+    if (params.orientation != Orientation::kAuto) {
+        fits.normals = fits.sheet_normals;
+        orient_fits(sorted, centroid, fits, {}, params, rep);
+    }
+    for (size_t r = 0; r < n; ++r) {
+        const Vec3 sheet = fits.sheet_normals[r], smooth = fits.normals[r];
+        points.normals[order[r]] =
+            fits.degenerate[r] ? smooth : (dot(sheet, smooth) < 0 ? -sheet : sheet);
+    }
     if (report) *report = rep;
 }
 
@@ -607,10 +703,10 @@ void orient_normals(PointSet& points, const NormalEstimationParams& params, cons
                     std::to_string(points.normals.size()) + " for " + std::to_string(n) +
                     " points)");
     }
-    check_cloud(pts, params.k, source);
+    check_cloud(pts, params, source);
     const std::vector<uint32_t> order = spatial_order(pts);
     const std::vector<Vec3> sorted = permuted(pts, order);
-    LocalFits fits = fit_local_planes(sorted, params.k, false);
+    LocalFits fits = fit_local_planes(sorted, params, false);
     fits.normals = permuted(points.normals, order);
     for (size_t r = 0; r < n; ++r) {
         const float len = length(fits.normals[r]);

@@ -73,9 +73,9 @@ size_t differing(const std::vector<T>& x, const std::vector<T>& y) {
 void expect_same_refinement_and_gather(const VisibilityMap& vm, float theta) {
     GiParams p;
     p.theta = theta;
-    p.backend = "cpu";
+    p.backend = Backend::kCpu;
     RadiositySolver cpu(vm, p);
-    p.backend = "cuda";
+    p.backend = Backend::kCuda;
     RadiositySolver gpu(vm, p);
     ASSERT_EQ(gpu.stats().backend.rfind("cuda", 0), 0u) << gpu.stats().backend;
     std::vector<uint64_t> rc, rg;
@@ -93,7 +93,7 @@ void expect_same_refinement_and_gather(const VisibilityMap& vm, float theta) {
     const auto fc = cpu.final_gather(2.0f), fgpu = gpu.final_gather(2.0f);
     EXPECT_EQ(differing(fc, fgpu), 0u) << "relative RMS " << relative_rms(fgpu, fc);
     std::vector<uint32_t> some;
-    for (uint32_t i = 0; i < vm.points.size(); i += 7) some.push_back(i);
+    for (uint32_t i = 0; i < vm.points().size(); i += 7) some.push_back(i);
     const auto pc = cpu.final_gather(1e9f, some), pg = gpu.final_gather(1e9f, some);
     EXPECT_EQ(differing(pc, pg), 0u);
     EXPECT_EQ(pg.size(), some.size());

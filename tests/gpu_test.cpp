@@ -34,19 +34,19 @@ TEST(GpuDevice, DeviceIndexIsCheckedAndUsed) {
         detail::make_cuda_backend(&why, n);
         FAIL() << "device " << n << " of " << n << " accepted";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("--device " + std::to_string(n)), std::string::npos)
+        EXPECT_NE(std::string(e.what()).find("device " + std::to_string(n)), std::string::npos)
             << e.what();
     }
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500);
     BuildParams bp = test::cpu_params(6, 1);
-    bp.backend = "cuda";
+    bp.backend = Backend::kCuda;
     bp.device = n - 1;
     const VisibilityMap last = build_vmap(ps, bp);
     bp.device = 0;
     const VisibilityMap first = build_vmap(ps, bp);
-    EXPECT_EQ(last.link_offsets, first.link_offsets);
-    EXPECT_TRUE(std::equal(last.link_targets.begin(), last.link_targets.end(),
-                           first.link_targets.begin(), first.link_targets.end()));
+    EXPECT_EQ(last.link_offsets(), first.link_offsets());
+    EXPECT_TRUE(std::equal(last.link_targets().begin(), last.link_targets().end(),
+                           first.link_targets().begin(), first.link_targets().end()));
 }
 
 class GpuMatchesCpu : public ::testing::TestWithParam<BuildCase> {};
@@ -197,11 +197,11 @@ TEST(GpuBackend, NodeDecisionsOnTheDeviceAreTheHosts) {
     const Octree t = Octree::build(ps, {8, 2}, order);
     const auto nb = detail::node_bounds(t);
     VisibilityParams vp;
-    const detail::NodePairContext c{t.view(),      nb.nodes.data(), nb.cones.data(),
-                                    t.skip.data(), vp,              detail::node_pair_margin(t.boxes[0])};
+    const detail::NodePairContext c{octree_view(t),      nb.nodes.data(), nb.cones.data(),
+                                    t.skip().data(), vp,              detail::node_pair_margin(t.boxes()[0])};
     std::vector<detail::NodePairRef> pairs;
     for (int32_t a = 0; a < t.num_nodes(); a += 3)
-        for (int32_t b = t.skip[a]; b < t.num_nodes(); b += 17) pairs.push_back({a, b});
+        for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 17) pairs.push_back({a, b});
     std::vector<uint8_t> host(pairs.size()), dev(pairs.size(), 99);
     struct {
         uint64_t shaft_node_tests = 0;

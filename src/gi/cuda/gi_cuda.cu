@@ -8,9 +8,11 @@
 #include <cub/device/device_radix_sort.cuh>
 #include <cub/device/device_run_length_encode.cuh>
 #include <cub/device/device_scan.cuh>
+#include <optional>
 #include <string>
 
 #include "gi/gi_device.h"
+#include "util/device.h"
 #include "util/cuda_check.h"
 #include "vmap/error.h"
 
@@ -256,17 +258,17 @@ void CudaGi::upload_tree(const GiTree& h, const uint8_t* emits) {
     const uint64_t N = uint64_t(h.num_nodes), P = h.num_points;
     link_entries_ = h.link_offsets[N];
     t_ = h;
-    skip_.from(h.skip, N), t_.skip() = skip_.p;
-    leaf_.from(h.node_leaf, N), t_.node_leaf() = leaf_.p;
-    parent_.from(h.parent, N), t_.parent() = parent_.p;
-    pb_.from(h.point_begin, N), t_.point_begin() = pb_.p;
-    pe_.from(h.point_end, N), t_.point_end() = pe_.p;
+    skip_.from(h.skip, N), t_.skip = skip_.p;
+    leaf_.from(h.node_leaf, N), t_.node_leaf = leaf_.p;
+    parent_.from(h.parent, N), t_.parent = parent_.p;
+    pb_.from(h.point_begin, N), t_.point_begin = pb_.p;
+    pe_.from(h.point_end, N), t_.point_end = pe_.p;
     geom_.from(h.geom, N), t_.geom = geom_.p;
     pos_.from(h.position, P), t_.position = pos_.p;
     nrm_.from(h.normal, P), t_.normal = nrm_.p;
     area_.from(h.area, P), t_.area = area_.p;
     point_leaf_.from(h.point_leaf, P), t_.point_leaf = point_leaf_.p;
-    offsets_.from(h.link_offsets, N + 1), t_.link_offsets() = offsets_.p;
+    offsets_.from(h.link_offsets, N + 1), t_.link_offsets = offsets_.p;
     links_.from(h.links, link_entries_), t_.links = links_.p;
     emits_.from(emits, N);
     has_tree_ = true;
@@ -374,23 +376,9 @@ void CudaGi::final_gather(float theta, const uint32_t* points, size_t n, bool li
 }  // namespace
 
 std::unique_ptr<GiDevice> make_gi_cuda(std::string* why) {
-    int count = 0;
-    const cudaError_t err = cudaGetDeviceCount(&count);
-    if (err != cudaSuccess || count == 0) {
-        if (why)
-            *why = err != cudaSuccess
-                       ? std::string("no usable CUDA device (") + cudaGetErrorString(err) + ")"
-                       : std::string("no CUDA device");
-        cudaGetLastError();  // clear the sticky error
-        return nullptr;
-    }
-    cudaDeviceProp prop{};
-    if (cudaGetDeviceProperties(&prop, 0) != cudaSuccess) {
-        if (why) *why = "cudaGetDeviceProperties failed";
-        cudaGetLastError();
-        return nullptr;
-    }
-    return std::make_unique<CudaGi>(std::string("cuda (") + prop.name + ")");
+    const std::optional<std::string> name = cuda_device(why);
+    if (!name) return nullptr;
+    return std::make_unique<CudaGi>("cuda (" + *name + ")");
 }
 
 }  // namespace vmap::detail

@@ -345,6 +345,15 @@ TEST(Pcd, BadInputIsRejectedNamingTheFieldOrByte) {
     EXPECT_READ_ERROR(
         read_pcd(file("g.pcd", "FIELDS x y z\nPOINTS 2\nDATA ascii\n1 2 3\n1 2 zz\n")), "g.pcd",
         "point 1 (line 5): field z", "invalid number 'zz'");
+    // A packed colour written as an integer must fit 32 bits (a fuzzer's 3.3e19 once was UB).
+    const std::string urgb = "FIELDS x y z rgb\nTYPE F F F U\nPOINTS 1\nDATA ascii\n1 2 3 ";
+    EXPECT_READ_ERROR(read_pcd(file("c1.pcd", urgb + "3.27e19\n")), "c1.pcd",
+                      "point 0 (line 5): field rgb", "not a packed 32-bit colour");
+    EXPECT_READ_ERROR(read_pcd(file("c2.pcd", urgb + "1.5\n")), "c2.pcd", "field rgb",
+                      "not a packed 32-bit colour");
+    const ModelData ok = read_pcd(file("c3.pcd", urgb + std::to_string(0xff8040u) + "\n"));
+    ASSERT_EQ(ok.points.colors.size(), 1u);
+    EXPECT_EQ(ok.points.colors[0], (Vec3{255, 128, 64} / 255.0f));
     const size_t sizes = zip.find("DATA binary_compressed\n") + 23;
     std::string lie = zip;
     lie[sizes + 3] = '\x7f';  // a compressed size larger than the file

@@ -364,8 +364,15 @@ void read_ascii(InputFile& in, const Header& h, Sink& sink) {
             return v;
         };
         auto bits = [&](int f) {
-            if (h.fields[f].type == 'F') return std::bit_cast<uint32_t>(float(value(f)));
-            return static_cast<uint32_t>(static_cast<int64_t>(value(f)));
+            const double v = value(f);
+            if (h.fields[f].type == 'F') return std::bit_cast<uint32_t>(float(v));
+            // A packed colour written as an integer: signed or unsigned 32 bits, nothing else.
+            if (!(v >= -2147483648.0 && v < 4294967296.0) || v != std::floor(v)) {
+                fail(in.path(), "point ", index, " (line ", in.line(), "): field ",
+                     h.fields[f].name, ": ", quoted(token(f)),
+                     " is not a packed 32-bit colour (a whole number in [-2^31, 2^32))");
+            }
+            return static_cast<uint32_t>(static_cast<int64_t>(v));
         };
         sink.add(in, index, in.line(), value, bits);
         ++index;

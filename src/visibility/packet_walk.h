@@ -1,0 +1,184 @@
+// The leaf-pair walk of leaf_pair.h for up to W leaf pairs at once, on the CPU (issue 15): the
+// host's counterpart of the GPU's packet kernel (cuda/cuda_backend.cu). The W segments of
+// neighbouring leaf pairs form a thin bundle, so they walk the preorder array together: each
+// node's box is tested against every lane's segment in one loop over the lanes (plain float
+// arrays, which the compiler turns into SIMD), the packet descends when any lane's own walk
+// would, and a lane tests only the nodes on its own path (n >= resume[i]: it has not skipped
+// past the node's subtree). So each lane makes exactly the tests of leaf_pair_visible, in the
+// same order, with the same float operations (FMA contraction is off in the whole build): the
+// same answer, node tests and occluder tests, from the same pieces (pair_segment's SlabRay,
+// occluder_reached). What the packet saves is the per-node cost: one load and one branch for W
+// lanes instead of an unpredictable branch per lane and node.
+//
+// slab_meets_box, lane by lane and branch free: the slab interval per axis is [min(ta, tb),
+// max(ta, tb)] as there. leaf_pair.h handles a direction component below 1e-30 in magnitude
+// apart (no inverse); a pair with one walks alone, through leaf_pair_visible itself, so the
+// packet's loop has no such case. tests/visibility_test.cpp holds the packet to
+// leaf_pair_visible on randomized trees, every pair, answers and counters.
+#pragma once
+
+#include <climits>
+#include <cstdint>
+
+#include "octree/records.h"
+#include "visibility/leaf_pair.h"
+
+// The packet loop compiled for AVX2 and AVX-512 too, chosen at run time (GCC on x86-64).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
+#define VMAP_PACKET_ISA 1
+#else
+#define VMAP_PACKET_ISA 0
+#endif
+
+namespace vmap::detail {
+
+template <int W>
+class SegmentPacket {
+    static_assert(W >= 1 && W <= 32, "a packet's lanes are the bits of one word");
+
+  public:
+    // Sets up lanes i < count for the leaf pairs (a[i], b[i]), a[i] != b[i]. Returns the mask
+    // of the facing lanes (the lanes to walk).
+    template <class Counters>
+    uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+                  const VisibilityParams& vp, Counters* wc) {
+        live_ = alone_ = 0;
+        for (int i = 0; i < W; ++i) {
+            const bool in = i < count;
+            a_[i] = in ? a[i] : 0, b_[i] = in ? b[i] : 0;
+            seg_[i] = pair_segment(t.leaves[a_[i]], t.leaves[b_[i]], vp);
+            const SlabRay& r = seg_[i].ray;
+            const bool small = fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f ||
+                               fabsf(r.d.z) < 1e-30f;
+            const bool walk = in && seg_[i].faces;
+            live_ |= uint32_t(walk && !small) << i;
+            alone_ |= uint32_t(walk && small) << i;
+            resume_[i] = walk && !small ? 0 : INT_MAX;  // a lane not in the packet is past all
+            occluders_[i] = 0;
+            p_[0][i] = r.p.x, p_[1][i] = r.p.y, p_[2][i] = r.p.z;
+            inv_[0][i] = r.inv.x, inv_[1][i] = r.inv.y, inv_[2][i] = r.inv.z;
+            t0_[i] = r.t0, t1_[i] = r.t1;
+        }
+        wc->facing_pairs += uint64_t(__builtin_popcount(live_));
+        return live_ | alone_;
+    }
+
+    // Walks `t` (the whole preorder array or a job's shaft list, as leaf_pair_visible would)
+    // with the lanes loaded; returns the mask of visible lanes.
+    template <class Counters>
+    uint32_t walk(const OctreeView& t, const VisibilityParams& vp, Counters* wc) {
+        const int live = __builtin_popcount(live_);
+        int64_t tests = 0;
+        if (live > 0) {
+#if VMAP_PACKET_ISA
+            static const int isa = packet_isa();
+            if (isa == 2)
+                tests = walk_avx512(t, vp, live, wc);
+            else if (isa == 1)
+                tests = walk_avx2(t, vp, live, wc);
+            else
+#endif
+                tests = walk_nodes(t, vp, live, wc);
+        }
+        wc->node_tests += uint64_t(tests);
+        for (uint32_t m = alone_; m; m &= m - 1) {
+            const int i = __builtin_ctz(m);
+            if (leaf_pair_visible<true>(t, a_[i], b_[i], vp, wc)) live_ |= 1u << i;
+        }
+        return live_;
+    }
+
+  private:
+    // The packet's walk; returns the node tests. The same loop compiled for wider vectors
+    // (walk_avx2, walk_avx512: the same float operations, FMA contraction is off, so the same
+    // bits) where the CPU has them.
+    template <class Counters>
+    __attribute__((always_inline)) inline int64_t walk_nodes(const OctreeView& t,
+                                                             const VisibilityParams& vp,
+                                                             int live, Counters* wc) {
+        int32_t tests[W] = {};
+        int32_t hit[W];
+        int32_t n = 0;
+        while (n < t.num_nodes && live > 0) {
+            const WalkNode w = t.walk[n];
+            int32_t any = 0;
+            for (int i = 0; i < W; ++i) {
+                float tmin = t0_[i], tmax = t1_[i];
+                axis(0, i, w.lo.x, w.hi.x, tmin, tmax);
+                axis(1, i, w.lo.y, w.hi.y, tmin, tmax);
+                axis(2, i, w.lo.z, w.hi.z, tmin, tmax);
+                const int32_t on = n >= resume_[i];
+                const int32_t h = on & (tmin <= tmax);
+                tests[i] += on;
+                resume_[i] = on & !h ? w.skip : resume_[i];
+                hit[i] = h;
+                any |= h;
+            }
+            if (!any) {
+                n = w.skip;
+                continue;
+            }
+            if (w.leaf >= 0) live -= occluders_at(t, w.leaf, hit, vp, wc);
+            ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
+        }
+        int64_t sum = 0;
+        for (int i = 0; i < W; ++i) sum += tests[i];
+        return sum;
+    }
+#if VMAP_PACKET_ISA
+    template <class Counters>
+    __attribute__((target("avx2"), noinline)) int64_t walk_avx2(const OctreeView& t,
+                                                                const VisibilityParams& vp,
+                                                                int live, Counters* wc) {
+        return walk_nodes(t, vp, live, wc);
+    }
+    template <class Counters>
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq,prefer-vector-width=512"),
+                   noinline)) int64_t
+    walk_avx512(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
+        return walk_nodes(t, vp, live, wc);
+    }
+    static int packet_isa() {
+        __builtin_cpu_init();
+        if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+            __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq"))
+            return 2;
+        return __builtin_cpu_supports("avx2") ? 1 : 0;
+    }
+#endif
+    // One axis of slab_meets_box for lane i.
+    void axis(int k, int i, float lo, float hi, float& tmin, float& tmax) const {
+        const float p = p_[k][i], inv = inv_[k][i];
+        const float ta = (lo - p) * inv, tb = (hi - p) * inv;
+        tmin = max_f(tmin, min_f(ta, tb));
+        tmax = min_f(tmax, max_f(ta, tb));
+    }
+    // The lanes that reached leaf `leaf` test it as an occluder (occluder_reached); a lane at
+    // its K-th occluder is hidden and leaves the walk. Returns the lanes that left.
+    template <class Counters>
+    int occluders_at(const OctreeView& t, int32_t leaf, const int32_t* hit,
+                     const VisibilityParams& vp, Counters* wc) {
+        int left = 0;
+        for (int i = 0; i < W; ++i) {
+            if (!hit[i] ||
+                !occluder_reached<true>(t, seg_[i], leaf, a_[i], b_[i], vp, occluders_[i], wc))
+                continue;
+            live_ &= ~(1u << i);
+            resume_[i] = INT_MAX;
+            ++left;
+        }
+        return left;
+    }
+
+    alignas(64) float p_[3][W];
+    alignas(64) float inv_[3][W];
+    alignas(64) float t0_[W];
+    alignas(64) float t1_[W];
+    alignas(64) int32_t resume_[W];
+    int32_t a_[W], b_[W], occluders_[W];
+    PairSegment seg_[W];
+    uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
+    uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)
+};
+
+}  // namespace vmap::detail

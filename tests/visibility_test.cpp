@@ -235,11 +235,11 @@ PointSet random_scene(uint32_t seed, int n) {
     return ps;
 }
 
-// Every pair of a tree through SegmentPacket<W> (packets of consecutive pairs in row-major
+// Every pair of a tree through SegmentPacket<W> with lane loop `isa` (packets of consecutive pairs in row-major
 // order, spanning rows, as HostBackend fills them) against leaf_pair_visible: the same answers
 // and the same facing pairs, node tests and occluder tests.
 template <int W>
-void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int* alone) {
+void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int isa, int* alone) {
     WorkCounters want, got;
     detail::SegmentPacket<W> pk;
     int32_t pa[W], pb[W];
@@ -247,7 +247,7 @@ void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int* 
     uint32_t expect = 0;
     auto flush = [&] {
         uint32_t mask = 0;
-        if (pk.load(v, pa, pb, count, vp, &got)) mask = pk.walk(v, vp, &got);
+        if (pk.load(v, pa, pb, count, vp, &got)) mask = pk.walk(v, vp, &got, isa);
         ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0];
         count = 0, expect = 0;
     };
@@ -279,8 +279,11 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
         for (int32_t l = 0; l < v.num_leaves; ++l)
             flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
         SCOPED_TRACE(seed);
-        packet_matches_pairs<32>(v, vp, &alone);
-        packet_matches_pairs<7>(v, vp, &alone);
+        // Every lane loop this CPU runs (SSE2, AVX2, AVX-512), at two packet widths.
+        for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa) {
+            packet_matches_pairs<32>(v, vp, isa, &alone);
+            packet_matches_pairs<7>(v, vp, isa, &alone);
+        }
     }
     EXPECT_GT(alone, 100);  // pairs with a zero direction component, which walk alone
     EXPECT_GT(flagged, 10);

@@ -17,6 +17,7 @@
 // leaf_pair_visible on randomized trees, every pair, answers and counters.
 #pragma once
 
+#include <array>
 #include <climits>
 #include <cstdint>
 
@@ -64,14 +65,19 @@ class SegmentPacket {
     }
 
     // Walks `t` (the whole preorder array or a job's shaft list, as leaf_pair_visible would)
-    // with the lanes loaded; returns the mask of visible lanes.
+    // with the lanes loaded; returns the mask of visible lanes. `isa`: the lane loop's code,
+    // 0 (the build's own, SSE2 on x86-64), 1 (AVX2), 2 (AVX-512), at most best_isa().
     template <class Counters>
     uint32_t walk(const OctreeView& t, const VisibilityParams& vp, Counters* wc) {
+        static const int isa = best_isa();
+        return walk(t, vp, wc, isa);
+    }
+    template <class Counters>
+    uint32_t walk(const OctreeView& t, const VisibilityParams& vp, Counters* wc, int isa) {
         const int live = __builtin_popcount(live_);
         int64_t tests = 0;
         if (live > 0) {
 #if VMAP_PACKET_ISA
-            static const int isa = packet_isa();
             if (isa == 2)
                 tests = walk_avx512(t, vp, live, wc);
             else if (isa == 1)
@@ -80,6 +86,7 @@ class SegmentPacket {
 #endif
                 tests = walk_nodes(t, vp, live, wc);
         }
+        (void)isa;
         wc->node_tests += uint64_t(tests);
         for (uint32_t m = alone_; m; m &= m - 1) {
             const int i = __builtin_ctz(m);
@@ -87,8 +94,26 @@ class SegmentPacket {
         }
         return live_;
     }
+    // The widest lane loop this CPU runs.
+    static int best_isa() {
+#if VMAP_PACKET_ISA
+        __builtin_cpu_init();
+        if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+            __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq"))
+            return 2;
+        return __builtin_cpu_supports("avx2") ? 1 : 0;
+#else
+        return 0;
+#endif
+    }
 
   private:
+    // 1 << i, as a table: the lane loop's masks then vectorise with SSE2 as well.
+    static constexpr auto kBit = [] {
+        std::array<uint32_t, W> b{};
+        for (int i = 0; i < W; ++i) b[size_t(i)] = 1u << i;
+        return b;
+    }();
     // The packet's walk; returns the node tests. The same loop compiled for wider vectors
     // (walk_avx2, walk_avx512: the same float operations, FMA contraction is off, so the same
     // bits) where the CPU has them.
@@ -97,11 +122,10 @@ class SegmentPacket {
                                                              const VisibilityParams& vp,
                                                              int live, Counters* wc) {
         int32_t tests[W] = {};
-        int32_t hit[W];
         int32_t n = 0;
         while (n < t.num_nodes && live > 0) {
             const WalkNode w = t.walk[n];
-            int32_t any = 0;
+            uint32_t hits = 0;  // the lanes whose walks enter node n
             for (int i = 0; i < W; ++i) {
                 float tmin = t0_[i], tmax = t1_[i];
                 axis(0, i, w.lo.x, w.hi.x, tmin, tmax);
@@ -111,14 +135,13 @@ class SegmentPacket {
                 const int32_t h = on & (tmin <= tmax);
                 tests[i] += on;
                 resume_[i] = on & !h ? w.skip : resume_[i];
-                hit[i] = h;
-                any |= h;
+                hits |= (0u - uint32_t(h)) & kBit[i];
             }
-            if (!any) {
+            if (!hits) {
                 n = w.skip;
                 continue;
             }
-            if (w.leaf >= 0) live -= occluders_at(t, w.leaf, hit, vp, wc);
+            if (w.leaf >= 0) live -= occluders_at(t, w.leaf, hits, vp, wc);
             ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
         }
         int64_t sum = 0;
@@ -138,13 +161,6 @@ class SegmentPacket {
     walk_avx512(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
         return walk_nodes(t, vp, live, wc);
     }
-    static int packet_isa() {
-        __builtin_cpu_init();
-        if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
-            __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq"))
-            return 2;
-        return __builtin_cpu_supports("avx2") ? 1 : 0;
-    }
 #endif
     // One axis of slab_meets_box for lane i.
     void axis(int k, int i, float lo, float hi, float& tmin, float& tmax) const {
@@ -156,12 +172,12 @@ class SegmentPacket {
     // The lanes that reached leaf `leaf` test it as an occluder (occluder_reached); a lane at
     // its K-th occluder is hidden and leaves the walk. Returns the lanes that left.
     template <class Counters>
-    int occluders_at(const OctreeView& t, int32_t leaf, const int32_t* hit,
+    int occluders_at(const OctreeView& t, int32_t leaf, uint32_t hits,
                      const VisibilityParams& vp, Counters* wc) {
         int left = 0;
-        for (int i = 0; i < W; ++i) {
-            if (!hit[i] ||
-                !occluder_reached<true>(t, seg_[i], leaf, a_[i], b_[i], vp, occluders_[i], wc))
+        for (; hits; hits &= hits - 1) {
+            const int i = __builtin_ctz(hits);
+            if (!occluder_reached<true>(t, seg_[i], leaf, a_[i], b_[i], vp, occluders_[i], wc))
                 continue;
             live_ &= ~(1u << i);
             resume_[i] = INT_MAX;

@@ -38,30 +38,39 @@ class SegmentPacket {
     static_assert(W >= 1 && W <= 32, "a packet's lanes are the bits of one word");
 
   public:
-    // Sets up lanes i < count for the leaf pairs (a[i], b[i]), a[i] != b[i]. Returns the mask
-    // of the facing lanes (the lanes to walk).
+    // Takes the leaf pairs (a[k], b[k]), k < count, a[k] != b[k], that face each other
+    // (pair_faces) as its lanes. Returns whether there are any (a walk to make).
     template <class Counters>
     uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
                   const VisibilityParams& vp, Counters* wc) {
         live_ = alone_ = 0;
-        for (int i = 0; i < W; ++i) {
-            const bool in = i < count;
-            a_[i] = in ? a[i] : 0, b_[i] = in ? b[i] : 0;
-            seg_[i] = pair_segment(t.leaves[a_[i]], t.leaves[b_[i]], vp);
-            const SlabRay& r = seg_[i].ray;
+        int n = 0;  // the lanes to walk, packed
+        for (int k = 0; k < count; ++k) {
+            const LeafDisc& la = t.leaves[a[k]];
+            const LeafDisc& lb = t.leaves[b[k]];
+            if (!pair_faces(la, lb, vp)) continue;
+            lane_[n] = k;
+            a_[n] = a[k], b_[n] = b[k];
+            seg_[n] = pair_segment(la, lb, vp);
+            const SlabRay& r = seg_[n].ray;
             const bool small = fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f ||
                                fabsf(r.d.z) < 1e-30f;
-            const bool walk = in && seg_[i].faces;
-            live_ |= uint32_t(walk && !small) << i;
-            alone_ |= uint32_t(walk && small) << i;
-            resume_[i] = walk && !small ? 0 : INT_MAX;  // a lane not in the packet is past all
-            occluders_[i] = 0;
-            p_[0][i] = r.p.x, p_[1][i] = r.p.y, p_[2][i] = r.p.z;
-            inv_[0][i] = r.inv.x, inv_[1][i] = r.inv.y, inv_[2][i] = r.inv.z;
-            t0_[i] = r.t0, t1_[i] = r.t1;
+            live_ |= uint32_t(!small) << n;
+            alone_ |= uint32_t(small) << n;
+            resume_[n] = small ? INT_MAX : 0;  // a lane not in the packet is past all
+            occluders_[n] = 0;
+            p_[0][n] = r.p.x, p_[1][n] = r.p.y, p_[2][n] = r.p.z;
+            inv_[0][n] = r.inv.x, inv_[1][n] = r.inv.y, inv_[2][n] = r.inv.z;
+            t0_[n] = r.t0, t1_[n] = r.t1;
+            ++n;
+        }
+        for (int i = n; i < W; ++i) {  // no pair: past every node (finite slabs, no NaN)
+            resume_[i] = INT_MAX;
+            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+            t0_[i] = t1_[i] = 0.f;
         }
         wc->facing_pairs += uint64_t(__builtin_popcount(live_));
-        return live_ | alone_;
+        return n > 0;
     }
 
     // Walks `t` (the whole preorder array or a job's shaft list, as leaf_pair_visible would)
@@ -92,7 +101,9 @@ class SegmentPacket {
             const int i = __builtin_ctz(m);
             if (leaf_pair_visible<true>(t, a_[i], b_[i], vp, wc)) live_ |= 1u << i;
         }
-        return live_;
+        uint32_t visible = 0;  // by the pairs' places in the packet
+        for (uint32_t m = live_; m; m &= m - 1) visible |= 1u << lane_[__builtin_ctz(m)];
+        return visible;
     }
     // The widest lane loop this CPU runs.
     static int best_isa() {
@@ -192,6 +203,7 @@ class SegmentPacket {
     alignas(64) float t1_[W];
     alignas(64) int32_t resume_[W];
     int32_t a_[W], b_[W], occluders_[W];
+    int32_t lane_[W];  // the pair's place in the packet, per lane
     PairSegment seg_[W];
     uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
     uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)

@@ -148,15 +148,49 @@ class HostBackend : public Backend {
         }
     }
 
-    // Derived::kPacketLanes pairs at a time (Derived::visible_packet), consecutive pairs of one
-    // job in its row-major order (a packet may span rows: a job one leaf wide is a column).
+    // Derived::kPacketLanes pairs at a time (Derived::visible_packet), pairs of one job in tiles
+    // of 8 columns by a few rows (a packet's segments then spread less at both ends than 32
+    // columns of one row): the words of the range are taken in chunks of up to kChunk words
+    // of one job, and a chunk's pairs go by word column, block of 8 columns, row, column.
     static void packet_range(const Derived& self, const Range& rg, State& st, WorkCounters& wc) {
-        constexpr int P = Derived::kPacketLanes;
-        int32_t pa[P], pb[P];
-        uint32_t* word[P];
-        uint32_t bit[P];
+        Packer pk{self, st, wc, rg};
+        size_t j = rg.first_job();
+        for (uint64_t item = rg.begin; item < rg.end;) {
+            j = enter_job(self, rg, item, j, st);
+            const PairJob& job = rg.jobs[j];
+            const uint64_t local = item - rg.first[j];
+            const uint64_t n = std::min<uint64_t>({kChunk, rg.end - item, rg.first[j + 1] - item});
+            const uint64_t rw = row_words(job.cols);
+            for (uint64_t k0 = 0; k0 < std::min(n, rw); ++k0)
+                for (int32_t blk = 0; blk < 32; blk += kBlock)
+                    for (uint64_t k = k0; k < n; k += rw) {
+                        const WordPos at = word_pos(job, local + k);
+                        uint32_t* w = rg.bits + job.word_offset + local + k;
+                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock); ++c)
+                            pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
+                    }
+            pk.flush();  // a packet holds pairs of one job
+            item += n;
+        }
+    }
+    static constexpr uint64_t kChunk = 16;
+    static constexpr int32_t kBlock = 8;
+    // The pairs of one packet and where their bits go.
+    struct Packer {
+        static constexpr int P = Derived::kPacketLanes;
+        const Derived& self;
+        State& st;
+        WorkCounters& wc;
+        const Range& rg;
+        int32_t pa[P] = {}, pb[P] = {};
+        uint32_t* word[P] = {};
+        uint32_t bit[P] = {};
         int count = 0;
-        auto flush = [&] {
+        void add(int32_t a, int32_t b, uint32_t* w, uint32_t m) {
+            pa[count] = a, pb[count] = b, word[count] = w, bit[count] = m;
+            if (++count == P) flush();
+        }
+        void flush() {
             if (count == 0) return;
             const uint32_t vis = self.visible_packet(st.state, pa, pb, count, &wc);
             for (int i = 0; i < count; ++i)
@@ -165,23 +199,8 @@ class HostBackend : public Backend {
             rg.pairs += count;
             wc.visible_pairs += __builtin_popcount(vis);
             count = 0;
-        };
-        size_t j = rg.first_job();
-        for (uint64_t item = rg.begin; item < rg.end; ++item) {
-            if (item >= rg.first[j + 1]) flush();  // a packet holds pairs of one job
-            j = enter_job(self, rg, item, j, st);
-            const PairJob& job = rg.jobs[j];
-            const uint64_t local = item - rg.first[j];
-            const WordPos at = word_pos(job, local);
-            uint32_t* w = rg.bits + job.word_offset + local;
-            for (int32_t c = at.c0; c < at.c1; ++c) {
-                pa[count] = at.a, pb[count] = job.col0 + c;
-                word[count] = w, bit[count] = 1u << (c - at.c0);
-                if (++count == P) flush();
-            }
         }
-        flush();
-    }
+    };
 
     double busy_ = 0;
     std::vector<uint32_t> buf_[2];

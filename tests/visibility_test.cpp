@@ -235,9 +235,9 @@ PointSet random_scene(uint32_t seed, int n) {
     return ps;
 }
 
-// Every pair of a tree through SegmentPacket<W> with lane loop `isa` (packets of consecutive pairs in row-major
-// order, spanning rows, as HostBackend fills them) against leaf_pair_visible: the same answers
-// and the same facing pairs, node tests and occluder tests.
+// Every pair of a tree through SegmentPacket<W> with lane loop `isa` (packets of consecutive pairs
+// in row-major order, spanning rows) against leaf_pair_visible: the same answers and the same
+// facing pairs, node tests and occluder tests.
 template <int W>
 void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int isa, int* alone) {
     WorkCounters want, got;
@@ -264,7 +264,8 @@ void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int i
     EXPECT_EQ(got.facing_pairs, want.facing_pairs);
     EXPECT_EQ(got.node_tests, want.node_tests);
     EXPECT_EQ(got.occluder_tests, want.occluder_tests);
-    EXPECT_GT(want.occluder_tests, 0u) << v.num_leaves << " leaves, " << want.facing_pairs << " facing, " << want.node_tests << " node tests";
+    EXPECT_GT(want.occluder_tests, 0u) << v.num_leaves << " leaves, " << want.facing_pairs
+                                       << " facing, " << want.node_tests << " node tests";
 }
 
 TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {

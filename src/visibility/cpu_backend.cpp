@@ -23,10 +23,6 @@ class CpuBackend final : public HostBackend<CpuBackend> {
         vp_ = vp;
     }
 
-    bool visible(int32_t a, int32_t b, WorkCounters* wc) const {
-        return leaf_pair_visible<true>(view_, a, b, vp_, wc);
-    }
-
     // With node bounds (construction "nodes"), a job of at least kShaftPairs leaf pairs walks
     // only the part of the tree its shaft meets (shaft_walk_nodes: the same answers, less
     // work), built when its first facing pair needs a walk.

@@ -1,16 +1,17 @@
-// The batching both CPU backends share (the sphere walk of leaf_pair.h and the grid walk of
-// grid_walk.h): a batch is evaluated on all cores when it is submitted. Work items are words:
-// 32 consecutive columns of one row (neighbouring segments, so the walks share cache lines),
-// indexed across jobs by a prefix sum. Derived supplies
+// The batching both CPU backends share (the box walk of leaf_pair.h, in packets, and the grid
+// walk of grid_walk.h): a batch is evaluated on all cores when it is submitted. Work items are
+// words: 32 consecutive columns of one row (neighbouring segments, so the walks share cache
+// lines), indexed across jobs by a prefix sum. Derived supplies either
 //   bool visible(int32_t a, int32_t b, WorkCounters* wc) const;
 // and may supply, to evaluate a job's pairs with state prepared once per job and thread,
 //   struct JobState; void begin_job(const PairJob&, JobState&) const;
 //   bool visible(JobState&, int32_t a, int32_t b, WorkCounters* wc) const;
-// or, to evaluate up to kPacketLanes consecutive pairs of one job at once (packet_walk.h),
+// or, with JobState and begin_job, to evaluate up to kPacketLanes pairs of one job at once
+// (packet_walk.h),
 //   static constexpr int kPacketLanes;
 //   uint32_t visible_packet(JobState&, const int32_t* a, const int32_t* b, int count,
 //                           WorkCounters* wc) const;  // the mask of the visible pairs;
-// it counts facing pairs, node and occluder tests; pairs and visible pairs are counted here.
+// which counts facing pairs, node and occluder tests (pairs and visible pairs are counted here).
 #pragma once
 
 #include <tbb/blocked_range.h>
@@ -39,22 +40,22 @@ class HostBackend : public Backend {
         for (size_t i = 0; i < jobs.size(); ++i) first[i + 1] = first[i] + job_words(jobs[i]);
         tbb::combinable<WorkCounters> counters;
         tbb::enumerable_thread_specific<State> states;
-        tbb::parallel_for(
-            tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
-                if (progress_ && progress_->cancelled()) return;
-                WorkCounters& wc = counters.local();
-                // The state of the job this thread worked on last carries over to the next
-                // range of the same job (a job's shaft is prepared once per thread, not once
-                // per 16 words).
-                State& st = states.local();
-                const Range rg{jobs.data(), first.data(), jobs.size(), range.begin(), range.end(),
-                               bits.data()};
-                if constexpr (packets())
-                    packet_range(self, rg, st, wc);
-                else
-                    pair_range(self, rg, st, wc);
-                if (progress_) progress_->add(rg.pairs);
-            });
+        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, first.back(), 16),
+                          [&](const auto& range) {
+                              if (progress_ && progress_->cancelled()) return;
+                              WorkCounters& wc = counters.local();
+                              // The state of the job this thread worked on last carries over to the
+                              // next range of the same job (a job's shaft is prepared once per
+                              // thread, not once per 16 words).
+                              State& st = states.local();
+                              const Range rg{jobs.data(),   first.data(), jobs.size(),
+                                             range.begin(), range.end(),  bits.data()};
+                              if constexpr (packets())
+                                  packet_range(self, rg, st, wc);
+                              else
+                                  pair_range(self, rg, st, wc);
+                              if (progress_) progress_->add(rg.pairs);
+                          });
         if (progress_) progress_->throw_if_cancelled();
         pending_[slot] = counters.combine([](WorkCounters x, const WorkCounters& y) {
             x += y;
@@ -86,8 +87,12 @@ class HostBackend : public Backend {
             return NoState{};
     }
     // (Functions, not constants: Derived is complete only where they are called.)
-    static constexpr bool job_state() { return requires { typename Derived::JobState; }; }
-    static constexpr bool packets() { return requires { Derived::kPacketLanes; }; }
+    static constexpr bool job_state() {
+        return requires { typename Derived::JobState; };
+    }
+    static constexpr bool packets() {
+        return requires { Derived::kPacketLanes; };
+    }
     struct State {
         int64_t job = -1;
         decltype(state_type<Derived>()) state;
@@ -166,7 +171,8 @@ class HostBackend : public Backend {
                     for (uint64_t k = k0; k < n; k += rw) {
                         const WordPos at = word_pos(job, local + k);
                         uint32_t* w = rg.bits + job.word_offset + local + k;
-                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock); ++c)
+                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock);
+                             ++c)
                             pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
                     }
             pk.flush();  // a packet holds pairs of one job

@@ -53,8 +53,8 @@ class SegmentPacket {
             a_[n] = a[k], b_[n] = b[k];
             seg_[n] = pair_segment(la, lb, vp);
             const SlabRay& r = seg_[n].ray;
-            const bool small = fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f ||
-                               fabsf(r.d.z) < 1e-30f;
+            const bool small =
+                fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f || fabsf(r.d.z) < 1e-30f;
             live_ |= uint32_t(!small) << n;
             alone_ |= uint32_t(small) << n;
             resume_[n] = small ? INT_MAX : 0;  // a lane not in the packet is past all
@@ -130,8 +130,8 @@ class SegmentPacket {
     // bits) where the CPU has them.
     template <class Counters>
     __attribute__((always_inline)) inline int64_t walk_nodes(const OctreeView& t,
-                                                             const VisibilityParams& vp,
-                                                             int live, Counters* wc) {
+                                                             const VisibilityParams& vp, int live,
+                                                             Counters* wc) {
         int32_t tests[W] = {};
         int32_t n = 0;
         while (n < t.num_nodes && live > 0) {
@@ -167,8 +167,8 @@ class SegmentPacket {
         return walk_nodes(t, vp, live, wc);
     }
     template <class Counters>
-    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq,prefer-vector-width=512"),
-                   noinline)) int64_t
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq,prefer-vector-width=512"), noinline))
+    int64_t
     walk_avx512(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
         return walk_nodes(t, vp, live, wc);
     }
@@ -183,8 +183,8 @@ class SegmentPacket {
     // The lanes that reached leaf `leaf` test it as an occluder (occluder_reached); a lane at
     // its K-th occluder is hidden and leaves the walk. Returns the lanes that left.
     template <class Counters>
-    int occluders_at(const OctreeView& t, int32_t leaf, uint32_t hits,
-                     const VisibilityParams& vp, Counters* wc) {
+    int occluders_at(const OctreeView& t, int32_t leaf, uint32_t hits, const VisibilityParams& vp,
+                     Counters* wc) {
         int left = 0;
         for (; hits; hits &= hits - 1) {
             const int i = __builtin_ctz(hits);

@@ -1,11 +1,13 @@
 // The leaf-pair predicate (paper §5; docs/design.md "Leaf-pair visibility").
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <random>
 
 #include "octree/records.h"
 #include "test_util.h"
 #include "visibility/leaf_pair.h"
+#include "visibility/packet_walk.h"
 
 namespace vmap {
 namespace {
@@ -187,6 +189,135 @@ INSTANTIATE_TEST_SUITE_P(Scenes, TraversalOracle,
                          ::testing::Values(std::make_tuple("cornell-bunny", 6, 1),
                                            std::make_tuple("cornell-bunny", 8, 2),
                                            std::make_tuple("cornell-two-models", 7, 3)));
+
+// A random scene for the packet walk: points on a few planes (some axis-aligned, with
+// coordinates on a coarse grid, so that many segments have an exactly zero direction component
+// and walk alone: segments between two facing plates on a grid, whose boxes' faces lie on the
+// segments' lines), on a sphere, on both sides of a thin wall, and pairs of points with opposite
+// normals at one place (flagged leaves).
+PointSet random_scene(uint32_t seed, int n) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    PointSet ps;
+    for (int i = 0; i < n; ++i) {
+        const int kind = int(rng() % 6);
+        Vec3 p{u(rng), u(rng), u(rng)}, nrm{0, 0, 0};
+        float radius = 0.06f;
+        if (kind == 5) {  // facing plates z = +-0.8 on a grid of 1/4, splats of radius 0
+            const bool top = rng() % 2;
+            p = {std::round(p.x * 4) / 4, std::round(p.y * 4) / 4, top ? 0.8f : -0.8f};
+            nrm = {0, 0, top ? -1.f : 1.f};
+            radius = 0;
+        } else if (kind == 0) {  // the wall x = 0.25 on a grid of 1/8, both sides
+            p = {0.25f, std::round(p.y * 8) / 8, std::round(p.z * 8) / 8};
+            nrm = {rng() % 2 ? 1.f : -1.f, 0, 0};
+        } else if (kind == 1) {  // the floor y = -1, normal up
+            p.y = -1.f;
+            nrm = {0, 1, 0};
+        } else if (kind == 2) {  // a sphere of radius 0.3 about (-0.4, 0.2, 0.1)
+            const Vec3 c{-0.4f, 0.2f, 0.1f};
+            const float l = sqrtf(length2(p));
+            nrm = l > 0 ? p * (1.f / l) : Vec3{0, 0, 1};
+            p = c + nrm * 0.3f;
+        } else if (kind == 3) {  // a tilted plate
+            p.z = 0.5f * p.x - 0.3f;
+            nrm = Vec3{-0.5f, 0, 1} * (1.f / sqrtf(1.25f));
+        } else {  // two points at one place, opposite normals: a leaf whose normals cancel
+            nrm = {0, 0, 1};
+            ps.positions.push_back(p);
+            ps.normals.push_back({0, 0, -1});
+            ps.radii.push_back(0.06f);
+        }
+        ps.positions.push_back(p);
+        ps.normals.push_back(nrm);
+        ps.radii.push_back(radius);  // splats: a leaf of one point is a disc
+    }
+    return ps;
+}
+
+// Every pair of a tree through SegmentPacket<W> with lane loop `isa` (packets of consecutive pairs
+// in row-major order, spanning rows) against leaf_pair_visible: the same answers and the same
+// facing pairs, node tests and occluder tests.
+template <int W>
+void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int isa, int* alone) {
+    WorkCounters want, got;
+    detail::SegmentPacket<W> pk;
+    int32_t pa[W], pb[W];
+    int count = 0;
+    uint32_t expect = 0;
+    auto flush = [&] {
+        uint32_t mask = 0;
+        if (pk.load(v, pa, pb, count, vp, &got)) mask = pk.walk(v, vp, &got, isa);
+        ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0];
+        count = 0, expect = 0;
+    };
+    for (int32_t a = 0; a < v.num_leaves; ++a)
+        for (int32_t b = a + 1; b < v.num_leaves; ++b) {
+            const LeafDisc& la = v.leaves[a];
+            const Vec3 d = v.leaves[b].centroid - la.centroid;
+            *alone += d.x == 0.f || d.y == 0.f || d.z == 0.f;
+            if (leaf_pair_visible<true>(v, a, b, vp, &want)) expect |= 1u << count;
+            pa[count] = a, pb[count] = b;
+            if (++count == W) flush();
+        }
+    flush();
+    EXPECT_EQ(got.facing_pairs, want.facing_pairs);
+    EXPECT_EQ(got.node_tests, want.node_tests);
+    EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+    EXPECT_GT(want.occluder_tests, 0u) << v.num_leaves << " leaves, " << want.facing_pairs
+                                       << " facing, " << want.node_tests << " node tests";
+}
+
+TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
+    int alone = 0, flagged = 0;
+    for (uint32_t seed = 1; seed <= 12; ++seed) {
+        PointSet ps = random_scene(seed, 100 + int(seed) * 12);
+        std::vector<uint32_t> order;
+        const Octree t = Octree::build(ps, {int(5 + seed % 4), int(1 + seed % 3)}, order);
+        VisibilityParams vp;
+        vp.K = int(1 + seed % 3);
+        const OctreeView v = octree_view(t);
+        for (int32_t l = 0; l < v.num_leaves; ++l)
+            flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
+        SCOPED_TRACE(seed);
+        // Every lane loop this CPU runs (SSE2, AVX2, AVX-512), and a packet not a power of 2.
+        for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa)
+            packet_matches_pairs<32>(v, vp, isa, &alone);
+        packet_matches_pairs<7>(v, vp, 0, &alone);
+    }
+    EXPECT_GT(alone, 100);  // pairs with a zero direction component, which walk alone
+    EXPECT_GT(flagged, 10);
+}
+
+// A segment with a zero direction component that runs in a box's face (p.x == lo.x): the
+// slab test takes that axis apart (no inverse), and so must the packet.
+TEST(PacketWalk, SegmentInABoxFaceIsWalkedLikeTheLeafPairWalk) {
+    std::vector<LeafDisc> leaves(3);
+    leaves[0].centroid = {0, 0, 0}, leaves[0].normal = {0, 0, 1};
+    leaves[1].centroid = {0, 0, 1}, leaves[1].normal = {0, 0, -1};
+    leaves[2].centroid = {0, 0, 0.5f}, leaves[2].normal = {0, 0, 1}, leaves[2].delta = 0.1f;
+    std::vector<WalkNode> walk(4);
+    walk[0].lo = {0, -1, -1}, walk[0].hi = {1, 1, 2}, walk[0].skip = 4;  // the root
+    for (int i = 0; i < 3; ++i) {
+        const Vec3 c = leaves[size_t(i)].centroid;
+        walk[size_t(i) + 1].lo = {0, c.y - 0.1f, c.z - 0.1f};
+        walk[size_t(i) + 1].hi = {0.1f, c.y + 0.1f, c.z + 0.1f};
+        walk[size_t(i) + 1].skip = i + 2;
+        walk[size_t(i) + 1].leaf = i;
+    }
+    const OctreeView v{walk.data(), leaves.data(), 4, 3};
+    VisibilityParams vp;
+    vp.K = 1;
+    WorkCounters want, got;
+    ASSERT_FALSE(leaf_pair_visible<true>(v, 0, 1, vp, &want));  // the middle leaf hides it
+    detail::SegmentPacket<4> pk;
+    const int32_t a[2] = {0, 2}, b[2] = {1, 1};
+    ASSERT_TRUE(pk.load(v, a, b, 2, vp, &got));
+    ASSERT_TRUE(leaf_pair_visible<true>(v, 2, 1, vp, &want));
+    EXPECT_EQ(pk.walk(v, vp, &got), 2u);
+    EXPECT_EQ(got.node_tests, want.node_tests);
+    EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+}
 
 TEST(Counting, CountedAndUncountedPredicatesAgree) {
     PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);

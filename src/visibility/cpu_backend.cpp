@@ -7,6 +7,7 @@
 #include "visibility/host_backend.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/node_pair.h"
+#include "visibility/packet_walk.h"
 
 namespace vmap::detail {
 namespace {
@@ -22,36 +23,37 @@ class CpuBackend final : public HostBackend<CpuBackend> {
         vp_ = vp;
     }
 
-    bool visible(int32_t a, int32_t b, WorkCounters* wc) const {
-        return leaf_pair_visible<true>(view_, a, b, vp_, wc);
-    }
-
     // With node bounds (construction "nodes"), a job of at least kShaftPairs leaf pairs walks
     // only the part of the tree its shaft meets (shaft_walk_nodes: the same answers, less
     // work), built when its first facing pair needs a walk.
     static constexpr uint64_t kShaftPairs = 64;
     void set_node_context(const NodePairContext* ctx) override { ctx_ = ctx; }
+    // The pairs of a job walk in packets (packet_walk.h: the answers and counts of
+    // leaf_pair_visible, less time a pair).
+    static constexpr int kPacketLanes = 32;
     struct JobState {
         const PairJob* job = nullptr;
         bool ready = false;
         std::vector<WalkNode> walk;
         std::vector<int32_t> scratch;
         OctreeView view;
+        SegmentPacket<kPacketLanes> packet;
     };
     void begin_job(const PairJob& job, JobState& s) const {
         s.job = &job;
         s.view = view_;
         s.ready = !ctx_ || !(ctx_->margin > 0) || uint64_t(job.rows) * job.cols < kShaftPairs;
     }
-    bool visible(JobState& s, int32_t a, int32_t b, WorkCounters* wc) const {
+    uint32_t visible_packet(JobState& s, const int32_t* a, const int32_t* b, int count,
+                            WorkCounters* wc) const {
+        if (!s.packet.load(view_, a, b, count, vp_, wc)) return 0;
         if (!s.ready) {
-            if (!pair_segment(view_.leaves[a], view_.leaves[b], vp_).faces) return false;
             shaft_walk_nodes(*ctx_, s.job->a, s.job->b, s.walk, s.scratch);
             s.view.walk = s.walk.data();
             s.view.num_nodes = int32_t(s.walk.size());
             s.ready = true;
         }
-        return leaf_pair_visible<true>(s.view, a, b, vp_, wc);
+        return s.packet.walk(s.view, vp_, wc);
     }
 
   private:

@@ -1,11 +1,17 @@
-// The batching both CPU backends share (the sphere walk of leaf_pair.h and the grid walk of
-// grid_walk.h): a batch is evaluated on all cores when it is submitted. Work items are words:
-// 32 consecutive columns of one row (neighbouring segments, so the walks share cache lines),
-// indexed across jobs by a prefix sum. Derived supplies
+// The batching both CPU backends share (the box walk of leaf_pair.h, in packets, and the grid
+// walk of grid_walk.h): a batch is evaluated on all cores when it is submitted. Work items are
+// words: 32 consecutive columns of one row (neighbouring segments, so the walks share cache
+// lines), indexed across jobs by a prefix sum. Derived supplies either
 //   bool visible(int32_t a, int32_t b, WorkCounters* wc) const;
 // and may supply, to evaluate a job's pairs with state prepared once per job and thread,
 //   struct JobState; void begin_job(const PairJob&, JobState&) const;
 //   bool visible(JobState&, int32_t a, int32_t b, WorkCounters* wc) const;
+// or, with JobState and begin_job, to evaluate up to kPacketLanes pairs of one job at once
+// (packet_walk.h),
+//   static constexpr int kPacketLanes;
+//   uint32_t visible_packet(JobState&, const int32_t* a, const int32_t* b, int count,
+//                           WorkCounters* wc) const;  // the mask of the visible pairs;
+// which counts facing pairs, node and occluder tests (pairs and visible pairs are counted here).
 #pragma once
 
 #include <tbb/blocked_range.h>
@@ -33,51 +39,23 @@ class HostBackend : public Backend {
         std::vector<uint64_t> first(jobs.size() + 1, 0);
         for (size_t i = 0; i < jobs.size(); ++i) first[i + 1] = first[i] + job_words(jobs[i]);
         tbb::combinable<WorkCounters> counters;
-        constexpr bool kJobState = requires { typename Derived::JobState; };
-        struct State {
-            int64_t job = -1;
-            decltype(state_type<Derived>()) state;
-        };
         tbb::enumerable_thread_specific<State> states;
-        tbb::parallel_for(
-            tbb::blocked_range<uint64_t>(0, first.back(), 16), [&](const auto& range) {
-                if (progress_ && progress_->cancelled()) return;
-                WorkCounters& wc = counters.local();
-                uint64_t range_pairs = 0;
-                // The state of the job this thread worked on last carries over to the next
-                // range of the same job (a job's shaft is prepared once per thread, not once
-                // per 16 words).
-                State& st = states.local();
-                size_t j =
-                    std::upper_bound(first.begin(), first.end(), range.begin()) - first.begin() - 1;
-                for (uint64_t item = range.begin(); item < range.end(); ++item) {
-                    while (item >= first[j + 1]) ++j;
-                    const PairJob& job = jobs[j];
-                    if constexpr (kJobState) {
-                        if (st.job != int64_t(j)) self.begin_job(job, st.state), st.job = j;
-                    }
-                    const uint64_t rw = row_words(job.cols);
-                    const uint64_t local = item - first[j];
-                    const int32_t r = static_cast<int32_t>(local / rw);
-                    const int32_t c0 = static_cast<int32_t>(local % rw) * 32;
-                    const int32_t c1 = std::min(job.cols, c0 + 32);
-                    const int32_t a = job.row0 + r;
-                    uint32_t word = 0;
-                    for (int32_t c = c0; c < c1; ++c) {
-                        bool vis;
-                        if constexpr (kJobState)
-                            vis = self.visible(st.state, a, job.col0 + c, &wc);
-                        else
-                            vis = self.visible(a, job.col0 + c, &wc);
-                        if (vis) word |= 1u << (c - c0);
-                    }
-                    wc.pairs += c1 - c0;
-                    range_pairs += c1 - c0;
-                    wc.visible_pairs += __builtin_popcount(word);
-                    bits[job.word_offset + local] = word;
-                }
-                if (progress_) progress_->add(range_pairs);
-            });
+        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, first.back(), 16),
+                          [&](const auto& range) {
+                              if (progress_ && progress_->cancelled()) return;
+                              WorkCounters& wc = counters.local();
+                              // The state of the job this thread worked on last carries over to the
+                              // next range of the same job (a job's shaft is prepared once per
+                              // thread, not once per 16 words).
+                              State& st = states.local();
+                              const Range rg{jobs.data(),   first.data(), jobs.size(),
+                                             range.begin(), range.end(),  bits.data()};
+                              if constexpr (packets())
+                                  packet_range(self, rg, st, wc);
+                              else
+                                  pair_range(self, rg, st, wc);
+                              if (progress_) progress_->add(rg.pairs);
+                          });
         if (progress_) progress_->throw_if_cancelled();
         pending_[slot] = counters.combine([](WorkCounters x, const WorkCounters& y) {
             x += y;
@@ -108,6 +86,127 @@ class HostBackend : public Backend {
         else
             return NoState{};
     }
+    // (Functions, not constants: Derived is complete only where they are called.)
+    static constexpr bool job_state() {
+        return requires { typename Derived::JobState; };
+    }
+    static constexpr bool packets() {
+        return requires { Derived::kPacketLanes; };
+    }
+    struct State {
+        int64_t job = -1;
+        decltype(state_type<Derived>()) state;
+    };
+    // The words [begin, end) of a batch (indexed across its jobs by the prefix sum `first`,
+    // num_jobs + 1 long) and the batch's table.
+    struct Range {
+        const PairJob* jobs;
+        const uint64_t* first;
+        size_t num_jobs;
+        uint64_t begin, end;
+        uint32_t* bits;
+        mutable uint64_t pairs = 0;  // leaf pairs evaluated
+        size_t first_job() const {
+            return std::upper_bound(first, first + num_jobs + 1, begin) - first - 1;
+        }
+    };
+    // The job of word `item` (j: the job of a word before it), its state made current.
+    static size_t enter_job(const Derived& self, const Range& rg, uint64_t item, size_t j,
+                            State& st) {
+        while (item >= rg.first[j + 1]) ++j;
+        if constexpr (job_state()) {
+            if (st.job != int64_t(j)) self.begin_job(rg.jobs[j], st.state), st.job = j;
+        }
+        return j;
+    }
+    // The row leaf and the column range [c0, c1) of word `local` of a job.
+    struct WordPos {
+        int32_t a, c0, c1;
+    };
+    static WordPos word_pos(const PairJob& job, uint64_t local) {
+        const uint64_t rw = row_words(job.cols);
+        const int32_t c0 = static_cast<int32_t>(local % rw) * 32;
+        return {job.row0 + static_cast<int32_t>(local / rw), c0, std::min(job.cols, c0 + 32)};
+    }
+
+    // One pair at a time (Derived::visible).
+    static void pair_range(const Derived& self, const Range& rg, State& st, WorkCounters& wc) {
+        size_t j = rg.first_job();
+        for (uint64_t item = rg.begin; item < rg.end; ++item) {
+            j = enter_job(self, rg, item, j, st);
+            const PairJob& job = rg.jobs[j];
+            const uint64_t local = item - rg.first[j];
+            const WordPos at = word_pos(job, local);
+            uint32_t word = 0;
+            for (int32_t c = at.c0; c < at.c1; ++c) {
+                bool vis;
+                if constexpr (job_state())
+                    vis = self.visible(st.state, at.a, job.col0 + c, &wc);
+                else
+                    vis = self.visible(at.a, job.col0 + c, &wc);
+                if (vis) word |= 1u << (c - at.c0);
+            }
+            wc.pairs += at.c1 - at.c0;
+            rg.pairs += at.c1 - at.c0;
+            wc.visible_pairs += __builtin_popcount(word);
+            rg.bits[job.word_offset + local] = word;
+        }
+    }
+
+    // Derived::kPacketLanes pairs at a time (Derived::visible_packet), pairs of one job in tiles
+    // of 8 columns by a few rows (a packet's segments then spread less at both ends than 32
+    // columns of one row): the words of the range are taken in chunks of up to kChunk words
+    // of one job, and a chunk's pairs go by word column, block of 8 columns, row, column.
+    static void packet_range(const Derived& self, const Range& rg, State& st, WorkCounters& wc) {
+        Packer pk{self, st, wc, rg};
+        size_t j = rg.first_job();
+        for (uint64_t item = rg.begin; item < rg.end;) {
+            j = enter_job(self, rg, item, j, st);
+            const PairJob& job = rg.jobs[j];
+            const uint64_t local = item - rg.first[j];
+            const uint64_t n = std::min<uint64_t>({kChunk, rg.end - item, rg.first[j + 1] - item});
+            const uint64_t rw = row_words(job.cols);
+            for (uint64_t k0 = 0; k0 < std::min(n, rw); ++k0)
+                for (int32_t blk = 0; blk < 32; blk += kBlock)
+                    for (uint64_t k = k0; k < n; k += rw) {
+                        const WordPos at = word_pos(job, local + k);
+                        uint32_t* w = rg.bits + job.word_offset + local + k;
+                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock);
+                             ++c)
+                            pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
+                    }
+            pk.flush();  // a packet holds pairs of one job
+            item += n;
+        }
+    }
+    static constexpr uint64_t kChunk = 16;
+    static constexpr int32_t kBlock = 8;
+    // The pairs of one packet and where their bits go.
+    struct Packer {
+        static constexpr int P = Derived::kPacketLanes;
+        const Derived& self;
+        State& st;
+        WorkCounters& wc;
+        const Range& rg;
+        int32_t pa[P] = {}, pb[P] = {};
+        uint32_t* word[P] = {};
+        uint32_t bit[P] = {};
+        int count = 0;
+        void add(int32_t a, int32_t b, uint32_t* w, uint32_t m) {
+            pa[count] = a, pb[count] = b, word[count] = w, bit[count] = m;
+            if (++count == P) flush();
+        }
+        void flush() {
+            if (count == 0) return;
+            const uint32_t vis = self.visible_packet(st.state, pa, pb, count, &wc);
+            for (int i = 0; i < count; ++i)
+                if (vis >> i & 1u) *word[i] |= bit[i];
+            wc.pairs += count;
+            rg.pairs += count;
+            wc.visible_pairs += __builtin_popcount(vis);
+            count = 0;
+        }
+    };
 
     double busy_ = 0;
     std::vector<uint32_t> buf_[2];

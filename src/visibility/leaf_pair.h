@@ -130,14 +130,20 @@ struct PairSegment {
     Vec3 q, na, nb;
     bool plane_a, plane_b;
 };
+// The facing part alone (the CPU's packet walk sets up only the pairs that face).
+VMAP_HD bool pair_faces(const LeafDisc& la, const LeafDisc& lb, const VisibilityParams& vp) {
+    const Vec3 d = lb.centroid - la.centroid;
+    const float len = sqrtf(length2(d));
+    // Coincident centroids: no direction to see along.
+    return len > 0.f && leaves_face(la, lb, d, len, vp);
+}
 VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
                                  const VisibilityParams& vp) {
     PairSegment s;
     s.p = la.centroid;
     s.d = lb.centroid - s.p;
     s.len = sqrtf(length2(s.d));
-    // Coincident centroids: no direction to see along.
-    s.faces = s.len > 0.f && leaves_face(la, lb, s.d, s.len, vp);
+    s.faces = pair_faces(la, lb, vp);
     s.ray = slab_ray(s.p, s.d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
     s.q = lb.centroid;
     s.na = la.normal;

@@ -470,8 +470,18 @@ inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         orig.push_back(n);
         return true;
     });
-    for (WalkNode& w : out)
-        w.skip = int32_t(std::lower_bound(orig.begin(), orig.end(), w.skip) - orig.begin());
+    // A node's skip in the list: the first entry past its subtree. Entries come in preorder
+    // and the list is ancestor-closed, so the open nodes form a stack (the innermost on top)
+    // and an entry closes every open node whose subtree ends at or before it.
+    std::vector<int32_t>& open = orig;  // reused: orig[k] is needed only for entries after k
+    size_t top = 0;
+    for (size_t k = 0; k < out.size(); ++k) {
+        const int32_t o = orig[k];
+        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
+            out[size_t(open[--top])].skip = int32_t(k);
+        open[top++] = int32_t(k);
+    }
+    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
 }
 
 // Whether the construction tests (A, B) at all: a pair of two leaves is one leaf pair, walked

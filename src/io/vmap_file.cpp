@@ -336,6 +336,13 @@ VisibilityMap load_vmap(const std::string& path) {
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
     if (mpi::is_shard_index(path)) return mpi::load_sharded(path);  // src/mpi/shard_file.h
+    return detail::load_vmap_file(path);
+}
+
+VisibilityMap detail::load_vmap_file(const std::string& path) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec))
+        throw Error(fmt::format("{}: not a regular file (or no such file)", path));
     const MappedFile data(path);
     const uint64_t size = data.size();
     if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));

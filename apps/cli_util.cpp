@@ -178,6 +178,11 @@ Verbosity& verbosity() {
     return v;
 }
 
+int& threads() {
+    static int n = 0;
+    return n;
+}
+
 std::string format_duration(double s) {
     if (!(s >= 0) || s > 1e9) return "a very long time";
     const auto t = static_cast<uint64_t>(s + 0.5);

@@ -5,6 +5,7 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <map>
 #include <optional>
 #include <string>
@@ -16,6 +17,7 @@
 #include "vmap/options.h"
 #include "vmap/vec.h"
 #include "vmap/visibility.h"
+#include "vmap/vmap.h"
 
 namespace vmap::cli {
 
@@ -25,15 +27,33 @@ class UsageError : public Error {
     using Error::Error;
 };
 
+// A subcommand: what add_*_command declared, and what runs it once parsed. `summary` says its
+// stdout is a summary, not the answers asked for (-q silences it).
 struct Command {
     CLI::App* app = nullptr;
     std::function<int()> run;
+    bool summary = false;
 };
 
-Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
+// Every subcommand is registered the same way: main() calls these in turn.
+Command add_build_command(CLI::App& app);        // apps/build_cmd.cpp
+Command add_info_command(CLI::App& app);         // apps/info_cmd.cpp
 Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
-Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
+Command add_gi_command(CLI::App& app);           // apps/gi_cmd.cpp
+Command add_validate_command(CLI::App& app);     // apps/validate_cmd.cpp
 Command add_view_command(CLI::App& app);         // apps/view_cmd.cpp
+Command add_bench_command(CLI::App& app);        // apps/bench_cmd.cpp (bench/bench.cpp)
+Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+Command add_bench_gi_command(CLI::App& app);     // bench/gi_bench.cpp
+
+// What a V-map holds (apps/map_summary.cpp, for build and info): the links per octree level
+// (each link once, at its first end's level), the level table, the parameters as two lines or
+// as JSON.
+std::vector<uint64_t> links_per_level(const VisibilityMap& vm);
+void print_tree_summary(const VisibilityMap& vm);
+void print_params(const VisibilityMap& vm);
+nlohmann::json params_json(const VisibilityMap& vm);
 
 // Option values (usage errors, exit 2, for a malformed one):
 // "x,y,z" -> Vec3; throws UsageError naming `option` for anything else (or non-finite values).
@@ -82,6 +102,9 @@ void print_notes(const std::vector<std::string>& notes);
 // summary, -v the timing breakdown too. Set once by main() from -q/-v.
 enum class Verbosity { kQuiet, kNormal, kVerbose };
 Verbosity& verbosity();
+
+// CPU threads asked for with --threads (0: all cores). Set once by main().
+int& threads();
 
 // "42 s", "12 min 5 s", "3 h 20 min".
 std::string format_duration(double seconds);

@@ -413,12 +413,10 @@ void add_reference_options(CLI::App* gi, GiOptions* o) {
 
 }  // namespace
 
-GiCommands add_gi_commands(CLI::App& app) {
+Command add_gi_command(CLI::App& app) {
     auto o = std::make_shared<GiOptions>();
-    GiCommands c;
     auto* gi = app.add_subcommand(
         "gi", "Diffuse global illumination over the V-map (hierarchical radiosity; paper §6.3)");
-    c.gi = gi;
     gi->add_option("input", o->input,
                    "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
                    "file. Default: scenes/cornell-bunny.json");
@@ -428,11 +426,7 @@ GiCommands add_gi_commands(CLI::App& app) {
     add_picture_options(gi, p);
     add_build_options(gi, p);
     add_reference_options(gi, p);
-    c.run_gi = [o] { return run_gi(*o); };
-    auto [bench, run_bench] = add_gi_bench_command(app);
-    c.bench = bench;
-    c.run_bench = run_bench;
-    return c;
+    return {gi, [o] { return run_gi(*o); }, true};
 }
 
 }  // namespace vmap::cli

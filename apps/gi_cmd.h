@@ -1,5 +1,5 @@
-// `vmap gi` (apps/gi_cmd.cpp) and `vmap bench-gi` (bench/gi_bench.cpp): declared here, registered
-// from apps/main.cpp with one call; main() runs the selected one inside its error handling.
+// What `vmap gi` (apps/gi_cmd.cpp), its error table (apps/gi_error.cpp) and `vmap bench-gi`
+// (bench/gi_bench.cpp) share; the commands are registered as every other (apps/commands.h).
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -13,17 +13,6 @@
 #include "vmap/vmap.h"
 
 namespace vmap::cli {
-
-struct GiCommands {
-    CLI::App* gi = nullptr;
-    CLI::App* bench = nullptr;
-    std::function<int()> run_gi, run_bench;
-
-    bool selected() const { return (gi && gi->parsed()) || (bench && bench->parsed()); }
-    int run() const { return gi && gi->parsed() ? run_gi() : run_bench(); }
-};
-
-GiCommands add_gi_commands(CLI::App& app);
 
 // The predicate for a V-map built by `vmap gi` (docs/gi.md "The V-map for the GI"): the GI weighs
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
@@ -64,8 +53,5 @@ BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, con
 
 // apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
 int run_gi_reference(GiOptions& o);
-
-// bench/gi_bench.cpp: declares `bench-gi` on `app`, returns the subcommand and its runner.
-std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app);
 
 }  // namespace vmap::cli

@@ -303,7 +303,7 @@ Command add_render_command(CLI::App& app) {
     c->add_option("--time", a->time_runs,
                   "Also time the render N more times (median, spread, work) for docs/results.md")
         ->check(CLI::Range(1, 1000));
-    return {c, [a] { return run_render(*a); }};
+    return {c, [a] { return run_render(*a); }, true};
 }
 
 }  // namespace vmap::cli

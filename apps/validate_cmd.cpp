@@ -1,7 +1,6 @@
 // `vmap validate SCENE...`: V-map answers against exact visibility (Embree rays on the scene's
 // triangles) per octree height, as Markdown (stdout or --md) and JSON (--json); with
 // --time-embree, Embree rays along leaf-centroid segments timed against the leaf-pair kernel.
-#include "apps/validate_cmd.h"
 
 #include <fmt/format.h>
 #include <tbb/task_arena.h>
@@ -39,7 +38,9 @@ void write_file(const std::string& path, const std::string& text, const char* wh
 
 }  // namespace
 
-CLI::App* add_validate_command(CLI::App& app) {
+int run_validate_command();
+
+Command add_validate_command(CLI::App& app) {
     auto* c = app.add_subcommand(
         "validate",
         "Measure V-map answers against exact visibility from the scene's triangles (Embree "
@@ -118,7 +119,7 @@ CLI::App* add_validate_command(CLI::App& app) {
           "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
           "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
-    return c;
+    return {c, [] { return run_validate_command(); }, true};
 }
 
 int run_validate_command() {

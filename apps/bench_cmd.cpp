@@ -16,9 +16,9 @@ Command add_bench_command(CLI::App& app) {
                        "Scene files (default: cornell-bunny, cornell-dragon, cornell-two-models)");
     benchc->add_option("--heights", bo2->heights, "Octree heights")
         ->delimiter(',')
-        ->check(CLI::Range(1, 21));
+        ->check(max_height_check());
     benchc->add_option("--leaf-points", bo2->leaf_points, "leaf_points for every run")
-        ->check(CLI::Range(1, 1000000))
+        ->check(leaf_points_check())
         ->capture_default_str();
     benchc->add_option("--runs", bo2->runs, "Timed runs per configuration (median, spread)")
         ->check(CLI::Range(1, 100))

@@ -213,26 +213,11 @@ int run_build(BuildOptions& o) {
 Command add_build_command(CLI::App& app) {
     auto bo = std::make_shared<BuildOptions>();
     auto* build = app.add_subcommand("build", "Build the V-map of a scene or point cloud");
-    build->add_option("input", bo->input.path,
+    add_input_options(build, bo->input,
                       "Scene file (.json), mesh (.ply with faces, .off, .obj, .stl: area-sampled) "
                       "or point cloud (.ply, .xyz, .xyzn, .xyzrgb, .pts, .pcd, ...; normals "
                       "estimated if absent). Default: scenes/cornell-bunny.json");
     build->add_option("-o,--output", bo->output, "Output .vmap file (default: <input name>.vmap)");
-    build->add_flag("--as-points", bo->input.as_points,
-                    "Take a mesh file's vertices as a point cloud instead of sampling its faces");
-    build->add_option("--points", bo->input.points, "Override the scene's number of sample points")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    build->add_option("--seed", bo->input.seed, "Override the scene's sampling seed");
-    build
-        ->add_option("--max-height", bo->input.max_height,
-                     "Deepest octree level (root = 0); default: the scene's octree.max_height, "
-                     "else 9")
-        ->check(CLI::Range(1, 21));
-    build
-        ->add_option("--leaf-points", bo->input.leaf_points,
-                     "Split nodes with more points than this; default: the scene's "
-                     "octree.leaf_points, else 4")
-        ->check(CLI::Range(1, 1000000));
     add_predicate_options(build, bo->params.visibility);
     add_choice(build, "--backend", bo->params.backend, "auto (GPU when present), cpu or cuda");
     add_choice(build, "--occluders", bo->params.occluders,

@@ -12,7 +12,9 @@
 #include <vector>
 
 #include "vmap/progress.h"
+#include "vmap/camera.h"
 #include "vmap/error.h"
+#include "vmap/input.h"
 #include "vmap/octree.h"
 #include "vmap/options.h"
 #include "vmap/vec.h"
@@ -76,9 +78,49 @@ CLI::Option* add_choice(CLI::App* app, const std::string& flag, E& target,
         ->default_str(name_of(target));
 }
 
+// A check of one option by the library's own: the value is set into a default P, and
+// P::check (whose message it gives) decides, so every range is defined once, in the library.
+// `range` is what --help shows.
+template <class P, class T>
+CLI::Validator checked_by(T P::*field, const std::string& range) {
+    return CLI::Validator(
+        [field](std::string& text) {
+            P p;
+            if (!CLI::detail::lexical_cast(text, p.*field)) return "'" + text + "' is not a number";
+            try {
+                p.check("");
+            } catch (const Error& e) {
+                return std::string(e.what()).substr(2);  // check's text after its ": "
+            }
+            return std::string();
+        },
+        range);
+}
+// OctreeParams::check's ranges of max_height and leaf_points; VisibilityParams::check's of K
+// and eps.
+CLI::Validator max_height_check();
+CLI::Validator leaf_points_check();
+CLI::Validator k_check();
+CLI::Validator eps_check();
+
 // The predicate's options (-K, --eps, --facing-tol, --parallel-tol) into `vp`, in the ranges
 // VisibilityParams::check accepts.
 void add_predicate_options(CLI::App* app, VisibilityParams& vp);
+
+// The input of build, render, gi and view and its overrides into `in` (vmap/input.h): the
+// positional `input` (described by `help`), --as-points, --points, --seed, --max-height and
+// --leaf-points.
+void add_input_options(CLI::App* app, InputOptions& in, const std::string& help);
+
+// The camera of render and gi: --scene (a scene file's camera), --eye, --target, --up, --fov,
+// --size. apply_camera gives `base` with the options given in place (UsageError naming the
+// option for a malformed one).
+struct CameraOptions {
+    std::string scene, eye, target, up, size = "800x800";
+    std::optional<float> fov;
+};
+void add_camera_options(CLI::App* app, CameraOptions& c);
+Camera apply_camera(const CameraOptions& c, Camera base);
 
 // Adds to every numeric option of `app` and its subcommands: floating-point values must be
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to

@@ -7,6 +7,7 @@
 #include <optional>
 #include <string>
 
+#include "apps/commands.h"
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"
 #include "vmap/render.h"
@@ -21,10 +22,9 @@ inline constexpr float kGiVmapEps = 0.05f;
 
 // The options of `vmap gi`.
 struct GiOptions {
-    std::string input;
+    InputOptions in;  // the input and its overrides (vmap/input.h)
+    CameraOptions cam;
     std::string image, ply, pfm;
-    std::optional<uint64_t> points, seed;
-    std::optional<int> max_height, leaf_points;
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
     GiParams gi;
@@ -34,11 +34,8 @@ struct GiOptions {
     bool final_gather = true;
     float gather_theta = 2.0f;
     float exposure = 0;
-    std::string scene, eye, target, up, size = "800x800";
-    std::optional<float> fov;
     RenderOptions render;
     bool compare = false;
-    bool as_points = false;  // a mesh file's vertices as a point cloud (not area-sampled)
     // --reference
     bool reference = false, brute = true;
     size_t ref_points = 1000;

@@ -56,10 +56,10 @@ Command add_validate_command(CLI::App& app) {
     c->add_option("--seed", opt.vp.pair_seed, "Seed of the pair sample")->capture_default_str();
     c->add_option("--heights", opt.vp.heights, "Octree max_height values (default 5..10)")
         ->delimiter(',')
-        ->check(CLI::Range(1, 21));
+        ->check(max_height_check());
     c->add_option("--leaf-points", opt.vp.leaf_points,
                   "Split nodes with more points than this (default: the scene's)")
-        ->check(CLI::Range(1, 1000000));
+        ->check(leaf_points_check());
     cli::add_predicate_options(c, opt.vp.visibility);
     cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
                   "[7], CPU only)");

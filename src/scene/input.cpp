@@ -20,8 +20,8 @@ void apply_octree_overrides(const InputOptions& o, OctreeParams& p) {
 void load_map(const InputOptions& o, Input& in) {
     if (o.max_height || o.leaf_points)
         throw Error(fmt::format(
-            "{}: max_height and leaf_points (--max-height, --leaf-points) apply when a V-map is "
-            "built, not to a .vmap",
+            "{}: max_height and leaf_points (--max-height, --leaf-points) apply when building a "
+            "V-map, not to a .vmap",
             o.path));
     in.kind = InputKind::kVmap;
     in.vmap = load_vmap(o.path);
@@ -64,7 +64,8 @@ Input load_input(const InputOptions& o) {
     if (is_vmap || !is_scene_input(o.path, o.as_points)) {
         if (o.points || o.seed)
             throw Error(fmt::format(
-                "{}: points and seed (--points, --seed) apply to scene and mesh files, not to {}",
+                "{}: points and seed (--points, --seed) apply when building from a scene or mesh "
+                "file, not to {}",
                 o.path, is_vmap ? "a .vmap" : "a point cloud"));
         is_vmap ? load_map(o, in) : load_cloud(o, in);
         return in;

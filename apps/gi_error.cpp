@@ -3,7 +3,6 @@
 // hierarchical solution without the final gather, the brute-force gather over the same V-map),
 // by bounce count and by point set (all non-emitting points, model points).
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -14,6 +13,7 @@
 
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"
+#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
@@ -190,7 +190,7 @@ Method direct_exact(const Scene& sc, const VisibilityMap& vm, const std::vector<
     const float offset = 1e-4f * std::max({ext.x, ext.y, ext.z});
     auto disc = [&](uint32_t k) { return 3.14159265f * ps.radii[k] * ps.radii[k]; };
     std::vector<Vec3> out(idx.size());
-    tbb::parallel_for(size_t(0), idx.size(), [&](size_t n) {
+    parallel_for(size_t(0), idx.size(), [&](size_t n) {
         const uint32_t i = idx[n];
         const Vec3 x = ps.positions[i], nx = ps.normals[i];
         Vec3 h{0, 0, 0};

@@ -142,24 +142,29 @@ void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
         st.fragments / secs[secs.size() / 2]);
 }
 
-int run_render(RenderArgs& a) {
+// The usage errors found after parsing (exit 2): a message on stderr, true.
+bool usage_error(const RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
     if ((a.in.points || a.in.seed) && !a.in.path.empty() &&
         (has_extension(a.in.path, ".vmap") || !sampled_input(a.in.path, a.in.as_points))) {
         fmt::print(stderr,
                    "vmap render: --points/--seed apply to scene and mesh files, not to {}\n",
                    a.in.path);
-        return 2;
+        return true;
     }
     if (needs_eye && !a.eye_id && a.eye_pos.empty()) {
         fmt::print(stderr, "vmap render: --mode {} needs --eye-id I or --eye-pos x,y,z\n", a.mode);
-        return 2;
+        return true;
     }
     if (!needs_eye && (a.eye_id || !a.eye_pos.empty())) {
         fmt::print(stderr, "vmap render: --eye-id/--eye-pos apply to --mode visible|heights\n");
-        return 2;
+        return true;
     }
-    // Check every option before any work, so a typo costs nothing.
+    return false;
+}
+
+// Every option checked and the outputs' paths settled before any work, so a typo costs nothing.
+void check_render_options(RenderArgs& a) {
     const auto [w, h] = parse_size(a.cam.size, "--size");
     a.opt.width = w;
     a.opt.height = h;
@@ -172,15 +177,10 @@ int run_render(RenderArgs& a) {
     if (!a.cam.scene.empty()) io::check_input_path(a.cam.scene);
     check_output(a.output, "-o", {input, a.cam.scene});
     check_output(a.ply, "--ply", {input, a.cam.scene, a.output});
-    Source s = load_source(a);
-    const Camera cam = make_camera(a, s);
-    check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    a.opt.shade = a.mode != "albedo";
+}
 
-    const auto t0 = std::chrono::steady_clock::now();
-    auto elapsed = [&] {
-        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    };
+// The picture of the chosen mode (and its PLY when asked for).
+Image render_mode(RenderArgs& a, Source& s, const Camera& cam) {
     Image img;
     if (a.mode == "albedo" || a.mode == "shaded") {
         std::vector<Vec3> colors = s.points.colors;
@@ -227,12 +227,24 @@ int run_render(RenderArgs& a) {
             write_colored_ply(with_suffix(a.ply, fmt::format("-h{}", a.heights[k])), s.points,
                               colors[k]);
     }
+    return img;
+}
+
+int run_render(RenderArgs& a) {
+    if (usage_error(a)) return 2;
+    check_render_options(a);
+    Source s = load_source(a);
+    const Camera cam = make_camera(a, s);
+    check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
+    a.opt.shade = a.mode != "albedo";
+    const auto t0 = std::chrono::steady_clock::now();
+    const Image img = render_mode(a, s, cam);
     if (a.time_runs > 0) time_render(a, s, cam);
     write_png(a.output, img);
     fmt::print("camera:     eye ({}, {}, {}) target ({}, {}, {}) fov {}\n", cam.eye.x, cam.eye.y,
                cam.eye.z, cam.target.x, cam.target.y, cam.target.z, cam.fov_y_deg);
     fmt::print("wrote:      {} ({}x{}, {} points, {:.2f} s)\n", a.output, img.width, img.height,
-               s.points.size(), elapsed());
+               s.points.size(), seconds_since(t0));
     if (!a.ply.empty() && a.mode != "heights") fmt::print("wrote:      {}\n", a.ply);
     return 0;
 }

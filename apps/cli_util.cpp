@@ -24,25 +24,25 @@ namespace vmap::cli {
 
 CLI::Validator max_height_check() {
     return checked_by(&OctreeParams::max_height,
-                      fmt::format("in [1 - {}]", OctreeParams::kHeightLimit));
+                      fmt::format("INT in [1 - {}]", OctreeParams::kHeightLimit));
 }
 CLI::Validator leaf_points_check() {
     return checked_by(&OctreeParams::leaf_points,
-                      fmt::format("in [1 - {}]", OctreeParams::kLeafPointsLimit));
+                      fmt::format("INT in [1 - {}]", OctreeParams::kLeafPointsLimit));
 }
 
 CLI::Validator k_check() {
     return checked_by(&VisibilityParams::K,
-                      fmt::format("in [1 - {}]", VisibilityParams::kKLimit));
+                      fmt::format("INT in [1 - {}]", VisibilityParams::kKLimit));
 }
 CLI::Validator eps_check() {
     return checked_by(&VisibilityParams::eps,
-                      fmt::format("in [0 - {})", VisibilityParams::kEpsLimit));
+                      fmt::format("FLOAT in [0 - {})", VisibilityParams::kEpsLimit));
 }
 
 void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     using P = VisibilityParams;
-    const std::string tol = fmt::format("in [0 - {})", P::kTolLimit);
+    const std::string tol = fmt::format("FLOAT in [0 - {})", P::kTolLimit);
     app->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
         ->check(k_check())
         ->capture_default_str();

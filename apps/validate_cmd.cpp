@@ -40,11 +40,10 @@ void write_file(const std::string& path, const std::string& text, const char* wh
 
 int run_validate_command();
 
-Command add_validate_command(CLI::App& app) {
-    auto* c = app.add_subcommand(
-        "validate",
-        "Measure V-map answers against exact visibility from the scene's triangles (Embree "
-        "rays), per octree height");
+namespace {
+
+// The scenes, the pairs and the V-maps built per height.
+void add_sample_options(CLI::App* c) {
     c->add_option("scene", opt.scenes,
                   "Scene files (.json) or mesh files (the mesh is its own truth)")
         ->required();
@@ -64,6 +63,10 @@ Command add_validate_command(CLI::App& app) {
     cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
                   "[7], CPU only)");
     cli::add_choice(c, "--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda");
+}
+
+// How the V-map's answers are predicted and what is scored.
+void add_predict_options(CLI::App* c) {
     c->add_option("--predict", opt.vp.predict,
                   "vmap (build and query the V-map per height: all leaf pairs, minutes per "
                   "height beyond ~50k points on a few CPU cores) or direct (the leaf-pair "
@@ -100,6 +103,10 @@ Command add_validate_command(CLI::App& app) {
                   "answers) to this .npz, for scripts/hpr-compare.sh");
     c->add_flag("--drop-buried", opt.vp.drop_buried,
                 "Leave out buried points (covered surface) before sampling pairs");
+}
+
+// The tables' files, and --time-embree instead of the scoring.
+void add_report_options(CLI::App* c) {
     c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
     c->add_option("--json", opt.json, "Also write the results as JSON here");
     c->add_flag("--time-embree", opt.time_embree,
@@ -111,6 +118,18 @@ Command add_validate_command(CLI::App& app) {
     c->add_option("--embree-pairs", opt.embree_pairs, "With --time-embree: leaf pairs sampled")
         ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
         ->capture_default_str();
+}
+
+}  // namespace
+
+Command add_validate_command(CLI::App& app) {
+    auto* c = app.add_subcommand(
+        "validate",
+        "Measure V-map answers against exact visibility from the scene's triangles (Embree "
+        "rays), per octree height");
+    add_sample_options(c);
+    add_predict_options(c);
+    add_report_options(c);
     // A later value of a single-valued option replaces an earlier one, so a sweep can vary one
     // setting of a fixed list (scripts/validate-sweep.sh).
     for (const char* name :

@@ -221,9 +221,10 @@ struct Reader {
 
 }  // namespace
 
-void save_vmap(const std::string& path, const VisibilityMap& vm) {
-    vm.require_links(path.c_str());
-    Writer w;
+namespace {
+
+// The payload: the five sections, as pieces that point into vm's arrays (or into w's own).
+void write_payload(Writer& w, const VisibilityMap& vm) {
     const Octree& t = vm.octree();
     const PointSet& ps = vm.points();
     Writer::Mark s = w.begin("PARM");
@@ -264,9 +265,13 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.vec(vm.link_offsets());
     w.vec(vm.link_targets());
     w.end(s);
-
     w.finish();
+}
 
+// The header (magic, version, payload size and checksum), then the payload, through an
+// AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at their offsets,
+// which the page cache takes several times faster than one stream.
+void write_file(const std::string& path, const Writer& w) {
     std::vector<uint8_t> head;
     head.insert(head.end(), kMagic, kMagic + 8);
     auto put = [&](auto v) {
@@ -278,8 +283,6 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     put(uint64_t(w.size));
     put(pieces_hash(w.pieces, w.size));
 
-    // Through an AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at
-    // their offsets, which the page cache takes several times faster than one stream.
     struct Chunk {
         const uint8_t* p;
         size_t n;
@@ -304,6 +307,15 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     });
     if (err.load() != 0) file.fail(err.load());
     file.commit();
+}
+
+}  // namespace
+
+void save_vmap(const std::string& path, const VisibilityMap& vm) {
+    vm.require_links(path.c_str());
+    Writer w;
+    write_payload(w, vm);
+    write_file(path, w);
 }
 
 namespace {

@@ -860,7 +860,11 @@ ModelData read_ply(const std::string& path) try {
     fail(path, "out of memory while reading");
 }
 
-void write_ply(const std::string& path, const PointSet& points, bool binary) {
+namespace {
+
+// Refuses what read_ply would refuse, so that every file written can be read back; returns
+// whether any point emits (the emission columns are written only then).
+bool check_writable(const std::string& path, const PointSet& points) {
     const size_t n = points.size();
     auto check_size = [&](size_t size, const char* what) {
         if (size != 0 && size != n) {
@@ -889,7 +893,11 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
             }
         }
     }
+    return emits;
+}
 
+std::string ply_header(const PointSet& points, bool binary, bool emits) {
+    const size_t n = points.size();
     std::string header = "ply\nformat ";
     header += binary ? "binary_little_endian" : "ascii";
     header += " 1.0\ncomment written by vmap\nelement vertex " + std::to_string(n) + "\n";
@@ -905,68 +913,85 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
             "property float emission_b\n";
     }
     header += "end_header\n";
+    return header;
+}
 
+// Point i's columns in the binary (little-endian) encoding.
+void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
+    const Vec3 p = points.positions[i];
+    put_le(chunk, p.x);
+    put_le(chunk, p.y);
+    put_le(chunk, p.z);
+    if (points.has_normals()) {
+        const Vec3 q = points.normals[i];
+        put_le(chunk, q.x);
+        put_le(chunk, q.y);
+        put_le(chunk, q.z);
+    }
+    if (points.has_colors()) {
+        const Vec3 c = points.colors[i];
+        chunk += static_cast<char>(colour_byte(c.x));
+        chunk += static_cast<char>(colour_byte(c.y));
+        chunk += static_cast<char>(colour_byte(c.z));
+    }
+    if (points.has_radii()) put_le(chunk, points.radii[i]);
+    if (emits) {
+        put_le(chunk, points.emission[i].x);
+        put_le(chunk, points.emission[i].y);
+        put_le(chunk, points.emission[i].z);
+    }
+}
+
+// Point i's line in the ASCII encoding.
+void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
+    const Vec3 p = points.positions[i];
+    put_text(chunk, p.x);
+    chunk += ' ';
+    put_text(chunk, p.y);
+    chunk += ' ';
+    put_text(chunk, p.z);
+    if (points.has_normals()) {
+        const Vec3 q = points.normals[i];
+        for (float f : {q.x, q.y, q.z}) {
+            chunk += ' ';
+            put_text(chunk, f);
+        }
+    }
+    if (points.has_colors()) {
+        const Vec3 c = points.colors[i];
+        for (float channel : {c.x, c.y, c.z}) {
+            chunk += ' ';
+            chunk += std::to_string(colour_byte(channel));
+        }
+    }
+    if (points.has_radii()) {
+        chunk += ' ';
+        put_text(chunk, points.radii[i]);
+    }
+    if (emits) {
+        const Vec3 e = points.emission[i];
+        for (float f : {e.x, e.y, e.z}) {
+            chunk += ' ';
+            put_text(chunk, f);
+        }
+    }
+    chunk += '\n';
+}
+
+}  // namespace
+
+void write_ply(const std::string& path, const PointSet& points, bool binary) {
+    const bool emits = check_writable(path, points);
     io::AtomicFile file(path);
-    file.write(header);
+    file.write(ply_header(points, binary, emits));
     std::string chunk;
     constexpr size_t kChunk = 1 << 20;
     chunk.reserve(kChunk + 256);
-    for (size_t i = 0; i < n; ++i) {
-        const Vec3 p = points.positions[i];
+    for (size_t i = 0; i < points.size(); ++i) {
         if (binary) {
-            put_le(chunk, p.x);
-            put_le(chunk, p.y);
-            put_le(chunk, p.z);
-            if (points.has_normals()) {
-                const Vec3 q = points.normals[i];
-                put_le(chunk, q.x);
-                put_le(chunk, q.y);
-                put_le(chunk, q.z);
-            }
-            if (points.has_colors()) {
-                const Vec3 c = points.colors[i];
-                chunk += static_cast<char>(colour_byte(c.x));
-                chunk += static_cast<char>(colour_byte(c.y));
-                chunk += static_cast<char>(colour_byte(c.z));
-            }
-            if (points.has_radii()) put_le(chunk, points.radii[i]);
-            if (emits) {
-                put_le(chunk, points.emission[i].x);
-                put_le(chunk, points.emission[i].y);
-                put_le(chunk, points.emission[i].z);
-            }
+            put_binary_point(chunk, points, i, emits);
         } else {
-            put_text(chunk, p.x);
-            chunk += ' ';
-            put_text(chunk, p.y);
-            chunk += ' ';
-            put_text(chunk, p.z);
-            if (points.has_normals()) {
-                const Vec3 q = points.normals[i];
-                for (float f : {q.x, q.y, q.z}) {
-                    chunk += ' ';
-                    put_text(chunk, f);
-                }
-            }
-            if (points.has_colors()) {
-                const Vec3 c = points.colors[i];
-                for (float channel : {c.x, c.y, c.z}) {
-                    chunk += ' ';
-                    chunk += std::to_string(colour_byte(channel));
-                }
-            }
-            if (points.has_radii()) {
-                chunk += ' ';
-                put_text(chunk, points.radii[i]);
-            }
-            if (emits) {
-                const Vec3 e = points.emission[i];
-                for (float f : {e.x, e.y, e.z}) {
-                    chunk += ' ';
-                    put_text(chunk, f);
-                }
-            }
-            chunk += '\n';
+            put_text_point(chunk, points, i, emits);
         }
         if (chunk.size() >= kChunk) {
             file.write(chunk);

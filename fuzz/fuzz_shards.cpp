@@ -1,17 +1,16 @@
 // libFuzzer target: the sharded V-map that `vmap build --shards -o m.vmap` writes under mpirun
 // (src/mpi/shard_file.h), read by load_vmap: the index (JSON), the base (.vmap) and the
 // per-rank link files. One input holds them all, parts cut at kPart: the index, the base, then
-// shard 0, 1, ... (written to a scratch folder as m.vmap, m.vmap.base, m.vmap.shard-K-of-S).
-// Checksums and sizes would stop almost every mutation, so the target reseals them first: the
-// base's header like fuzz_vmap's, each shard's checksum in its header, and in the index each
-// shard's "bytes" and "checksum" (when the index parses): the structure checks are fuzzed.
-// A map that loads answers a pair query and a visible set.
+// shard 0, 1, ... Each part is an in-memory file (fuzz_input.h), so the index names the others
+// by their /proc/self/fd numbers (the index's folder). Checksums and sizes would stop almost
+// every mutation, so the target reseals them first: the base's header like fuzz_vmap's, each
+// shard's checksum in its header, and in the index (when it parses) each shard's "bytes" and
+// "checksum", and the files' names: the structure checks are what is fuzzed. A map that loads
+// answers a pair query and a visible set.
 #include <fmt/format.h>
-#include <stdlib.h>
 
 #include <cstring>
-#include <filesystem>
-#include <fstream>
+#include <deque>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <string_view>
@@ -24,21 +23,9 @@
 
 namespace {
 
-namespace fs = std::filesystem;
 constexpr std::string_view kPart = "\n#vmap-shard-part\n";
 constexpr size_t kVmapHeader = 8 + 4 + 4 + 8 + 8;       // magic, version, reserved, size, sum
 constexpr size_t kShardHeader = 8 + 4 + 4 + 4 + 4 + 8;  // ... up to the checksum at 32
-
-// The scratch folder of this process, removed at exit.
-const fs::path& scratch() {
-    static const fs::path dir = [] {
-        std::string t = (fs::temp_directory_path() / "vmap-fuzz-shards-XXXXXX").string();
-        if (::mkdtemp(t.data()) == nullptr) std::abort();
-        std::atexit([] { fs::remove_all(scratch()); });
-        return fs::path(t);
-    }();
-    return dir;
-}
 
 std::vector<std::string> split(std::string_view in) {
     std::vector<std::string> parts;
@@ -53,8 +40,8 @@ std::vector<std::string> split(std::string_view in) {
 void reseal_base(std::string& b) {
     if (b.size() < kVmapHeader) return;
     const uint64_t payload = b.size() - kVmapHeader;
-    const uint64_t sum =
-        vmap::detail::payload_hash(reinterpret_cast<const uint8_t*>(b.data()) + kVmapHeader, payload);
+    const uint64_t sum = vmap::detail::payload_hash(
+        reinterpret_cast<const uint8_t*>(b.data()) + kVmapHeader, payload);
     std::memcpy(b.data() + 16, &payload, 8);
     std::memcpy(b.data() + 24, &sum, 8);
 }
@@ -77,19 +64,31 @@ bool reseal_shard(std::string& s, uint64_t& sum) {
     return true;
 }
 
+// The index with each shard's size, checksum and file name, and the base's name, as the files
+// written hold them.
 void reseal_index(std::string& index, const std::vector<std::string>& parts,
-                  const std::vector<uint64_t>& sums, const std::vector<bool>& sealed) {
+                  const std::vector<uint64_t>& sums, const std::vector<bool>& sealed,
+                  const std::vector<std::string>& names) {
     nlohmann::json j = nlohmann::json::parse(index, nullptr, false);
-    if (j.is_discarded() || !j.is_object() || !j.contains("shards") || !j["shards"].is_array())
-        return;
-    for (size_t k = 0; k < j["shards"].size() && k + 2 < parts.size(); ++k) {
-        nlohmann::json& e = j["shards"][k];
-        if (!e.is_object()) continue;
-        e["bytes"] = parts[k + 2].size();
-        if (sealed[k]) e["checksum"] = fmt::format("{:016x}", sums[k]);
-    }
+    if (j.is_discarded() || !j.is_object()) return;
+    j["base"] = names[0];
+    if (j.contains("shards") && j["shards"].is_array())
+        for (size_t k = 0; k < j["shards"].size() && k + 2 < parts.size(); ++k) {
+            nlohmann::json& e = j["shards"][k];
+            if (!e.is_object()) continue;
+            e["file"] = names[k + 1];
+            e["bytes"] = parts[k + 2].size();
+            if (sealed[k]) e["checksum"] = fmt::format("{:016x}", sums[k]);
+        }
     index = j.dump(1);
 }
+
+// An in-memory file's name in /proc/self/fd.
+std::string fd_name(const vmap::fuzz::MemFile& f) {
+    return f.path().substr(f.path().rfind('/') + 1);
+}
+
+const uint8_t* bytes_of(const std::string& s) { return reinterpret_cast<const uint8_t*>(s.data()); }
 
 }  // namespace
 
@@ -105,19 +104,17 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         sealed[k] = reseal_shard(parts[k + 2], sum);
         sums[k] = sum;
     }
-    reseal_index(parts[0], parts, sums, sealed);
-
-    const fs::path& dir = scratch();
-    for (const auto& old : fs::directory_iterator(dir)) fs::remove(old.path());
-    const std::string index = (dir / "m.vmap").string();
-    std::vector<std::string> names{index, vmap::mpi::base_name(index)};
-    for (size_t k = 0; k < shards; ++k)
-        names.push_back(vmap::mpi::shard_name(index, int(k), int(shards)));
-    for (size_t i = 0; i < parts.size(); ++i)
-        std::ofstream(names[i], std::ios::binary).write(parts[i].data(), std::streamsize(parts[i].size()));
+    std::deque<vmap::fuzz::MemFile> files;  // the base, then the shards
+    std::vector<std::string> names;
+    for (size_t i = 1; i < parts.size(); ++i) {
+        files.emplace_back(bytes_of(parts[i]), parts[i].size(), "fuzz.vmap.part");
+        names.push_back(fd_name(files.back()));
+    }
+    reseal_index(parts[0], parts, sums, sealed, names);
+    const vmap::fuzz::MemFile index(bytes_of(parts[0]), parts[0].size(), "fuzz.vmap");
 
     vmap::fuzz::expect_only_vmap_errors([&] {
-        const vmap::VisibilityMap vm = vmap::load_vmap(index);
+        const vmap::VisibilityMap vm = vmap::load_vmap(index.path());
         const uint32_t n = uint32_t(vm.points().size());
         if (n == 0) return;
         (void)vm.query(0, n - 1);

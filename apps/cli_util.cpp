@@ -22,20 +22,79 @@
 
 namespace vmap::cli {
 
+CLI::Validator max_height_check() {
+    return checked_by(&OctreeParams::max_height,
+                      fmt::format("INT in [1 - {}]", OctreeParams::kHeightLimit));
+}
+CLI::Validator leaf_points_check() {
+    return checked_by(&OctreeParams::leaf_points,
+                      fmt::format("INT in [1 - {}]", OctreeParams::kLeafPointsLimit));
+}
+
+CLI::Validator k_check() {
+    return checked_by(&VisibilityParams::K,
+                      fmt::format("INT in [1 - {}]", VisibilityParams::kKLimit));
+}
+CLI::Validator eps_check() {
+    return checked_by(&VisibilityParams::eps,
+                      fmt::format("FLOAT in [0 - {})", VisibilityParams::kEpsLimit));
+}
+
 void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
+    using P = VisibilityParams;
+    const std::string tol = fmt::format("FLOAT in [0 - {})", P::kTolLimit);
     app->add_option("-K", vp.K, "Actual occluders that make a leaf pair invisible")
-        ->check(CLI::Range(1, 1000))
+        ->check(k_check())
         ->capture_default_str();
     app->add_option("--eps", vp.eps, "Occluder plane must cut the segment at t in (eps, 1-eps)")
-        ->check(CLI::Range(0.0f, 0.49f))
+        ->check(eps_check())
         ->capture_default_str();
     app->add_option("--facing-tol", vp.facing_tol, "Facing test: n.d > tol |d|")
-        ->check(CLI::Range(0.0f, 0.99f))
+        ->check(checked_by(&P::facing_tol, tol))
         ->capture_default_str();
     app->add_option("--parallel-tol", vp.parallel_tol,
                     "Occluder planes with |n.d| <= tol |d| are ignored")
-        ->check(CLI::Range(0.0f, 0.99f))
+        ->check(checked_by(&P::parallel_tol, tol))
         ->capture_default_str();
+}
+
+void add_input_options(CLI::App* app, InputOptions& in, const std::string& help) {
+    const OctreeParams fallback;
+    app->add_option("input", in.path, help);
+    app->add_flag("--as-points", in.as_points,
+                  "Take a mesh file's vertices as a point cloud instead of sampling its faces");
+    app->add_option("--points", in.points,
+                    "Scene and mesh files: sample this many points instead of the scene's number")
+        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
+    app->add_option("--seed", in.seed, "Scene and mesh files: the sampling seed instead of the scene's");
+    app->add_option("--max-height", in.max_height,
+                    fmt::format("Deepest octree level (root = 0) of a V-map built here; default: "
+                                "the scene's octree.max_height, else {}",
+                                fallback.max_height))
+        ->check(max_height_check());
+    app->add_option("--leaf-points", in.leaf_points,
+                    fmt::format("Split the octree's nodes with more points than this (a V-map "
+                                "built here); default: the scene's octree.leaf_points, else {}",
+                                fallback.leaf_points))
+        ->check(leaf_points_check());
+}
+
+void add_camera_options(CLI::App* app, CameraOptions& c) {
+    app->add_option("--scene", c.scene, "Take the camera from this scene file (for .vmap input)");
+    app->add_option("--eye", c.eye, "Camera position x,y,z");
+    app->add_option("--target", c.target, "Camera target x,y,z");
+    app->add_option("--up", c.up, "Camera up vector x,y,z (default 0,1,0)");
+    app->add_option("--fov", c.fov, "Vertical field of view, degrees")
+        ->check(CLI::Range(1.f, 179.f));
+    app->add_option("--size", c.size, "Image size WxH")->capture_default_str();
+}
+
+Camera apply_camera(const CameraOptions& c, Camera base) {
+    if (!c.eye.empty()) base.eye = parse_vec3(c.eye, "--eye");
+    if (!c.target.empty()) base.target = parse_vec3(c.target, "--target");
+    if (!c.up.empty()) base.up = parse_vec3(c.up, "--up");
+    if (c.fov) base.fov_y_deg = *c.fov;
+    return base;
 }
 
 bool sampled_input(const std::string& path, bool as_points) {
@@ -176,6 +235,11 @@ void check_output(const std::string& path, const char* option,
 Verbosity& verbosity() {
     static Verbosity v = Verbosity::kNormal;
     return v;
+}
+
+int& threads() {
+    static int n = 0;
+    return n;
 }
 
 std::string format_duration(double s) {

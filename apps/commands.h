@@ -5,17 +5,21 @@
 
 #include <CLI/CLI.hpp>
 #include <functional>
+#include <nlohmann/json.hpp>
 #include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
 #include "vmap/progress.h"
+#include "vmap/camera.h"
 #include "vmap/error.h"
+#include "vmap/input.h"
 #include "vmap/octree.h"
 #include "vmap/options.h"
 #include "vmap/vec.h"
 #include "vmap/visibility.h"
+#include "vmap/vmap.h"
 
 namespace vmap::cli {
 
@@ -25,15 +29,33 @@ class UsageError : public Error {
     using Error::Error;
 };
 
+// A subcommand: what add_*_command declared, and what runs it once parsed. `summary` says its
+// stdout is a summary, not the answers asked for (-q silences it).
 struct Command {
     CLI::App* app = nullptr;
     std::function<int()> run;
+    bool summary = false;
 };
 
-Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
+// Every subcommand is registered the same way: main() calls these in turn.
+Command add_build_command(CLI::App& app);        // apps/build_cmd.cpp
+Command add_info_command(CLI::App& app);         // apps/info_cmd.cpp
 Command add_query_command(CLI::App& app);        // apps/query_cmd.cpp
-Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
+Command add_gi_command(CLI::App& app);           // apps/gi_cmd.cpp
+Command add_validate_command(CLI::App& app);     // apps/validate_cmd.cpp
 Command add_view_command(CLI::App& app);         // apps/view_cmd.cpp
+Command add_bench_command(CLI::App& app);        // apps/bench_cmd.cpp (bench/bench.cpp)
+Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
+Command add_bench_gi_command(CLI::App& app);     // bench/gi_bench.cpp
+
+// What a V-map holds (apps/map_summary.cpp, for build and info): the links per octree level
+// (each link once, at its first end's level), the level table, the parameters as two lines or
+// as JSON.
+std::vector<uint64_t> links_per_level(const VisibilityMap& vm);
+void print_tree_summary(const VisibilityMap& vm);
+void print_params(const VisibilityMap& vm);
+nlohmann::json params_json(const VisibilityMap& vm);
 
 // Option values (usage errors, exit 2, for a malformed one):
 // "x,y,z" -> Vec3; throws UsageError naming `option` for anything else (or non-finite values).
@@ -56,9 +78,49 @@ CLI::Option* add_choice(CLI::App* app, const std::string& flag, E& target,
         ->default_str(name_of(target));
 }
 
+// A check of one option by the library's own: the value is set into a default P, and
+// P::check (whose message it gives) decides, so every range is defined once, in the library.
+// `range` is what --help shows.
+template <class P, class T>
+CLI::Validator checked_by(T P::*field, const std::string& range) {
+    return CLI::Validator(
+        [field](std::string& text) {
+            P p;
+            if (!CLI::detail::lexical_cast(text, p.*field)) return "'" + text + "' is not a number";
+            try {
+                p.check("");
+            } catch (const Error& e) {
+                return std::string(e.what()).substr(2);  // check's text after its ": "
+            }
+            return std::string();
+        },
+        range);
+}
+// OctreeParams::check's ranges of max_height and leaf_points; VisibilityParams::check's of K
+// and eps.
+CLI::Validator max_height_check();
+CLI::Validator leaf_points_check();
+CLI::Validator k_check();
+CLI::Validator eps_check();
+
 // The predicate's options (-K, --eps, --facing-tol, --parallel-tol) into `vp`, in the ranges
 // VisibilityParams::check accepts.
 void add_predicate_options(CLI::App* app, VisibilityParams& vp);
+
+// The input of build, render, gi and view and its overrides into `in` (vmap/input.h): the
+// positional `input` (described by `help`), --as-points, --points, --seed, --max-height and
+// --leaf-points.
+void add_input_options(CLI::App* app, InputOptions& in, const std::string& help);
+
+// The camera of render and gi: --scene (a scene file's camera), --eye, --target, --up, --fov,
+// --size. apply_camera gives `base` with the options given in place (UsageError naming the
+// option for a malformed one).
+struct CameraOptions {
+    std::string scene, eye, target, up, size = "800x800";
+    std::optional<float> fov;
+};
+void add_camera_options(CLI::App* app, CameraOptions& c);
+Camera apply_camera(const CameraOptions& c, Camera base);
 
 // Adds to every numeric option of `app` and its subcommands: floating-point values must be
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to
@@ -82,6 +144,9 @@ void print_notes(const std::vector<std::string>& notes);
 // summary, -v the timing breakdown too. Set once by main() from -q/-v.
 enum class Verbosity { kQuiet, kNormal, kVerbose };
 Verbosity& verbosity();
+
+// CPU threads asked for with --threads (0: all cores). Set once by main().
+int& threads();
 
 // "42 s", "12 min 5 s", "3 h 20 min".
 std::string format_duration(double seconds);

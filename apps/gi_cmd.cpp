@@ -42,51 +42,35 @@ size_t count_emitters(const PointSet& ps, const std::string& input) {
     return emitters;
 }
 
-// The V-map of the input: loaded, or built from a scene or mesh (sampled, with the scene's
-// octree defaults) or a point cloud.
+// The V-map of the input (vmap/input.h): loaded, or built from a scene or mesh (sampled, with
+// the scene's octree defaults) or a point cloud; the scene's camera, or --scene's.
 VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
-    const bool is_vmap = has_extension(o.input, ".vmap");
-    if (!is_vmap && is_scene_input(o.input, o.as_points)) {
-        Scene sc = load_scene(o.input);
-        print_notes(sc.notes);
-        camera = sc.camera;
-        if (o.points) sc.points = *o.points;
-        if (o.seed) sc.seed = *o.seed;
-        warn_if_long(o.input, sc.points, gi_build_params(sc.octree, o).octree);
-        BuildStats st;
-        PointSet points = sample_scene(sc);
-        count_emitters(points, o.input);
-        VisibilityMap vm = build_vmap(std::move(points), gi_build_params(sc.octree, o), &st, o.input);
+    if (has_extension(o.in.path, ".vmap") && (o.K != kGiVmapK || o.eps != kGiVmapEps))
+        throw Error(fmt::format("{}: -K/--eps apply when the V-map is built, not to a .vmap",
+                                o.in.path));
+    Input in = load_input(o.in);
+    print_notes(in.notes);
+    camera = in.camera;
+    if (!o.cam.scene.empty()) camera = load_scene(o.cam.scene).camera;
+    if (in.vmap) {
         build_s = seconds_since(t0);
-        what = fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
-                           has_extension(o.input, ".json") ? "scene" : "mesh", sc.name, o.input,
-                           st.backend, build_s);
-        return vm;
+        what = fmt::format("V-map {} (loaded in {:.2f} s)", o.in.path, build_s);
+        return std::move(*in.vmap);
     }
-    if (o.points || o.seed)
-        throw Error(fmt::format("{}: --points/--seed apply to scene and mesh files", o.input));
-    if (!is_vmap) {
-        BuildStats st;
-        PointSet points = load_point_cloud(o.input);
-        count_emitters(points, o.input);
-        VisibilityMap vm =
-            build_vmap(std::move(points), gi_build_params(std::nullopt, o), &st, o.input);
-        if (!o.scene.empty()) camera = load_scene(o.scene).camera;
-        build_s = seconds_since(t0);
-        what = fmt::format("point cloud {}, V-map built on {} in {:.2f} s", o.input, st.backend,
-                           build_s);
-        return vm;
-    }
-    if (o.max_height || o.leaf_points || o.K != kGiVmapK || o.eps != kGiVmapEps)
-        throw Error(fmt::format(
-            "{}: --max-height/--leaf-points/-K/--eps apply when the V-map is built, not to a .vmap",
-            o.input));
-    VisibilityMap vm = load_vmap(o.input);
-    if (!o.scene.empty()) camera = load_scene(o.scene).camera;
+    count_emitters(in.points, o.in.path);
+    const BuildParams bp = gi_build_params(in.octree, o);
+    warn_if_long(o.in.path, in.points.size(), bp.octree);
+    BuildStats st;
+    VisibilityMap vm = build_vmap(std::move(in.points), bp, &st, o.in.path);
     build_s = seconds_since(t0);
-    what = fmt::format("V-map {} (loaded in {:.2f} s)", o.input, build_s);
+    what = in.kind == InputKind::kCloud
+               ? fmt::format("point cloud {}, V-map built on {} in {:.2f} s", o.in.path,
+                             st.backend, build_s)
+               : fmt::format("{} {} ({}), V-map built on {} in {:.2f} s",
+                             in.kind == InputKind::kScene ? "scene" : "mesh", in.name, o.in.path,
+                             st.backend, build_s);
     return vm;
 }
 
@@ -236,20 +220,18 @@ void write_outputs(const VisibilityMap& vm, const std::vector<Vec3>& B, float ex
 }
 
 int run_gi(GiOptions& o) {
-    if (o.input.empty()) o.input = default_scene_path();
-    io::check_input_path(o.input);
-    if (!o.scene.empty()) io::check_input_path(o.scene);
+    if (o.in.path.empty()) o.in.path = default_scene_path();
+    io::check_input_path(o.in.path);
+    if (!o.cam.scene.empty()) io::check_input_path(o.cam.scene);
     if (o.reference) return run_gi_reference(o);
-    if (o.image.empty()) o.image = std::filesystem::path(o.input).stem().string() + "-gi.png";
-    check_output(o.ply, "--ply", {o.input, o.scene, o.image});
-    check_output(o.pfm, "--pfm", {o.input, o.scene, o.image, o.ply});
-    check_output(o.image, "-o", {o.input, o.scene});
-    const auto [width, height] = parse_size(o.size, "--size");
+    if (o.image.empty()) o.image = std::filesystem::path(o.in.path).stem().string() + "-gi.png";
+    check_output(o.ply, "--ply", {o.in.path, o.cam.scene, o.image});
+    check_output(o.pfm, "--pfm", {o.in.path, o.cam.scene, o.image, o.ply});
+    check_output(o.image, "-o", {o.in.path, o.cam.scene});
+    const auto [width, height] = parse_size(o.cam.size, "--size");
     o.render.width = width, o.render.height = height;
     o.render.shade = false;                          // the light is in the radiosity
-    if (!o.eye.empty()) parse_vec3(o.eye, "--eye");  // bad camera options fail before the work
-    if (!o.target.empty()) parse_vec3(o.target, "--target");
-    if (!o.up.empty()) parse_vec3(o.up, "--up");
+    apply_camera(o.cam, Camera{});  // bad camera options fail before the work
     std::string what;
     double build_s = 0;
     std::optional<Camera> scene_camera;
@@ -258,17 +240,13 @@ int run_gi(GiOptions& o) {
     PointSet out = points_in_input_order(vm);  // input order and units, for the outputs
     // The camera (the default one frames the points' box, which the order does not change),
     // checked before the solve.
-    Camera cam = scene_camera ? *scene_camera : default_camera(out);
-    if (!o.eye.empty()) cam.eye = parse_vec3(o.eye, "--eye");
-    if (!o.target.empty()) cam.target = parse_vec3(o.target, "--target");
-    if (!o.up.empty()) cam.up = parse_vec3(o.up, "--up");
-    if (o.fov) cam.fov_y_deg = *o.fov;
+    Camera cam = apply_camera(o.cam, scene_camera ? *scene_camera : default_camera(out));
     if (!o.image.empty() || !o.pfm.empty())
         check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    const size_t emitters = count_emitters(ps, o.input);
+    const size_t emitters = count_emitters(ps, o.in.path);
     if (!ps.has_radii())
         throw Error(
-            fmt::format("{}: points have no splat radii (needed for their areas)", o.input));
+            fmt::format("{}: points have no splat radii (needed for their areas)", o.in.path));
 
     fmt::print("input:      {}\n", what);
     fmt::print("points:     {} ({} emitting), {} nodes, {} leaves, {} links\n", ps.size(), emitters,
@@ -288,8 +266,8 @@ int run_gi(GiOptions& o) {
 BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o) {
     BuildParams bp;
     if (scene_octree) bp.octree = *scene_octree;
-    if (o.max_height) bp.octree.max_height = *o.max_height;
-    if (o.leaf_points) bp.octree.leaf_points = *o.leaf_points;
+    if (o.in.max_height) bp.octree.max_height = *o.in.max_height;
+    if (o.in.leaf_points) bp.octree.leaf_points = *o.in.leaf_points;
     bp.visibility.K = o.K;
     bp.visibility.eps = o.eps;
     bp.backend = o.gi.backend;
@@ -343,13 +321,7 @@ void add_picture_options(CLI::App* gi, GiOptions* o) {
                    "automatic (95th percentile of the lit points -> 0.8)")
         ->check(CLI::Range(0.0f, 1e9f))
         ->capture_default_str();
-    gi->add_option("--scene", o->scene, "Take the camera from this scene file (for .vmap input)");
-    gi->add_option("--eye", o->eye, "Camera position x,y,z");
-    gi->add_option("--target", o->target, "Camera target x,y,z");
-    gi->add_option("--up", o->up, "Camera up vector x,y,z (default 0,1,0)");
-    gi->add_option("--fov", o->fov, "Vertical field of view, degrees")
-        ->check(CLI::Range(1.f, 179.f));
-    gi->add_option("--size", o->size, "Image size WxH")->capture_default_str();
+    add_camera_options(gi, o->cam);
     gi->add_option("--splat-scale", o->render.splat_scale, "Disc radius = splat radius x this")
         ->check(CLI::Range(0.01f, 100.f))
         ->capture_default_str();
@@ -360,22 +332,13 @@ void add_picture_options(CLI::App* gi, GiOptions* o) {
 
 // Sampling and the V-map built here.
 void add_build_options(CLI::App* gi, GiOptions* o) {
-    gi->add_flag("--as-points", o->as_points,
-                 "Take a mesh file's vertices as a point cloud instead of sampling its faces");
-    gi->add_option("--points", o->points, "Override the scene's number of sample points")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    gi->add_option("--seed", o->seed, "Override the scene's sampling seed");
-    gi->add_option("--max-height", o->max_height, "Override the scene's octree max_height")
-        ->check(CLI::Range(1, 21));
-    gi->add_option("--leaf-points", o->leaf_points, "Override the scene's octree leaf_points")
-        ->check(CLI::Range(1, 1000000));
     gi->add_option("-K", o->K, "V-map built here: actual occluders that hide a leaf pair")
-        ->check(CLI::Range(1, 1000))
+        ->check(k_check())
         ->capture_default_str();
     gi->add_option("--eps", o->eps,
                    "V-map built here: an occluder's plane must cut the segment at t in (eps, "
                    "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
-        ->check(CLI::Range(0.0f, 0.49f))
+        ->check(eps_check())
         ->capture_default_str();
 }
 
@@ -413,26 +376,20 @@ void add_reference_options(CLI::App* gi, GiOptions* o) {
 
 }  // namespace
 
-GiCommands add_gi_commands(CLI::App& app) {
+Command add_gi_command(CLI::App& app) {
     auto o = std::make_shared<GiOptions>();
-    GiCommands c;
     auto* gi = app.add_subcommand(
         "gi", "Diffuse global illumination over the V-map (hierarchical radiosity; paper §6.3)");
-    c.gi = gi;
-    gi->add_option("input", o->input,
-                   "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
-                   "file. Default: scenes/cornell-bunny.json");
+    add_input_options(gi, o->in,
+                      "Scene file (.json), mesh or point cloud (V-map built on the fly) or .vmap "
+                      "file. Default: scenes/cornell-bunny.json");
     GiOptions* p = o.get();
     add_output_options(gi, p);
     add_solver_options(gi, p);
     add_picture_options(gi, p);
     add_build_options(gi, p);
     add_reference_options(gi, p);
-    c.run_gi = [o] { return run_gi(*o); };
-    auto [bench, run_bench] = add_gi_bench_command(app);
-    c.bench = bench;
-    c.run_bench = run_bench;
-    return c;
+    return {gi, [o] { return run_gi(*o); }, true};
 }
 
 }  // namespace vmap::cli

@@ -1,5 +1,5 @@
-// `vmap gi` (apps/gi_cmd.cpp) and `vmap bench-gi` (bench/gi_bench.cpp): declared here, registered
-// from apps/main.cpp with one call; main() runs the selected one inside its error handling.
+// What `vmap gi` (apps/gi_cmd.cpp), its error table (apps/gi_error.cpp) and `vmap bench-gi`
+// (bench/gi_bench.cpp) share; the commands are registered as every other (apps/commands.h).
 #pragma once
 
 #include <CLI/CLI.hpp>
@@ -7,23 +7,13 @@
 #include <optional>
 #include <string>
 
+#include "apps/commands.h"
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"
 #include "vmap/render.h"
 #include "vmap/vmap.h"
 
 namespace vmap::cli {
-
-struct GiCommands {
-    CLI::App* gi = nullptr;
-    CLI::App* bench = nullptr;
-    std::function<int()> run_gi, run_bench;
-
-    bool selected() const { return (gi && gi->parsed()) || (bench && bench->parsed()); }
-    int run() const { return gi && gi->parsed() ? run_gi() : run_bench(); }
-};
-
-GiCommands add_gi_commands(CLI::App& app);
 
 // The predicate for a V-map built by `vmap gi` (docs/gi.md "The V-map for the GI"): the GI weighs
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
@@ -32,10 +22,9 @@ inline constexpr float kGiVmapEps = 0.05f;
 
 // The options of `vmap gi`.
 struct GiOptions {
-    std::string input;
+    InputOptions in;  // the input and its overrides (vmap/input.h)
+    CameraOptions cam;
     std::string image, ply, pfm;
-    std::optional<uint64_t> points, seed;
-    std::optional<int> max_height, leaf_points;
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
     GiParams gi;
@@ -45,11 +34,8 @@ struct GiOptions {
     bool final_gather = true;
     float gather_theta = 2.0f;
     float exposure = 0;
-    std::string scene, eye, target, up, size = "800x800";
-    std::optional<float> fov;
     RenderOptions render;
     bool compare = false;
-    bool as_points = false;  // a mesh file's vertices as a point cloud (not area-sampled)
     // --reference
     bool reference = false, brute = true;
     size_t ref_points = 1000;
@@ -64,8 +50,5 @@ BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, con
 
 // apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
 int run_gi_reference(GiOptions& o);
-
-// bench/gi_bench.cpp: declares `bench-gi` on `app`, returns the subcommand and its runner.
-std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app);
 
 }  // namespace vmap::cli

@@ -3,7 +3,6 @@
 // hierarchical solution without the final gather, the brute-force gather over the same V-map),
 // by bounce count and by point set (all non-emitting points, model points).
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -14,6 +13,7 @@
 
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"
+#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
@@ -190,7 +190,7 @@ Method direct_exact(const Scene& sc, const VisibilityMap& vm, const std::vector<
     const float offset = 1e-4f * std::max({ext.x, ext.y, ext.z});
     auto disc = [&](uint32_t k) { return 3.14159265f * ps.radii[k] * ps.radii[k]; };
     std::vector<Vec3> out(idx.size());
-    tbb::parallel_for(size_t(0), idx.size(), [&](size_t n) {
+    parallel_for(size_t(0), idx.size(), [&](size_t n) {
         const uint32_t i = idx[n];
         const Vec3 x = ps.positions[i], nx = ps.normals[i];
         Vec3 h{0, 0, 0};
@@ -288,39 +288,39 @@ void write_csv(const std::string& path, const Scene& sc, const VisibilityMap& vm
 // The scene, its points' surfaces and the V-map: built from the scene, or a saved V-map of it
 // (--scene; its points must be the scene's samples, checked point by point).
 VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t>& surf) {
-    const bool saved = !has_extension(o.input, ".json");
-    if (saved && o.scene.empty())
+    const bool saved = !has_extension(o.in.path, ".json");
+    if (saved && o.cam.scene.empty())
         throw Error(
             fmt::format("{}: --reference needs the scene file (.json, or --scene for a "
                         ".vmap): the reference traces the scene's triangles",
-                        o.input));
-    sc = load_scene(saved ? o.scene : o.input);
-    if (o.points) sc.points = *o.points;
-    if (o.seed) sc.seed = *o.seed;
+                        o.in.path));
+    sc = load_scene(saved ? o.cam.scene : o.in.path);
+    if (o.in.points) sc.points = *o.in.points;
+    if (o.in.seed) sc.seed = *o.in.seed;
     const auto t0 = Clock::now();
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
         if (o.K != kGiVmapK || o.eps != kGiVmapEps)
             throw Error(
-                fmt::format("{}: -K/--eps apply to a V-map built from a scene file", o.input));
-        VisibilityMap vm = load_vmap(o.input);
+                fmt::format("{}: -K/--eps apply to a V-map built from a scene file", o.in.path));
+        VisibilityMap vm = load_vmap(o.in.path);
         bool same = vm.points().size() == ps.size();
         for (size_t k = 0; same && k < vm.points().size(); ++k)
             same = vm.points().positions[k] == ps.positions[vm.order()[k]];
         if (!same)
             throw Error(fmt::format("{}: points: not the samples of {} (points {}, seed {})",
-                                    o.input, o.scene, sc.points, sc.seed));
+                                    o.in.path, o.cam.scene, sc.points, sc.seed));
         fmt::print(
             "scene:      {} ({}): {} points, V-map {} (K {}, eps {}, {} links) loaded in {:.2f} "
             "s\n",
-            sc.name, o.scene, vm.points().size(), o.input, vm.visibility_params().K,
+            sc.name, o.cam.scene, vm.points().size(), o.in.path, vm.visibility_params().K,
             vm.visibility_params().eps, vm.num_links(), seconds_since(t0));
         return vm;
     }
     const BuildParams bp = gi_build_params(sc.octree, o);
-    VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.input);
+    VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.in.path);
     fmt::print("scene:      {} ({}): {} points, V-map (K {}, eps {}) {} links in {:.2f} s\n",
-               sc.name, o.input, vm.points().size(), o.K, o.eps, vm.num_links(), seconds_since(t0));
+               sc.name, o.in.path, vm.points().size(), o.K, o.eps, vm.num_links(), seconds_since(t0));
     return vm;
 }
 
@@ -345,7 +345,7 @@ void side_by_side_picture(const Scene& sc, const VisibilityMap& vm,
     rp.samples = o.ref_picture_samples;
     rp.bounces = 1;
     rp.progress = stderr_progress();
-    const ReferenceResult ref = path_trace_radiosity(sc.surfaces, at, rp, o.input);
+    const ReferenceResult ref = path_trace_radiosity(sc.surfaces, at, rp, o.in.path);
     const std::vector<Vec3>& r = ref.value.back();
     const float exposure = o.exposure > 0 ? o.exposure : [&] {
         std::vector<Vec3> unused;
@@ -376,7 +376,7 @@ void side_by_side_picture(const Scene& sc, const VisibilityMap& vm,
 int run_gi_reference(GiOptions& o) {
     check_output(o.ref_out, "--ref-out");
     check_output(o.image, "-o");
-    const auto [width, height] = parse_size(o.size, "--size");
+    const auto [width, height] = parse_size(o.cam.size, "--size");
     o.render.width = width, o.render.height = height;
     Scene sc;
     std::vector<uint32_t> surf;
@@ -390,7 +390,7 @@ int run_gi_reference(GiOptions& o) {
     const int K = o.ref.bounces;
     ReferenceParams rp = o.ref;
     rp.progress = stderr_progress();
-    const ReferenceResult ref = path_trace_radiosity(sc.surfaces, at, rp, o.input);
+    const ReferenceResult ref = path_trace_radiosity(sc.surfaces, at, rp, o.in.path);
     fmt::print(
         "reference:  {} + {} points (all non-emitting, model), {} paths each, seed {}: {:.3g} "
         "rays in {:.1f} s\n",
@@ -409,7 +409,7 @@ int run_gi_reference(GiOptions& o) {
                    seconds_since(tb));
     }
     print_table(s.methods, ref, sets, K, s.converged_bounces + 1);
-    print_direct_split(direct_exact(sc, vm, sets.points, o.input), s.methods[0], ref, sets);
+    print_direct_split(direct_exact(sc, vm, sets.points, o.in.path), s.methods[0], ref, sets);
     if (!o.ref_out.empty()) {
         write_csv(o.ref_out, sc, vm, surf, sets, ref, s.methods, K);
         fmt::print("wrote:      {}\n", o.ref_out);

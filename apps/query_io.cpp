@@ -1,7 +1,6 @@
 #include "apps/query_io.h"
 
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <charconv>
 #include <cstring>
@@ -9,6 +8,7 @@
 #include <iterator>
 
 #include "io/npy.h"
+#include "util/parallel.h"
 #include "vmap/error.h"
 
 namespace vmap::cli {
@@ -88,7 +88,7 @@ void write_answers(std::FILE* out, std::span<const uint32_t> ids, std::span<cons
     std::vector<std::string> text(std::min<size_t>(blocks, 64));
     for (size_t b0 = 0; b0 < blocks; b0 += text.size()) {
         const size_t nb = std::min(text.size(), blocks - b0);
-        tbb::parallel_for(size_t(0), nb, [&](size_t b) {
+        parallel_for(size_t(0), nb, [&](size_t b) {
             fmt::memory_buffer buf;
             const size_t k1 = std::min(ans.size(), (b0 + b + 1) * kBlock);
             for (size_t k = (b0 + b) * kBlock; k < k1; ++k)

@@ -33,16 +33,13 @@ namespace {
 namespace fs = std::filesystem;
 
 struct RenderArgs {
-    std::string input, output, ply, scene, mode = "shaded";
-    std::string eye, target, up, size = "800x800", eye_pos;
-    std::optional<float> fov;
+    InputOptions in;  // the input and its overrides (vmap/input.h)
+    CameraOptions cam;
+    std::string output, ply, mode = "shaded", eye_pos;
     std::optional<uint32_t> eye_id;
-    std::optional<uint64_t> points, seed;
-    std::optional<int> max_height, leaf_points;
     std::vector<int> heights{7, 9};
     Backend backend = Backend::kAuto;
     int time_runs = 0;
-    bool as_points = false;
     RenderOptions opt;
 };
 
@@ -51,52 +48,39 @@ struct Source {
     PointSet points;
     std::optional<VisibilityMap> vm;
     std::optional<Camera> camera;
-    std::optional<OctreeParams> octree;
+    OctreeParams octree;
 };
 
-Source load_source(RenderArgs& a) {
+Source load_source(const RenderArgs& a) {
+    Input in = load_input(a.in);
+    print_notes(in.notes);
     Source s;
-    if (a.input.empty()) a.input = default_scene_path();
-    if (!has_extension(a.input, ".vmap") && is_scene_input(a.input, a.as_points)) {
-        Scene sc = load_scene(a.input);
-        print_notes(sc.notes);
-        if (a.points) sc.points = *a.points;
-        if (a.seed) sc.seed = *a.seed;
-        s.points = sample_scene(sc);
-        s.camera = sc.camera;
-        s.octree = sc.octree;
-    } else if (has_extension(a.input, ".vmap")) {
-        s.vm = load_vmap(a.input);
-        s.points = points_in_input_order(*s.vm);
-        s.octree = s.vm->octree_params();
+    s.octree = in.octree;
+    s.camera = in.camera;
+    if (in.vmap) {
+        s.points = points_in_input_order(*in.vmap);
+        s.vm = std::move(in.vmap);
     } else {
-        s.points = load_point_cloud(a.input);
+        s.points = std::move(in.points);
     }
-    if (!a.scene.empty()) s.camera = load_scene(a.scene).camera;
+    if (!a.cam.scene.empty()) s.camera = load_scene(a.cam.scene).camera;
     return s;
 }
 
 Camera make_camera(const RenderArgs& a, const Source& s) {
-    Camera cam = s.camera ? *s.camera : default_camera(s.points);
-    if (!a.eye.empty()) cam.eye = parse_vec3(a.eye, "--eye");
-    if (!a.target.empty()) cam.target = parse_vec3(a.target, "--target");
-    if (!a.up.empty()) cam.up = parse_vec3(a.up, "--up");
-    if (a.fov) cam.fov_y_deg = *a.fov;
-    return cam;
+    return apply_camera(a.cam, s.camera ? *s.camera : default_camera(s.points));
 }
 
 VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> height,
                        BuildStats* stats = nullptr) {
     BuildParams bp;
-    if (s.octree) bp.octree = *s.octree;
-    if (a.max_height) bp.octree.max_height = *a.max_height;
-    if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
+    bp.octree = s.octree;  // the scene's or the map's, with --max-height/--leaf-points
     if (height) bp.octree.max_height = *height;
     bp.backend = a.backend;
     bp.progress = stderr_progress();
-    warn_if_long(a.input, s.points.size(), bp.octree);
+    warn_if_long(a.in.path, s.points.size(), bp.octree);
     BuildStats st;
-    VisibilityMap vm = build_vmap(s.points, bp, &st, a.input);
+    VisibilityMap vm = build_vmap(s.points, bp, &st, a.in.path);
     fmt::print("built:      V-map at max_height {} (height {}): {} links, {:.2f} s on {}\n",
                bp.octree.max_height, vm.octree().height(), vm.num_links(), st.seconds_total,
                st.backend);
@@ -120,7 +104,7 @@ std::vector<Vec3> decided_colors(const VisibilityMap& vm, const BuildStats& st) 
 uint32_t pick_eye(const RenderArgs& a, const Source& s) {
     if (a.eye_id) {
         if (*a.eye_id >= s.points.size())
-            throw Error(fmt::format("{}: --eye-id: point id {} out of range ({} points)", a.input,
+            throw Error(fmt::format("{}: --eye-id: point id {} out of range ({} points)", a.in.path,
                                     *a.eye_id, s.points.size()));
         return *a.eye_id;
     }
@@ -158,44 +142,45 @@ void time_render(const RenderArgs& a, const Source& s, const Camera& cam) {
         st.fragments / secs[secs.size() / 2]);
 }
 
-int run_render(RenderArgs& a) {
+// The usage errors found after parsing (exit 2): a message on stderr, true.
+bool usage_error(const RenderArgs& a) {
     const bool needs_eye = a.mode == "visible" || a.mode == "heights";
-    if ((a.points || a.seed) && !a.input.empty() &&
-        (has_extension(a.input, ".vmap") || !sampled_input(a.input, a.as_points))) {
+    if ((a.in.points || a.in.seed) && !a.in.path.empty() &&
+        (has_extension(a.in.path, ".vmap") || !sampled_input(a.in.path, a.in.as_points))) {
         fmt::print(stderr,
                    "vmap render: --points/--seed apply to scene and mesh files, not to {}\n",
-                   a.input);
-        return 2;
+                   a.in.path);
+        return true;
     }
     if (needs_eye && !a.eye_id && a.eye_pos.empty()) {
         fmt::print(stderr, "vmap render: --mode {} needs --eye-id I or --eye-pos x,y,z\n", a.mode);
-        return 2;
+        return true;
     }
     if (!needs_eye && (a.eye_id || !a.eye_pos.empty())) {
         fmt::print(stderr, "vmap render: --eye-id/--eye-pos apply to --mode visible|heights\n");
-        return 2;
+        return true;
     }
-    // Check every option before any work, so a typo costs nothing.
-    const auto [w, h] = parse_size(a.size, "--size");
+    return false;
+}
+
+// Every option checked and the outputs' paths settled before any work, so a typo costs nothing.
+void check_render_options(RenderArgs& a) {
+    const auto [w, h] = parse_size(a.cam.size, "--size");
     a.opt.width = w;
     a.opt.height = h;
     if (!a.eye_pos.empty()) parse_vec3(a.eye_pos, "--eye-pos");
     if (a.mode == "heights" && a.heights.empty()) throw Error("--heights: give at least one");
-    if (a.input.empty()) a.input = default_scene_path();
-    if (a.output.empty()) a.output = fs::path(a.input).stem().string() + "-" + a.mode + ".png";
-    io::check_input_path(a.input);
-    if (!a.scene.empty()) io::check_input_path(a.scene);
-    check_output(a.output, "-o", {a.input, a.scene});
-    check_output(a.ply, "--ply", {a.input, a.scene, a.output});
-    Source s = load_source(a);
-    const Camera cam = make_camera(a, s);
-    check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
-    a.opt.shade = a.mode != "albedo";
+    std::string& input = a.in.path;
+    if (input.empty()) input = default_scene_path();
+    if (a.output.empty()) a.output = fs::path(input).stem().string() + "-" + a.mode + ".png";
+    io::check_input_path(input);
+    if (!a.cam.scene.empty()) io::check_input_path(a.cam.scene);
+    check_output(a.output, "-o", {input, a.cam.scene});
+    check_output(a.ply, "--ply", {input, a.cam.scene, a.output});
+}
 
-    const auto t0 = std::chrono::steady_clock::now();
-    auto elapsed = [&] {
-        return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    };
+// The picture of the chosen mode (and its PLY when asked for).
+Image render_mode(RenderArgs& a, Source& s, const Camera& cam) {
     Image img;
     if (a.mode == "albedo" || a.mode == "shaded") {
         std::vector<Vec3> colors = s.points.colors;
@@ -242,12 +227,24 @@ int run_render(RenderArgs& a) {
             write_colored_ply(with_suffix(a.ply, fmt::format("-h{}", a.heights[k])), s.points,
                               colors[k]);
     }
+    return img;
+}
+
+int run_render(RenderArgs& a) {
+    if (usage_error(a)) return 2;
+    check_render_options(a);
+    Source s = load_source(a);
+    const Camera cam = make_camera(a, s);
+    check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
+    a.opt.shade = a.mode != "albedo";
+    const auto t0 = std::chrono::steady_clock::now();
+    const Image img = render_mode(a, s, cam);
     if (a.time_runs > 0) time_render(a, s, cam);
     write_png(a.output, img);
     fmt::print("camera:     eye ({}, {}, {}) target ({}, {}, {}) fov {}\n", cam.eye.x, cam.eye.y,
                cam.eye.z, cam.target.x, cam.target.y, cam.target.z, cam.fov_y_deg);
     fmt::print("wrote:      {} ({}x{}, {} points, {:.2f} s)\n", a.output, img.width, img.height,
-               s.points.size(), elapsed());
+               s.points.size(), seconds_since(t0));
     if (!a.ply.empty() && a.mode != "heights") fmt::print("wrote:      {}\n", a.ply);
     return 0;
 }
@@ -257,9 +254,9 @@ int run_render(RenderArgs& a) {
 Command add_render_command(CLI::App& app) {
     auto a = std::make_shared<RenderArgs>();
     auto* c = app.add_subcommand("render", "Render a scene, point cloud or V-map to PNG");
-    c->add_option("input", a->input,
-                  "Scene (.json), mesh (area-sampled), point cloud or .vmap file. Default: "
-                  "scenes/cornell-bunny.json");
+    add_input_options(c, a->in,
+                      "Scene (.json), mesh (area-sampled), point cloud or .vmap file. Default: "
+                      "scenes/cornell-bunny.json");
     c->add_option("-o,--output", a->output, "PNG file (default: <input name>-<mode>.png)");
     c->add_option("--mode", a->mode,
                   "albedo | shaded | visible (Fig. 9) | heights (Fig. 11: visible at each of "
@@ -270,29 +267,13 @@ Command add_render_command(CLI::App& app) {
     c->add_option("--ply", a->ply,
                   "Also write the points with the mode's colours as a PLY (heights: one file per "
                   "height, -h<H> before the extension)");
-    c->add_option("--scene", a->scene, "Take the camera from this scene file (for .vmap input)");
-    c->add_option("--eye", a->eye, "Camera position x,y,z");
-    c->add_option("--target", a->target, "Camera target x,y,z");
-    c->add_option("--up", a->up, "Camera up vector x,y,z (default 0,1,0)");
-    c->add_option("--fov", a->fov, "Vertical field of view, degrees")
-        ->check(CLI::Range(1.f, 179.f));
-    c->add_option("--size", a->size, "Image size WxH")->capture_default_str();
+    add_camera_options(c, a->cam);
     c->add_option("--eye-id", a->eye_id, "visible/heights: the eye is input point I");
     c->add_option("--eye-pos", a->eye_pos,
                   "visible/heights: the eye is the surface point nearest x,y,z");
     c->add_option("--heights", a->heights, "heights: octree max heights, e.g. 7,9")
         ->delimiter(',')
-        ->check(CLI::Range(1, 21));
-    c->add_option("--max-height", a->max_height,
-                  "visible: octree height when building the V-map (default: the scene's)")
-        ->check(CLI::Range(1, 21));
-    c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
-        ->check(CLI::Range(1, 1000000));
-    c->add_flag("--as-points", a->as_points,
-                "Take a mesh file's vertices as a point cloud instead of sampling its faces");
-    c->add_option("--points", a->points, "Scene input: number of sample points")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    c->add_option("--seed", a->seed, "Scene input: sampling seed");
+        ->check(max_height_check());
     cli::add_choice(c, "--backend", a->backend, "Backend when building: auto, cpu or cuda");
     c->add_option("--splat-scale", a->opt.splat_scale, "Disc radius = splat radius x this")
         ->check(CLI::Range(0.01f, 100.f))
@@ -303,7 +284,7 @@ Command add_render_command(CLI::App& app) {
     c->add_option("--time", a->time_runs,
                   "Also time the render N more times (median, spread, work) for docs/results.md")
         ->check(CLI::Range(1, 1000));
-    return {c, [a] { return run_render(*a); }};
+    return {c, [a] { return run_render(*a); }, true};
 }
 
 }  // namespace vmap::cli

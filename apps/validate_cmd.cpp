@@ -1,7 +1,6 @@
 // `vmap validate SCENE...`: V-map answers against exact visibility (Embree rays on the scene's
 // triangles) per octree height, as Markdown (stdout or --md) and JSON (--json); with
 // --time-embree, Embree rays along leaf-centroid segments timed against the leaf-pair kernel.
-#include "apps/validate_cmd.h"
 
 #include <fmt/format.h>
 #include <tbb/task_arena.h>
@@ -39,11 +38,12 @@ void write_file(const std::string& path, const std::string& text, const char* wh
 
 }  // namespace
 
-CLI::App* add_validate_command(CLI::App& app) {
-    auto* c = app.add_subcommand(
-        "validate",
-        "Measure V-map answers against exact visibility from the scene's triangles (Embree "
-        "rays), per octree height");
+int run_validate_command();
+
+namespace {
+
+// The scenes, the pairs and the V-maps built per height.
+void add_sample_options(CLI::App* c) {
     c->add_option("scene", opt.scenes,
                   "Scene files (.json) or mesh files (the mesh is its own truth)")
         ->required();
@@ -55,14 +55,18 @@ CLI::App* add_validate_command(CLI::App& app) {
     c->add_option("--seed", opt.vp.pair_seed, "Seed of the pair sample")->capture_default_str();
     c->add_option("--heights", opt.vp.heights, "Octree max_height values (default 5..10)")
         ->delimiter(',')
-        ->check(CLI::Range(1, 21));
+        ->check(max_height_check());
     c->add_option("--leaf-points", opt.vp.leaf_points,
                   "Split nodes with more points than this (default: the scene's)")
-        ->check(CLI::Range(1, 1000000));
+        ->check(leaf_points_check());
     cli::add_predicate_options(c, opt.vp.visibility);
     cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
                   "[7], CPU only)");
     cli::add_choice(c, "--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda");
+}
+
+// How the V-map's answers are predicted and what is scored.
+void add_predict_options(CLI::App* c) {
     c->add_option("--predict", opt.vp.predict,
                   "vmap (build and query the V-map per height: all leaf pairs, minutes per "
                   "height beyond ~50k points on a few CPU cores) or direct (the leaf-pair "
@@ -99,6 +103,10 @@ CLI::App* add_validate_command(CLI::App& app) {
                   "answers) to this .npz, for scripts/hpr-compare.sh");
     c->add_flag("--drop-buried", opt.vp.drop_buried,
                 "Leave out buried points (covered surface) before sampling pairs");
+}
+
+// The tables' files, and --time-embree instead of the scoring.
+void add_report_options(CLI::App* c) {
     c->add_option("--md", opt.md, "Write the Markdown here instead of stdout");
     c->add_option("--json", opt.json, "Also write the results as JSON here");
     c->add_flag("--time-embree", opt.time_embree,
@@ -110,6 +118,18 @@ CLI::App* add_validate_command(CLI::App& app) {
     c->add_option("--embree-pairs", opt.embree_pairs, "With --time-embree: leaf pairs sampled")
         ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
         ->capture_default_str();
+}
+
+}  // namespace
+
+Command add_validate_command(CLI::App& app) {
+    auto* c = app.add_subcommand(
+        "validate",
+        "Measure V-map answers against exact visibility from the scene's triangles (Embree "
+        "rays), per octree height");
+    add_sample_options(c);
+    add_predict_options(c);
+    add_report_options(c);
     // A later value of a single-valued option replaces an earlier one, so a sweep can vary one
     // setting of a fixed list (scripts/validate-sweep.sh).
     for (const char* name :
@@ -118,7 +138,7 @@ CLI::App* add_validate_command(CLI::App& app) {
           "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
           "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
-    return c;
+    return {c, [] { return run_validate_command(); }, true};
 }
 
 int run_validate_command() {

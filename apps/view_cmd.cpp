@@ -30,51 +30,32 @@ namespace {
 namespace fs = std::filesystem;
 
 struct ViewArgs {
-    std::string input, scene, host = "127.0.0.1", web;
+    InputOptions in;  // the input and its overrides (vmap/input.h)
+    std::string scene, host = "127.0.0.1", web;
     int port = 0;
-    std::optional<uint64_t> points, seed;
-    std::optional<int> max_height, leaf_points;
     Backend backend = Backend::kAuto;
     bool gi = false;
 };
 
-// The map to show: loaded, or built from a scene or cloud (the scene's octree defaults).
-VisibilityMap input_map(ViewArgs& a, view::ServerConfig& cfg) {
-    const bool is_vmap = has_extension(a.input, ".vmap");
-    if (is_vmap && (a.points || a.seed || a.max_height || a.leaf_points))
-        throw Error(fmt::format(
-            "{}: --points/--seed/--max-height/--leaf-points apply when building (scene or cloud)",
-            a.input));
+// The map to show: loaded, or built from a scene, mesh or cloud (vmap/input.h); the camera and
+// name from --scene, else the input's.
+VisibilityMap input_map(const ViewArgs& a, view::ServerConfig& cfg) {
     if (!a.scene.empty()) {
         const Scene sc = load_scene(a.scene);
         cfg.camera = sc.camera;
         cfg.name = sc.name;
     }
-    if (is_vmap) {
-        if (cfg.name.empty()) cfg.name = fs::path(a.input).filename().string();
-        return load_vmap(a.input);
-    }
+    Input in = load_input(a.in);
+    print_notes(in.notes);
+    if (!cfg.camera) cfg.camera = in.camera;
+    if (cfg.name.empty()) cfg.name = in.name;
+    if (in.vmap) return std::move(*in.vmap);
     BuildParams bp;
-    PointSet pts;
-    if (has_extension(a.input, ".json")) {
-        Scene sc = load_scene(a.input);
-        if (a.points) sc.points = *a.points;
-        if (a.seed) sc.seed = *a.seed;
-        if (sc.octree) bp.octree = *sc.octree;
-        if (!cfg.camera) cfg.camera = sc.camera;
-        if (cfg.name.empty()) cfg.name = sc.name;
-        pts = sample_scene(sc);
-    } else {
-        if (a.points || a.seed) throw Error(a.input + ": --points/--seed apply to scene files");
-        pts = load_point_cloud(a.input);
-        if (cfg.name.empty()) cfg.name = fs::path(a.input).filename().string();
-    }
-    if (a.max_height) bp.octree.max_height = *a.max_height;
-    if (a.leaf_points) bp.octree.leaf_points = *a.leaf_points;
+    bp.octree = in.octree;
     bp.backend = a.backend;
     bp.progress = cli::stderr_progress();
     BuildStats st;
-    VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.input);
+    VisibilityMap vm = build_vmap(std::move(in.points), bp, &st, a.in.path);
     fmt::print(
         "built:      V-map of {} points at max_height {}: {} leaves, {} links, {:.2f} s on "
         "{}\n",
@@ -125,7 +106,7 @@ void start_signal_thread() {
 }
 
 int run_view(ViewArgs& a) {
-    if (a.input.empty()) a.input = default_scene_path();
+    if (a.in.path.empty()) a.in.path = default_scene_path();
     if (a.web.empty()) a.web = data_dir() + "/web";
     const fs::path three = fs::path(a.web) / "vendor" / "three.module.js";
     if (!fs::is_regular_file(three))
@@ -160,9 +141,9 @@ Command add_view_command(CLI::App& app) {
     auto a = std::make_shared<ViewArgs>();
     auto* c = app.add_subcommand(
         "view", "Interactive viewer in the browser: a local server holding the V-map");
-    c->add_option("input", a->input,
-                  "A .vmap file, or a scene (.json) or cloud (.ply/.off) to build one from "
-                  "(default: scenes/cornell-bunny.json)");
+    add_input_options(c, a->in,
+                      "A .vmap file, or a scene (.json), mesh or cloud to build one from "
+                      "(default: scenes/cornell-bunny.json)");
     c->add_option("--scene", a->scene, "Take the camera and name from this scene file");
     c->add_option("--host", a->host, "Address to bind (only this machine unless changed)")
         ->capture_default_str();
@@ -170,13 +151,6 @@ Command add_view_command(CLI::App& app) {
         ->check(CLI::Range(0, 65535))
         ->capture_default_str();
     c->add_option("--web", a->web, "The page's folder (default: the source tree's web/)");
-    c->add_option("--points", a->points, "Scene input: number of sample points")
-        ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
-    c->add_option("--seed", a->seed, "Scene input: sampling seed");
-    c->add_option("--max-height", a->max_height, "Octree height when building")
-        ->check(CLI::Range(1, 21));
-    c->add_option("--leaf-points", a->leaf_points, "Octree leaf size when building")
-        ->check(CLI::Range(1, 1000000));
     cli::add_choice(c, "--backend", a->backend, "auto, cpu or cuda (building and --gi)");
     c->add_flag("--gi", a->gi, "Compute global illumination first (the page's GI colours)");
     return {c, [a] { return run_view(*a); }};

@@ -14,6 +14,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "apps/commands.h"
 #include "apps/gi_cmd.h"
 #include "io/atomic_file.h"
 #include "vmap/error.h"
@@ -193,7 +194,7 @@ int run_bench(BenchOptions& o) {
 
 }  // namespace
 
-std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
+Command add_bench_gi_command(CLI::App& app) {
     auto o = std::make_shared<BenchOptions>();
     auto* b = app.add_subcommand(
         "bench-gi", "Time per GI bounce against points: hierarchical (CPU, GPU) vs brute force");
@@ -226,7 +227,7 @@ std::pair<CLI::App*, std::function<int()>> add_gi_bench_command(CLI::App& app) {
         ->delimiter(',')
         ->check(CLI::IsMember({"cpu", "cuda"}));
     b->add_option("--out", o->out_dir, "Write bench-gi.md and bench-gi.csv into this folder");
-    return {b, [o] { return run_bench(*o); }};
+    return {b, [o] { return run_bench(*o); }, true};
 }
 
 }  // namespace vmap::cli

@@ -26,7 +26,6 @@
 // and those normals, each signed like the true one, to score directions alone with `vmap
 // validate SCENE.json --cloud FILE`.
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <chrono>
@@ -39,6 +38,7 @@
 #include <vector>
 
 #include "scene/cloud_knn.h"
+#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
@@ -80,7 +80,7 @@ std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_
     const detail::CloudAdaptor ad{truth.positions};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     std::vector<uint8_t> thin(truth.size(), 0);
-    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+    parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         const float r = 3 * truth.radii[i];
         uint32_t idx[48];
@@ -103,7 +103,7 @@ std::vector<uint8_t> buried(const PointSet& truth) {
     const detail::CloudAdaptor ad{truth.positions};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     std::vector<uint8_t> out(truth.size(), 0);
-    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+    parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i], d = truth.normals[i];
         uint32_t idx[64];
         float d2[64];
@@ -133,7 +133,7 @@ std::vector<float> old_radii(const std::vector<Vec3>& pts) {
     const detail::CloudAdaptor ad{pts};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     std::vector<float> r(pts.size());
-    tbb::parallel_for(size_t(0), pts.size(), [&](size_t i) {
+    parallel_for(size_t(0), pts.size(), [&](size_t i) {
         uint32_t idx[9];
         float d2[9];
         const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
@@ -193,7 +193,7 @@ std::vector<Vec3> dense_fit_normals(Scene sc, const PointSet& truth) {
     const detail::CloudAdaptor ad{dense.positions};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     std::vector<Vec3> out(truth.size());
-    tbb::parallel_for(size_t(0), truth.size(), [&](size_t i) {
+    parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         uint32_t idx = 0;
         float d2 = 0;

@@ -231,7 +231,7 @@ Command add_bench_query_command(CLI::App& app) {
         ->capture_default_str();
     cli::add_choice(c, "--backend", a->backend, "Backend for the builds: auto, cpu or cuda");
     c->add_option("--out", a->out_dir, "Write bench-query.md and bench-query.csv here");
-    return {c, [a] { return run_bench_query(*a); }};
+    return {c, [a] { return run_bench_query(*a); }, true};
 }
 
 }  // namespace vmap::cli

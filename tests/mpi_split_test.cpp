@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <nlohmann/json.hpp>
 
 #include "mpi/shard_file.h"
 #include "mpi/share.h"
@@ -160,15 +161,18 @@ class ShardFiles : public ::testing::Test {
 
     // want's links as `parts` shards and an index; returns the index's path.
     std::string write(const VisibilityMap& want, int parts) {
-        const std::string index = (dir / "m.vmap").string();
-        std::vector<NodePair> links;
         std::vector<uint32_t> deg(size_t(want.octree().num_nodes()), 0);
+        for (int32_t n = 0; n < want.octree().num_nodes(); ++n) deg[n] = want.links(n).size();
+        return write(want, mpi::split_nodes(deg, parts));
+    }
+    // The same with the shards' node ranges [b[k], b[k + 1]) given.
+    std::string write(const VisibilityMap& want, const std::vector<int32_t>& b) {
+        const std::string index = (dir / "m.vmap").string();
+        const int parts = int(b.size()) - 1;
+        std::vector<NodePair> links;
         for (int32_t n = 0; n < want.octree().num_nodes(); ++n)
-            for (int32_t m : want.links(n)) {
-                deg[n]++;
+            for (int32_t m : want.links(n))
                 if (m > n) links.emplace_back(n, m);
-            }
-        const std::vector<int32_t> b = mpi::split_nodes(deg, parts);
         std::vector<mpi::ShardInfo> info(static_cast<size_t>(parts));
         for (int k = 0; k < parts; ++k)
             mpi::write_shard(mpi::shard_name(index, k, parts), k,
@@ -190,6 +194,16 @@ TEST_F(ShardFiles, ReadBackAsTheOneFileMap) {
     EXPECT_EQ(want.order(), got.order());
     EXPECT_EQ(want.octree().skip(), got.octree().skip());
     EXPECT_EQ(got.query(0, 700), want.query(0, 700));
+}
+
+// A shard of no nodes, so no links (the fuzz target's finding: its empty array was copied
+// from a null pointer, undefined behaviour that the debug build's UBSan stops).
+TEST_F(ShardFiles, AShardOfNoNodesLoads) {
+    const VisibilityMap want =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 400), test::cpu_params(4, 2));
+    const int32_t nodes = want.octree().num_nodes();
+    const VisibilityMap got = load_vmap(write(want, {0, nodes / 2, nodes / 2, nodes}));
+    expect_same_links(want, got);
 }
 
 TEST_F(ShardFiles, MissingOrCorruptShardIsNamed) {
@@ -215,6 +229,70 @@ TEST_F(ShardFiles, MissingOrCorruptShardIsNamed) {
     }
     std::filesystem::remove(shard);
     EXPECT_THROW(load_vmap(index), Error);
+}
+
+// What the fuzz target fuzz/fuzz_shards.cpp found, or would have: each damaged index or shard is
+// a vmap::Error naming the field, never a crash, a recursion or another exception type.
+class DamagedShards : public ShardFiles {
+  protected:
+    std::string index;
+    nlohmann::json j;
+    void SetUp() override {
+        ShardFiles::SetUp();
+        index = write(build_vmap(test::sample(test::scene_path("cornell-bunny"), 300),
+                                 test::cpu_params(4, 2)),
+                      2);
+        j = nlohmann::json::parse(std::ifstream(index));
+    }
+    // The index rewritten with `edit` applied; the load's error message.
+    template <class F>
+    std::string error_after(F&& edit) {
+        nlohmann::json k = j;
+        edit(k);
+        std::ofstream(index) << k.dump(1);
+        try {
+            load_vmap(index);
+        } catch (const Error& e) {
+            return e.what();
+        }
+        return "no error";
+    }
+};
+
+TEST_F(DamagedShards, AnIndexNamingItselfAsItsBaseIsAnErrorNotARecursion) {
+    EXPECT_NE(error_after([](auto& k) { k["base"] = "m.vmap"; }).find("not a .vmap"),
+              std::string::npos);
+}
+
+TEST_F(DamagedShards, BadFieldsOfTheIndexAreNamed) {
+    auto has = [](const std::string& msg, const char* part) {
+        return msg.find(part) != std::string::npos;
+    };
+    EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["checksum"] = "zz"; }),
+                    "shard 0: \"checksum\": \"zz\" is not 16 hex digits"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["nodes"] = 1e300; }),
+                    "\"nodes\": an integer expected"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][1]["nodes"][1] = 1 << 30; }),
+                    "shard 1: \"nodes\": 1073741824 is outside"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["nodes"][0] = -1; }),
+                    "shard 0: \"nodes\": -1 is outside"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["file"] = "../m.vmap.base"; }),
+                    "is not a file name in the index's folder"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["version"] = "1"; }), "an integer expected"));
+}
+
+TEST_F(DamagedShards, TargetCountsThatOverflowTheLengthCheckAreRefused) {
+    // ends + 2^62 links: 4 bytes each wraps to the true length, in the header and the index.
+    const std::string shard = mpi::shard_name(index, 0, 2);
+    const uint64_t ends = j["shards"][0]["ends"].get<uint64_t>() + (uint64_t(1) << 62);
+    {
+        std::fstream f(shard, std::ios::in | std::ios::out | std::ios::binary);
+        f.seekp(24);
+        f.write(reinterpret_cast<const char*>(&ends), 8);
+    }
+    EXPECT_NE(error_after([&](auto& k) { k["shards"][0]["ends"] = ends; })
+                  .find("shard-0-of-2: length does not match its header"),
+              std::string::npos);
 }
 
 }  // namespace

@@ -364,6 +364,51 @@ TEST(Npz, RoundTripAndDamagedFilesAreErrorsNamingTheEntry) {
     EXPECT_THROW(detail::read_npz(bad), Error);
 }
 
+// What the fuzz target fuzz/fuzz_npz.cpp found, or would have: each a vmap::Error.
+TEST(Npz, MalformedHeadersShapesAndEntriesAreErrors) {
+    auto npy = [](const std::string& dict, const std::string& body) {
+        return std::string("\x93NUMPY\x01\x00", 8) + char(dict.size()) + '\0' + dict + body;
+    };
+    auto refused = [](const std::string& data, const char* part) {
+        try {
+            detail::parse_npy(data, "a", "a.npy");
+        } catch (const Error& e) {
+            return std::string(e.what()).find(part) != std::string::npos;
+        }
+        return false;
+    };
+    EXPECT_TRUE(refused(npy("{'descr': '<f4', 'fortran_order': False, 'shape': ,}", ""),
+                        "bad shape"));
+    EXPECT_TRUE(refused(npy("{'descr': <f4, 'fortran_order': False, 'shape': (1,),}", "abcd"),
+                        "bad 'descr'"));
+    // 2^32 x 2^32 elements multiply out to 0 in 64 bits: not the empty body's match.
+    EXPECT_TRUE(refused(npy("{'descr': '<f4', 'fortran_order': False, "
+                            "'shape': (4294967296, 4294967296), }",
+                            ""),
+                        "body: 0 bytes"));
+    // An empty dimension with an empty body is an array.
+    EXPECT_EQ(detail::parse_npy(npy("{'descr': '<u4', 'fortran_order': False, 'shape': (0, 3), }",
+                                    ""),
+                                "a", "a.npy")
+                  .count(),
+              0u);
+    // A central directory entry cut before its name: the end record follows 10 bytes of it (a
+    // signature and nothing more).
+    test::ScratchDir dir;
+    const std::string path = dir.path("cut.npz");
+    std::string zip("PK\x01\x02", 4);
+    zip += std::string(6, '\0');
+    zip += std::string("PK\x05\x06", 4) + std::string(4, '\0') + std::string("\x01\0\x01\0", 4);
+    zip += std::string("\x0a\0\0\0", 4) + std::string(4, '\0') + std::string(2, '\0');
+    std::ofstream(path, std::ios::binary) << zip;
+    try {
+        detail::read_npz(path);
+        FAIL() << "no error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("truncated"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Validate, LargerDeltaLeaksLessAndHidesMore) {
     ValidateParams p;
     p.pairs = 20000;

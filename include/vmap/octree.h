@@ -17,9 +17,11 @@
 namespace vmap {
 
 struct OctreeParams {
-    int max_height = 9;   // deepest level a leaf may have (root = level 0); 1..21
+    static constexpr int kHeightLimit = 21;          // max_height in 1..kHeightLimit
+    static constexpr int kLeafPointsLimit = 1000000;  // leaf_points in 1..kLeafPointsLimit
+    int max_height = 9;   // deepest level a leaf may have (root = level 0)
     int leaf_points = 1;  // a node splits while it holds more points than this (and is not at
-                          // max_height); 1..1000000
+                          // max_height)
 
     // Throws vmap::Error naming `source` and the field for a value out of range.
     void check(const std::string& source) const;

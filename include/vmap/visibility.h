@@ -7,6 +7,9 @@
 namespace vmap {
 
 struct VisibilityParams {
+    static constexpr int kKLimit = 1000;       // K in 1..kKLimit
+    static constexpr float kEpsLimit = 0.5f;   // eps in [0, kEpsLimit)
+    static constexpr float kTolLimit = 1.0f;   // facing_tol, parallel_tol in [0, kTolLimit)
     int K = 2;                   // actual occluders that make a pair invisible (>= 1)
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
     float facing_tol = 0.001f;   // facing: n_a . d > facing_tol |d| (a rounding guard)

@@ -2,11 +2,7 @@
 #include "vmap/gi.h"
 
 #include <fmt/format.h>
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/info.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
-#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
@@ -17,9 +13,10 @@
 #include <numbers>
 
 #include "gi/gi_device.h"
-#include "util/device.h"
 #include "gi/gi_hier.h"
 #include "gi/gi_kernels.h"
+#include "util/device.h"
+#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 
@@ -78,7 +75,7 @@ std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
     const Octree& t = vm.octree();
     const PointSet& ps = vm.points();
     std::vector<NodeGeom> g(t.num_nodes());
-    tbb::parallel_for(0, t.num_nodes(), [&](int32_t n) {
+    parallel_for(0, t.num_nodes(), [&](int32_t n) {
         double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
         for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
             const double ak = area_of(ps, k);
@@ -146,12 +143,13 @@ struct Refiner {
     // Every link once (a < b).
     template <class MakeEmit>
     void run(MakeEmit&& make_emit) const {
-        tbb::parallel_for(tbb::blocked_range<int32_t>(0, vm.octree().num_nodes()), [&](auto r) {
-            auto emit = make_emit();
-            for (int32_t a = r.begin(); a < r.end(); ++a)
-                for (int32_t b : vm.links(a))
-                    if (b > a) refine(a, b, emit);
-        });
+        parallel_for_range<int32_t>(vm.octree().num_nodes(), 1,
+                                    [&](int32_t chunk_begin, int32_t chunk_end) {
+                                        auto emit = make_emit();
+                                        for (int32_t a = chunk_begin; a < chunk_end; ++a)
+                                            for (int32_t b : vm.links(a))
+                                                if (b > a) refine(a, b, emit);
+                                    });
     }
 };
 
@@ -202,12 +200,12 @@ Blocks merge_node_parts(std::vector<std::vector<Part>>& per) {
     std::vector<uint64_t> first(size_t(N) + 1, 0);
     for (int32_t x = 0; x < N; ++x) first[x + 1] = first[x] + per[x].size();
     std::vector<Tagged> all(first[N]);
-    tbb::parallel_for(0, N, [&](int32_t x) {
+    parallel_for(0, N, [&](int32_t x) {
         for (size_t k = 0; k < per[x].size(); ++k)
             all[first[x] + k] = {per[x][k].key, x, per[x][k].w};
         std::vector<Part>().swap(per[x]);
     });
-    tbb::parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
+    parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
         return p.key != q.key ? p.key < q.key : p.node < q.node;
     });
     Blocks b;
@@ -227,7 +225,7 @@ Blocks cpu_blocks(const detail::GiTree& tree, float theta, const ProgressCallbac
     detail::Progress bar("gi refinement", uint64_t(N), &progress);
     std::mutex bar_mutex;
     std::atomic<uint64_t> done{0};
-    tbb::parallel_for(0, N, [&](int32_t x) {
+    parallel_for(0, N, [&](int32_t x) {
         const uint64_t finished = ++done;
         if (std::unique_lock lock(bar_mutex, std::try_to_lock); lock) bar.set(finished);
         per[x] = parts_of_node(tree, theta, x);
@@ -290,7 +288,7 @@ void RadiositySolver::Impl::prepare_arrays() {
     const uint32_t P = uint32_t(ps.size());
     geom = node_geometry(vm);
     emission.resize(P), albedo.resize(P), area.resize(P), point_leaf.resize(P);
-    tbb::parallel_for(uint32_t(0), P, [&](uint32_t i) {
+    parallel_for(uint32_t(0), P, [&](uint32_t i) {
         emission[i] = emission_of(ps, i);
         albedo[i] = albedo_of(ps, i);
         area[i] = area_of(ps, i);
@@ -300,7 +298,7 @@ void RadiositySolver::Impl::prepare_arrays() {
         for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) point_leaf[k] = n;
     }
     inv_area.resize(N), node_area.resize(N), emits.assign(N, 0);
-    tbb::parallel_for(0, N, [&](int32_t n) {
+    parallel_for(0, N, [&](int32_t n) {
         inv_area[n] = geom[n].area > 0 ? 1.0f / geom[n].area : 0.0f;
         node_area[n] = geom[n].area;
         for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n] && !emits[n]; ++k)
@@ -343,17 +341,18 @@ void RadiositySolver::Impl::refine_on_host() {
     };
     auto run_refinement = [&](auto&& make_emit) {
         if (by_links) return Refiner{vm, geom, params.theta}.run(make_emit);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, blocks.key.size(), 4096), [&](auto r) {
-            auto emit = make_emit();
-            for (size_t k = r.begin(); k < r.end(); ++k) {
-                const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);
-                const double a1 = element_area(e1), a2 = element_area(e2);
-                if (!(a1 > 0) || !(a2 > 0)) continue;
-                const double kw = blocks.w[k];  // sum of A_x A_y K(x, y) over the visible parts
-                emit(e1, e2, float(std::min(1.0, kw / a1)));
-                emit(e2, e1, float(std::min(1.0, kw / a2)));
-            }
-        });
+        parallel_for_range<size_t>(
+            blocks.key.size(), 4096, [&](size_t chunk_begin, size_t chunk_end) {
+                auto emit = make_emit();
+                for (size_t k = chunk_begin; k < chunk_end; ++k) {
+                    const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);
+                    const double a1 = element_area(e1), a2 = element_area(e2);
+                    if (!(a1 > 0) || !(a2 > 0)) continue;
+                    const double kw = blocks.w[k];  // sum of A_x A_y K(x, y) over the visible parts
+                    emit(e1, e2, float(std::min(1.0, kw / a1)));
+                    emit(e2, e1, float(std::min(1.0, kw / a2)));
+                }
+            });
     };
     std::unique_ptr<std::atomic<uint64_t>[]> count(new std::atomic<uint64_t>[num_el + 1]);
     for (uint64_t e = 0; e <= num_el; ++e) count[e].store(0, std::memory_order_relaxed);
@@ -380,7 +379,7 @@ void RadiositySolver::Impl::refine_on_host() {
 // Rows sorted by source, so the sums run in an order that does not depend on thread timing.
 void RadiositySolver::Impl::sort_rows() {
     const uint64_t num_el = row.size() - 1;
-    tbb::parallel_for(uint64_t(0), num_el, [&](uint64_t e) {
+    parallel_for(uint64_t(0), num_el, [&](uint64_t e) {
         const uint64_t b = row[e], n = row[e + 1] - b;
         if (n < 2) return;
         std::vector<std::pair<uint32_t, float>> tmp(n);
@@ -476,20 +475,22 @@ detail::GiGatherView RadiositySolver::Impl::gather_view(float theta) const {
 
 void RadiositySolver::Impl::reset_host() {
     const int32_t N = view.num_nodes;
-    tbb::parallel_for(uint32_t(0), view.num_points,
-                      [&](uint32_t i) { B[uint64_t(N) + i] = emission[i]; });
-    tbb::parallel_for(0, N, [&](int32_t n) { detail::gi_pull_up(view, n); });
+    parallel_for(uint32_t(0), view.num_points,
+                 [&](uint32_t i) { B[uint64_t(N) + i] = emission[i]; });
+    parallel_for(0, N, [&](int32_t n) { detail::gi_pull_up(view, n); });
 }
 
 void RadiositySolver::Impl::cpu_bounce() {
     const uint64_t num_el = uint64_t(view.num_nodes) + view.num_points;
-    tbb::parallel_for(tbb::blocked_range<uint64_t>(0, num_el, 256), [&](auto r) {
-        for (uint64_t e = r.begin(); e < r.end(); ++e) detail::gi_gather(view, e);
+    parallel_for_range<uint64_t>(num_el, 256, [&](uint64_t chunk_begin, uint64_t chunk_end) {
+        for (uint64_t e = chunk_begin; e < chunk_end; ++e) detail::gi_gather(view, e);
     });
-    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, view.num_points, 1024), [&](auto r) {
-        for (uint32_t i = r.begin(); i < r.end(); ++i) detail::gi_point_update(view, i);
-    });
-    tbb::parallel_for(0, view.num_nodes, [&](int32_t n) { detail::gi_pull_up(view, n); });
+    parallel_for_range<uint32_t>(view.num_points, 1024,
+                                 [&](uint32_t chunk_begin, uint32_t chunk_end) {
+                                     for (uint32_t i = chunk_begin; i < chunk_end; ++i)
+                                         detail::gi_point_update(view, i);
+                                 });
+    parallel_for(0, view.num_nodes, [&](int32_t n) { detail::gi_pull_up(view, n); });
 }
 
 void GiParams::check(const std::string& source) const {
@@ -555,10 +556,10 @@ std::vector<Vec3> RadiositySolver::final_gather(float theta,
     // Progress for a gather of every point (the picture's), not for the reference's short lists.
     const ProgressCallback* cb = points.empty() ? &impl_->params.progress : nullptr;
     detail::Progress bar("gi final gather", n, cb && *cb ? cb : nullptr);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](auto r) {
-        for (size_t k = r.begin(); k < r.end(); ++k)
+    parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t k = chunk_begin; k < chunk_end; ++k)
             out[k] = detail::gi_final_gather_point(v, points.empty() ? uint32_t(k) : points[k]);
-        bar.add(r.size());
+        bar.add((chunk_end - chunk_begin));
     });
     bar.finish();
     return out;
@@ -591,10 +592,10 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
     std::vector<Vec3> B(P), next(P);
     for (uint32_t i = 0; i < P; ++i) B[i] = emission_of(ps, i);
     if (pairs) {
-        *pairs = tbb::parallel_reduce(
-            tbb::blocked_range<uint32_t>(0, P), uint64_t(0),
-            [&](auto r, uint64_t acc) {
-                for (uint32_t i = r.begin(); i < r.end(); ++i)
+        *pairs = parallel_reduce_range<uint32_t>(
+            P, 1, uint64_t(0),
+            [&](uint32_t chunk_begin, uint32_t chunk_end, uint64_t acc) {
+                for (uint32_t i = chunk_begin; i < chunk_end; ++i)
                     for (int32_t A = t.leaf_node()[t.leaf_of_point(i)]; A >= 0; A = t.parent()[A])
                         for (int32_t L : vm.links(A)) acc += t.point_end()[L] - t.point_begin()[L];
                 return acc;
@@ -603,8 +604,8 @@ std::vector<Vec3> brute_force_radiosity(const VisibilityMap& vm, int bounces,
     }
     for (int b = 0; b < bounces; ++b) {
         const auto t0 = Clock::now();
-        tbb::parallel_for(tbb::blocked_range<uint32_t>(0, P, 64), [&](auto r) {
-            for (uint32_t i = r.begin(); i < r.end(); ++i) {
+        parallel_for_range<uint32_t>(P, 64, [&](uint32_t chunk_begin, uint32_t chunk_end) {
+            for (uint32_t i = chunk_begin; i < chunk_end; ++i) {
                 const Vec3 pi = ps.positions[i], ni = ps.normals[i];
                 const float ai = area_of(ps, i);
                 Vec3 h{0, 0, 0};

@@ -1,6 +1,5 @@
 // Path-traced reference radiosity (the contract is in include/vmap/gi_reference.h).
 #include <fmt/format.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <atomic>
@@ -9,6 +8,7 @@
 #include <mutex>
 #include <numbers>
 
+#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi_reference.h"
@@ -160,7 +160,7 @@ ReferenceResult path_trace_radiosity(const std::vector<SceneSurface>& surfaces,
     detail::Progress bar("reference", at.size(), &params.progress);
     std::mutex bar_mutex;
     const uint64_t seed = Rng::mix(params.seed ^ 0x7265665f67690000ULL);
-    tbb::parallel_for(size_t(0), at.size(), [&](size_t i) {
+    parallel_for(size_t(0), at.size(), [&](size_t i) {
         const ReferencePoint& p = at[i];
         std::vector<double> sum(3 * bins, 0.0), sum2(3 * bins, 0.0);
         std::vector<Vec3> found(bins);

@@ -4,6 +4,7 @@
 // per line, so that a short line is reported with the line it is on.
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <cstring>
 #include <new>
@@ -63,19 +64,21 @@ int64_t parse_count(const std::string& path, std::string_view token, const char*
     return n;
 }
 
-}  // namespace
+struct OffHeader {
+    bool has_colors = false, has_normals = false;
+    int64_t vertices = 0, faces = 0;
+};
 
-ModelData read_off(const std::string& path) try {
-    const FileBuffer file = load_file(path);
-    if (file.size == 0) fail(path, "empty file");
-    LineReader lines(file.begin(), file.end());
+// The keyword and the counts, checked against the bytes left: a corrupt count must not become
+// a huge allocation.
+OffHeader read_header(const std::string& path, LineReader& lines) {
     std::vector<std::string_view> tokens;
     if (!lines.next(tokens)) fail(path, "header: bad magic (no 'OFF' line, only comments)");
-
+    OffHeader h;
     const std::string_view keyword = tokens[0];
-    const bool has_colors = keyword == "COFF" || keyword == "CNOFF";
-    const bool has_normals = keyword == "NOFF" || keyword == "CNOFF";
-    if (!has_colors && !has_normals && keyword != "OFF") {
+    h.has_colors = keyword == "COFF" || keyword == "CNOFF";
+    h.has_normals = keyword == "NOFF" || keyword == "CNOFF";
+    if (!h.has_colors && !h.has_normals && keyword != "OFF") {
         fail(path, "header: bad magic ", quoted(keyword), " (expected OFF, COFF, NOFF or CNOFF)");
     }
     // The counts may follow the keyword on the same line or have a line of their own.
@@ -90,35 +93,47 @@ ModelData read_off(const std::string& path) try {
         fail(path, "header: expected vertex, face and edge counts, found ", counts.size(), " value",
              counts.size() == 1 ? "" : "s");
     }
-    const int64_t vertex_count = parse_count(path, counts[0], "vertex");
-    const int64_t face_count = parse_count(path, counts[1], "face");
+    h.vertices = parse_count(path, counts[0], "vertex");
+    h.faces = parse_count(path, counts[1], "face");
     if (counts.size() > 2) parse_count(path, counts[2], "edge");
-
-    // A corrupt count must not become a huge allocation: a vertex line is at least "0 0 0\n"
-    // and a face line at least "3 0 0 0\n" (the last line may lack its newline).
+    // A vertex line is at least "0 0 0\n" and a face line at least "3 0 0 0\n" (the last line
+    // may lack its newline).
     const uint64_t room = lines.remaining() + 1;
-    if (static_cast<uint64_t>(vertex_count) > room / 6 ||
-        static_cast<uint64_t>(face_count) > (room - 6 * static_cast<uint64_t>(vertex_count)) / 8) {
-        fail(path, "truncated: ", vertex_count,
-             vertex_count == 1 ? " vertex and " : " vertices and ", face_count,
-             face_count == 1 ? " face" : " faces", " cannot fit in the ", lines.remaining(),
+    if (static_cast<uint64_t>(h.vertices) > room / 6 ||
+        static_cast<uint64_t>(h.faces) > (room - 6 * static_cast<uint64_t>(h.vertices)) / 8) {
+        fail(path, "truncated: ", h.vertices, h.vertices == 1 ? " vertex and " : " vertices and ",
+             h.faces, h.faces == 1 ? " face" : " faces", " cannot fit in the ", lines.remaining(),
              " bytes after the header");
     }
+    return h;
+}
 
-    ModelData out;
-    PointSet& points = out.points;
-    points.positions.reserve(vertex_count);
-    if (has_normals) points.normals.reserve(vertex_count);
-    if (has_colors) points.colors.reserve(vertex_count);
-    const size_t needed_values = 3 + (has_normals ? 3 : 0) + (has_colors ? 3 : 0);
+// Three values of a vertex line (v[0..2]) as a finite vector, else the error naming `what`.
+Vec3 finite_triple(const std::string& path, const float* v, int64_t i, size_t line,
+                   const char* what) {
+    const Vec3 x{v[0], v[1], v[2]};
+    if (!is_finite(x))
+        fail(path, "vertex ", i, " (line ", line, "): non-finite ", what, " (", x.x, ", ", x.y,
+             ", ", x.z, ")");
+    return x;
+}
+
+// The vertices (positions, and normals and colours when the keyword says so); true when a
+// line carried values beyond those (alpha, texture coordinates: ignored).
+bool read_vertices(const std::string& path, const OffHeader& h, LineReader& lines,
+                   PointSet& points) {
+    std::vector<std::string_view> tokens;
+    points.positions.reserve(h.vertices);
+    if (h.has_normals) points.normals.reserve(h.vertices);
+    if (h.has_colors) points.colors.reserve(h.vertices);
+    const size_t needed_values = 3 + (h.has_normals ? 3 : 0) + (h.has_colors ? 3 : 0);
     float max_channel = 0;
-    bool extra_vertex_values = false, extra_face_values = false;
-    for (int64_t i = 0; i < vertex_count; ++i) {
+    bool extra = false;
+    for (int64_t i = 0; i < h.vertices; ++i) {
         if (!lines.next(tokens)) {
-            fail(path, "truncated: expected ", vertex_count, " vertices, found ", i);
+            fail(path, "truncated: expected ", h.vertices, " vertices, found ", i);
         }
-        // Extra values (alpha, texture coordinates) are allowed, ignored and noted.
-        extra_vertex_values |= tokens.size() > needed_values;
+        extra |= tokens.size() > needed_values;
         if (tokens.size() < needed_values) {
             fail(path, "vertex ", i, " (line ", lines.line(), "): expected ", needed_values,
                  " values, found ", tokens.size());
@@ -130,28 +145,12 @@ ModelData read_off(const std::string& path) try {
                      quoted(tokens[k]));
             }
         }
-        const Vec3 p{v[0], v[1], v[2]};
-        if (!is_finite(p)) {
-            fail(path, "vertex ", i, " (line ", lines.line(), "): non-finite coordinate (", p.x,
-                 ", ", p.y, ", ", p.z, ")");
-        }
-        points.positions.push_back(p);
-        size_t next = 3;
-        if (has_normals) {
-            const Vec3 n{v[3], v[4], v[5]};
-            if (!is_finite(n)) {
-                fail(path, "vertex ", i, " (line ", lines.line(), "): non-finite normal (", n.x,
-                     ", ", n.y, ", ", n.z, ")");
-            }
-            points.normals.push_back(n);
-            next = 6;
-        }
-        if (has_colors) {
-            const Vec3 c{v[next], v[next + 1], v[next + 2]};
-            if (!is_finite(c)) {
-                fail(path, "vertex ", i, " (line ", lines.line(), "): non-finite colour (", c.x,
-                     ", ", c.y, ", ", c.z, ")");
-            }
+        points.positions.push_back(finite_triple(path, v, i, lines.line(), "coordinate"));
+        const size_t next = h.has_normals ? 6 : 3;
+        if (h.has_normals)
+            points.normals.push_back(finite_triple(path, v + 3, i, lines.line(), "normal"));
+        if (h.has_colors) {
+            const Vec3 c = finite_triple(path, v + next, i, lines.line(), "colour");
             max_channel = std::max({max_channel, c.x, c.y, c.z});
             points.colors.push_back(c);
         }
@@ -161,11 +160,19 @@ ModelData read_off(const std::string& path) try {
     if (max_channel > 1.0f) {
         for (Vec3& c : points.colors) c = c / 255.0f;
     }
+    return extra;
+}
 
-    out.triangles.reserve(face_count);
-    for (int64_t f = 0; f < face_count; ++f) {
+// The faces as a fan of triangles each; true when a line carried values after its indices (a
+// face colour: ignored).
+bool read_faces(const std::string& path, const OffHeader& h, LineReader& lines,
+                std::vector<std::array<uint32_t, 3>>& triangles) {
+    std::vector<std::string_view> tokens;
+    triangles.reserve(h.faces);
+    bool extra = false;
+    for (int64_t f = 0; f < h.faces; ++f) {
         if (!lines.next(tokens)) {
-            fail(path, "truncated: expected ", face_count, " faces, found ", f);
+            fail(path, "truncated: expected ", h.faces, " faces, found ", f);
         }
         int64_t corners = 0;
         if (!parse_int(tokens[0], corners)) {
@@ -176,8 +183,7 @@ ModelData read_off(const std::string& path) try {
             fail(path, "face ", f, " (line ", lines.line(), "): degenerate face with ", corners,
                  corners == 1 ? " vertex" : " vertices");
         }
-        // Values after the indices (a face colour) are allowed, ignored and noted.
-        extra_face_values |= tokens.size() - 1 > static_cast<uint64_t>(corners);
+        extra |= tokens.size() - 1 > static_cast<uint64_t>(corners);
         if (tokens.size() - 1 < static_cast<uint64_t>(corners)) {
             fail(path, "face ", f, " (line ", lines.line(), "): expected ", corners + 1,
                  " values, found ", tokens.size());
@@ -190,19 +196,32 @@ ModelData read_off(const std::string& path) try {
                      quoted(tokens[k + 1]));
             }
             // Triangles hold 32-bit indices; only a file of tens of GB could exceed them.
-            if (v < 0 || v >= vertex_count || v > int64_t{UINT32_MAX}) {
+            if (v < 0 || v >= h.vertices || v > int64_t{UINT32_MAX}) {
                 fail(path, "face ", f, " (line ", lines.line(), "): vertex index ", v,
-                     " out of range (", vertex_count, " vertices)");
+                     " out of range (", h.vertices, " vertices)");
             }
             const uint32_t u = static_cast<uint32_t>(v);
             if (k == 0) {
                 index[0] = u;
             } else if (k >= 2) {
-                out.triangles.push_back({index[0], index[1], u});
+                triangles.push_back({index[0], index[1], u});
             }
             index[1] = u;
         }
     }
+    return extra;
+}
+
+}  // namespace
+
+ModelData read_off(const std::string& path) try {
+    const FileBuffer file = load_file(path);
+    if (file.size == 0) fail(path, "empty file");
+    LineReader lines(file.begin(), file.end());
+    const OffHeader h = read_header(path, lines);
+    ModelData out;
+    const bool extra_vertex_values = read_vertices(path, h, lines, out.points);
+    const bool extra_face_values = read_faces(path, h, lines, out.triangles);
     if (extra_vertex_values)
         out.notes.push_back(path +
                             ": ignored extra values on vertex lines (alpha, texture coordinates)");

@@ -273,14 +273,16 @@ void check_counts_fit(const std::string& path, const Header& header, size_t data
     }
 }
 
-Header parse_header(const std::string& path, const FileBuffer& file) {
+// The header's lines (from the magic to before 'end_header'), found before they are
+// interpreted, so that a header cut short is reported as such and not as garbage keywords from
+// the data that follows. Sets where the data starts.
+std::vector<std::string_view> header_lines(const std::string& path, const FileBuffer& file,
+                                           Header& header) {
     const std::string_view text(file.begin(), file.size);
     const size_t first_end = text.find('\n');
     if (trim(text.substr(0, first_end)) != "ply") {
         fail(path, "header: bad magic (not a PLY file: the first line is not 'ply')");
     }
-    // Find the end of the header before interpreting it, so that a header cut short is reported
-    // as such and not as garbage keywords from the data that follows.
     std::vector<std::string_view> lines;
     size_t pos = 0;
     bool found_end = false;
@@ -298,9 +300,95 @@ Header parse_header(const std::string& path, const FileBuffer& file) {
     }
     if (!found_end) fail(path, "header: missing 'end_header'");
 
-    Header header;
     header.data_offset = pos;
     header.data_line = lines.size() + 2;
+    return lines;
+}
+
+using Words = std::vector<std::string_view>;
+
+// "format <type> 1.0".
+void parse_format(const std::string& path, size_t line_no, const Words& words, bool& have_format,
+                  Header& header) {
+    if (have_format) fail(path, "header line ", line_no, ": second 'format' line");
+    if (words.size() != 3) {
+        fail(path, "header line ", line_no, ": expected 'format <type> 1.0'");
+    }
+    if (words[1] == "ascii") {
+        header.format = Format::kAscii;
+    } else if (words[1] == "binary_little_endian") {
+        header.format = Format::kBinaryLittle;
+    } else if (words[1] == "binary_big_endian") {
+        header.format = Format::kBinaryBig;
+    } else {
+        fail(path, "header line ", line_no, ": unknown format ", quoted(words[1]));
+    }
+    if (words[2] != "1.0" && words[2] != "1") {
+        fail(path, "header line ", line_no, ": unsupported PLY version ", quoted(words[2]));
+    }
+    have_format = true;
+}
+
+// "element <name> <count>".
+void parse_element(const std::string& path, size_t line_no, const Words& words, Header& header) {
+    if (words.size() != 3) {
+        fail(path, "header line ", line_no, ": expected 'element <name> <count>'");
+    }
+    int64_t count = 0;
+    if (!words[2].empty() && words[2][0] == '-' && parse_int(words[2], count)) {
+        fail(path, "header: element ", words[1], ": negative count ", count);
+    }
+    Element element;
+    element.name = words[1];
+    const char* e = words[2].data() + words[2].size();
+    auto [ptr, ec] = std::from_chars(words[2].data(), e, element.count);
+    if (ec == std::errc::result_out_of_range) {
+        fail(path, "header: element ", words[1], ": count ", quoted(words[2]), " is too large");
+    }
+    if (ec != std::errc() || ptr != e) {
+        fail(path, "header: element ", words[1], ": invalid count ", quoted(words[2]));
+    }
+    header.elements.push_back(std::move(element));
+}
+
+// "property <type> <name>" or "property list <count type> <item type> <name>".
+void parse_property(const std::string& path, size_t line_no, const Words& words, Header& header) {
+    if (header.elements.empty()) {
+        fail(path, "header line ", line_no, ": property before any element");
+    }
+    Element& element = header.elements.back();
+    Property p;
+    if (words.size() >= 2 && words[1] == "list") {
+        if (words.size() != 5) {
+            fail(path, "header line ", line_no,
+                 ": expected 'property list <count type> <item type> <name>'");
+        }
+        p.is_list = true;
+        p.count_type = parse_type(path, line_no, words[2]);
+        if (!is_integer(p.count_type)) {
+            fail(path, "header line ", line_no, ": list count type must be an integer");
+        }
+        p.type = parse_type(path, line_no, words[3]);
+        p.name = words[4];
+        element.has_lists = true;
+    } else {
+        if (words.size() != 3) {
+            fail(path, "header line ", line_no, ": expected 'property <type> <name>'");
+        }
+        p.type = parse_type(path, line_no, words[1]);
+        p.name = words[2];
+    }
+    for (const Property& other : element.properties) {
+        if (other.name == p.name) {
+            fail(path, "header: element ", element.name, ": duplicate property '", p.name, "'");
+        }
+    }
+    element.properties.push_back(std::move(p));
+}
+
+Header parse_header(const std::string& path, const FileBuffer& file) {
+    Header header;
+    const std::vector<std::string_view> lines = header_lines(path, file, header);
     bool have_format = false;
     for (size_t i = 1; i < lines.size(); ++i) {
         const size_t line_no = i + 1;
@@ -309,76 +397,11 @@ Header parse_header(const std::string& path, const FileBuffer& file) {
         const std::string_view keyword = words[0];
         if (keyword == "comment" || keyword == "obj_info") continue;
         if (keyword == "format") {
-            if (have_format) fail(path, "header line ", line_no, ": second 'format' line");
-            if (words.size() != 3) {
-                fail(path, "header line ", line_no, ": expected 'format <type> 1.0'");
-            }
-            if (words[1] == "ascii") {
-                header.format = Format::kAscii;
-            } else if (words[1] == "binary_little_endian") {
-                header.format = Format::kBinaryLittle;
-            } else if (words[1] == "binary_big_endian") {
-                header.format = Format::kBinaryBig;
-            } else {
-                fail(path, "header line ", line_no, ": unknown format ", quoted(words[1]));
-            }
-            if (words[2] != "1.0" && words[2] != "1") {
-                fail(path, "header line ", line_no, ": unsupported PLY version ", quoted(words[2]));
-            }
-            have_format = true;
+            parse_format(path, line_no, words, have_format, header);
         } else if (keyword == "element") {
-            if (words.size() != 3) {
-                fail(path, "header line ", line_no, ": expected 'element <name> <count>'");
-            }
-            int64_t count = 0;
-            if (!words[2].empty() && words[2][0] == '-' && parse_int(words[2], count)) {
-                fail(path, "header: element ", words[1], ": negative count ", count);
-            }
-            Element element;
-            element.name = words[1];
-            const char* e = words[2].data() + words[2].size();
-            auto [ptr, ec] = std::from_chars(words[2].data(), e, element.count);
-            if (ec == std::errc::result_out_of_range) {
-                fail(path, "header: element ", words[1], ": count ", quoted(words[2]),
-                     " is too large");
-            }
-            if (ec != std::errc() || ptr != e) {
-                fail(path, "header: element ", words[1], ": invalid count ", quoted(words[2]));
-            }
-            header.elements.push_back(std::move(element));
+            parse_element(path, line_no, words, header);
         } else if (keyword == "property") {
-            if (header.elements.empty()) {
-                fail(path, "header line ", line_no, ": property before any element");
-            }
-            Element& element = header.elements.back();
-            Property p;
-            if (words.size() >= 2 && words[1] == "list") {
-                if (words.size() != 5) {
-                    fail(path, "header line ", line_no,
-                         ": expected 'property list <count type> <item type> <name>'");
-                }
-                p.is_list = true;
-                p.count_type = parse_type(path, line_no, words[2]);
-                if (!is_integer(p.count_type)) {
-                    fail(path, "header line ", line_no, ": list count type must be an integer");
-                }
-                p.type = parse_type(path, line_no, words[3]);
-                p.name = words[4];
-                element.has_lists = true;
-            } else {
-                if (words.size() != 3) {
-                    fail(path, "header line ", line_no, ": expected 'property <type> <name>'");
-                }
-                p.type = parse_type(path, line_no, words[1]);
-                p.name = words[2];
-            }
-            for (const Property& other : element.properties) {
-                if (other.name == p.name) {
-                    fail(path, "header: element ", element.name, ": duplicate property '", p.name,
-                         "'");
-                }
-            }
-            element.properties.push_back(std::move(p));
+            parse_property(path, line_no, words, header);
         } else {
             fail(path, "header line ", line_no, ": unknown keyword ", quoted(keyword));
         }
@@ -640,123 +663,152 @@ float colour_range(Type t) {
     }
 }
 
+// Which of the vertex roles an element's properties fill, and the colour channels' ranges.
+struct VertexLayout {
+    bool has_normals = false, has_colors = false, has_radii = false, has_emission = false,
+         has_sensors = false;
+    float range[3] = {1, 1, 1};
+};
+
+VertexLayout vertex_layout(const Element& element) {
+    VertexLayout lay;
+    for (const Property& p : element.properties) {
+        lay.has_normals |= p.role == kNx;
+        lay.has_colors |= p.role == kRed;
+        lay.has_radii |= p.role == kRadius;
+        lay.has_emission |= p.role == kEmissionR;
+        lay.has_sensors |= p.role == kSensorX;
+        if (p.role >= kRed && p.role <= kBlue) lay.range[p.role - kRed] = colour_range(p.type);
+    }
+    return lay;
+}
+
+void reserve_vertices(const VertexLayout& lay, uint64_t count, PointSet& points) {
+    points.positions.reserve(count);
+    if (lay.has_normals) points.normals.reserve(count);
+    if (lay.has_colors) points.colors.reserve(count);
+    if (lay.has_radii) points.radii.reserve(count);
+    if (lay.has_emission) points.emission.reserve(count);
+}
+
+// Element i's scalars into v (by role) and its vertex indices into corners; other lists are
+// skipped.
+template <class Source>
+void read_values(Source& source, const Element& element, uint64_t i, double* v,
+                 std::vector<int64_t>& corners) {
+    source.begin_element(element, i);
+    for (const Property& p : element.properties) {
+        if (!p.is_list) {
+            v[p.role] = source.value(p.type);
+            continue;
+        }
+        const uint64_t count = source.list_count(p.count_type);
+        if (p.role != kIndices) {
+            source.skip_list(count, p.type);
+            continue;
+        }
+        corners.clear();
+        for (uint64_t k = 0; k < count; ++k) {
+            corners.push_back(static_cast<int64_t>(source.value(p.type)));
+        }
+    }
+    source.end_element();
+}
+
+// A vertex from its values, each checked (finite; radius and emission not negative).
+template <class Source>
+void add_vertex(const std::string& path, const Source& source, const VertexLayout& lay,
+                const double* v, ModelData& out) {
+    const Vec3 pos{static_cast<float>(v[kX]), static_cast<float>(v[kY]), static_cast<float>(v[kZ])};
+    if (!is_finite(pos)) {
+        fail(path, source.where(), ": non-finite coordinate (", v[kX], ", ", v[kY], ", ", v[kZ],
+             ")");
+    }
+    out.points.positions.push_back(pos);
+    if (lay.has_normals) {
+        const Vec3 n{static_cast<float>(v[kNx]), static_cast<float>(v[kNy]),
+                     static_cast<float>(v[kNz])};
+        if (!is_finite(n)) {
+            fail(path, source.where(), ": non-finite normal (", v[kNx], ", ", v[kNy], ", ", v[kNz],
+                 ")");
+        }
+        out.points.normals.push_back(n);
+    }
+    if (lay.has_colors) {
+        const Vec3 c{static_cast<float>(v[kRed]) / lay.range[0],
+                     static_cast<float>(v[kGreen]) / lay.range[1],
+                     static_cast<float>(v[kBlue]) / lay.range[2]};
+        if (!is_finite(c)) {
+            fail(path, source.where(), ": non-finite colour (", v[kRed], ", ", v[kGreen], ", ",
+                 v[kBlue], ")");
+        }
+        out.points.colors.push_back(c);
+    }
+    if (lay.has_sensors) {
+        const Vec3 q{static_cast<float>(v[kSensorX]), static_cast<float>(v[kSensorY]),
+                     static_cast<float>(v[kSensorZ])};
+        if (!is_finite(q)) {
+            fail(path, source.where(), ": non-finite sensor position (", v[kSensorX], ", ",
+                 v[kSensorY], ", ", v[kSensorZ], ")");
+        }
+        out.sensors.push_back(q);
+    }
+    if (lay.has_radii) {
+        const float r = static_cast<float>(v[kRadius]);
+        if (!std::isfinite(r) || r < 0) {
+            fail(path, source.where(), ": invalid radius ", v[kRadius]);
+        }
+        out.points.radii.push_back(r);
+    }
+    if (lay.has_emission) {
+        const Vec3 e{static_cast<float>(v[kEmissionR]), static_cast<float>(v[kEmissionG]),
+                     static_cast<float>(v[kEmissionB])};
+        if (!is_finite(e) || e.x < 0 || e.y < 0 || e.z < 0) {
+            fail(path, source.where(), ": invalid emission (", v[kEmissionR], ", ", v[kEmissionG],
+                 ", ", v[kEmissionB], "): must be finite and >= 0");
+        }
+        out.points.emission.push_back(e);
+    }
+}
+
+// A face as a fan of triangles, its corners checked.
+template <class Source>
+void add_face(const std::string& path, const Source& source, const Header& header,
+              const std::vector<int64_t>& corners, ModelData& out) {
+    if (corners.size() < 3) {
+        fail(path, source.where(), ": degenerate face with ", corners.size(),
+             corners.size() == 1 ? " vertex" : " vertices");
+    }
+    for (int64_t c : corners) {
+        if (c < 0 || static_cast<uint64_t>(c) >= header.vertex_count) {
+            fail(path, source.where(), ": vertex index ", c, " out of range (", header.vertex_count,
+                 " vertices)");
+        }
+    }
+    for (size_t k = 1; k + 1 < corners.size(); ++k) {
+        out.triangles.push_back({static_cast<uint32_t>(corners[0]),
+                                 static_cast<uint32_t>(corners[k]),
+                                 static_cast<uint32_t>(corners[k + 1])});
+    }
+}
+
 template <class Source>
 void read_data(const std::string& path, const Header& header, Source& source, ModelData& out) {
-    PointSet& points = out.points;
     std::vector<int64_t> corners;
     for (const Element& element : header.elements) {
         if (element.properties.empty()) continue;
         const bool is_vertex = element.name == "vertex";
         const bool is_face = element.name == "face";
-        bool has_normals = false, has_colors = false, has_radii = false, has_emission = false,
-             has_sensors = false;
-        float range[3] = {1, 1, 1};
-        if (is_vertex) {
-            for (const Property& p : element.properties) {
-                has_normals |= p.role == kNx;
-                has_colors |= p.role == kRed;
-                has_radii |= p.role == kRadius;
-                has_emission |= p.role == kEmissionR;
-                has_sensors |= p.role == kSensorX;
-                if (p.role >= kRed && p.role <= kBlue) range[p.role - kRed] = colour_range(p.type);
-            }
-            points.positions.reserve(element.count);
-            if (has_normals) points.normals.reserve(element.count);
-            if (has_colors) points.colors.reserve(element.count);
-            if (has_radii) points.radii.reserve(element.count);
-            if (has_emission) points.emission.reserve(element.count);
-        }
+        const VertexLayout lay = is_vertex ? vertex_layout(element) : VertexLayout{};
+        if (is_vertex) reserve_vertices(lay, element.count, out.points);
         if (is_face) out.triangles.reserve(element.count);
-
         double v[kRoleCount] = {};
         for (uint64_t i = 0; i < element.count; ++i) {
-            source.begin_element(element, i);
-            for (const Property& p : element.properties) {
-                if (!p.is_list) {
-                    v[p.role] = source.value(p.type);
-                    continue;
-                }
-                const uint64_t count = source.list_count(p.count_type);
-                if (p.role != kIndices) {
-                    source.skip_list(count, p.type);
-                    continue;
-                }
-                corners.clear();
-                for (uint64_t k = 0; k < count; ++k) {
-                    corners.push_back(static_cast<int64_t>(source.value(p.type)));
-                }
-            }
-            source.end_element();
-
+            read_values(source, element, i, v, corners);
             if (is_vertex) {
-                const Vec3 pos{static_cast<float>(v[kX]), static_cast<float>(v[kY]),
-                               static_cast<float>(v[kZ])};
-                if (!is_finite(pos)) {
-                    fail(path, source.where(), ": non-finite coordinate (", v[kX], ", ", v[kY],
-                         ", ", v[kZ], ")");
-                }
-                points.positions.push_back(pos);
-                if (has_normals) {
-                    const Vec3 n{static_cast<float>(v[kNx]), static_cast<float>(v[kNy]),
-                                 static_cast<float>(v[kNz])};
-                    if (!is_finite(n)) {
-                        fail(path, source.where(), ": non-finite normal (", v[kNx], ", ", v[kNy],
-                             ", ", v[kNz], ")");
-                    }
-                    points.normals.push_back(n);
-                }
-                if (has_colors) {
-                    const Vec3 c{static_cast<float>(v[kRed]) / range[0],
-                                 static_cast<float>(v[kGreen]) / range[1],
-                                 static_cast<float>(v[kBlue]) / range[2]};
-                    if (!is_finite(c)) {
-                        fail(path, source.where(), ": non-finite colour (", v[kRed], ", ",
-                             v[kGreen], ", ", v[kBlue], ")");
-                    }
-                    points.colors.push_back(c);
-                }
-                if (has_sensors) {
-                    const Vec3 q{static_cast<float>(v[kSensorX]), static_cast<float>(v[kSensorY]),
-                                 static_cast<float>(v[kSensorZ])};
-                    if (!is_finite(q)) {
-                        fail(path, source.where(), ": non-finite sensor position (", v[kSensorX],
-                             ", ", v[kSensorY], ", ", v[kSensorZ], ")");
-                    }
-                    out.sensors.push_back(q);
-                }
-                if (has_radii) {
-                    const float r = static_cast<float>(v[kRadius]);
-                    if (!std::isfinite(r) || r < 0) {
-                        fail(path, source.where(), ": invalid radius ", v[kRadius]);
-                    }
-                    points.radii.push_back(r);
-                }
-                if (has_emission) {
-                    const Vec3 e{static_cast<float>(v[kEmissionR]),
-                                 static_cast<float>(v[kEmissionG]),
-                                 static_cast<float>(v[kEmissionB])};
-                    if (!is_finite(e) || e.x < 0 || e.y < 0 || e.z < 0) {
-                        fail(path, source.where(), ": invalid emission (", v[kEmissionR], ", ",
-                             v[kEmissionG], ", ", v[kEmissionB], "): must be finite and >= 0");
-                    }
-                    points.emission.push_back(e);
-                }
+                add_vertex(path, source, lay, v, out);
             } else if (is_face) {
-                if (corners.size() < 3) {
-                    fail(path, source.where(), ": degenerate face with ", corners.size(),
-                         corners.size() == 1 ? " vertex" : " vertices");
-                }
-                for (int64_t c : corners) {
-                    if (c < 0 || static_cast<uint64_t>(c) >= header.vertex_count) {
-                        fail(path, source.where(), ": vertex index ", c, " out of range (",
-                             header.vertex_count, " vertices)");
-                    }
-                }
-                for (size_t k = 1; k + 1 < corners.size(); ++k) {
-                    out.triangles.push_back({static_cast<uint32_t>(corners[0]),
-                                             static_cast<uint32_t>(corners[k]),
-                                             static_cast<uint32_t>(corners[k + 1])});
-                }
+                add_face(path, source, header, corners, out);
             }
         }
     }
@@ -808,7 +860,11 @@ ModelData read_ply(const std::string& path) try {
     fail(path, "out of memory while reading");
 }
 
-void write_ply(const std::string& path, const PointSet& points, bool binary) {
+namespace {
+
+// Refuses what read_ply would refuse, so that every file written can be read back; returns
+// whether any point emits (the emission columns are written only then).
+bool check_writable(const std::string& path, const PointSet& points) {
     const size_t n = points.size();
     auto check_size = [&](size_t size, const char* what) {
         if (size != 0 && size != n) {
@@ -837,7 +893,11 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
             }
         }
     }
+    return emits;
+}
 
+std::string ply_header(const PointSet& points, bool binary, bool emits) {
+    const size_t n = points.size();
     std::string header = "ply\nformat ";
     header += binary ? "binary_little_endian" : "ascii";
     header += " 1.0\ncomment written by vmap\nelement vertex " + std::to_string(n) + "\n";
@@ -853,68 +913,85 @@ void write_ply(const std::string& path, const PointSet& points, bool binary) {
             "property float emission_b\n";
     }
     header += "end_header\n";
+    return header;
+}
 
+// Point i's columns in the binary (little-endian) encoding.
+void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
+    const Vec3 p = points.positions[i];
+    put_le(chunk, p.x);
+    put_le(chunk, p.y);
+    put_le(chunk, p.z);
+    if (points.has_normals()) {
+        const Vec3 q = points.normals[i];
+        put_le(chunk, q.x);
+        put_le(chunk, q.y);
+        put_le(chunk, q.z);
+    }
+    if (points.has_colors()) {
+        const Vec3 c = points.colors[i];
+        chunk += static_cast<char>(colour_byte(c.x));
+        chunk += static_cast<char>(colour_byte(c.y));
+        chunk += static_cast<char>(colour_byte(c.z));
+    }
+    if (points.has_radii()) put_le(chunk, points.radii[i]);
+    if (emits) {
+        put_le(chunk, points.emission[i].x);
+        put_le(chunk, points.emission[i].y);
+        put_le(chunk, points.emission[i].z);
+    }
+}
+
+// Point i's line in the ASCII encoding.
+void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
+    const Vec3 p = points.positions[i];
+    put_text(chunk, p.x);
+    chunk += ' ';
+    put_text(chunk, p.y);
+    chunk += ' ';
+    put_text(chunk, p.z);
+    if (points.has_normals()) {
+        const Vec3 q = points.normals[i];
+        for (float f : {q.x, q.y, q.z}) {
+            chunk += ' ';
+            put_text(chunk, f);
+        }
+    }
+    if (points.has_colors()) {
+        const Vec3 c = points.colors[i];
+        for (float channel : {c.x, c.y, c.z}) {
+            chunk += ' ';
+            chunk += std::to_string(colour_byte(channel));
+        }
+    }
+    if (points.has_radii()) {
+        chunk += ' ';
+        put_text(chunk, points.radii[i]);
+    }
+    if (emits) {
+        const Vec3 e = points.emission[i];
+        for (float f : {e.x, e.y, e.z}) {
+            chunk += ' ';
+            put_text(chunk, f);
+        }
+    }
+    chunk += '\n';
+}
+
+}  // namespace
+
+void write_ply(const std::string& path, const PointSet& points, bool binary) {
+    const bool emits = check_writable(path, points);
     io::AtomicFile file(path);
-    file.write(header);
+    file.write(ply_header(points, binary, emits));
     std::string chunk;
     constexpr size_t kChunk = 1 << 20;
     chunk.reserve(kChunk + 256);
-    for (size_t i = 0; i < n; ++i) {
-        const Vec3 p = points.positions[i];
+    for (size_t i = 0; i < points.size(); ++i) {
         if (binary) {
-            put_le(chunk, p.x);
-            put_le(chunk, p.y);
-            put_le(chunk, p.z);
-            if (points.has_normals()) {
-                const Vec3 q = points.normals[i];
-                put_le(chunk, q.x);
-                put_le(chunk, q.y);
-                put_le(chunk, q.z);
-            }
-            if (points.has_colors()) {
-                const Vec3 c = points.colors[i];
-                chunk += static_cast<char>(colour_byte(c.x));
-                chunk += static_cast<char>(colour_byte(c.y));
-                chunk += static_cast<char>(colour_byte(c.z));
-            }
-            if (points.has_radii()) put_le(chunk, points.radii[i]);
-            if (emits) {
-                put_le(chunk, points.emission[i].x);
-                put_le(chunk, points.emission[i].y);
-                put_le(chunk, points.emission[i].z);
-            }
+            put_binary_point(chunk, points, i, emits);
         } else {
-            put_text(chunk, p.x);
-            chunk += ' ';
-            put_text(chunk, p.y);
-            chunk += ' ';
-            put_text(chunk, p.z);
-            if (points.has_normals()) {
-                const Vec3 q = points.normals[i];
-                for (float f : {q.x, q.y, q.z}) {
-                    chunk += ' ';
-                    put_text(chunk, f);
-                }
-            }
-            if (points.has_colors()) {
-                const Vec3 c = points.colors[i];
-                for (float channel : {c.x, c.y, c.z}) {
-                    chunk += ' ';
-                    chunk += std::to_string(colour_byte(channel));
-                }
-            }
-            if (points.has_radii()) {
-                chunk += ' ';
-                put_text(chunk, points.radii[i]);
-            }
-            if (emits) {
-                const Vec3 e = points.emission[i];
-                for (float f : {e.x, e.y, e.z}) {
-                    chunk += ' ';
-                    put_text(chunk, f);
-                }
-            }
-            chunk += '\n';
+            put_text_point(chunk, points, i, emits);
         }
         if (chunk.size() >= kChunk) {
             file.write(chunk);

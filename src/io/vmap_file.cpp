@@ -201,13 +201,30 @@ struct Reader {
         copy_bytes(reinterpret_cast<uint8_t*>(v.data()), p, n * sizeof(T));
         p += n * sizeof(T);
     }
+    // Enters the section tagged `tag` (4 characters); returns where it ends.
+    const uint8_t* begin_section(const char* tag) {
+        section = tag;
+        char got[4];
+        if (size_t(end - p) < 12) fail("missing");
+        std::memcpy(got, p, 4);
+        if (std::memcmp(got, tag, 4) != 0)
+            fail(fmt::format("expected here, found '{}'", std::string(got, 4)));
+        p += 4;
+        const uint64_t len = get<uint64_t>();
+        if (len > uint64_t(end - p)) fail("truncated");
+        return p + len;
+    }
+    void end_section(const uint8_t* e) const {
+        if (p != e) fail("length does not match its contents");
+    }
 };
 
 }  // namespace
 
-void save_vmap(const std::string& path, const VisibilityMap& vm) {
-    vm.require_links(path.c_str());
-    Writer w;
+namespace {
+
+// The payload: the five sections, as pieces that point into vm's arrays (or into w's own).
+void write_payload(Writer& w, const VisibilityMap& vm) {
     const Octree& t = vm.octree();
     const PointSet& ps = vm.points();
     Writer::Mark s = w.begin("PARM");
@@ -248,9 +265,13 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     w.vec(vm.link_offsets());
     w.vec(vm.link_targets());
     w.end(s);
-
     w.finish();
+}
 
+// The header (magic, version, payload size and checksum), then the payload, through an
+// AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at their offsets,
+// which the page cache takes several times faster than one stream.
+void write_file(const std::string& path, const Writer& w) {
     std::vector<uint8_t> head;
     head.insert(head.end(), kMagic, kMagic + 8);
     auto put = [&](auto v) {
@@ -262,8 +283,6 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     put(uint64_t(w.size));
     put(pieces_hash(w.pieces, w.size));
 
-    // Through an AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at
-    // their offsets, which the page cache takes several times faster than one stream.
     struct Chunk {
         const uint8_t* p;
         size_t n;
@@ -288,6 +307,15 @@ void save_vmap(const std::string& path, const VisibilityMap& vm) {
     });
     if (err.load() != 0) file.fail(err.load());
     file.commit();
+}
+
+}  // namespace
+
+void save_vmap(const std::string& path, const VisibilityMap& vm) {
+    vm.require_links(path.c_str());
+    Writer w;
+    write_payload(w, vm);
+    write_file(path, w);
 }
 
 namespace {
@@ -336,16 +364,21 @@ VisibilityMap load_vmap(const std::string& path) {
     if (!std::filesystem::is_regular_file(path, ec))
         throw Error(fmt::format("{}: not a regular file", path));
     if (mpi::is_shard_index(path)) return mpi::load_sharded(path);  // src/mpi/shard_file.h
-    const MappedFile data(path);
-    const uint64_t size = data.size();
+    return detail::load_vmap_file(path);
+}
+
+namespace {
+
+// The header: magic, version, payload size and checksum against the file's bytes.
+void check_header(const std::string& path, const uint8_t* data, uint64_t size) {
     if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));
-    if (std::memcmp(data.data(), kMagic, 8) != 0)
+    if (std::memcmp(data, kMagic, 8) != 0)
         throw Error(fmt::format("{}: header: not a .vmap file (bad magic)", path));
     uint32_t version;
     uint64_t payload, sum;
-    std::memcpy(&version, data.data() + 8, 4);
-    std::memcpy(&payload, data.data() + 16, 8);
-    std::memcpy(&sum, data.data() + 24, 8);
+    std::memcpy(&version, data + 8, 4);
+    std::memcpy(&payload, data + 16, 8);
+    std::memcpy(&sum, data + 24, 8);
     if (version != kVersion)
         throw Error(fmt::format(
             "{}: header: version {} not supported (this vmap reads version {}); rebuild it with "
@@ -354,38 +387,23 @@ VisibilityMap load_vmap(const std::string& path) {
     if (payload != size - kHeader)
         throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}",
                                 path, payload, size - kHeader));
-    if (detail::payload_hash(data.data() + kHeader, payload) != sum)
+    if (detail::payload_hash(data + kHeader, payload) != sum)
         throw Error(fmt::format("{}: checksum mismatch: the file is corrupt", path));
+}
 
-    VisibilityMap vm;
-    detail::MapData& d = detail::MapAccess::data(vm);
-    Reader r{data.data() + kHeader, data.data() + size, path, "header"};
-    auto section = [&](const char* tag) {
-        r.section = tag;
-        char got[4];
-        if (size_t(r.end - r.p) < 12) r.fail("missing");
-        std::memcpy(got, r.p, 4);
-        if (std::memcmp(got, tag, 4) != 0)
-            r.fail(fmt::format("expected here, found '{}'", std::string(got, 4)));
-        r.p += 4;
-        const uint64_t len = r.get<uint64_t>();
-        if (len > uint64_t(r.end - r.p)) r.fail("truncated");
-        return r.p + len;
-    };
-    auto finish = [&](const uint8_t* e) {
-        if (r.p != e) r.fail("length does not match its contents");
-    };
-
-    const uint8_t* e = section("PARM");
+// PARM, PNTS and ORDR: the parameters, the points and their order (a permutation, checked);
+// returns the number of points.
+uint64_t read_points(Reader& r, detail::MapData& d) {
+    const uint8_t* e = r.begin_section("PARM");
     d.octree_params.max_height = r.get<int32_t>();
     d.octree_params.leaf_points = r.get<int32_t>();
     d.visibility_params.K = r.get<int32_t>();
     d.visibility_params.eps = r.get<float>();
     d.visibility_params.facing_tol = r.get<float>();
     d.visibility_params.parallel_tol = r.get<float>();
-    finish(e);
+    r.end_section(e);
 
-    e = section("PNTS");
+    e = r.begin_section("PNTS");
     const uint64_t n = r.get<uint64_t>();
     const uint8_t mask = r.get<uint8_t>();
     PointSet& ps = d.points;
@@ -394,36 +412,22 @@ VisibilityMap load_vmap(const std::string& path) {
     if (mask & 1) r.vec(ps.colors, n);
     if (mask & 2) r.vec(ps.radii, n);
     if (mask & 4) r.vec(ps.emission, n);
-    finish(e);
+    r.end_section(e);
 
-    e = section("ORDR");
+    e = r.begin_section("ORDR");
     r.vec(d.order, n);
-    finish(e);
+    r.end_section(e);
     d.inverse.assign(n, UINT32_MAX);
     for (uint32_t k = 0; k < n; ++k) {
         if (d.order[k] >= n || d.inverse[d.order[k]] != UINT32_MAX) r.fail("not a permutation");
         d.inverse[d.order[k]] = k;
     }
+    return n;
+}
 
-    e = section("TREE");
-    detail::OctreeData& t = detail::OctreeAccess::data(d.octree);
-    const int32_t nn = r.get<int32_t>(), nl = r.get<int32_t>();
-    if (nn < 1 || nl < 1 || nl > nn) r.fail(fmt::format("bad counts: {} nodes, {} leaves", nn, nl));
-    t.params = d.octree_params;
-    t.root_min = r.get<Vec3>();
-    t.root_size = r.get<float>();
-    r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn),
-        r.vec(t.parent, nn);
-    r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
-    r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
-    r.vec(t.leaf_splat, nl);
-    t.scale = r.get<double>();
-    int exponent = 0;
-    if (!(t.scale > 0) || !std::isfinite(t.scale) || std::frexp(t.scale, &exponent) != 0.5)
-        r.fail(fmt::format("scale {} is not a power of two", t.scale));
-    finish(e);
-    // Structure checks, so that even a well-checksummed but inconsistent file cannot make a
-    // query index out of bounds.
+// Structure checks, so that even a well-checksummed but inconsistent file cannot make a query
+// index out of bounds.
+void check_tree(Reader& r, const detail::OctreeData& t, int32_t nn, int32_t nl, uint64_t n) {
     for (int32_t i = 0; i < nn; ++i) {
         const int want_level =
             i == 0 ? 0 : (t.parent[i] >= 0 && t.parent[i] < i ? t.level[t.parent[i]] + 1 : -1);
@@ -439,10 +443,36 @@ VisibilityMap load_vmap(const std::string& path) {
     for (int32_t l = 0; l < nl; ++l)
         if (t.leaf_node[l] < 0 || t.leaf_node[l] >= nn || t.node_leaf[t.leaf_node[l]] != l)
             r.fail(fmt::format("leaf {} is inconsistent", l));
+}
 
+// TREE: the octree's arrays, checked; returns the number of nodes.
+int32_t read_tree(Reader& r, detail::MapData& d, uint64_t n) {
+    const uint8_t* e = r.begin_section("TREE");
+    detail::OctreeData& t = detail::OctreeAccess::data(d.octree);
+    const int32_t nn = r.get<int32_t>(), nl = r.get<int32_t>();
+    if (nn < 1 || nl < 1 || nl > nn) r.fail(fmt::format("bad counts: {} nodes, {} leaves", nn, nl));
+    t.params = d.octree_params;
+    t.root_min = r.get<Vec3>();
+    t.root_size = r.get<float>();
+    r.vec(t.spheres, nn), r.vec(t.boxes, nn), r.vec(t.half_size, nn), r.vec(t.skip, nn),
+        r.vec(t.parent, nn);
+    r.vec(t.level, nn), r.vec(t.node_leaf, nn), r.vec(t.point_begin, nn), r.vec(t.point_end, nn);
+    r.vec(t.leaf_begin, nn), r.vec(t.leaf_end, nn), r.vec(t.leaf_node, nl), r.vec(t.leaves, nl);
+    r.vec(t.leaf_splat, nl);
+    t.scale = r.get<double>();
+    int exponent = 0;
+    if (!(t.scale > 0) || !std::isfinite(t.scale) || std::frexp(t.scale, &exponent) != 0.5)
+        r.fail(fmt::format("scale {} is not a power of two", t.scale));
+    r.end_section(e);
+    check_tree(r, t, nn, nl, n);
     detail::OctreeAccess::pack_walk(d.octree);
+    return nn;
+}
 
-    e = section("LINK");
+// LINK: the offsets (non-decreasing from 0) and the targets (node ids).
+void read_links(Reader& r, VisibilityMap& vm, int32_t nn) {
+    detail::MapData& d = detail::MapAccess::data(vm);
+    const uint8_t* e = r.begin_section("LINK");
     r.vec(d.link_offsets, uint64_t(nn) + 1);
     if (d.link_offsets[0] != 0) r.fail("bad offsets");
     for (int32_t i = 0; i < nn; ++i)
@@ -455,7 +485,24 @@ VisibilityMap load_vmap(const std::string& path) {
     r.p += num_targets * sizeof(int32_t);
     for (int32_t x : vm.link_targets())
         if (x < 0 || x >= nn) r.fail("link target out of range");
-    finish(e);
+    r.end_section(e);
+}
+
+}  // namespace
+
+VisibilityMap detail::load_vmap_file(const std::string& path) {
+    std::error_code ec;
+    if (!std::filesystem::is_regular_file(path, ec))
+        throw Error(fmt::format("{}: not a regular file (or no such file)", path));
+    const MappedFile data(path);
+    const uint64_t size = data.size();
+    check_header(path, data.data(), size);
+    VisibilityMap vm;
+    detail::MapData& d = detail::MapAccess::data(vm);
+    Reader r{data.data() + kHeader, data.data() + size, path, "header"};
+    const uint64_t n = read_points(r, d);
+    const int32_t nn = read_tree(r, d, n);
+    read_links(r, vm, nn);
     if (r.p != r.end) throw Error(fmt::format("{}: trailing bytes after the last section", path));
     return vm;
 }

@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <charconv>
+#include <climits>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
@@ -26,9 +28,6 @@ uint64_t hash_of(const V& v) {
     return detail::payload_hash(reinterpret_cast<const uint8_t*>(v.data()),
                                 v.size() * sizeof(v[0]));
 }
-uint64_t range_hash(const std::vector<uint64_t>& offsets, const std::vector<int32_t>& targets) {
-    return hash_of(offsets) * 0x9e3779b97f4a7c15ULL ^ hash_of(targets);
-}
 
 std::string folder_of(const std::string& path) {
     const fs::path d = fs::path(path).parent_path();
@@ -49,16 +48,21 @@ T get(const uint8_t*& p) {
 }
 
 std::vector<uint8_t> read_all(const std::string& path, const std::string& what) {
+    std::error_code ec;
+    if (!fs::is_regular_file(path, ec))
+        throw Error(fmt::format("{}: cannot open {} (no such regular file)", path, what));
     std::ifstream in(path, std::ios::binary | std::ios::ate);
-    if (!in) throw Error(fmt::format("{}: cannot open {}", path, what));
-    std::vector<uint8_t> data(static_cast<size_t>(in.tellg()));
+    const std::streamoff size = in ? std::streamoff(in.tellg()) : -1;
+    if (size < 0) throw Error(fmt::format("{}: cannot open {}", path, what));
+    std::vector<uint8_t> data(static_cast<size_t>(size));
     in.seekg(0);
     if (!in.read(reinterpret_cast<char*>(data.data()), std::streamsize(data.size())))
         throw Error(fmt::format("{}: read error", path));
     return data;
 }
 
-// One shard's arrays, checked against its entry in the index, appended to vm's.
+// One shard's arrays, checked against its entry in the index (whose range load_sharded has
+// checked to lie in 0..nodes), appended to the map's.
 void read_shard(const std::string& path, const ShardInfo& want, int k, detail::MapData& map,
                 std::vector<int32_t>& all) {
     const std::vector<uint8_t> d = read_all(path, fmt::format("shard {}", k));
@@ -76,15 +80,17 @@ void read_shard(const std::string& path, const ShardInfo& want, int k, detail::M
     if (version != kVersion)
         throw Error(fmt::format("{}: shard version {} not supported", path, version));
     if (kk != uint32_t(k) || n0 != want.n0 || n1 != want.n1 || ends != want.ends ||
-        sum != want.checksum || n1 < n0)
+        sum != want.checksum)
         throw Error(fmt::format("{}: header does not match the index (from another build?)", path));
-    if (d.size() != kHead + (size_t(n1 - n0) + 1) * 8 + ends * 4)
+    // n0 <= n1 here (the index's range); the sizes are compared without overflow.
+    const size_t offsets = size_t(n1 - n0) + 1, rest = d.size() - kHead;
+    if (rest / 8 < offsets || (rest - offsets * 8) % 4 != 0 || (rest - offsets * 8) / 4 != ends)
         throw Error(fmt::format("{}: length does not match its header", path));
-    std::vector<uint64_t> off(size_t(n1 - n0) + 1);
+    std::vector<uint64_t> off(offsets);
     std::vector<int32_t> tg(ends);
     std::memcpy(off.data(), p, off.size() * 8);
-    std::memcpy(tg.data(), p + off.size() * 8, ends * 4);
-    if (range_hash(off, tg) != sum)
+    if (ends) std::memcpy(tg.data(), p + off.size() * 8, ends * 4);  // no links: tg.data() null
+    if (shard_checksum(off, tg) != sum)
         throw Error(fmt::format("{}: checksum mismatch: the shard is corrupt", path));
     const uint64_t base = all.size();
     bool ok = off[0] == 0 && off.back() == ends;
@@ -94,7 +100,89 @@ void read_shard(const std::string& path, const ShardInfo& want, int k, detail::M
     all.insert(all.end(), tg.begin(), tg.end());
 }
 
+// A non-negative integer of the index in [lo, hi] (a float, a string or a value out of range
+// is an error naming the field).
+uint64_t int_value(const nlohmann::json& v, const std::string& name, uint64_t lo, uint64_t hi,
+                   const std::string& where) {
+    if (!v.is_number_integer())
+        throw Error(fmt::format("{}: \"{}\": an integer expected, found {}", where, name, v.dump()));
+    const bool negative = !v.is_number_unsigned() && v.get<int64_t>() < 0;
+    if (negative || v.get<uint64_t>() < lo || v.get<uint64_t>() > hi)
+        throw Error(
+            fmt::format("{}: \"{}\": {} is outside [{}, {}]", where, name, v.dump(), lo, hi));
+    return v.get<uint64_t>();
+}
+uint64_t int_field(const nlohmann::json& j, const char* key, uint64_t lo, uint64_t hi,
+                   const std::string& where) {
+    return int_value(j.at(key), key, lo, hi, where);
+}
+
+// A file named in the index: a plain name in the index's folder (what write_index writes).
+std::string file_field(const nlohmann::json& j, const char* key, const std::string& where) {
+    const std::string name = j.at(key).get<std::string>();
+    if (name.empty() || name == "." || name == ".." || name.find('/') != std::string::npos ||
+        name.find('\0') != std::string::npos)
+        throw Error(fmt::format("{}: \"{}\": \"{}\" is not a file name in the index's folder",
+                                where, key, name));
+    return name;
+}
+
+uint64_t checksum_field(const nlohmann::json& j, const std::string& where) {
+    const std::string text = j.at("checksum").get<std::string>();
+    uint64_t v = 0;
+    const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v, 16);
+    if (text.size() != 16 || ec != std::errc() || end != text.data() + text.size())
+        throw Error(fmt::format("{}: \"checksum\": \"{}\" is not 16 hex digits", where, text));
+    return v;
+}
+
+struct Index {
+    std::string base;
+    int32_t nodes = 0;
+    std::vector<ShardInfo> shards;
+};
+
+// The index's fields, each checked: the shards' ranges follow each other from 0 to `nodes`.
+Index read_index(const std::string& path) {
+    const nlohmann::json j = io::parse_json_file(path);
+    Index x;
+    try {
+        if (int_field(j, "version", 0, UINT32_MAX, path) != kVersion)
+            throw Error(fmt::format("{}: shard index version {} not supported", path,
+                                    j.at("version").dump()));
+        x.base = file_field(j, "base", path);
+        x.nodes = int32_t(int_field(j, "nodes", 1, INT32_MAX, path));
+        int32_t next = 0;
+        for (const auto& s : j.at("shards")) {
+            const std::string where = fmt::format("{}: shard {}", path, x.shards.size());
+            const nlohmann::json& r = s.at("nodes");
+            if (!r.is_array() || r.size() != 2)
+                throw Error(fmt::format("{}: \"nodes\": [first, end] expected", where));
+            const uint64_t nodes = uint64_t(x.nodes);
+            ShardInfo info{file_field(s, "file", where),
+                           int32_t(int_value(r.at(0), "nodes", 0, nodes, where)),
+                           int32_t(int_value(r.at(1), "nodes", 0, nodes, where)),
+                           int_field(s, "ends", 0, UINT64_MAX, where),
+                           int_field(s, "bytes", 0, UINT64_MAX, where), checksum_field(s, where)};
+            if (info.n0 != next || info.n1 < info.n0)
+                throw Error(fmt::format("{}: nodes [{}, {}]: [{}, n) expected", where, info.n0,
+                                        info.n1, next));
+            next = info.n1;
+            x.shards.push_back(std::move(info));
+        }
+        if (next != x.nodes)
+            throw Error(fmt::format("{}: the shards cover nodes 0..{} of {}", path, next, x.nodes));
+    } catch (const nlohmann::json::exception& e) {
+        throw Error(fmt::format("{}: shard index: {}", path, e.what()));
+    }
+    return x;
+}
+
 }  // namespace
+
+uint64_t shard_checksum(const std::vector<uint64_t>& offsets, const std::vector<int32_t>& targets) {
+    return hash_of(offsets) * 0x9e3779b97f4a7c15ULL ^ hash_of(targets);
+}
 
 std::string shard_name(const std::string& index, int k, int shards) {
     return fmt::format("{}.shard-{}-of-{}", index, k, shards);
@@ -106,7 +194,7 @@ std::unique_ptr<io::AtomicFile> write_shard(const std::string& path, int k, cons
     std::vector<uint8_t> head(kMagic, kMagic + 8);
     info.file = fs::path(path).filename().string();
     info.n0 = r.n0, info.n1 = r.n1, info.ends = r.targets.size();
-    info.checksum = range_hash(r.offsets, r.targets);
+    info.checksum = shard_checksum(r.offsets, r.targets);
     put(head, kVersion), put(head, uint32_t(k)), put(head, r.n0), put(head, r.n1);
     put(head, info.ends), put(head, info.checksum);
     auto f = std::make_unique<io::AtomicFile>(path);
@@ -156,44 +244,19 @@ bool is_shard_index(const std::string& path) {
 }
 
 VisibilityMap load_sharded(const std::string& path) {
-    const nlohmann::json j = io::parse_json_file(path);
-    std::vector<ShardInfo> shards;
-    int32_t nodes = 0;
-    std::string base;
-    try {
-        if (j.at("version").get<int>() != int(kVersion))
-            throw Error(fmt::format("{}: shard index version {} not supported", path,
-                                    j.at("version").get<int>()));
-        base = j.at("base").get<std::string>();
-        nodes = j.at("nodes").get<int32_t>();
-        for (const auto& s : j.at("shards"))
-            shards.push_back({s.at("file").get<std::string>(), s.at("nodes").at(0).get<int32_t>(),
-                              s.at("nodes").at(1).get<int32_t>(), s.at("ends").get<uint64_t>(),
-                              s.at("bytes").get<uint64_t>(),
-                              std::stoull(s.at("checksum").get<std::string>(), nullptr, 16)});
-    } catch (const nlohmann::json::exception& e) {
-        throw Error(fmt::format("{}: shard index: {}", path, e.what()));
-    }
+    const Index x = read_index(path);
     const std::string dir = folder_of(path);
-    VisibilityMap vm = load_vmap((fs::path(dir) / base).string());
-    if (vm.octree().num_nodes() != nodes || vm.num_links() != 0)
+    VisibilityMap vm = detail::load_vmap_file((fs::path(dir) / x.base).string());
+    if (vm.octree().num_nodes() != x.nodes || vm.num_links() != 0)
         throw Error(fmt::format("{}: base {} does not match the index ({} nodes, {} links)", path,
-                                base, vm.octree().num_nodes(), vm.num_links()));
+                                x.base, vm.octree().num_nodes(), vm.num_links()));
     detail::MapData& d = detail::MapAccess::data(vm);
     std::vector<int32_t> all;
-    int32_t next = 0;
-    for (size_t k = 0; k < shards.size(); ++k) {
-        if (shards[k].n0 != next)
-            throw Error(fmt::format("{}: shard {} starts at node {}, {} expected", path, k,
-                                    shards[k].n0, next));
-        read_shard((fs::path(dir) / shards[k].file).string(), shards[k], int(k), d, all);
-        next = shards[k].n1;
-    }
-    if (next != nodes)
-        throw Error(fmt::format("{}: the shards cover nodes 0..{} of {}", path, next, nodes));
+    for (size_t k = 0; k < x.shards.size(); ++k)
+        read_shard((fs::path(dir) / x.shards[k].file).string(), x.shards[k], int(k), d, all);
     std::copy(all.begin(), all.end(), detail::allocate_link_targets(d, all.size()));
-    for (int32_t x : vm.link_targets())
-        if (x < 0 || x >= nodes)
+    for (int32_t t : vm.link_targets())
+        if (t < 0 || t >= x.nodes)
             throw Error(fmt::format("{}: a link target is out of range", path));
     return vm;
 }

@@ -28,6 +28,9 @@ struct ShardInfo {
     uint64_t ends = 0, bytes = 0, checksum = 0;
 };
 
+// The checksum of a shard's arrays, as its header and the index store it.
+uint64_t shard_checksum(const std::vector<uint64_t>& offsets, const std::vector<int32_t>& targets);
+
 std::string shard_name(const std::string& index, int k, int shards);
 std::string base_name(const std::string& index);
 

@@ -1,12 +1,11 @@
 // One process's part of a shared build (src/mpi/share.h).
 #include "mpi/share.h"
 
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
-
 #include <algorithm>
 #include <chrono>
 #include <unordered_set>
+
+#include "util/parallel.h"
 
 namespace vmap::mpi {
 namespace {
@@ -125,13 +124,13 @@ LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1)
         if (in(a)) keys.push_back(uint64_t(uint32_t(a)) << 32 | uint32_t(b));
         if (in(b)) keys.push_back(uint64_t(uint32_t(b)) << 32 | uint32_t(a));
     }
-    tbb::parallel_sort(keys.begin(), keys.end());
+    parallel_sort(keys.begin(), keys.end());
     LinkRange r;
     r.n0 = n0, r.n1 = n1;
     r.offsets.assign(size_t(n1 - n0) + 1, 0);
     r.targets.resize(keys.size());
-    tbb::parallel_for(size_t(0), keys.size(),
-                      [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
+    parallel_for(size_t(0), keys.size(),
+                 [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
     for (uint64_t k : keys) r.offsets[size_t(int32_t(k >> 32) - n0) + 1]++;
     for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
     return r;

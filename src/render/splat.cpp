@@ -160,9 +160,9 @@ Camera default_camera(const PointSet& points) {
     return cam;
 }
 
-Image render_points(const PointSet& points, std::span<const Vec3> colors, const Camera& cam,
-                    const RenderOptions& opt, RenderStats* stats) {
-    check_options(opt);
+namespace {
+
+void check_inputs(const PointSet& points, std::span<const Vec3> colors) {
     const size_t n = points.size();
     if (n == 0) throw Error("render: the point set is empty");
     if (colors.size() != n)
@@ -171,68 +171,83 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
         throw Error(fmt::format("render: {} normals for {} points", points.normals.size(), n));
     if (points.has_radii() && points.radii.size() != n)
         throw Error(fmt::format("render: {} radii for {} points", points.radii.size(), n));
+}
 
-    const int s = opt.supersample;
-    const int W = opt.width * s, H = opt.height * s;
-    const Frame fr(cam, W, H);
-    const float near = 1e-6f;
+constexpr float kNear = 1e-6f;
 
-    // 1. Per point: shade, project, bound on screen.
-    std::vector<Disc> discs(n);
-    parallel_for_range(n, size_t(4096), [&](size_t i0, size_t i1) {
-        for (size_t i = i0; i != i1; ++i) {
-            Disc& d = discs[i];
-            d.c = points.positions[i];
-            const Vec3 v = d.c - fr.eye;
-            const float z = dot(v, fr.f);
-            const float dist = length(v);
-            if (!(z > near) || !is_finite(d.c)) continue;  // behind the eye: x1 < x0 skips it
-            const Vec3 view = v / dist;
-            Vec3 nrm = points.has_normals() ? points.normals[i] : -view;
-            if (!(length2(nrm) > 0) || !is_finite(nrm)) nrm = -view;
-            d.n = nrm;
-            // Radius in world units; without radii, one (output) pixel at this depth.
-            float R = points.has_radii() ? points.radii[i] * opt.splat_scale
-                                         : opt.splat_scale * float(s) * z / fr.fpx;
-            if (!(R > 0) || !std::isfinite(R)) R = float(s) * z / fr.fpx;
-            if (z - R <= near) continue;  // straddles the eye plane
-            d.r2 = R * R;
-            d.band = 2 * R;
-            const Vec3 c = colors[i];
-            const float shade =
-                opt.shade ? opt.ambient + (1 - opt.ambient) * std::fabs(dot(nrm, view)) : 1.f;
-            d.color = c * shade;
-            // Screen bounds: the disc lies in the sphere of radius R about c, whose silhouette
-            // spans, per screen axis, the two planes through the eye tangent to it:
-            // (a z -+ R sqrt(a^2 + z^2 - R^2)) / (z^2 - R^2) for view coordinate a (z > R here).
-            // A sample centre (x + 0.5) inside [lo, hi] has x in [floor(lo), floor(hi)].
-            const float vx = dot(v, fr.r), vy = dot(v, fr.u);
-            const float den = z * z - d.r2;
-            const float ex = R * std::sqrt(vx * vx + z * z - d.r2);
-            const float ey = R * std::sqrt(vy * vy + z * z - d.r2);
-            const float lx = fr.cx + fr.fpx * (vx * z - ex) / den;
-            const float hx = fr.cx + fr.fpx * (vx * z + ex) / den;
-            const float ly = fr.cy - fr.fpx * (vy * z + ey) / den;
-            const float hy = fr.cy - fr.fpx * (vy * z - ey) / den;
-            if (!(std::isfinite(lx) && std::isfinite(hx) && std::isfinite(ly) && std::isfinite(hy)))
-                continue;
-            const float fx0 = std::max(std::floor(lx), 0.f),
-                        fx1 = std::min(std::floor(hx), float(W - 1));
-            const float fy0 = std::max(std::floor(ly), 0.f),
-                        fy1 = std::min(std::floor(hy), float(H - 1));
-            if (fx0 > fx1 || fy0 > fy1) continue;
-            d.x0 = int(fx0);
-            d.x1 = int(fx1);
-            d.y0 = int(fy0);
-            d.y1 = int(fy1);
-        }
-    });
+// The supersampled image: s x s samples per output pixel, W x H in all.
+struct Raster {
+    Frame fr;
+    int s, W, H;
+};
 
-    // 2. Bin discs into tiles of kTile x kTile output pixels (counting sort, serial: cheap).
-    constexpr int kTile = 24;
-    const int T = kTile * s;  // tile edge in supersampled pixels
-    const int tw = (W + T - 1) / T, th = (H + T - 1) / T;
-    std::vector<uint64_t> start(size_t(tw) * th + 1, 0);
+// Point i shaded, projected and bounded on screen (x1 < x0 when it shows nowhere).
+Disc make_disc(const PointSet& points, Vec3 color, size_t i, const Raster& ra,
+               const RenderOptions& opt) {
+    const Frame& fr = ra.fr;
+    const int s = ra.s, W = ra.W, H = ra.H;
+    const float near = kNear;
+    Disc d;
+    d.c = points.positions[i];
+    const Vec3 v = d.c - fr.eye;
+    const float z = dot(v, fr.f);
+    const float dist = length(v);
+    if (!(z > near) || !is_finite(d.c)) return d;  // behind the eye: x1 < x0 skips it
+    const Vec3 view = v / dist;
+    Vec3 nrm = points.has_normals() ? points.normals[i] : -view;
+    if (!(length2(nrm) > 0) || !is_finite(nrm)) nrm = -view;
+    d.n = nrm;
+    // Radius in world units; without radii, one (output) pixel at this depth.
+    float R = points.has_radii() ? points.radii[i] * opt.splat_scale
+                                 : opt.splat_scale * float(s) * z / fr.fpx;
+    if (!(R > 0) || !std::isfinite(R)) R = float(s) * z / fr.fpx;
+    if (z - R <= near) return d;  // straddles the eye plane
+    d.r2 = R * R;
+    d.band = 2 * R;
+    const Vec3 c = color;
+    const float shade =
+        opt.shade ? opt.ambient + (1 - opt.ambient) * std::fabs(dot(nrm, view)) : 1.f;
+    d.color = c * shade;
+    // Screen bounds: the disc lies in the sphere of radius R about c, whose silhouette
+    // spans, per screen axis, the two planes through the eye tangent to it:
+    // (a z -+ R sqrt(a^2 + z^2 - R^2)) / (z^2 - R^2) for view coordinate a (z > R here).
+    // A sample centre (x + 0.5) inside [lo, hi] has x in [floor(lo), floor(hi)].
+    const float vx = dot(v, fr.r), vy = dot(v, fr.u);
+    const float den = z * z - d.r2;
+    const float ex = R * std::sqrt(vx * vx + z * z - d.r2);
+    const float ey = R * std::sqrt(vy * vy + z * z - d.r2);
+    const float lx = fr.cx + fr.fpx * (vx * z - ex) / den;
+    const float hx = fr.cx + fr.fpx * (vx * z + ex) / den;
+    const float ly = fr.cy - fr.fpx * (vy * z + ey) / den;
+    const float hy = fr.cy - fr.fpx * (vy * z - ey) / den;
+    if (!(std::isfinite(lx) && std::isfinite(hx) && std::isfinite(ly) && std::isfinite(hy)))
+        return d;
+    const float fx0 = std::max(std::floor(lx), 0.f), fx1 = std::min(std::floor(hx), float(W - 1));
+    const float fy0 = std::max(std::floor(ly), 0.f), fy1 = std::min(std::floor(hy), float(H - 1));
+    if (fx0 > fx1 || fy0 > fy1) return d;
+    d.x0 = int(fx0);
+    d.x1 = int(fx1);
+    d.y0 = int(fy0);
+    d.y1 = int(fy1);
+    return d;
+}
+
+// Discs binned into tiles of kTile x kTile output pixels: tile k lists the discs whose screen
+// bounds touch it, list[start[k] .. start[k + 1]) (a counting sort, serial: cheap).
+struct Tiles {
+    static constexpr int kTile = 24;
+    int T = 0, tw = 0, th = 0;  // tile edge in supersampled pixels, tiles across and down
+    std::vector<uint64_t> start;
+    std::vector<uint32_t> list;
+};
+
+Tiles bin_discs(const std::vector<Disc>& discs, const Raster& ra) {
+    Tiles b;
+    const int T = b.T = Tiles::kTile * ra.s;
+    const int tw = b.tw = (ra.W + T - 1) / T;
+    b.th = (ra.H + T - 1) / T;
+    std::vector<uint64_t>& start = b.start;
+    start.assign(size_t(tw) * b.th + 1, 0);
     for (const Disc& d : discs)
         if (d.x1 >= d.x0)
             for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
@@ -246,107 +261,149 @@ Image render_points(const PointSet& points, std::span<const Vec3> colors, const 
             fmt::format("render: the splats cover {} tile cells (more than 1e9): the "
                         "camera is too close or the splats too large for this size",
                         start.back()));
-    std::vector<uint32_t> list(start.back());
-    {
-        std::vector<uint64_t> fill(start.begin(), start.end() - 1);
-        for (uint32_t i = 0; i < n; ++i) {
-            const Disc& d = discs[i];
-            if (d.x1 < d.x0) continue;
-            for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
-                for (int tx = d.x0 / T; tx <= d.x1 / T; ++tx)
-                    list[fill[size_t(ty) * tw + tx]++] = i;
-        }
+    b.list.resize(start.back());
+    std::vector<uint64_t> fill(start.begin(), start.end() - 1);
+    for (uint32_t i = 0; i < discs.size(); ++i) {
+        const Disc& d = discs[i];
+        if (d.x1 < d.x0) continue;
+        for (int ty = d.y0 / T; ty <= d.y1 / T; ++ty)
+            for (int tx = d.x0 / T; tx <= d.x1 / T; ++tx) b.list[fill[size_t(ty) * tw + tx]++] = i;
     }
+    return b;
+}
 
-    // 3. Tiles in parallel: nearest depth, then blend the fragments near it, then average the
-    //    supersamples into output pixels.
+// One tile's buffers, reused from tile to tile by a thread's chunk.
+struct TileScratch {
+    std::vector<float> zbuf, wsum;
+    std::vector<Vec3> acc;
+    std::vector<Fragment> frags;
+    explicit TileScratch(int T) : zbuf(size_t(T) * T), wsum(size_t(T) * T), acc(size_t(T) * T) {}
+};
+
+// Per output pixel of the image: the mean colour of its covered samples, and how many were.
+struct PixelMeans {
+    int width = 0;
+    std::vector<Vec3> mean;
+    std::vector<uint8_t> covered;
+};
+
+// Tile `tile`: the nearest depth per sample, then the fragments near it blended, then the
+// s x s samples averaged into output pixels. Returns the fragments found.
+uint64_t render_tile(int tile, const std::vector<Disc>& discs, const Tiles& tiles, const Raster& ra,
+                     const RenderOptions& opt, TileScratch& sc, PixelMeans& px) {
+    const Frame& fr = ra.fr;
+    const int s = ra.s, W = ra.W, H = ra.H, T = tiles.T, tw = tiles.tw;
+    const float near = kNear, inv_f = 1.f / fr.fpx;
+    std::vector<float>& zbuf = sc.zbuf;
+    std::vector<float>& wsum = sc.wsum;
+    std::vector<Vec3>& acc = sc.acc;
+    std::vector<Fragment>& frags = sc.frags;
+    const uint32_t* const list = tiles.list.data();
+    const std::vector<uint64_t>& start = tiles.start;
+    const int tx0 = (tile % tw) * T, ty0 = (tile / tw) * T;
+    const int tx1 = std::min(tx0 + T, W) - 1, ty1 = std::min(ty0 + T, H) - 1;
+    std::fill(zbuf.begin(), zbuf.end(), std::numeric_limits<float>::infinity());
+    std::fill(wsum.begin(), wsum.end(), 0.f);
+    std::fill(acc.begin(), acc.end(), Vec3{});
+    const uint32_t* ids = list + start[tile];
+    const uint64_t count = start[tile + 1] - start[tile];
+    // The ray of pixel (x, y) is eye + t dir(x, y), t = depth along the view axis;
+    // a disc is hit where t = (c - eye).n / dir.n lands within its radius of c.
+    auto for_fragments = [&](auto&& emit) {
+        for (uint32_t k = 0; k < count; ++k) {
+            const Disc& d = discs[ids[k]];
+            const int x0 = std::max(d.x0, tx0), x1 = std::min(d.x1, tx1);
+            const int y0 = std::max(d.y0, ty0), y1 = std::min(d.y1, ty1);
+            const Vec3 ce = d.c - fr.eye;
+            const float num = dot(ce, d.n);
+            const float fn = dot(fr.f, d.n), rn = dot(fr.r, d.n), un = dot(fr.u, d.n);
+            for (int y = y0; y <= y1; ++y) {
+                const float py = (fr.cy - (float(y) + 0.5f)) * inv_f;
+                for (int x = x0; x <= x1; ++x) {
+                    const float px = ((float(x) + 0.5f) - fr.cx) * inv_f;
+                    const float den = fn + px * rn + py * un;
+                    if (std::fabs(den) < 1e-7f) continue;  // edge-on
+                    const float t = num / den;
+                    if (!(t > near)) continue;
+                    const Vec3 dir = fr.f + fr.r * px + fr.u * py;
+                    const Vec3 off = dir * t - ce;
+                    const float q = length2(off);
+                    if (q >= d.r2) continue;
+                    emit(k, size_t(y - ty0) * T + (x - tx0), t, q);
+                }
+            }
+        }
+    };
+    // Pass 1 records every fragment (so pass 2 need not intersect again) and keeps the
+    // nearest depth per sample; pass 2 blends those within the band of it.
+    frags.clear();
+    for_fragments([&](uint32_t k, size_t p, float t, float q) {
+        zbuf[p] = std::min(zbuf[p], t);
+        frags.push_back({uint32_t(p), k, t, q});
+    });
+    const uint64_t found = frags.size();
+    for (const Fragment& f : frags) {
+        const Disc& d = discs[ids[f.k]];
+        if (f.t > zbuf[f.p] + d.band) continue;
+        const float w = 1.f - f.q / d.r2 + 1e-4f;  // falls to ~0 at the rim
+        acc[f.p] += d.color * w;
+        wsum[f.p] += w;
+    }
+    // Average s x s samples into each output pixel of the tile.
+    for (int oy = ty0 / s; oy <= ty1 / s; ++oy)
+        for (int ox = tx0 / s; ox <= tx1 / s; ++ox) {
+            Vec3 sum{};
+            int hit = 0;
+            for (int sy = 0; sy < s; ++sy)
+                for (int sx = 0; sx < s; ++sx) {
+                    const size_t p = size_t(oy * s + sy - ty0) * T + (ox * s + sx - tx0);
+                    if (wsum[p] > 0) {
+                        sum += acc[p] / wsum[p];
+                        ++hit;
+                    }
+                }
+            const size_t o = size_t(oy) * px.width + ox;
+            px.covered[o] = uint8_t(hit);
+            px.mean[o] = hit > 0 ? sum / float(hit) : opt.background;
+        }
+    return found;
+}
+
+}  // namespace
+
+Image render_points(const PointSet& points, std::span<const Vec3> colors, const Camera& cam,
+                    const RenderOptions& opt, RenderStats* stats) {
+    check_options(opt);
+    check_inputs(points, colors);
+    const int s = opt.supersample;
+    const Raster ra{Frame(cam, opt.width * s, opt.height * s), s, opt.width * s, opt.height * s};
+
+    // 1. Per point: shade, project, bound on screen.
+    const size_t n = points.size();
+    std::vector<Disc> discs(n);
+    parallel_for_range(n, size_t(4096), [&](size_t i0, size_t i1) {
+        for (size_t i = i0; i != i1; ++i) discs[i] = make_disc(points, colors[i], i, ra, opt);
+    });
+    // 2. Bin the discs into tiles.
+    const Tiles tiles = bin_discs(discs, ra);
+    // 3. Tiles in parallel, each into its output pixels.
     Image img;
     img.width = opt.width;
     img.height = opt.height;
     img.rgb.assign(size_t(img.width) * img.height * 3, 0);
-    const float inv_f = 1.f / fr.fpx;
-    // Per output pixel: the mean colour of its covered samples and how many were covered.
     if (opt.keep_linear) img.linear.assign(size_t(img.width) * img.height, Vec3{});
-    std::vector<Vec3> mean(size_t(img.width) * img.height);
-    std::vector<uint8_t> covered(size_t(img.width) * img.height, 0);
+    PixelMeans px{img.width, std::vector<Vec3>(size_t(img.width) * img.height),
+                  std::vector<uint8_t>(size_t(img.width) * img.height, 0)};
     std::atomic<uint64_t> fragments{0};
-    parallel_for_range(tw * th, 1, [&](int tile0, int tile1) {
-        std::vector<float> zbuf(size_t(T) * T), wsum(size_t(T) * T);
-        std::vector<Vec3> acc(size_t(T) * T);
-        std::vector<Fragment> frags;
-        for (int tile = tile0; tile != tile1; ++tile) {
-            const int tx0 = (tile % tw) * T, ty0 = (tile / tw) * T;
-            const int tx1 = std::min(tx0 + T, W) - 1, ty1 = std::min(ty0 + T, H) - 1;
-            std::fill(zbuf.begin(), zbuf.end(), std::numeric_limits<float>::infinity());
-            std::fill(wsum.begin(), wsum.end(), 0.f);
-            std::fill(acc.begin(), acc.end(), Vec3{});
-            const uint32_t* ids = list.data() + start[tile];
-            const uint64_t count = start[tile + 1] - start[tile];
-            // The ray of pixel (x, y) is eye + t dir(x, y), t = depth along the view axis;
-            // a disc is hit where t = (c - eye).n / dir.n lands within its radius of c.
-            auto for_fragments = [&](auto&& emit) {
-                for (uint32_t k = 0; k < count; ++k) {
-                    const Disc& d = discs[ids[k]];
-                    const int x0 = std::max(d.x0, tx0), x1 = std::min(d.x1, tx1);
-                    const int y0 = std::max(d.y0, ty0), y1 = std::min(d.y1, ty1);
-                    const Vec3 ce = d.c - fr.eye;
-                    const float num = dot(ce, d.n);
-                    const float fn = dot(fr.f, d.n), rn = dot(fr.r, d.n), un = dot(fr.u, d.n);
-                    for (int y = y0; y <= y1; ++y) {
-                        const float py = (fr.cy - (float(y) + 0.5f)) * inv_f;
-                        for (int x = x0; x <= x1; ++x) {
-                            const float px = ((float(x) + 0.5f) - fr.cx) * inv_f;
-                            const float den = fn + px * rn + py * un;
-                            if (std::fabs(den) < 1e-7f) continue;  // edge-on
-                            const float t = num / den;
-                            if (!(t > near)) continue;
-                            const Vec3 dir = fr.f + fr.r * px + fr.u * py;
-                            const Vec3 off = dir * t - ce;
-                            const float q = length2(off);
-                            if (q >= d.r2) continue;
-                            emit(k, size_t(y - ty0) * T + (x - tx0), t, q);
-                        }
-                    }
-                }
-            };
-            // Pass 1 records every fragment (so pass 2 need not intersect again) and keeps the
-            // nearest depth per sample; pass 2 blends those within the band of it.
-            frags.clear();
-            for_fragments([&](uint32_t k, size_t p, float t, float q) {
-                zbuf[p] = std::min(zbuf[p], t);
-                frags.push_back({uint32_t(p), k, t, q});
-            });
-            fragments += frags.size();
-            for (const Fragment& f : frags) {
-                const Disc& d = discs[ids[f.k]];
-                if (f.t > zbuf[f.p] + d.band) continue;
-                const float w = 1.f - f.q / d.r2 + 1e-4f;  // falls to ~0 at the rim
-                acc[f.p] += d.color * w;
-                wsum[f.p] += w;
-            }
-            // Average s x s samples into each output pixel of the tile.
-            for (int oy = ty0 / s; oy <= ty1 / s; ++oy)
-                for (int ox = tx0 / s; ox <= tx1 / s; ++ox) {
-                    Vec3 sum{};
-                    int hit = 0;
-                    for (int sy = 0; sy < s; ++sy)
-                        for (int sx = 0; sx < s; ++sx) {
-                            const size_t p = size_t(oy * s + sy - ty0) * T + (ox * s + sx - tx0);
-                            if (wsum[p] > 0) {
-                                sum += acc[p] / wsum[p];
-                                ++hit;
-                            }
-                        }
-                    const size_t o = size_t(oy) * img.width + ox;
-                    covered[o] = uint8_t(hit);
-                    mean[o] = hit > 0 ? sum / float(hit) : opt.background;
-                }
-        }
+    parallel_for_range(tiles.tw * tiles.th, 1, [&](int tile0, int tile1) {
+        TileScratch sc(tiles.T);
+        for (int tile = tile0; tile != tile1; ++tile)
+            fragments += render_tile(tile, discs, tiles, ra, opt, sc, px);
     });
-    resolve(img, std::move(mean), std::move(covered), s * s, opt.background);
+    resolve(img, std::move(px.mean), std::move(px.covered), s * s, opt.background);
     if (stats) {
         for (const Disc& d : discs) stats->discs += d.x1 >= d.x0;
-        stats->tile_refs += list.size();
+        stats->tile_refs += tiles.list.size();
         stats->fragments += fragments.load();
     }
     return img;

@@ -5,8 +5,6 @@
 #include "scene/free_space.h"
 
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
@@ -17,6 +15,8 @@
 #include <map>
 #include <numeric>
 #include <optional>
+
+#include "util/parallel.h"
 
 namespace vmap::detail {
 namespace {
@@ -90,8 +90,8 @@ Grid make_grid(const Bounds& b, float h, int pad) {
 std::vector<uint8_t> occupancy(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
                                const std::vector<float>& radii, float cap, const Grid& g) {
     std::vector<uint8_t> occ(g.size(), 0);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, pts.size(), 1024), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+    parallel_for_range<size_t>(pts.size(), 1024, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const Vec3 p = pts[i], n = normals[i];
             const float r = std::min(3 * radii[i], cap);
             const float slab = 0.5f * g.h * (std::fabs(n.x) + std::fabs(n.y) + std::fabs(n.z));
@@ -486,8 +486,8 @@ FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
     FreeSpace fs;
     const size_t n = pts.size();
     fs.sides.resize(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i)
+    parallel_for_range<size_t>(n, 1024, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i)
             fs.sides[i] = {probe(g, regions, pts[i], normals[i]),
                            probe(g, regions, pts[i], -normals[i])};
     });
@@ -579,8 +579,8 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     v.method = fs.method;
     const DiscCaster caster(pts, normals, radii, b, r_med, 2 * g.h);
     const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, b, r_med);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+    parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
             const bool wall = room_wall[size_t(DiscCaster::exit_face(b, pts[i], free_n))];

@@ -7,8 +7,6 @@
 #include "vmap/normals.h"
 
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cfloat>
@@ -23,6 +21,7 @@
 #include "geom/morton.h"
 #include "scene/cloud_knn.h"
 #include "scene/free_space.h"
+#include "util/parallel.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -249,9 +248,9 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
               const std::vector<float>& d2, size_t c, const std::vector<Vec3>* prev,
               LocalFits& fits, std::vector<Vec3>& out) {
     const size_t n = pts.size(), band = std::min(c - 1, kBandwidthNeighbour);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
+    parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
         std::vector<float> w(c);
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const uint32_t* nb = &cand[i * c];
             const float h2 = d2[i * c + band];
             size_t kept = 0;
@@ -292,8 +291,8 @@ LocalFits fit_local_planes(const std::vector<Vec3>& pts, const NormalEstimationP
 
     const detail::CloudAdaptor adaptor{pts};
     const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+    parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             uint32_t* nb = &cand[i * c];
             const float query[3] = {pts[i].x, pts[i].y, pts[i].z};
             const size_t found = tree.knnSearch(query, c, nb, &d2[i * c]);
@@ -506,8 +505,8 @@ size_t agree_with_neighbours(const std::vector<Vec3>& pts, const LocalFits& fits
                              const detail::SideVotes& votes, std::vector<Vec3>& normals) {
     const size_t n = pts.size(), k = fits.k;
     std::vector<uint8_t> flip(n, 0);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+    parallel_for_range<size_t>(n, 1024, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             if (votes.cue[i] != detail::SideCue::kRays || fits.degenerate[i]) continue;
             float agree = 0, disagree = 0;
             for (size_t j = 0; j < k; ++j) {
@@ -545,8 +544,8 @@ std::vector<uint32_t> spatial_order(const std::vector<Vec3>& pts) {
 
     const size_t n = pts.size();
     std::vector<std::pair<uint64_t, uint32_t>> keyed(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const auto& range) {
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+    parallel_for_range<size_t>(n, 4096, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const Vec3 p = pts[i];
             const uint64_t code = detail::spread_bits(cell(p.x, lo.x)) << 2 |
                                   detail::spread_bits(cell(p.y, lo.y)) << 1 |

@@ -2,9 +2,6 @@
 // thin part), smoothed over that sheet; and the normal consistency check.
 
 #include <fmt/format.h>
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-#include <tbb/parallel_reduce.h>
 
 #include <algorithm>
 #include <cmath>
@@ -12,6 +9,7 @@
 #include <vector>
 
 #include "scene/cloud_knn.h"
+#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/normals.h"
 
@@ -51,10 +49,10 @@ std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& 
     const size_t want = std::min(params.candidates + 1, n);
     points.radii.resize(n);
     std::vector<uint32_t> same(n * k, kNone);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256), [&](const auto& range) {
+    parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
         std::vector<uint32_t> idx(want);
         std::vector<float> d2(want), kept, all;
-        for (size_t i = range.begin(); i < range.end(); ++i) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const Vec3 p = pts[i], np = points.normals[i];
             const float q[3] = {p.x, p.y, p.z};
             const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
@@ -113,8 +111,8 @@ void smooth_radii(std::vector<float>& radii, const std::vector<uint32_t>& same, 
     std::vector<double> x(n), y(n);
     for (size_t i = 0; i < n; ++i) x[i] = double(radii[i]) * radii[i];
     for (int pass = 0; pass < passes; ++pass) {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const auto& range) {
-            for (size_t i = range.begin(); i < range.end(); ++i) {
+        parallel_for_range<size_t>(n, 1024, [&](size_t chunk_begin, size_t chunk_end) {
+            for (size_t i = chunk_begin; i < chunk_end; ++i) {
                 double v = x[i];
                 for (size_t e = start[i]; e < start[i] + deg[i]; ++e) {
                     const uint32_t o = adj[e];
@@ -157,12 +155,12 @@ double normal_inconsistency(const PointSet& points, size_t k) {
     struct Count {
         uint64_t pairs = 0, opposed = 0;
     };
-    const Count c = tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(0, n, 1024), Count{},
-        [&](const auto& range, Count acc) {
+    const Count c = parallel_reduce_range<size_t>(
+        n, 1024, Count{},
+        [&](size_t chunk_begin, size_t chunk_end, Count acc) {
             std::vector<uint32_t> idx(want);
             std::vector<float> d2(want);
-            for (size_t i = range.begin(); i < range.end(); ++i) {
+            for (size_t i = chunk_begin; i < chunk_end; ++i) {
                 const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
                 const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
                 for (size_t j = 0; j < got; ++j) {

@@ -4,6 +4,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <array>
 #include <cstring>
 #include <fstream>
@@ -102,11 +103,15 @@ NpyArray parse_npy(std::string_view data, const std::string& name, const std::st
     const std::string dict(data.substr(10, hlen));
     NpyArray a;
     a.name = name;
-    std::string descr = dict_value(dict, "descr", where);
-    a.descr = descr.size() >= 2 ? descr.substr(1, descr.size() - 2) : "";
+    const std::string descr = dict_value(dict, "descr", where);
+    if (descr.size() < 2 || descr.front() != '\'' || descr.back() != '\'')
+        throw Error(fmt::format("{}: header: bad 'descr' {} (a quoted dtype expected)", where, descr));
+    a.descr = descr.substr(1, descr.size() - 2);
     if (dict_value(dict, "fortran_order", where) != "False")
         throw Error(fmt::format("{}: header: fortran_order: only C order is read", where));
-    std::string sh = dict_value(dict, "shape", where);
+    const std::string sh = dict_value(dict, "shape", where);
+    if (sh.size() < 2 || sh.front() != '(' || sh.back() != ')')
+        throw Error(fmt::format("{}: header: bad shape {} (a tuple expected)", where, sh));
     std::istringstream in(sh.substr(1, sh.size() - 2));
     for (std::string tok; std::getline(in, tok, ',');) {
         const size_t b = tok.find_first_not_of(' ');
@@ -117,7 +122,14 @@ NpyArray parse_npy(std::string_view data, const std::string& name, const std::st
         a.shape.push_back(std::stoull(tok.substr(b, e - b)));
     }
     a.bytes = std::string(data.substr(10 + hlen));
-    if (a.item_size() == 0 || a.bytes.size() != a.count() * a.item_size())
+    // The element count is multiplied out against the body's size, so that a shape whose
+    // product overflows 64 bits cannot match a short body.
+    bool fits = a.item_size() != 0;
+    if (std::find(a.shape.begin(), a.shape.end(), 0) == a.shape.end()) {
+        uint64_t room = fits ? a.bytes.size() / a.item_size() : 0;
+        for (uint64_t d : a.shape) fits = fits && d <= room, room = fits ? room / d : 0;
+    }
+    if (!fits || a.bytes.size() != a.count() * a.item_size())
         throw Error(fmt::format("{}: body: {} bytes for shape {} of '{}'", where, a.bytes.size(),
                                 sh, a.descr));
     return a;
@@ -166,12 +178,16 @@ std::vector<NpyArray> read_npz(const std::string& path) {
     for (size_t e = 0; e < entries; ++e) {
         if (get(s, at, 4, path) != 0x02014b50u)
             throw Error(fmt::format("{}: central directory entry {}: bad signature", path, e));
-        const std::string name = s.substr(at + 46, get(s, at + 28, 2, path));
+        // The fixed 46 bytes of the entry first (the last field read ends there), then its name.
+        const size_t size = get(s, at + 24, 4, path), local = get(s, at + 42, 4, path);
+        const size_t name_size = get(s, at + 28, 2, path);
+        if (at + 46 + name_size > s.size())
+            throw Error(fmt::format("{}: central directory entry {}: truncated", path, e));
+        const std::string name = s.substr(at + 46, name_size);
         const std::string where = fmt::format("{}: {}", path, name);
         if (get(s, at + 10, 2, path) != 0)
             throw Error(fmt::format("{}: compressed: only stored entries are read", where));
         const uint32_t crc = uint32_t(get(s, at + 16, 4, path));
-        const size_t size = get(s, at + 24, 4, path), local = get(s, at + 42, 4, path);
         const size_t body = local + 30 + get(s, local + 26, 2, path) + get(s, local + 28, 2, path);
         if (body + size > s.size()) throw Error(fmt::format("{}: truncated", where));
         const std::string_view data = std::string_view(s).substr(body, size);

@@ -7,21 +7,25 @@
 namespace vmap {
 
 void OctreeParams::check(const std::string& source) const {
-    if (max_height < 1 || max_height > 21)
-        throw Error(fmt::format("{}: max_height {} out of range (1..21)", source, max_height));
-    if (leaf_points < 1 || leaf_points > 1000000)
-        throw Error(
-            fmt::format("{}: leaf_points {} out of range (1..1000000)", source, leaf_points));
+    if (max_height < 1 || max_height > kHeightLimit)
+        throw Error(fmt::format("{}: max_height {} out of range (1..{})", source, max_height,
+                                kHeightLimit));
+    if (leaf_points < 1 || leaf_points > kLeafPointsLimit)
+        throw Error(fmt::format("{}: leaf_points {} out of range (1..{})", source, leaf_points,
+                                kLeafPointsLimit));
 }
 
 void VisibilityParams::check(const std::string& source) const {
-    if (K < 1 || K > 1000) throw Error(fmt::format("{}: K {} out of range (1..1000)", source, K));
-    if (!(eps >= 0 && eps < 0.5f))
-        throw Error(fmt::format("{}: eps {} out of range [0, 0.5)", source, eps));
-    if (!(facing_tol >= 0 && facing_tol < 1))
-        throw Error(fmt::format("{}: facing_tol {} out of range [0, 1)", source, facing_tol));
-    if (!(parallel_tol >= 0 && parallel_tol < 1))
-        throw Error(fmt::format("{}: parallel_tol {} out of range [0, 1)", source, parallel_tol));
+    if (K < 1 || K > kKLimit)
+        throw Error(fmt::format("{}: K {} out of range (1..{})", source, K, kKLimit));
+    if (!(eps >= 0 && eps < kEpsLimit))
+        throw Error(fmt::format("{}: eps {} out of range [0, {})", source, eps, kEpsLimit));
+    if (!(facing_tol >= 0 && facing_tol < kTolLimit))
+        throw Error(fmt::format("{}: facing_tol {} out of range [0, {})", source, facing_tol,
+                                kTolLimit));
+    if (!(parallel_tol >= 0 && parallel_tol < kTolLimit))
+        throw Error(fmt::format("{}: parallel_tol {} out of range [0, {})", source, parallel_tol,
+                                kTolLimit));
 }
 
 void BuildParams::check(const std::string& source) const {

@@ -1,0 +1,77 @@
+// One command's input: scene, mesh, cloud or .vmap, with the overrides (include/vmap/input.h).
+#include "vmap/input.h"
+
+#include <fmt/format.h>
+
+#include <filesystem>
+
+#include "vmap/error.h"
+#include "vmap/io.h"
+#include "vmap/visibility_map.h"
+
+namespace vmap {
+namespace {
+
+void apply_octree_overrides(const InputOptions& o, OctreeParams& p) {
+    if (o.max_height) p.max_height = *o.max_height;
+    if (o.leaf_points) p.leaf_points = *o.leaf_points;
+}
+
+void load_map(const InputOptions& o, Input& in) {
+    if (o.max_height || o.leaf_points)
+        throw Error(fmt::format(
+            "{}: max_height and leaf_points (--max-height, --leaf-points) apply when building a "
+            "V-map, not to a .vmap",
+            o.path));
+    in.kind = InputKind::kVmap;
+    in.vmap = load_vmap(o.path);
+    in.octree = in.vmap->octree_params();
+    in.description = fmt::format("V-map {}", o.path);
+}
+
+void load_cloud(const InputOptions& o, Input& in) {
+    in.kind = InputKind::kCloud;
+    in.points = load_point_cloud(o.path, o.cloud, &in.done);
+    in.octree = BuildParams{}.octree;
+    apply_octree_overrides(o, in.octree);
+    in.description = fmt::format("point cloud {}", o.path);
+}
+
+void load_sampled(const InputOptions& o, Input& in) {
+    Scene sc = load_scene(o.path);
+    const bool scene_file = has_extension(o.path, ".json");
+    in.kind = scene_file ? InputKind::kScene : InputKind::kMesh;
+    if (o.points) sc.points = *o.points;
+    if (o.seed) sc.seed = *o.seed;
+    in.octree = sc.octree.value_or(BuildParams{}.octree);
+    apply_octree_overrides(o, in.octree);
+    in.name = sc.name;
+    in.camera = sc.camera;
+    in.notes = sc.notes;
+    in.description =
+        scene_file ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.path, sc.surfaces.size())
+                   : fmt::format("mesh {} ({} triangles, area-sampled)", o.path,
+                                 sc.surfaces[0].mesh.triangles.size());
+    in.points = sample_scene(sc);
+}
+
+}  // namespace
+
+Input load_input(const InputOptions& o) {
+    Input in;
+    in.name = std::filesystem::path(o.path).filename().string();
+    const bool is_vmap = has_extension(o.path, ".vmap");
+    if (is_vmap || !is_scene_input(o.path, o.as_points)) {
+        if (o.points || o.seed)
+            throw Error(fmt::format(
+                "{}: points and seed (--points, --seed) apply when building from a scene or mesh "
+                "file, not to {}",
+                o.path, is_vmap ? "a .vmap" : "a point cloud"));
+        is_vmap ? load_map(o, in) : load_cloud(o, in);
+        return in;
+    }
+    load_sampled(o, in);
+    return in;
+}
+
+}  // namespace vmap

@@ -1,0 +1,80 @@
+// vmap::load_input (include/vmap/input.h, src/scene/input.cpp): each kind of input, the
+// overrides, and the overrides that do not apply.
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "test_files.h"
+#include "test_util.h"
+#include "vmap/error.h"
+#include "vmap/input.h"
+
+namespace vmap {
+namespace {
+
+bool throws_naming(const InputOptions& o, const std::string& part) {
+    try {
+        (void)load_input(o);
+    } catch (const Error& e) {
+        return std::string(e.what()).find(part) != std::string::npos;
+    }
+    return false;
+}
+
+TEST(Input, ASceneIsSampledWithTheOverridesInPlaceOfTheScenesValues) {
+    InputOptions o;
+    o.path = test::scene_path("cornell-bunny");
+    o.points = 700;
+    o.seed = 3;
+    o.max_height = 5;
+    const Input in = load_input(o);
+    EXPECT_EQ(in.kind, InputKind::kScene);
+    EXPECT_EQ(in.points.positions, test::sample(o.path, 700, 3).positions);
+    EXPECT_EQ(in.octree.max_height, 5);
+    const Scene sc = load_scene(o.path);
+    EXPECT_EQ(in.octree.leaf_points, sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points);
+    EXPECT_EQ(in.name, sc.name);
+    EXPECT_EQ(in.camera.has_value(), sc.camera.has_value());
+    EXPECT_FALSE(in.vmap);
+}
+
+TEST(Input, ACloudIsReadAndSamplingOverridesAreAnErrorNamingTheFile) {
+    test::ScratchDir dir;
+    InputOptions o;
+    o.path = dir.path("c.xyzn");
+    {
+        std::ofstream f(o.path);
+        for (int i = 0; i < 50; ++i) f << i * 0.1 << " " << (i % 7) * 0.1 << " 0 0 0 1\n";
+    }
+    o.leaf_points = 3;
+    const Input in = load_input(o);
+    EXPECT_EQ(in.kind, InputKind::kCloud);
+    EXPECT_EQ(in.points.size(), 50u);
+    EXPECT_EQ(in.octree.leaf_points, 3);
+    EXPECT_EQ(in.name, "c.xyzn");
+    o.seed = 1;
+    EXPECT_TRUE(throws_naming(o, "c.xyzn: points and seed (--points, --seed)"));
+}
+
+TEST(Input, AVmapIsLoadedAndOctreeOverridesAreAnError) {
+    test::ScratchDir dir;
+    const VisibilityMap vm =
+        build_vmap(test::sample(test::scene_path("cornell-bunny"), 300), test::cpu_params(4, 2));
+    InputOptions o;
+    o.path = dir.path("m.vmap");
+    save_vmap(o.path, vm);
+    const Input in = load_input(o);
+    EXPECT_EQ(in.kind, InputKind::kVmap);
+    ASSERT_TRUE(in.vmap);
+    EXPECT_EQ(in.vmap->num_links(), vm.num_links());
+    EXPECT_EQ(in.octree.max_height, 4);
+    EXPECT_TRUE(in.points.positions.empty());
+    o.max_height = 6;
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height and leaf_points"));
+    o.max_height.reset();
+    o.points = 10;
+    EXPECT_TRUE(throws_naming(o, "not to a .vmap"));
+}
+
+}  // namespace
+}  // namespace vmap

@@ -168,8 +168,8 @@ VMAP_HD bool in_front_of_ends(const PairSegment& s, const LeafDisc& x) {
     return fa && fb;
 }
 
-// Near an end, the mirror of in_front_of_ends (docs/validation.md "The predicate: the near-end
-// exit rule"). A leaf x whose plane is cut within half the end's own disc radius of that end
+// Near an end, the mirror of in_front_of_ends (docs/validation.md "The predicate near the
+// ends"). A leaf x whose plane is cut within half the end's own disc radius of that end
 // (t |d| < Delta_end / 2, t measured from the nearer end), with that end's centroid behind x's
 // plane, is crossed from its back to its front: the segment comes out of a surface it never
 // went into, right where it leaves the end. The end lies on the outside of its own surface and

@@ -223,8 +223,12 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     }
     EXPECT_GT(node_links[0], 0u);  // the coarse setting did transfer at node level
     for (int b = 0; b < 3; ++b) {
-        for (size_t t = 1; t < thetas.size(); ++t)  // links: equal where no link changes level
-            EXPECT_LE(err[t][b], err[t - 1][b]) << "theta " << thetas[t] << " bounce " << b + 1;
+        // links: equal where no link changes level. Theta 0.5 and 1 transfer at nearly the same
+        // nodes, and their errors then differ by rounding-sized amounts either way (2e-4
+        // relative at the near-end exit rule of the predicate): a rise below 0.1% is no rise.
+        for (size_t t = 1; t < thetas.size(); ++t)
+            EXPECT_LE(err[t][b], err[t - 1][b] * (1 + 1e-3))
+                << "theta " << thetas[t] << " bounce " << b + 1;
         EXPECT_LT(err[1][b], 0.03) << "theta 1, bounce " << b + 1;
         EXPECT_LT(err[2][b], 0.02) << "the default theta 4, bounce " << b + 1;
         EXPECT_LT(err[3][b], 0.5 * err[1][b]) << "theta 16 against 1, bounce " << b + 1;

@@ -131,6 +131,46 @@ TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
     EXPECT_TRUE(counts(x));
 }
 
+// The near-end exit rule (exits_at_an_end): a leaf whose plane the segment cuts within half
+// the end's disc radius of that end, coming out of it (the end behind its plane), is the end's
+// own surface; one the segment goes into, or one cut farther out, still counts. a sits at the
+// origin with Delta 0.05 (half: 0.025) and the segment leaves along d = (1, 0.1, 0).
+TEST_F(EndPlanes, CrossedFromBehindRightAtAnEndDoesNotCount) {
+    // Centroid in front of a's plane (y > 0), a behind its plane: n . (a - c) < 0. Its plane
+    // cuts the segment at about 0.012 from a, inside the disc.
+    const LeafDisc x = disc({0.02f, 0.004f, 0}, {1, -0.3f, 0}, 0.05f);
+    ASSERT_TRUE(detail::in_front_of_ends(detail::pair_segment(a, b, vp), x));
+    ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
+    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_FALSE(counts(x));
+    // The same leaf facing the other way: the segment goes into it, so it counts.
+    LeafDisc in = x;
+    in.normal = -x.normal;
+    EXPECT_TRUE(counts(in));
+}
+TEST_F(EndPlanes, CrossedFromBehindFartherOutCounts) {
+    // The same geometry moved out to about 0.05 from a: more than half of a's Delta (0.025).
+    const LeafDisc x = disc({0.06f, 0.01f, 0}, {1, -0.3f, 0}, 0.05f);
+    ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
+    EXPECT_TRUE(counts(x));
+    // A larger end disc reaches it: now it is the end's own surface.
+    a.delta = 0.2f;
+    EXPECT_FALSE(counts(x));
+}
+TEST_F(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
+    // Near b (centroid (1, 0.1, 0), normal -x): a leaf just in front of b's plane with b
+    // behind its own plane, cut about 0.02 from b (b's Delta 0.05).
+    const LeafDisc x = disc({0.98f, 0.1f, 0.f}, {-1, 0.2f, 0}, 0.05f);
+    const detail::PairSegment s = detail::pair_segment(a, b, vp);
+    ASSERT_TRUE(detail::in_front_of_ends(s, x));
+    ASSERT_LT(dot(x.normal, b.centroid - x.centroid), 0.f);
+    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_FALSE(counts(x));
+    b.flags = kLeafNormalDegenerate;  // an end without a plane drops nothing
+    b.normal = {0, 0, 0};
+    EXPECT_TRUE(counts(x));
+}
+
 TEST(Facing, BothNormalsMustFaceTheOther) {
     VisibilityParams vp;
     LeafDisc a, b;

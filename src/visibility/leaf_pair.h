@@ -61,14 +61,16 @@ VMAP_HD bool slab_meets_box(const SlabRay& r, const Box& b, float g) {
 }
 
 // Is leaf x an actual occluder of segment p + t d (paper §5.1, Fig. 7)?
+// The crossing's t goes to *t_out when given.
 VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
-                                const VisibilityParams& vp) {
+                                const VisibilityParams& vp, float* t_out = nullptr) {
     if (x.flags & kLeafNormalDegenerate) {
         // No tangent plane: the disc degenerates to its sphere; occludes if the segment's
         // interior passes within Delta of the centroid.
         const float dd = len * len;
         const Vec3 v = x.centroid - p;
         const float t = dot(v, d) / dd;
+        if (t_out) *t_out = t;
         if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
         return length2(v - d * t) <= x.delta * x.delta;
     }
@@ -76,6 +78,7 @@ VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
     // Tangent plane (nearly) parallel to pq: no proper crossing (x5 in Fig. 7).
     if (fabsf(nd) <= vp.parallel_tol * len) return false;
     const float t = dot(x.normal, x.centroid - p) / nd;
+    if (t_out) *t_out = t;
     // The plane is cut outside the segment's interior (x1 in Fig. 7).
     if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
     // The crossing lies farther than Delta from the centroid (x4 in Fig. 7).
@@ -126,9 +129,11 @@ struct PairSegment {
     bool faces;  // a direction to see along (len > 0) and the two leaves face each other
     SlabRay ray;
     // The ends' tangent planes (in_front_of_ends): b's centroid q, the normals, and whether
-    // each end has a plane at all (a flagged leaf has none).
+    // each end has a plane at all (a flagged leaf has none); the ends' disc radii
+    // (exits_at_an_end).
     Vec3 q, na, nb;
     bool plane_a, plane_b;
+    float delta_a, delta_b;
 };
 // The facing part alone (the CPU's packet walk sets up only the pairs that face).
 VMAP_HD bool pair_faces(const LeafDisc& la, const LeafDisc& lb, const VisibilityParams& vp) {
@@ -150,6 +155,8 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.nb = lb.normal;
     s.plane_a = !(la.flags & kLeafNormalDegenerate);
     s.plane_b = !(lb.flags & kLeafNormalDegenerate);
+    s.delta_a = la.delta;
+    s.delta_b = lb.delta;
     return s;
 }
 
@@ -167,14 +174,37 @@ VMAP_HD bool in_front_of_ends(const PairSegment& s, const LeafDisc& x) {
     return fa && fb;
 }
 
-// Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that
-// stands in front of both ends.
-VMAP_HD bool counts_as_occluder(const PairSegment& s, const LeafDisc& x,
-                                const VisibilityParams& vp) {
-    return in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp);
+// Near an end, the mirror of in_front_of_ends (docs/validation.md "The predicate near the
+// ends"). A leaf x whose plane is cut within half the end's own disc radius of that end
+// (t |d| < Delta_end / 2, t measured from the nearer end), with that end's centroid behind x's
+// plane, is crossed from its back to its front: the segment comes out of a surface it never
+// went into, right where it leaves the end. The end lies on the outside of its own surface and
+// the segment leaves into the open (the facing test), so such an x is the end's own surface:
+// a neighbour on a crease or a curve whose centroid is not quite behind the end's plane, its
+// disc of 2.5 splat radii standing for more surface than it has. Farther out an exit is a real
+// one (the far wall of a closed object, which K 2 counts with the near one), so the rule stays
+// within half a disc. A surface that faces the end (an object a few millimetres in front of a
+// wall, seen from the wall) has the end in front of its plane and still counts. The rule only
+// drops occluders the eps window lets count, never adds one: every node-level proof of
+// node_pair.h (an upper bound on the occluders) still holds, and the walk's sub-segment is
+// unchanged. A flagged x or end has no plane to be behind and is not dropped.
+VMAP_HD bool exits_at_an_end(const PairSegment& s, const LeafDisc& x, float t) {
+    if (x.flags & kLeafNormalDegenerate) return false;
+    const bool near_a = t < 0.5f;
+    if (!(near_a ? s.plane_a : s.plane_b)) return false;
+    const float from_end = (near_a ? t : 1.f - t) * s.len;
+    if (!(from_end < 0.5f * (near_a ? s.delta_a : s.delta_b))) return false;
+    return dot(x.normal, (near_a ? s.p : s.q) - x.centroid) < 0.f;
 }
 
-
+// Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that
+// stands in front of both ends and is not crossed from behind right at an end.
+VMAP_HD bool counts_as_occluder(const PairSegment& s, const LeafDisc& x,
+                                const VisibilityParams& vp) {
+    float t = 0.f;
+    return in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp, &t) &&
+           !exits_at_an_end(s, x, t);
+}
 
 // A node reached by the walk (its box meets the segment): when it is a leaf other than a and b,
 // tests it as an occluder. True when that makes the K-th actual occluder (the pair is hidden).

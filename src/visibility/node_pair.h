@@ -35,6 +35,14 @@
 //       Both are below eps when (h + 3E)/(D - E) + 1e-6 < eps (the flat test below); or (iv)
 //       every shaft point is farther than E from x's disc (within 32uM of the plane and within
 //       Delta + 3u Delta + 10uM of c means within E of the disc).
+//  (e5) What counts is narrower than what (e3)/(e4) bound: counts_as_occluder also asks that x
+//       stand in front of both ends (in_front_of_ends) and not be crossed from behind within
+//       half an end's disc radius of that end (exits_at_an_end). Both only drop occluders that
+//       pass the eps window and the disc test; neither makes a leaf count that (e3) would reject.
+//       So every bound here, an upper bound on the leaves with eps < t < 1 - eps whose disc the
+//       segment meets, bounds the leaves that count, and "fewer than K may occlude" stays a
+//       proof. (A rule that let a leaf count at t <= eps, or t >= 1 - eps, would need flat_end
+//       and the shaft's t range redone; none does.)
 // Doubles carry relative errors near 1e-16, far inside E.
 #pragma once
 

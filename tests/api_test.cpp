@@ -71,12 +71,19 @@ TEST(Api, ProgressStartsAtZeroRisesAndEndsAtTheLeafPairCount) {
 }
 
 TEST(Api, ProgressCallbackCancelsTheBuild) {
-    BuildParams bp = test::cpu_params(6, 2);
+    // A build of seconds (20,000 points, one a leaf: about 1.6e8 leaf pairs), cancelled at the
+    // second report (reports come at most ~10 a second): it stops early with Cancelled. A
+    // smaller build can finish between two reports, which is no cancellation to test.
+    BuildParams bp = test::cpu_params(8, 1);
     std::atomic<int> calls{0};
     bp.progress = [&](const ProgressInfo&) { return ++calls < 2; };
-    EXPECT_THROW(build_vmap(test::sample(test::scene_path("cornell-empty"), 3000, 2), bp),
-                 Cancelled);
+    const auto points = test::sample(test::scene_path("cornell-empty"), 20000, 2);
+    EXPECT_THROW(build_vmap(points, bp), Cancelled);
     EXPECT_GE(calls.load(), 2);
+    // Cancelled at the first report too, before any batch is evaluated.
+    calls = 1;
+    EXPECT_THROW(build_vmap(points, bp), Cancelled);
+    EXPECT_EQ(calls.load(), 2);
 }
 
 TEST(Api, CudaWithoutAUsableDeviceIsAnErrorAndAutoFallsBackWithANote) {

@@ -107,6 +107,10 @@ struct NodePairContext {
     VisibilityParams vp;
     double margin = 0;  // E above; 0 disables every decision (all undecided)
     const int32_t* bounds_index = nullptr;
+    // True when nb holds every node's bounds, the leaves' too (the host's node_bounds() does:
+    // bounds_of stores leaf_bounds for a leaf), so bounds_at reads a leaf's instead of computing
+    // them again at every node a shaft walk tests. The same values either way.
+    bool leaves_stored = false;
 };
 
 // Float rounding of a double bound, outward: never below (down) or above (up) the double value,
@@ -170,7 +174,7 @@ VMAP_HD NodeBounds leaf_bounds(const LeafDisc& d) {
 // The bounds of node n.
 VMAP_HD NodeBounds bounds_at(const NodePairContext& c, int32_t n) {
     const int32_t leaf = c.tree.walk[n].leaf;
-    if (leaf >= 0) return leaf_bounds(c.tree.leaves[leaf]);
+    if (leaf >= 0 && !c.leaves_stored) return leaf_bounds(c.tree.leaves[leaf]);
     return c.nb[c.bounds_index ? c.bounds_index[n] : n];
 }
 

@@ -77,6 +77,7 @@ void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, No
     nt.nb = detail::node_bounds(t);
     nt.ctx = {octree_view(t),  nt.nb.nodes.data(), nt.nb.cones.data(),
               t.skip().data(), params.visibility,  detail::node_pair_margin(t.boxes()[0])};
+    nt.ctx.leaves_stored = true;  // node_bounds() stores the leaves' bounds too
 }
 
 // Points to octree (in the unit frame), with the point order and its inverse.

@@ -389,6 +389,7 @@ class CudaBackend final : public Backend {
         ctx_.cones = cones_.ptr;
         ctx_.skip = skip_.ptr;
         ctx_.bounds_index = index_.ptr;
+        ctx_.leaves_stored = false;  // the device keeps the internal nodes' bounds only
     }
 
     bool decide(std::span<const NodePairRef> pairs, uint8_t* out,

@@ -98,181 +98,170 @@ std::string fmt_time(const Stat& s, bool done, bool est) {
     return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);
 }
 
-}  // namespace
+// What one `vmap bench` call carries from configuration to configuration.
+struct Session {
+    explicit Session(const Options& opts) : o(opts) {}
+    const Options& o;
+    bool want_cpu = false, want_gpu = false, have_gpu = false;
+    std::string why;  // why there is no GPU
+    bool warmed = false;
+    std::string tmp;  // where --save writes
+};
 
-int run(const Options& o) {
-    if (o.runs < 1 || o.runs > 100) throw Error("--runs: must be 1..100");
-    if (!o.out_dir.empty()) io::make_output_folder(o.out_dir, "--out");
-    std::vector<std::string> backends = o.backends;
-    std::string why;
-    const bool have_gpu = detail::make_cuda_backend(&why) != nullptr;
+// The backends asked for (default: cpu, plus cuda where a device answers).
+void pick_backends(Session& s) {
+    std::vector<std::string> backends = s.o.backends;
+    s.have_gpu = detail::make_cuda_backend(&s.why) != nullptr;
     if (backends.empty()) {
         backends.push_back("cpu");
-        if (have_gpu) backends.push_back("cuda");
+        if (s.have_gpu) backends.push_back("cuda");
     }
-    const bool want_cpu = std::count(backends.begin(), backends.end(), "cpu") > 0;
-    const bool want_gpu = std::count(backends.begin(), backends.end(), "cuda") > 0;
-    if (want_gpu && !have_gpu) throw Error("--backends cuda: " + why);
-    const int cores = tbb::this_task_arena::max_concurrency();
-    const bool tty = isatty(2);
+    s.want_cpu = std::count(backends.begin(), backends.end(), "cpu") > 0;
+    s.want_gpu = std::count(backends.begin(), backends.end(), "cuda") > 0;
+    if (s.want_gpu && !s.have_gpu) throw Error("--backends cuda: " + s.why);
+}
 
-    std::vector<Row> rows;
-    bool warmed = false;
-    const std::string tmp =
-        (std::filesystem::temp_directory_path() / fmt::format("vmap-bench-{}.vmap", getpid()))
-            .string();
-    for (const std::string& file : o.scenes) {
-        Scene sc = load_scene(file);
-        if (o.points) sc.points = o.points;
-        const PointSet pts = sample_scene(sc);
-        for (int h : o.heights) {
-            Row r;
-            r.scene = sc.name;
-            r.points = pts.size();
-            r.height = h;
-            r.leaf_points = o.leaf_points;
-            BuildParams bp;
-            bp.octree = {h, o.leaf_points};
-            bp.construction = o.construction;
-            if (tty) fmt::print(stderr, "\r\033[Kbench: {} height {}", sc.name, h);
-            std::vector<double> gpu_t, cpu_t, save_t;
-            double non_pair = 0;
-            if (want_gpu) {
-                bp.backend = Backend::kCuda;
-                if (!warmed) {
-                    build_vmap(pts, bp);
-                    warmed = true;
-                }
-                for (int k = 0; k < o.runs; ++k) {
-                    BuildStats st;
-                    VisibilityMap vm = build_vmap(pts, bp, &st);
-                    gpu_t.push_back(st.seconds_total);
-                    non_pair = st.seconds_total - st.seconds_wait;
-                    r.gpu_wait = st.seconds_wait;
-                    r.kernel.push_back(st.seconds_backend);
-                    r.work = st.work;
-                    r.walked = st.leaf_pairs_walked;
-                    r.node_pairs_tested = st.node_pairs_tested;
-                    r.device_bytes = st.peak_device_bytes;
-                    r.leaves = vm.octree().num_leaves();
-                    r.links = vm.num_links();
-                    if (o.save) {
-                        const auto t0 = Clock::now();
-                        save_vmap(tmp, vm);
-                        save_t.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
-                        std::filesystem::remove(tmp);
-                    }
-                }
-                r.gpu = stat(gpu_t);
-                r.gpu_done = true;
+// One configuration's measurements on their way into its row.
+struct Timing {
+    std::vector<double> gpu, cpu, save;
+    double non_pair = 0;  // seconds of a build outside the leaf-pair wait
+};
+
+void take_counts(Row& r, const VisibilityMap& vm, const BuildStats& st) {
+    r.work = st.work;
+    r.walked = st.leaf_pairs_walked;
+    r.node_pairs_tested = st.node_pairs_tested;
+    r.leaves = vm.octree().num_leaves();
+    r.links = vm.num_links();
+}
+
+void time_save(const Session& s, const VisibilityMap& vm, Timing& tm) {
+    if (!s.o.save) return;
+    const auto t0 = Clock::now();
+    save_vmap(s.tmp, vm);
+    tm.save.push_back(std::chrono::duration<double>(Clock::now() - t0).count());
+    std::filesystem::remove(s.tmp);
+}
+
+void time_gpu(Session& s, const PointSet& pts, BuildParams bp, Row& r, Timing& tm) {
+    bp.backend = Backend::kCuda;
+    if (!s.warmed) {
+        build_vmap(pts, bp);
+        s.warmed = true;
+    }
+    for (int k = 0; k < s.o.runs; ++k) {
+        BuildStats st;
+        VisibilityMap vm = build_vmap(pts, bp, &st);
+        tm.gpu.push_back(st.seconds_total);
+        tm.non_pair = st.seconds_total - st.seconds_wait;
+        r.gpu_wait = st.seconds_wait;
+        r.kernel.push_back(st.seconds_backend);
+        take_counts(r, vm, st);
+        r.device_bytes = st.peak_device_bytes;
+        time_save(s, vm, tm);
+    }
+    r.gpu = stat(tm.gpu);
+    r.gpu_done = true;
+}
+
+// Estimate first from a sample; run in full only when within the budget.
+void time_cpu(const Session& s, const PointSet& pts, BuildParams bp, Row& r, Timing& tm) {
+    const Options& o = s.o;
+    bp.backend = Backend::kCpu;
+    PointSet copy = pts;
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(copy, bp.octree, order, "bench");
+    r.cpu_pair_rate = sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
+    // The GPU run, when there was one, says how many leaf pairs are walked.
+    const uint64_t pairs =
+        r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
+    const double est = pairs / r.cpu_pair_rate;
+    if (est * o.runs <= o.cpu_budget_s) {
+        for (int k = 0; k < o.runs; ++k) {
+            BuildStats st;
+            VisibilityMap vm = build_vmap(pts, bp, &st);
+            tm.cpu.push_back(st.seconds_total);
+            if (!r.gpu_done) {
+                take_counts(r, vm, st);
+                tm.non_pair = st.seconds_total - st.seconds_wait;
+                time_save(s, vm, tm);
             }
-            if (want_cpu) {
-                bp.backend = Backend::kCpu;
-                // Estimate first from a sample; run in full only when within the budget.
-                PointSet copy = pts;
-                std::vector<uint32_t> order;
-                const Octree t = Octree::build(copy, bp.octree, order, "bench");
-                r.cpu_pair_rate =
-                    sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
-                // The GPU run, when there was one, says how many leaf pairs are walked.
-                const uint64_t pairs =
-                    r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
-                const double est = pairs / r.cpu_pair_rate;
-                if (est * o.runs <= o.cpu_budget_s) {
-                    for (int k = 0; k < o.runs; ++k) {
-                        BuildStats st;
-                        VisibilityMap vm = build_vmap(pts, bp, &st);
-                        cpu_t.push_back(st.seconds_total);
-                        if (!r.gpu_done) {
-                            r.work = st.work;
-                            r.walked = st.leaf_pairs_walked;
-                            r.node_pairs_tested = st.node_pairs_tested;
-                            r.leaves = vm.octree().num_leaves();
-                            r.links = vm.num_links();
-                            non_pair = st.seconds_total - st.seconds_wait;
-                            if (o.save) {
-                                const auto t0 = Clock::now();
-                                save_vmap(tmp, vm);
-                                save_t.push_back(
-                                    std::chrono::duration<double>(Clock::now() - t0).count());
-                                std::filesystem::remove(tmp);
-                            }
-                        }
-                        r.cpu_pair_rate = st.work.pairs / std::max(1e-9, st.seconds_wait);
-                    }
-                    r.cpu = stat(cpu_t);
-                } else {
-                    r.cpu = {est + non_pair, est + non_pair, est + non_pair};
-                    r.cpu_estimated = true;
-                    if (!r.gpu_done) r.leaves = t.num_leaves();
-                }
-                r.cpu_done = true;
-            }
-            r.pairs = uint64_t(r.leaves) * (r.leaves - 1) / 2;
-            r.save = stat(save_t);
-            rows.push_back(r);
+            r.cpu_pair_rate = st.work.pairs / std::max(1e-9, st.seconds_wait);
         }
+        r.cpu = stat(tm.cpu);
+    } else {
+        r.cpu = {est + tm.non_pair, est + tm.non_pair, est + tm.non_pair};
+        r.cpu_estimated = true;
+        if (!r.gpu_done) r.leaves = t.num_leaves();
     }
-    if (tty) fmt::print(stderr, "\r\033[K");
+    r.cpu_done = true;
+}
 
-    // ---- the table ----
-    char date[32];
-    const std::time_t now = std::time(nullptr);
-    std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&now));
-    std::string device = "none";
-    if (have_gpu) {
-        auto g = detail::make_cuda_backend(&why);
-        device = g->name();
-    }
-    std::string md;
-    md += fmt::format(
+Row bench_one(Session& s, const Scene& sc, const PointSet& pts, int h) {
+    Row r;
+    r.scene = sc.name;
+    r.points = pts.size();
+    r.height = h;
+    r.leaf_points = s.o.leaf_points;
+    BuildParams bp;
+    bp.octree = {h, s.o.leaf_points};
+    bp.construction = s.o.construction;
+    Timing tm;
+    if (s.want_gpu) time_gpu(s, pts, bp, r, tm);
+    if (s.want_cpu) time_cpu(s, pts, bp, r, tm);
+    r.pairs = uint64_t(r.leaves) * (r.leaves - 1) / 2;
+    r.save = stat(tm.save);
+    return r;
+}
+
+// The table's facts apart from the rows.
+struct Header {
+    int cores = 0;
+    std::string device = "none", date;
+};
+
+std::string md_row(const Options& o, const Header& hd, const Row& r) {
+    const double gpu_rate = r.gpu_done ? r.pairs / std::max(1e-9, r.gpu.median) : 0;
+    const double speed = r.gpu_done && r.cpu_done ? r.cpu.median / r.gpu.median : 0;
+    const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
+    const double kern = stat(r.kernel).median;
+    return fmt::format(
+        "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | "
+        "{:.1f} | {} | {} | {} |\n",
+        r.scene, r.points, r.height, r.leaves, double(r.pairs),
+        100.0 * r.walked / std::max<uint64_t>(1, r.pairs), double(r.node_pairs_tested),
+        double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
+        fmt_time(r.gpu, r.gpu_done, false), speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
+        r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
+        r.gpu_done ? fmt::format("{:.3g}", r.pairs / std::max(1e-9, kern)) : "-",
+        r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / hd.cores) : "-", ntp,
+        r.gpu_done ? fmt::format("{:.3g}", r.work.node_tests / std::max(1e-9, kern)) : "-",
+        o.save ? fmt::format("{:.3g}", r.save.median) : "-",
+        r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
+}
+
+std::string csv_row(const Header& hd, const Row& r) {
+    const double kern = stat(r.kernel).median;
+    return fmt::format(
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{}\n",
+        r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.walked,
+        r.node_pairs_tested, r.links, r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated),
+        r.gpu.median, r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0, kern,
+        r.cpu_pair_rate / hd.cores, r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests,
+        r.save.median, r.device_bytes, hd.cores, hd.device, git_commit(), hd.date);
+}
+
+std::string md_table(const Options& o, const Header& hd, const std::vector<Row>& rows) {
+    std::string md = fmt::format(
         "vmap bench: {} CPU threads, GPU {}, {} runs, leaf_points {}, construction {}, commit {}, "
         "{}\n\n",
-        cores, device, o.runs, o.leaf_points, name_of(o.construction), git_commit(), date);
+        hd.cores, hd.device, o.runs, o.leaf_points, name_of(o.construction), git_commit(), hd.date);
     md +=
         "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | "
-        "CPU s "
-        "| GPU s | speedup | "
-        "GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | node tests/pair | GPU node tests/s "
-        "| "
-        "save s | device MiB |\n";
+        "CPU s | GPU s | speedup | GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | "
+        "node tests/pair | GPU node tests/s | save s | device MiB |\n";
     md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
-    std::string csv =
-        "scene,points,height,leaf_points,leaves,leaf_pairs,leaf_pairs_walked,node_pairs_tested,"
-        "links,cpu_s,cpu_s_min,cpu_s_max,"
-        "cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,gpu_kernel_s,cpu_pairs_s_core,facing_"
-        "pairs,"
-        "node_tests,occluder_tests,save_s,device_bytes,cpu_threads,device,commit,date\n";
-    for (const Row& r : rows) {
-        const double gpu_rate = r.gpu_done ? r.pairs / std::max(1e-9, r.gpu.median) : 0;
-        const double speed = r.gpu_done && r.cpu_done ? r.cpu.median / r.gpu.median : 0;
-        const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
-        const double kern = stat(r.kernel).median;
-        md += fmt::format(
-            "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | "
-            "{} | "
-            "{:.1f} | {} | "
-            "{} | "
-            "{} |\n",
-            r.scene, r.points, r.height, r.leaves, double(r.pairs),
-            100.0 * r.walked / std::max<uint64_t>(1, r.pairs), double(r.node_pairs_tested),
-            double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
-            fmt_time(r.gpu, r.gpu_done, false), speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
-            r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
-            r.gpu_done ? fmt::format("{:.3g}", r.pairs / std::max(1e-9, kern)) : "-",
-            r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / cores) : "-", ntp,
-            r.gpu_done ? fmt::format("{:.3g}", r.work.node_tests / std::max(1e-9, kern)) : "-",
-            o.save ? fmt::format("{:.3g}", r.save.median) : "-",
-            r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
-        csv += fmt::format(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",{},{"
-            "}\n",
-            r.scene, r.points, r.height, r.leaf_points, r.leaves, r.pairs, r.walked,
-            r.node_pairs_tested, r.links, r.cpu.median, r.cpu.lo, r.cpu.hi, int(r.cpu_estimated),
-            r.gpu.median, r.gpu.lo, r.gpu.hi, r.gpu_done ? r.pairs / r.gpu.median : 0, kern,
-            r.cpu_pair_rate / cores, r.work.facing_pairs, r.work.node_tests, r.work.occluder_tests,
-            r.save.median, r.device_bytes, cores, device, git_commit(), date);
-    }
+    for (const Row& r : rows) md += md_row(o, hd, r);
     md +=
         "\nTimes in seconds, median [min-max] over the runs, octree to V-map in memory; "
         "\"save s\" adds writing the .vmap. \"est.\": CPU leaf-pair rate measured on a sample "
@@ -282,10 +271,61 @@ int run(const Options& o) {
         "unordered leaf pair, including those the facing test settles; \"GPU pairs/s\" is end to "
         "end (octree, "
         "visibility, links), \"GPU kernel pairs/s\" the leaf-pair kernel alone (CUDA events).\n";
+    return md;
+}
+
+std::string csv_table(const Header& hd, const std::vector<Row>& rows) {
+    std::string csv =
+        "scene,points,height,leaf_points,leaves,leaf_pairs,leaf_pairs_walked,node_pairs_tested,"
+        "links,cpu_s,cpu_s_min,cpu_s_max,cpu_estimated,gpu_s,gpu_s_min,gpu_s_max,gpu_pairs_s,"
+        "gpu_kernel_s,cpu_pairs_s_core,facing_pairs,node_tests,occluder_tests,save_s,"
+        "device_bytes,cpu_threads,device,commit,date\n";
+    for (const Row& r : rows) csv += csv_row(hd, r);
+    return csv;
+}
+
+Header table_header(const Session& s) {
+    Header hd;
+    hd.cores = tbb::this_task_arena::max_concurrency();
+    char date[32];
+    const std::time_t now = std::time(nullptr);
+    std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&now));
+    hd.date = date;
+    if (s.have_gpu) {
+        std::string why;
+        hd.device = detail::make_cuda_backend(&why)->name();
+    }
+    return hd;
+}
+
+}  // namespace
+
+int run(const Options& o) {
+    if (o.runs < 1 || o.runs > 100) throw Error("--runs: must be 1..100");
+    if (!o.out_dir.empty()) io::make_output_folder(o.out_dir, "--out");
+    Session s(o);
+    pick_backends(s);
+    const bool tty = isatty(2);
+    s.tmp = (std::filesystem::temp_directory_path() /
+             fmt::format("vmap-bench-{}.vmap", getpid()))
+                .string();
+    std::vector<Row> rows;
+    for (const std::string& file : o.scenes) {
+        Scene sc = load_scene(file);
+        if (o.points) sc.points = o.points;
+        const PointSet pts = sample_scene(sc);
+        for (int h : o.heights) {
+            if (tty) fmt::print(stderr, "\r\033[Kbench: {} height {}", sc.name, h);
+            rows.push_back(bench_one(s, sc, pts, h));
+        }
+    }
+    if (tty) fmt::print(stderr, "\r\033[K");
+    const Header hd = table_header(s);
+    const std::string md = md_table(o, hd, rows);
     fmt::print("{}", md);
     if (!o.out_dir.empty()) {
         io::write_file_atomic(o.out_dir + "/bench.md", md);
-        io::write_file_atomic(o.out_dir + "/bench.csv", csv);
+        io::write_file_atomic(o.out_dir + "/bench.csv", csv_table(hd, rows));
     }
     return 0;
 }

@@ -108,17 +108,17 @@ if [[ "$cmd" == bundle ]]; then
     for b in .device/bin/*; do ldd "$b" | awk '/=>/ {print $3}'; done | sort -u |
         grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann|cpp-httplib|brotli|ssl|crypto)' |
         while read -r so; do cp -L "$so" .device/lib/; done
-    # Large libraries (Embree is 43 MB) travel compressed; `run` unpacks them.
-    find .device/lib -type f -size +8M -exec xz -T0 -6 {} \;
     strip --strip-unneeded .device/bin/* 2>/dev/null || true
-    # The test binaries travel compressed too (together they pass the 64 MiB a carry may hold).
-    xz -T0 -6 .device/bin/*_test
-    for f in models/dragon.ply models/bunny.off models/armadillo.off; do
+    # Every model a scene or a test names (the test scenes' libcgal-demo meshes too).
+    for f in models/dragon.ply models/*.off; do
         gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
     done
     cp build-device/tests/vmap_equal .device/bin/ 2>/dev/null || true
     # (grep -q would close the pipe early: ldd's SIGPIPE fails the test under pipefail)
     if ldd build-device/vmap | grep libmpi.so >/dev/null; then bundle_mpi .device/mpi; fi
+    # Everything over 1 MB travels compressed (Embree alone is 43 MB; together the binaries and
+    # libraries pass the 64 MiB a carry may hold); `run` unpacks them.
+    find .device/lib .device/bin -type f -size +1M -exec xz -T0 -6 {} \;
     git rev-parse --short HEAD > .device/commit
     du -sh .device
     exit 0
@@ -301,6 +301,10 @@ if [[ "$cmd" == run ]]; then
             *) echo "unknown step $step" >&2; rc=2 ;;
         esac
     done
+    # Only a few files come back from the device: every log travels in one archive, and the
+    # summaries beside it.
+    (cd "$OUT" && find . -maxdepth 1 -type f ! -name logs.tgz -printf '%P\n' |
+        tar czf logs.tgz -T - && find . -maxdepth 1 -type f \( -name '*.log' \) -delete)
     exit $rc
 fi
 echo "usage: scripts/device.sh bundle | run [gpu|sanitize|cpu|dragon|bench]..." >&2

@@ -34,10 +34,26 @@ std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, i
     vm = mpi::probe(pts, bp, ranks, tp, st, "test");
     if (max_area) tp = mpi::make_top_pairs(vm.octree(), max_area);
     const auto parts = guided ? mpi::dynamic_chunks(tp, ranks) : mpi::static_shares(tp, ranks);
-    std::vector<mpi::ShareResult> got(parts.size());
+    // Guided: each simulated rank takes every ranks-th chunk, all in one build (build_rounds,
+    // as a rank of the dynamic schedule does); static: one build of its share each.
+    const size_t procs = guided ? size_t(ranks) : parts.size();
+    std::vector<mpi::ShareResult> got(procs);
     std::vector<uint8_t> full(tp.pairs.size(), 0);
-    for (size_t k = 0; k < parts.size(); ++k) {
-        mpi::build_round(pts, bp, tp, parts[k], true, "test", got[k]);
+    for (size_t k = 0; k < procs; ++k) {
+        if (guided) {
+            size_t next = k;
+            mpi::build_rounds(
+                pts, bp, tp,
+                [&]() -> const std::vector<uint32_t>* {
+                    if (next >= parts.size()) return nullptr;
+                    next += procs;
+                    return &parts[next - procs];
+                },
+                true, "test", got[k]);
+            EXPECT_EQ(got[k].rounds, int((parts.size() - k + procs - 1) / procs));
+        } else {
+            mpi::build_round(pts, bp, tp, parts[k], true, "test", got[k]);
+        }
         for (size_t i = 0; i < full.size(); ++i)
             full[i] |= got[k].full.size() > i && got[k].full[i];
     }
@@ -120,6 +136,35 @@ TEST(MpiSplit, SimulatedRanksGiveTheSingleProcessMap) {
             expect_same_links(want, vm);
         }
     }
+}
+
+// A rank of the dynamic schedule resolves every chunk it is handed in one build; an empty
+// chunk (more bins than jobs) must not end its rounds, or the chunks after it would be lost.
+TEST(MpiSplit, EmptyChunksDoNotEndARanksRounds) {
+    const PointSet pts = test::sample(test::scene_path("cornell-bunny"), 1000);
+    const BuildParams bp = test::cpu_params(6, 1);
+    const VisibilityMap want = build_vmap(pts, bp);
+    mpi::TopPairs tp;
+    BuildStats st;
+    VisibilityMap vm = mpi::probe(pts, bp, 1, tp, st, "test");
+    const auto two = mpi::static_shares(tp, 2);
+    const std::vector<std::vector<uint32_t>> chunks{{}, two[0], {}, {}, two[1], {}};
+    size_t next = 0;
+    mpi::ShareResult got;
+    mpi::build_rounds(
+        pts, bp, tp,
+        [&]() -> const std::vector<uint32_t>* {
+            return next < chunks.size() ? &chunks[next++] : nullptr;
+        },
+        true, "test", got);
+    EXPECT_EQ(next, chunks.size());
+    EXPECT_EQ(got.rounds, int(chunks.size()));
+    const mpi::Merge m = mpi::merge_full(tp, got.full);
+    std::vector<NodePair> links = m.add;
+    mpi::drop_merged(tp, m, got.links);
+    links.insert(links.end(), got.links.begin(), got.links.end());
+    set_links(vm, std::move(links));
+    expect_same_links(want, vm);
 }
 
 // The node ranges of the sharded output, laid end to end, are the one-file arrays.

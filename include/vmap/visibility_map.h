@@ -54,7 +54,9 @@ struct BuildParams {
     // The node pairs the construction starts from, given the octree; empty function: every
     // pair of sibling nodes (the whole V-map). Pairs (a, b) of disjoint subtrees, a before b in
     // preorder, each covering its leaves(a) x leaves(b) once: the map then holds the links of
-    // those rectangles only (the MPI build, src/mpi/, gives each process a share).
+    // those rectangles only (the MPI build, src/mpi/, gives each process a share). Called
+    // again each time its pairs are resolved, until it returns none: a caller can hand out its
+    // work in chunks over one octree (the MPI build's dynamic schedule).
     std::function<std::vector<std::pair<int32_t, int32_t>>(const Octree&)> top_pairs;
 
     // Throws vmap::Error naming `source` and the field for a value out of range (octree and

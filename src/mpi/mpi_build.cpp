@@ -279,28 +279,37 @@ std::string run_dynamic(Run& r) {
     const auto chunks = dynamic_chunks(r.tp, r.c.size);
     r.chunks = int(chunks.size());
     const int n = r.chunks;
-    auto round = [&](int k) {
-        build_round(r.points, r.params, r.tp, chunks[k], !r.opt.count_links, r.source, r.share);
+    // One build_vmap a rank: the chunks it is handed are resolved over one octree.
+    auto rounds = [&](const std::function<int()>& take) {
+        build_rounds(
+            r.points, r.params, r.tp,
+            [&]() -> const std::vector<uint32_t>* {
+                const int k = take();
+                return k < 0 ? nullptr : &chunks[size_t(k)];
+            },
+            !r.opt.count_links, r.source, r.share);
     };
     if (r.c.rank == 0) {
         std::atomic<int> next{0};
         std::atomic<bool> failed{false};
         std::thread t([&] { dispatch(r.c, n, next, failed); });
         std::string err = attempt([&] {
-            for (int k; !failed && (k = next.fetch_add(1)) < n;) round(k);
+            rounds([&] {
+                const int k = failed ? n : next.fetch_add(1);
+                return k < n ? k : -1;
+            });
         });
         if (!err.empty()) failed = true;
         t.join();
         return err;
     }
     std::string err = attempt([&] {
-        for (;;) {
+        rounds([&] {
             int ask = 0, k = -1;
             MPI_Send(&ask, 1, MPI_INT, 0, kTagAsk, MPI_COMM_WORLD);
             MPI_Recv(&k, 1, MPI_INT, 0, kTagGive, MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-            if (k < 0) return;
-            round(k);
-        }
+            return k;
+        });
     });
     if (!err.empty()) {
         int quit = 1;

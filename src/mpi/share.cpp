@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <functional>
+#include <utility>
 #include <unordered_set>
 
 #include "util/parallel.h"
@@ -32,14 +34,33 @@ VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks
 void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out) {
+    bool given = false;
+    build_rounds(points, params, tp,
+                 [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep, source,
+                 out);
+}
+
+void build_rounds(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+                  const std::function<const std::vector<uint32_t>*()>& next, bool keep,
+                  const std::string& source, ShareResult& out) {
     const auto t0 = std::chrono::steady_clock::now();
     BuildParams p = params;
     p.keep_links = true;  // a job's own link says whether it came back fully visible
-    p.top_pairs = [&](const Octree&) { return job_pairs(tp, jobs); };
+    std::vector<uint32_t> done;  // every job of every chunk taken
+    int chunks = 0;
+    p.top_pairs = [&](const Octree&) {
+        // An empty chunk would read as "no more" to build_vmap: take the next one instead.
+        const std::vector<uint32_t>* jobs = next();
+        for (; jobs && jobs->empty(); jobs = next()) ++chunks;
+        if (!jobs) return std::vector<NodePair>{};
+        ++chunks;
+        done.insert(done.end(), jobs->begin(), jobs->end());
+        return job_pairs(tp, *jobs);
+    };
     BuildStats st;
     const VisibilityMap vm = build_vmap(points, p, &st, source);
     out.full.resize(tp.pairs.size(), 0);
-    for (uint32_t j : jobs) {
+    for (uint32_t j : done) {
         const auto l = vm.links(tp.pairs[j].a);
         out.full[j] = std::binary_search(l.begin(), l.end(), tp.pairs[j].b);
     }
@@ -61,7 +82,7 @@ void build_round(const PointSet& points, const BuildParams& params, const TopPai
         out.stats.seconds_links += st.seconds_links;
         out.stats.peak_device_bytes = std::max(out.stats.peak_device_bytes, st.peak_device_bytes);
     }
-    out.rounds++;
+    out.rounds += chunks;
     out.seconds += seconds_since(t0);
 }
 

@@ -5,6 +5,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,11 @@ VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks
 void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out);
+// The same for the chunks of jobs `next` hands out (nullptr: no more), all in one build_vmap:
+// one octree and one backend for every chunk (a round each).
+void build_rounds(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+                  const std::function<const std::vector<uint32_t>*()>& next, bool keep,
+                  const std::string& source, ShareResult& out);
 
 // Drops the links of the jobs merged into their parents' (Merge::drop).
 void drop_merged(const TopPairs& tp, const Merge& m, std::vector<NodePair>& links);

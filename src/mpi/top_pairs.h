@@ -52,7 +52,9 @@ std::vector<std::vector<uint32_t>> static_shares(const TopPairs& tp, int ranks);
 // the jobs sorted by size, largest first and shrinking (guided self-scheduling), balanced worse
 // than the static shares (slowest / mean 1.36-1.55 against 1.11-1.14 at 4 and 8 ranks), since
 // the estimate undercounts the small jobs' cost (the large ones are mostly decided at node level).
-constexpr int kChunksPerRank = 4;
+// A rank resolves all its chunks in one build_vmap (mpi::build_rounds), so a chunk costs one
+// message, not an octree: 16 a rank balanced 8 ranks to 1.03 (4: 1.08-1.12; docs/scaling.md).
+constexpr int kChunksPerRank = 16;
 std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks);
 
 // The node pairs of the given jobs, for BuildParams::top_pairs.

@@ -54,12 +54,15 @@ std::vector<detail::NodePairRef> sibling_pairs(const Octree& t) {
     return roots;
 }
 
-// The node pairs a caller gave (BuildParams::top_pairs: the MPI build's share) as frontier roots.
-std::vector<detail::NodePairRef> given_pairs(const std::vector<std::pair<int32_t, int32_t>>& pairs) {
-    std::vector<detail::NodePairRef> roots;
-    roots.reserve(pairs.size());
-    for (const auto& [a, b] : pairs) roots.push_back({a, b});
-    return roots;
+// The node pairs a caller gives (BuildParams::top_pairs: the MPI build's share, in chunks) as
+// frontier roots, list after list until it gives none.
+std::function<std::vector<detail::NodePairRef>()> given_pairs(const BuildParams& params,
+                                                              const Octree& t) {
+    return [&params, &t] {
+        std::vector<detail::NodePairRef> roots;
+        for (const auto& [a, b] : params.top_pairs(t)) roots.push_back({a, b});
+        return roots;
+    };
 }
 
 // Node bounds and the context of the node tests, when the construction decides node pairs.
@@ -130,7 +133,10 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     st.seconds_plan = seconds_since(t1);
     auto fr = std::make_unique<detail::Frontier>(t, nt.on ? &nt.ctx : nullptr, *backend, params,
                                                  fp, st);
-    fr->run(params.top_pairs ? given_pairs(params.top_pairs(t)) : sibling_pairs(t));
+    if (params.top_pairs)
+        fr->run(given_pairs(params, t));
+    else
+        fr->run(sibling_pairs(t));
     st.seconds_plan += st.seconds_decide;  // "plan and node tests"
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();

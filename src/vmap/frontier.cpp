@@ -9,6 +9,7 @@
 #include <atomic>
 #include <chrono>
 #include <numeric>
+#include <utility>
 
 #include "vmap/error.h"
 
@@ -66,6 +67,11 @@ uint32_t Frontier::num_kids(NodePairRef p) const {
 }
 
 void Frontier::run(const std::vector<NodePairRef>& roots) {
+    bool given = false;
+    run([&] { return std::exchange(given, true) ? std::vector<NodePairRef>{} : roots; });
+}
+
+void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
     st_.levels.assign(size_t(t_.height()) + 1, {});
     st_.leaf_pairs = uint64_t(t_.num_leaves()) * (t_.num_leaves() - 1) / 2;
     // The first report says the job's size and an estimate (as if every pair were walked).
@@ -74,16 +80,17 @@ void Frontier::run(const std::vector<NodePairRef>& roots) {
                       rate > 0 ? double(st_.leaf_pairs) / rate : 0.0);
     progress_ = &progress;
     backend_.set_progress(&progress);
-    for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
-        const std::vector<NodePairRef> slice(
-            roots.begin() + s, roots.begin() + std::min(roots.size(), s + fp_.max_level_pairs));
-        const std::vector<uint8_t> full = resolve(slice);
-        // A sibling pair has no parent pair: a full one is a link.
-        LinkSink& out = sinks_.local();
-        for (size_t i = 0; i < slice.size(); ++i)
-            if (full[i]) out.push(slice[i].a, slice[i].b);
-        collect_sinks(sinks_);
-    }
+    for (std::vector<NodePairRef> roots; !(roots = next()).empty();)
+        for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
+            const std::vector<NodePairRef> slice(
+                roots.begin() + s, roots.begin() + std::min(roots.size(), s + fp_.max_level_pairs));
+            const std::vector<uint8_t> full = resolve(slice);
+            // A root has no parent pair here: a full one is a link.
+            LinkSink& out = sinks_.local();
+            for (size_t i = 0; i < slice.size(); ++i)
+                if (full[i]) out.push(slice[i].a, slice[i].b);
+            collect_sinks(sinks_);
+        }
     finish_extraction(0);
     finish_extraction(1);
     backend_.set_progress(nullptr);

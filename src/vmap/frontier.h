@@ -14,6 +14,7 @@
 #include <tbb/task_group.h>
 
 #include <cstdint>
+#include <functional>
 #include <vector>
 
 #include "util/progress.h"
@@ -38,6 +39,9 @@ class Frontier {
              const BuildParams& params, const FrontierParams& fp, BuildStats& st);
     // Resolves every leaf pair under the roots (the sibling pairs), making their links.
     void run(const std::vector<NodePairRef>& roots);
+    // The same for root lists pulled from `next` until it gives an empty one (the MPI build's
+    // chunks, one octree and one backend for all of them).
+    void run(const std::function<std::vector<NodePairRef>()>& next);
     // The links made (blocks that were counted into arrays), and arrays counting their ends.
     std::vector<std::vector<Link>> pieces;
     LinkArrays arrays;

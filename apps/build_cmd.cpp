@@ -50,7 +50,7 @@ struct BuildOptions {
     bool count_links = false;
     bool json = false;
     bool shards = false;                // under mpirun: src/mpi/mpi_build.h
-    std::string schedule = "static";
+    std::string schedule = "dynamic";
     BuildParams params;
 };
 
@@ -263,8 +263,9 @@ Command add_build_command(CLI::App& app) {
                     "Under mpirun: one file of links per rank and -o an index of them (for maps "
                     "beyond one host's memory; load and the queries read it as one map)");
     build->add_option("--schedule", bo->schedule,
-                      "Under mpirun: static (a share each by a work estimate: balanced better, "
-                      "docs/scaling.md) or dynamic (rank 0 hands out chunks of jobs)")
+                      "Under mpirun: dynamic (rank 0 hands out small chunks of jobs to whichever "
+                      "rank asks: balanced better, docs/scaling.md) or static (a share each by a "
+                      "work estimate)")
         ->check(CLI::IsMember({"static", "dynamic"}))
         ->capture_default_str();
     return {

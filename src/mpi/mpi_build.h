@@ -4,9 +4,9 @@
 //
 // How the work is cut and put back together: src/mpi/top_pairs.h (no MPI) and src/mpi/share.h.
 // Every rank reads the input and builds the same octree; ranks whose inputs differ stop the job.
-// Schedules: "static" (the default: each rank its share of the jobs by a work estimate, fixed in
-// advance) or "dynamic" (rank 0 hands out chunks of jobs to whichever rank asks; a thread of
-// rank 0 answers while rank 0 builds too). A failure on one rank (bad input, out of memory,
+// Schedules: "dynamic" (the default: rank 0 hands out chunks of jobs to whichever rank asks; a
+// thread of rank 0 answers while rank 0 builds too; each rank resolves its chunks over one
+// octree) or "static" (each rank its share of the jobs by a work estimate, fixed in advance). A failure on one rank (bad input, out of memory,
 // a write error) ends every rank with that rank's message; nothing is written unless every
 // rank got that far, and the output appears whole (io::AtomicFile) or not at all.
 //
@@ -28,7 +28,7 @@ struct Options {
     std::string output;               // .vmap (or the index, with shards)
     bool shards = false;              // one file of links per rank and an index (shard_file.h)
     bool count_links = false;         // count, write nothing (BuildParams::keep_links false)
-    std::string schedule = "static";  // static | dynamic (docs/scaling.md: static balanced better)
+    std::string schedule = "dynamic";  // dynamic | static (docs/scaling.md: dynamic balanced better)
     int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
 };
 

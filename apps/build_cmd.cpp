@@ -1,5 +1,5 @@
 // `vmap build`: a scene, mesh or cloud (or the default scene) into a .vmap, alone or across
-// the processes of mpirun (src/mpi/mpi_build.h), with a summary of what was built.
+// the processes of mpirun (vmap/mpi.h), with a summary of what was built.
 #include <fmt/format.h>
 #include <tbb/task_arena.h>
 
@@ -10,12 +10,11 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "mpi/mpi_build.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/input.h"
 #include "vmap/io.h"
+#include "vmap/mpi.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
 
@@ -49,7 +48,7 @@ struct BuildOptions {
     std::vector<float> viewpoint;
     bool count_links = false;
     bool json = false;
-    bool shards = false;                // under mpirun: src/mpi/mpi_build.h
+    bool shards = false;                // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
     BuildParams params;
 };

@@ -2,6 +2,7 @@
 #include <fmt/format.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <array>
@@ -14,9 +15,8 @@
 #include <sstream>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/octree.h"
 #include "vmap/scene.h"
 
@@ -254,7 +254,7 @@ std::string format_duration(double s) {
 
 ProgressCallback stderr_progress() {
     const bool quiet = verbosity() == Verbosity::kQuiet;
-    const bool moving = !quiet && detail::stderr_is_terminal();
+    const bool moving = !quiet && isatty(STDERR_FILENO) == 1;
     return [quiet, moving](const ProgressInfo& p) {
         if (quiet) return true;
         if (p.done == 0 && p.seconds < 1e-3) {

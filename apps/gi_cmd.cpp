@@ -14,9 +14,8 @@
 #include <optional>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/gi.h"
 #include "vmap/io.h"
 #include "vmap/render.h"
@@ -108,10 +107,18 @@ std::vector<Vec3> solve(const VisibilityMap& vm, GiOptions& o) {
     double previous = double(p0.x) + p0.y + p0.z;
     {
         const ProgressCallback cb = stderr_progress();
-        detail::Progress bar("gi bounces", uint64_t(limit), &cb);
+        const auto t0 = std::chrono::steady_clock::now();
+        auto report = [&](int done) {  // a bounce takes long enough to report each one
+            const double s = seconds_since(t0);
+            ProgressInfo p;
+            p.stage = "gi bounces", p.done = uint64_t(done), p.total = uint64_t(limit);
+            p.seconds = s, p.eta_seconds = done ? s / done * (limit - done) : 0;
+            if (!cb(p)) throw Cancelled("gi: cancelled");
+        };
+        report(0);
         for (int b = 0; b < limit; ++b) {
             solver.bounce();
-            bar.set(uint64_t(b + 1));
+            report(b + 1);
             const auto B = solver.radiosity();
             if (o.compare) hier.push_back(B);
             const Vec3 p = total_power(vm, B);
@@ -125,6 +132,7 @@ std::vector<Vec3> solve(const VisibilityMap& vm, GiOptions& o) {
             }
             previous = now;
         }
+        report(limit);  // the end, also when it converged early
     }
     std::vector<Vec3> B = solver.radiosity();
     const int hier_bounces = solver.bounces_done();
@@ -162,7 +170,7 @@ void put(std::string& out, const T& v) {
 }
 
 // The image as PFM (little-endian float RGB, rows bottom-up), in radiosity units: the linear
-// render divided by the exposure. Written atomically (io/atomic_file.h).
+// render divided by the exposure. Written atomically (vmap/files.h).
 void write_pfm(const std::string& path, const Image& img, float exposure) {
     std::string out = fmt::format("PF\n{} {}\n-1.0\n", img.width, img.height);
     out.reserve(out.size() + size_t(12) * img.width * img.height);

@@ -14,7 +14,6 @@
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"
 #include "util/parallel.h"
-#include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"

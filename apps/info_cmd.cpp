@@ -6,7 +6,7 @@
 #include <nlohmann/json.hpp>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
+#include "vmap/files.h"
 #include "vmap/vmap.h"
 
 namespace vmap::cli {

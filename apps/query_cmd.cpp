@@ -14,10 +14,10 @@
 
 #include "apps/commands.h"
 #include "apps/query_io.h"
-#include "io/npy.h"
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/io.h"
+#include "vmap/npy.h"
 #include "vmap/query.h"
 #include "vmap/render.h"
 
@@ -102,7 +102,7 @@ void run_pairs(const QueryArgs& a, const VisibilityMap& vm, json& js) {
         throw Error(fmt::format("{}: {}", a.pairs.empty() ? a.path : a.pairs, e.what()));
     }
     if (!a.out.empty()) {
-        detail::write_npy_u8(a.out, ans);
+        write_npy_u8(a.out, ans);
         if (verbosity() != Verbosity::kQuiet)
             fmt::print(stderr, "{} answers (0 hidden, 1 visible, 2 same-leaf) -> {}\n", ans.size(),
                        a.out);

@@ -7,9 +7,9 @@
 #include <fstream>
 #include <iterator>
 
-#include "io/npy.h"
 #include "util/parallel.h"
 #include "vmap/error.h"
+#include "vmap/npy.h"
 
 namespace vmap::cli {
 namespace {
@@ -77,7 +77,7 @@ std::vector<uint32_t> read_pairs(const std::string& path) {
     const std::string data = slurp(path);
     const std::string name = path == "-" ? "stdin" : path;
     if (data.size() >= 6 && std::memcmp(data.data(), "\x93NUMPY", 6) == 0)
-        return detail::read_npy_pairs(data, name);
+        return read_npy_pairs(data, name);
     return parse_text(data, name);
 }
 

@@ -19,9 +19,8 @@
 #include <memory>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/io.h"
 #include "vmap/query.h"
 #include "vmap/render.h"

@@ -10,9 +10,8 @@
 #include <fstream>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/validate.h"
 
 namespace vmap::cli {

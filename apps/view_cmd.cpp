@@ -15,7 +15,6 @@
 #include <thread>
 
 #include "apps/commands.h"
-#include "util/progress.h"
 #include "view/view_server.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"

@@ -18,9 +18,9 @@
 #include <fstream>
 #include <random>
 
-#include "io/atomic_file.h"
 #include "visibility/backend.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/scene.h"
 #include "vmap/version.h"
 #include "vmap/vmap.h"

@@ -16,8 +16,8 @@
 
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/gi.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"

@@ -17,9 +17,8 @@
 #include <random>
 
 #include "apps/commands.h"
-#include "io/atomic_file.h"
-#include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/query.h"
 #include "vmap/scene.h"
 

@@ -9,10 +9,10 @@
 #include <filesystem>
 #include <mutex>
 
-#include "io/npy.h"
 #include "test_util.h"
 #include "visibility/backend.h"
 #include "vmap/error.h"
+#include "vmap/npy.h"
 #include "vmap/query.h"
 #include "vmap/version.h"
 
@@ -186,7 +186,7 @@ std::string le(std::initializer_list<uint64_t> v, int bytes, bool big = false) {
 }
 
 TEST(Npy, ReadsPairsOfEveryIntegerLayout) {
-    using detail::read_npy_pairs;
+    using vmap::read_npy_pairs;
     const std::vector<uint32_t> want = {1, 2, 3, 40000};
     EXPECT_EQ(read_npy_pairs(npy("<i8", "2, 2", le({1, 2, 3, 40000}, 8)), "a"), want);
     EXPECT_EQ(read_npy_pairs(npy(">i4", "2, 2", le({1, 2, 3, 40000}, 4, true)), "a"), want);
@@ -198,7 +198,7 @@ TEST(Npy, ReadsPairsOfEveryIntegerLayout) {
 }
 
 TEST(Npy, BadFilesNameTheFileAndTheField) {
-    using detail::read_npy_pairs;
+    using vmap::read_npy_pairs;
     auto fails = [](const std::string& data, const std::string& what) {
         try {
             read_npy_pairs(data, "p.npy");

@@ -1,6 +1,6 @@
-// The one writer every output goes through (io/atomic_file.h): writers to one path never mix,
+// The one writer every output goes through (vmap/files.h): writers to one path never mix,
 // failures leave nothing behind, and output paths are checked before any work.
-#include "io/atomic_file.h"
+#include "vmap/files.h"
 
 #include <gtest/gtest.h>
 #include <sys/stat.h>

@@ -1,5 +1,5 @@
-// AtomicFile (io/atomic_file.h): a unique temporary, written, synced, renamed, folder synced.
-#include "io/atomic_file.h"
+// AtomicFile (vmap/files.h): a unique temporary, written, synced, renamed, folder synced.
+#include "vmap/files.h"
 
 #include <fcntl.h>
 #include <fmt/format.h>

@@ -8,8 +8,8 @@
 #include <sstream>
 #include <vector>
 
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 
 namespace vmap::io {
 namespace {

@@ -13,8 +13,8 @@
 #include <vector>
 
 #include "io/line_reader.h"
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/io.h"
 
 namespace vmap {

@@ -1,7 +1,7 @@
 // The .npy format: magic "\x93NUMPY", major/minor version, header length (u16 for 1.0, u32
 // for 2.0/3.0), then a Python dict literal {'descr': '<i8', 'fortran_order': False,
 // 'shape': (M, 2), } padded to a multiple of 64 bytes, then the raw array.
-#include "io/npy.h"
+#include "vmap/npy.h"
 
 #include <fmt/format.h>
 
@@ -11,10 +11,10 @@
 #include <fstream>
 #include <memory>
 
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 
-namespace vmap::detail {
+namespace vmap {
 namespace {
 
 struct Header {
@@ -140,4 +140,4 @@ void write_npy_u8(const std::string& path, std::span<const uint8_t> values) {
     out.commit();
 }
 
-}  // namespace vmap::detail
+}  // namespace vmap

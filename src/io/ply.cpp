@@ -17,8 +17,8 @@
 #include <system_error>
 #include <vector>
 
-#include "io/atomic_file.h"
 #include "io/text_util.h"
+#include "vmap/files.h"
 #include "vmap/io.h"
 
 namespace vmap {

@@ -13,8 +13,8 @@
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
 //           units per octree unit: points and octree are stored in the octree's frame)
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
-#include "util/parallel.h"
 #include "io/vmap_file.h"
+#include "util/parallel.h"
 
 #include <fcntl.h>
 #include <sys/mman.h>
@@ -33,10 +33,10 @@
 #include <fstream>
 #include <type_traits>
 
-#include "io/atomic_file.h"
 #include "mpi/shard_file.h"
-#include "vmap/error.h"
 #include "octree/records.h"
+#include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/map_access.h"
 
 namespace vmap {
@@ -269,7 +269,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
 }
 
 // The header (magic, version, payload size and checksum), then the payload, through an
-// AtomicFile (io/atomic_file.h). The pieces are written in parallel chunks at their offsets,
+// AtomicFile (vmap/files.h). The pieces are written in parallel chunks at their offsets,
 // which the page cache takes several times faster than one stream.
 void write_file(const std::string& path, const Writer& w) {
     std::vector<uint8_t> head;

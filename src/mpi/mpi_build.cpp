@@ -1,5 +1,5 @@
-// The V-map build across MPI processes (src/mpi/mpi_build.h).
-#include "mpi/mpi_build.h"
+// The V-map build across MPI processes (vmap/mpi.h).
+#include "vmap/mpi.h"
 
 #include <cstdlib>
 
@@ -39,9 +39,6 @@ namespace vmap::mpi {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 constexpr int kTagAsk = 11, kTagGive = 12, kTagData = 13;
 constexpr size_t kChunkBytes = size_t(256) << 20;  // one message at most (int counts)

@@ -16,8 +16,8 @@
 #include <string>
 #include <vector>
 
-#include "io/atomic_file.h"
 #include "mpi/share.h"
+#include "vmap/files.h"
 #include "vmap/vmap.h"
 
 namespace vmap::mpi {

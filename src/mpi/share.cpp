@@ -12,10 +12,6 @@
 namespace vmap::mpi {
 namespace {
 
-double seconds_since(std::chrono::steady_clock::time_point t0) {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-}
-
 constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
 
 }  // namespace

@@ -7,8 +7,8 @@
 #include <cstdio>
 #include <cstring>
 
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/render.h"
 
 // The stb headers are third-party C: keep their warnings out of ours.

@@ -10,9 +10,9 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 
-#include "io/atomic_file.h"
 #include "io/json_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 #include "vmap/io.h"
 #include "vmap/version.h"
 

@@ -10,8 +10,8 @@
 #include <fstream>
 #include <sstream>
 
-#include "io/atomic_file.h"
 #include "vmap/error.h"
+#include "vmap/files.h"
 
 namespace vmap::detail {
 

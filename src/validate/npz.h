@@ -27,7 +27,7 @@ NpyArray npy_array(std::string name, std::string descr, std::vector<uint64_t> sh
                     std::string(reinterpret_cast<const char*>(data), n * sizeof(T))};
 }
 
-// The arrays as one .npz file, written atomically (io/atomic_file.h). Throws vmap::Error naming
+// The arrays as one .npz file, written atomically (vmap/files.h). Throws vmap::Error naming
 // `path` when an array's bytes do not match its shape and dtype or the file cannot be written.
 void write_npz(const std::string& path, const std::vector<NpyArray>& arrays);
 

@@ -17,9 +17,6 @@ namespace vmap::detail {
 namespace {
 
 using Clock = std::chrono::steady_clock;
-double seconds_since(Clock::time_point t0) {
-    return std::chrono::duration<double>(Clock::now() - t0).count();
-}
 
 struct Batch {
     size_t begin, end;

@@ -27,6 +27,7 @@ Result build(PointSet, BuildParams, const Options&, const std::string&) {
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <memory>
 #include <numeric>
 #include <thread>
 
@@ -447,6 +448,25 @@ std::vector<std::string> summary(const Run& r, double output_s) {
     return lines;
 }
 
+// Rank 0 reports for the job: its own leaf pairs are about 1/ranks of them (the chunks go to
+// whoever asks), so its count is scaled up and the estimate shared out, instead of a bar that
+// stops near 1/ranks and an estimate for one rank doing everything.
+ProgressCallback whole_job_progress(ProgressCallback inner, int ranks) {
+    auto where = std::make_shared<std::string>();
+    return [inner = std::move(inner), ranks, where](const ProgressInfo& p) {
+        ProgressInfo q = p;
+        q.done = std::min(p.total, p.done * uint64_t(ranks));
+        if (p.done >= p.total) q.done = p.total;
+        q.estimate_seconds = p.estimate_seconds / ranks;
+        q.eta_seconds = q.done ? p.seconds * double(q.total - q.done) / double(q.done) : 0;
+        if (*p.backend) {
+            *where = fmt::format("{} ranks, {} each", ranks, p.backend);
+            q.backend = where->c_str();
+        }
+        return inner(q);
+    };
+}
+
 // Threads, device and progress of this rank.
 void configure(Run& r) {
     r.threads = threads_for(r.c, r.opt.threads, r.note);
@@ -456,6 +476,8 @@ void configure(Run& r) {
         r.params.device = gpus > 0 ? r.c.local_rank % gpus : 0;
     }
     if (r.c.rank != 0) r.params.progress = nullptr;
+    if (r.c.rank == 0 && r.params.progress && r.c.size > 1)
+        r.params.progress = whole_job_progress(std::move(r.params.progress), r.c.size);
     r.schedule = r.opt.schedule;
     if (r.schedule != "static" && r.schedule != "dynamic")
         throw Error(

@@ -65,6 +65,11 @@ for k in "${!scenes[@]}"; do
         <('$vmap' query '$tmp/sh-$k.vmap' --pair 0 100)"
 done
 
+# Rank 0 speaks for the whole job: its first report names the ranks and the whole job's size.
+check "progress names the ranks" bash -c "${mpi[*]} -np 2 '$vmap' build \
+    '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \
+    -o '$tmp/p.vmap' 2> '$tmp/err' && grep -q '^leaf pairs: [0-9]* to do on 2 ranks, cpu' '$tmp/err'"
+
 # A shard missing or corrupt: one clear error naming it.
 rm -f "$tmp/sh-0.vmap.shard-1-of-3"
 check "missing shard named" bash -c "! '$vmap' info '$tmp/sh-0.vmap' 2> '$tmp/err' &&

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <random>
 
+#include "backend_fixture.h"
 #include "octree/records.h"
 #include "test_util.h"
 #include "visibility/leaf_pair.h"
@@ -200,35 +201,77 @@ bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
     return occ < vp.K;
 }
 
-class TraversalOracle : public ::testing::TestWithParam<std::tuple<const char*, int, int>> {};
+// The backend's answers for leaf pairs (a < b each), one 1 x 1 rectangle a pair, in one batch;
+// its work added to *wc.
+std::vector<bool> visible_on(detail::Backend& backend, const Octree& t, const VisibilityParams& vp,
+                             const std::vector<std::pair<int32_t, int32_t>>& pairs,
+                             WorkCounters* wc) {
+    std::vector<detail::PairJob> jobs(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+        jobs[k].row0 = pairs[k].first, jobs[k].rows = 1;
+        jobs[k].col0 = pairs[k].second, jobs[k].cols = 1;
+        jobs[k].word_offset = k;
+    }
+    backend.prepare(t, vp, std::max<uint64_t>(1, pairs.size()));
+    backend.submit(jobs, pairs.size(), 0);
+    const uint32_t* bits = backend.wait(0, *wc);
+    std::vector<bool> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) out[k] = bits[k] & 1u;
+    return out;
+}
 
+// Random leaf pairs, a < b.
+std::vector<std::pair<int32_t, int32_t>> random_pairs(int32_t num_leaves, int n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int32_t> pick(0, num_leaves - 1);
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    for (int it = 0; it < n; ++it) {
+        int32_t a = pick(rng), b = pick(rng);
+        if (a == b) continue;
+        pairs.push_back({std::min(a, b), std::max(a, b)});
+    }
+    return pairs;
+}
+
+class TraversalOracle : public test::OnEachBackendWith<std::tuple<const char*, int, int>> {};
+
+// The backend's walk (on the GPU: the default kernel) and the host's leaf_pair_visible against
+// testing every leaf.
 TEST_P(TraversalOracle, SpherePruningNeverDropsAnOccluder) {
-    const auto [scene, height, k] = GetParam();
+    const auto [scene, height, k] = param();
     PointSet ps = test::sample(test::scene_path(scene), 3000, 5);
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {height, 3}, order);
     VisibilityParams vp;
     vp.K = k;
     const OctreeView v = octree_view(t);
-    std::mt19937 rng(9);
-    std::uniform_int_distribution<int32_t> pick(0, v.num_leaves - 1);
+    const auto pairs = random_pairs(v.num_leaves, 4000, 9);
+    WorkCounters wc;
+    const std::vector<bool> got = visible_on(*leaf_pair_backend(), t, vp, pairs, &wc);
     int visible = 0, hidden = 0;
-    for (int it = 0; it < 4000; ++it) {
-        int32_t a = pick(rng), b = pick(rng);
-        if (a == b) continue;
-        if (a > b) std::swap(a, b);
-        const bool got = leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr));
-        ASSERT_EQ(got, visible_without_pruning(v, a, b, vp)) << a << " " << b;
-        (got ? visible : hidden)++;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+        const auto [a, b] = pairs[i];
+        const bool want = visible_without_pruning(v, a, b, vp);
+        ASSERT_EQ(got[i], want) << "backend, leaves " << a << " " << b;
+        ASSERT_EQ(leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)), want)
+            << "host, leaves " << a << " " << b;
+        (got[i] ? visible : hidden)++;
     }
+    EXPECT_EQ(wc.pairs, pairs.size());
+    EXPECT_EQ(wc.visible_pairs, uint64_t(visible));
     EXPECT_GT(visible, 100);
     EXPECT_GT(hidden, 100);
 }
 
-INSTANTIATE_TEST_SUITE_P(Scenes, TraversalOracle,
-                         ::testing::Values(std::make_tuple("cornell-bunny", 6, 1),
-                                           std::make_tuple("cornell-bunny", 8, 2),
-                                           std::make_tuple("cornell-two-models", 7, 3)));
+VMAP_ON_EACH_BACKEND_WITH(TraversalOracle,
+                          ::testing::Values(std::make_tuple("cornell-bunny", 6, 1),
+                                            std::make_tuple("cornell-bunny", 8, 2),
+                                            std::make_tuple("cornell-two-models", 7, 3)),
+                          [](const std::tuple<const char*, int, int>& c) {
+                              return std::string(std::get<0>(c)) + "_h" +
+                                     std::to_string(std::get<1>(c)) + "_K" +
+                                     std::to_string(std::get<2>(c));
+                          });
 
 // A random scene for the packet walk: points on a few planes (some axis-aligned, with
 // coordinates on a coarse grid, so that many segments have an exactly zero direction component
@@ -372,6 +415,37 @@ TEST(Counting, CountedAndUncountedPredicatesAgree) {
                       leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
     EXPECT_GT(wc.node_tests, wc.facing_pairs);
 }
+
+// The backend's work counts for a batch of pairs are the counted predicate's, pair by pair
+// summed, and its answers the uncounted one's.
+class Counting : public test::OnEachBackend {};
+
+TEST_P(Counting, BackendCountsTheCountedPredicatesWork) {
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);
+    std::vector<uint32_t> order;
+    Octree t = Octree::build(ps, {7, 4}, order);
+    const OctreeView v = octree_view(t);
+    VisibilityParams vp;
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    for (int32_t a = 0; a < 50; ++a)
+        for (int32_t b = a + 1; b < v.num_leaves; b += 7) pairs.push_back({a, b});
+    WorkCounters want, got;
+    const std::vector<bool> vis = visible_on(*leaf_pair_backend(), t, vp, pairs, &got);
+    for (size_t i = 0; i < pairs.size(); ++i) {
+        const auto [a, b] = pairs[i];
+        leaf_pair_visible<true>(v, a, b, vp, &want);
+        ASSERT_EQ(vis[i], leaf_pair_visible<false>(v, a, b, vp,
+                                                   static_cast<WorkCounters*>(nullptr)))
+            << a << " " << b;
+    }
+    EXPECT_EQ(got.pairs, pairs.size());
+    EXPECT_EQ(got.facing_pairs, want.facing_pairs);
+    EXPECT_EQ(got.node_tests, want.node_tests);
+    EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+    EXPECT_GT(got.node_tests, got.facing_pairs);
+}
+
+VMAP_ON_EACH_BACKEND(Counting);
 
 }  // namespace
 }  // namespace vmap

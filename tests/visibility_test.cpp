@@ -7,13 +7,13 @@
 #include "backend_fixture.h"
 #include "octree/records.h"
 #include "test_util.h"
+#include "visibility/predicate_cases.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/packet_walk.h"
 
 namespace vmap {
 namespace {
 
-using detail::is_actual_occluder;
 using detail::leaf_pair_visible;
 using detail::segment_meets_sphere;
 
@@ -43,89 +43,120 @@ TEST(SegmentSphere, AgreesWithDenseSamplingOfTheSegment) {
     EXPECT_GT(misses, 1000);
 }
 
-// Fig. 7 of the paper: p = origin, q = (1, 0, 0).
-struct Fig7 : ::testing::Test {
-    VisibilityParams vp;
-    Vec3 p{0, 0, 0}, d{1, 0, 0};
-    LeafDisc disc(Vec3 c, Vec3 n, float delta) {
-        LeafDisc x;
-        x.centroid = c;
-        x.normal = n / length(n);
-        x.delta = delta;
-        return x;
+LeafDisc disc(Vec3 c, Vec3 n, float delta) {
+    LeafDisc x;
+    x.centroid = c;
+    x.normal = n / length(n);
+    x.delta = delta;
+    return x;
+}
+
+// The predicate's pieces asked on the fixture's backend (visibility/predicate_cases.h).
+class OnBackend : public test::OnEachBackend {
+  protected:
+    bool ask(test::PredicateCase c) const {
+        return test::answers_on(backend(), std::span(&c, 1))[0] != 0;
+    }
+    // is_actual_occluder(p, d, len, x, vp)
+    bool occludes(Vec3 p, Vec3 d, float len, const LeafDisc& x, const VisibilityParams& vp) const {
+        test::PredicateCase c;
+        c.what = test::Predicate::kActualOccluder;
+        c.p = p, c.d = d, c.len = len, c.x = x, c.vp = vp;
+        return ask(c);
+    }
+    // leaves_face(a, b, d, len, vp)
+    bool face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len,
+              const VisibilityParams& vp) const {
+        test::PredicateCase c;
+        c.what = test::Predicate::kLeavesFace;
+        c.a = a, c.b = b, c.d = d, c.len = len, c.vp = vp;
+        return ask(c);
+    }
+    // counts_as_occluder(pair_segment(a, b, vp), x, vp), or in_front_of_ends when `front`.
+    bool counts(const LeafDisc& a, const LeafDisc& b, const LeafDisc& x,
+                const VisibilityParams& vp, bool front = false) const {
+        test::PredicateCase c;
+        c.what = front ? test::Predicate::kInFrontOfEnds : test::Predicate::kCountsAsOccluder;
+        c.a = a, c.b = b, c.x = x, c.vp = vp;
+        return ask(c);
     }
 };
 
-TEST_F(Fig7, PlaneCuttingTheSegmentNearItsCentroidOccludes) {
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, disc({0.5f, 0.05f, 0}, {1, 0.2f, 0}, 0.1f), vp));
+// Fig. 7 of the paper: p = origin, q = (1, 0, 0).
+struct Fig7 : OnBackend {
+    VisibilityParams vp;
+    Vec3 p{0, 0, 0}, d{1, 0, 0};
+    bool occludes(const LeafDisc& x) const { return OnBackend::occludes(p, d, 1, x, vp); }
+};
+
+TEST_P(Fig7, PlaneCuttingTheSegmentNearItsCentroidOccludes) {
+    EXPECT_TRUE(occludes(disc({0.5f, 0.05f, 0}, {1, 0.2f, 0}, 0.1f)));
 }
-TEST_F(Fig7, PlaneCutOutsideTheSegmentIsRejected) {  // x1
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({1.3f, 0, 0}, {1, 0, 0}, 0.5f), vp));
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({-0.2f, 0, 0}, {1, 0, 0}, 0.5f), vp));
+TEST_P(Fig7, PlaneCutOutsideTheSegmentIsRejected) {  // x1
+    EXPECT_FALSE(occludes(disc({1.3f, 0, 0}, {1, 0, 0}, 0.5f)));
+    EXPECT_FALSE(occludes(disc({-0.2f, 0, 0}, {1, 0, 0}, 0.5f)));
 }
-TEST_F(Fig7, CrossingFartherThanDeltaIsRejected) {  // x4
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.2f), vp));
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.31f), vp));
+TEST_P(Fig7, CrossingFartherThanDeltaIsRejected) {  // x4
+    EXPECT_FALSE(occludes(disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.2f)));
+    EXPECT_TRUE(occludes(disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.31f)));
 }
-TEST_F(Fig7, PlaneParallelToTheSegmentIsRejected) {  // x5
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0.5f, 0.01f, 0}, {0, 1, 0}, 0.5f), vp));
+TEST_P(Fig7, PlaneParallelToTheSegmentIsRejected) {  // x5
+    EXPECT_FALSE(occludes(disc({0.5f, 0.01f, 0}, {0, 1, 0}, 0.5f)));
 }
-TEST_F(Fig7, CrossingAtTheEndpointsIsNotAnOcclusion) {
+TEST_P(Fig7, CrossingAtTheEndpointsIsNotAnOcclusion) {
     // Neighbours on the same surface as p: their plane passes through p (t = 0 < eps).
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0, 0.02f, 0}, {1, 0, 0}, 0.1f), vp));
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({1, 0.02f, 0}, {1, 0, 0}, 0.1f), vp));
+    EXPECT_FALSE(occludes(disc({0, 0.02f, 0}, {1, 0, 0}, 0.1f)));
+    EXPECT_FALSE(occludes(disc({1, 0.02f, 0}, {1, 0, 0}, 0.1f)));
 }
-TEST_F(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
+TEST_P(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
     LeafDisc x = disc({0.5f, 0.05f, 0}, {1, 0, 0}, 0.1f);
     x.flags = kLeafNormalDegenerate;
     x.normal = {0, 0, 0};
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, x, vp));
+    EXPECT_TRUE(occludes(x));
     x.centroid.y = 0.2f;
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, x, vp));
+    EXPECT_FALSE(occludes(x));
 }
+
+VMAP_ON_EACH_BACKEND(Fig7);
 
 // A convex neighbour of end a: its centroid just behind a's tangent plane, its disc tilted so it
 // reaches into the segment's first stretch. It cuts the segment as a disc, but no surface
 // wholly behind a's plane can lie on a segment in front of it.
-struct EndPlanes : ::testing::Test {
+struct EndPlanes : OnBackend {
     VisibilityParams vp;
     LeafDisc a, b;
     Vec3 d;
-    LeafDisc disc(Vec3 c, Vec3 n, float delta) {
-        LeafDisc x;
-        x.centroid = c;
-        x.normal = n / length(n);
-        x.delta = delta;
-        return x;
-    }
     void SetUp() override {
+        OnBackend::SetUp();
+        if (IsSkipped()) return;
         a = disc({0, 0, 0}, {0, 1, 0}, 0.05f);
         b = disc({1, 0.1f, 0}, {-1, 0, 0}, 0.05f);
         d = b.centroid - a.centroid;
-        ASSERT_TRUE(detail::leaves_face(a, b, d, length(d), vp));
+        ASSERT_TRUE(face(a, b, d, length(d), vp));
     }
-    bool counts(const LeafDisc& x) {
-        return detail::counts_as_occluder(detail::pair_segment(a, b, vp), x, vp);
-    }
+    bool counts(const LeafDisc& x) const { return OnBackend::counts(a, b, x, vp); }
+    bool in_front_of_ends(const LeafDisc& x) const { return OnBackend::counts(a, b, x, vp, true); }
+    // As a disc, x cuts the segment from a to b.
+    bool cuts(const LeafDisc& x) const { return occludes(a.centroid, d, length(d), x, vp); }
 };
 
-TEST_F(EndPlanes, NeighbourBehindAnEndsTangentPlaneDoesNotCount) {
+TEST_P(EndPlanes, NeighbourBehindAnEndsTangentPlaneDoesNotCount) {
     const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));  // as a disc, it cuts
+    EXPECT_TRUE(cuts(x));  // as a disc, it cuts
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, SurfaceInFrontOfBothEndsCounts) {
+TEST_P(EndPlanes, SurfaceInFrontOfBothEndsCounts) {
     const LeafDisc x = disc({0.1f, 0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_TRUE(counts(x));
 }
-TEST_F(EndPlanes, BehindTheFarEndsPlaneDoesNotCountEither) {
+TEST_P(EndPlanes, BehindTheFarEndsPlaneDoesNotCountEither) {
     // Just behind b's plane (x > 1), tilted toward the segment's last stretch.
     const LeafDisc x = disc({1.004f, 0.08f, 0}, {1, 3, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
+TEST_P(EndPlanes, AnEndWithoutANormalCullsNothing) {
     const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
     a.flags = kLeafNormalDegenerate;
     a.normal = {0, 0, 0};
@@ -136,20 +167,20 @@ TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
 // the end's disc radius of that end, coming out of it (the end behind its plane), is the end's
 // own surface; one the segment goes into, or one cut farther out, still counts. a sits at the
 // origin with Delta 0.05 (half: 0.025) and the segment leaves along d = (1, 0.1, 0).
-TEST_F(EndPlanes, CrossedFromBehindRightAtAnEndDoesNotCount) {
+TEST_P(EndPlanes, CrossedFromBehindRightAtAnEndDoesNotCount) {
     // Centroid in front of a's plane (y > 0), a behind its plane: n . (a - c) < 0. Its plane
     // cuts the segment at about 0.012 from a, inside the disc.
     const LeafDisc x = disc({0.02f, 0.004f, 0}, {1, -0.3f, 0}, 0.05f);
-    ASSERT_TRUE(detail::in_front_of_ends(detail::pair_segment(a, b, vp), x));
+    ASSERT_TRUE(in_front_of_ends(x));
     ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
     // The same leaf facing the other way: the segment goes into it, so it counts.
     LeafDisc in = x;
     in.normal = -x.normal;
     EXPECT_TRUE(counts(in));
 }
-TEST_F(EndPlanes, CrossedFromBehindFartherOutCounts) {
+TEST_P(EndPlanes, CrossedFromBehindFartherOutCounts) {
     // The same geometry moved out to about 0.05 from a: more than half of a's Delta (0.025).
     const LeafDisc x = disc({0.06f, 0.01f, 0}, {1, -0.3f, 0}, 0.05f);
     ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
@@ -158,33 +189,38 @@ TEST_F(EndPlanes, CrossedFromBehindFartherOutCounts) {
     a.delta = 0.2f;
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
+TEST_P(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
     // Near b (centroid (1, 0.1, 0), normal -x): a leaf just in front of b's plane with b
     // behind its own plane, cut about 0.02 from b (b's Delta 0.05).
     const LeafDisc x = disc({0.98f, 0.1f, 0.f}, {-1, 0.2f, 0}, 0.05f);
-    const detail::PairSegment s = detail::pair_segment(a, b, vp);
-    ASSERT_TRUE(detail::in_front_of_ends(s, x));
+    ASSERT_TRUE(in_front_of_ends(x));
     ASSERT_LT(dot(x.normal, b.centroid - x.centroid), 0.f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
     b.flags = kLeafNormalDegenerate;  // an end without a plane drops nothing
     b.normal = {0, 0, 0};
     EXPECT_TRUE(counts(x));
 }
 
-TEST(Facing, BothNormalsMustFaceTheOther) {
+VMAP_ON_EACH_BACKEND(EndPlanes);
+
+class Facing : public OnBackend {};
+
+TEST_P(Facing, BothNormalsMustFaceTheOther) {
     VisibilityParams vp;
     LeafDisc a, b;
     a.normal = {0, 1, 0};
     b.normal = {0, -1, 0};
     const Vec3 d{0, 1, 0};
-    EXPECT_TRUE(detail::leaves_face(a, b, d, 1, vp));
+    EXPECT_TRUE(face(a, b, d, 1, vp));
     b.normal = {0, 1, 0};
-    EXPECT_FALSE(detail::leaves_face(a, b, d, 1, vp));
+    EXPECT_FALSE(face(a, b, d, 1, vp));
     // Coplanar leaves (d in the tangent plane) do not face each other.
     b.normal = {0, 1, 0};
-    EXPECT_FALSE(detail::leaves_face(a, b, {1, 0, 0}, 1, vp));
+    EXPECT_FALSE(face(a, b, {1, 0, 0}, 1, vp));
 }
+
+VMAP_ON_EACH_BACKEND(Facing);
 
 // The traversal (sphere pruning, early exit at K) against testing every leaf.
 bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,

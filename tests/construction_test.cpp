@@ -243,7 +243,6 @@ std::vector<uint8_t> decisions_on(detail::Backend& backend, const Octree& t,
 // for each leaf pair under it (the brute-force matrix).
 TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
     uint64_t all = 0, none = 0;
-    const auto backend = leaf_pair_backend();
     for (uint64_t seed = 300; seed < 320; ++seed) {
         const PointSet ps = random_scene(seed);
         BuildParams bp = test::cpu_params(4 + int(seed % 4), 2 + int(seed % 3));
@@ -259,7 +258,7 @@ TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
         for (int32_t a = 0; a < t.num_nodes(); ++a)
             for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 1 + int32_t(seed % 3))
                 pairs.push_back({a, b});
-        const std::vector<uint8_t> got = decisions_on(*backend, t, c, pairs);
+        const std::vector<uint8_t> got = decisions_on(*leaf_pair_backend(), t, c, pairs);
         const int32_t L = t.num_leaves();
         for (size_t i = 0; i < pairs.size(); ++i) {
             const auto d = detail::PairDecision(got[i]);

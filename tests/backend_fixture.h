@@ -116,6 +116,13 @@ auto case_names(Name name) {
 
 }  // namespace vmap::test
 
+// In a plain TEST of the GPU alone: GTEST_SKIP with the reason when no device is usable.
+#define VMAP_REQUIRE_GPU()                                                          \
+    do {                                                                            \
+        const std::string why_ = ::vmap::test::why_unusable(::vmap::Backend::kCuda); \
+        if (!why_.empty()) GTEST_SKIP() << "no GPU: " << why_;                      \
+    } while (0)
+
 // Instantiates Suite (an OnEachBackend) as Cpu/Suite.* and Cuda/Suite.*.
 #define VMAP_ON_EACH_BACKEND(Suite)                                                 \
     INSTANTIATE_TEST_SUITE_P(Cpu, Suite, ::testing::Values(::vmap::Backend::kCpu)); \

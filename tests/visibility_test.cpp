@@ -438,17 +438,27 @@ TEST(PacketWalk, SegmentInABoxFaceIsWalkedLikeTheLeafPairWalk) {
     EXPECT_EQ(got.occluder_tests, want.occluder_tests);
 }
 
-TEST(Counting, CountedAndUncountedPredicatesAgree) {
+// The counting cases' tree (2000 bunny samples, height 7, 4 points a leaf) and leaf pairs.
+Octree counting_tree() {
     PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);
     std::vector<uint32_t> order;
-    Octree t = Octree::build(ps, {7, 4}, order);
+    return Octree::build(ps, {7, 4}, order);
+}
+std::vector<std::pair<int32_t, int32_t>> counting_pairs(int32_t num_leaves) {
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    for (int32_t a = 0; a < 50; ++a)
+        for (int32_t b = a + 1; b < num_leaves; b += 7) pairs.push_back({a, b});
+    return pairs;
+}
+
+TEST(Counting, CountedAndUncountedPredicatesAgree) {
+    const Octree t = counting_tree();
     const OctreeView v = octree_view(t);
     VisibilityParams vp;
     WorkCounters wc;
-    for (int32_t a = 0; a < 50; ++a)
-        for (int32_t b = a + 1; b < v.num_leaves; b += 7)
-            ASSERT_EQ(leaf_pair_visible<true>(v, a, b, vp, &wc),
-                      leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
+    for (const auto& [a, b] : counting_pairs(v.num_leaves))
+        ASSERT_EQ(leaf_pair_visible<true>(v, a, b, vp, &wc),
+                  leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
     EXPECT_GT(wc.node_tests, wc.facing_pairs);
 }
 
@@ -457,14 +467,10 @@ TEST(Counting, CountedAndUncountedPredicatesAgree) {
 class Counting : public test::OnEachBackend {};
 
 TEST_P(Counting, BackendCountsTheCountedPredicatesWork) {
-    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);
-    std::vector<uint32_t> order;
-    Octree t = Octree::build(ps, {7, 4}, order);
+    const Octree t = counting_tree();
     const OctreeView v = octree_view(t);
     VisibilityParams vp;
-    std::vector<std::pair<int32_t, int32_t>> pairs;
-    for (int32_t a = 0; a < 50; ++a)
-        for (int32_t b = a + 1; b < v.num_leaves; b += 7) pairs.push_back({a, b});
+    const auto pairs = counting_pairs(v.num_leaves);
     WorkCounters want, got;
     const std::vector<bool> vis = visible_on(*leaf_pair_backend(), t, vp, pairs, &got);
     for (size_t i = 0; i < pairs.size(); ++i) {

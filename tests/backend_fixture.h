@@ -61,6 +61,11 @@ class BackendCase {
         p.bounces = bounces;
         return p;
     }
+    // That a build's or solver's stats name this backend as the one that ran ("cpu (...)",
+    // "cuda (...)"): no silent fallback.
+    void expect_ran_here(const std::string& ran) const {
+        EXPECT_EQ(ran.rfind(name_of(backend()), 0), 0u) << "ran on " << ran;
+    }
     // The leaf-pair evaluator of this backend (visibility/backend.h), never null.
     std::unique_ptr<detail::Backend> leaf_pair_backend() const {
         if (backend() == Backend::kCpu) return detail::make_cpu_backend();

@@ -25,6 +25,7 @@ void expect_same_vmap(const PointSet& ps, BuildParams bp, const std::string& wha
     bp.construction = Construction::kNodes;
     const VisibilityMap got = build_vmap(ps, bp, &ns);
     ASSERT_EQ(ns.construction, "nodes");
+    ASSERT_EQ(ns.backend.rfind(name_of(bp.backend), 0), 0u) << ns.backend;
     EXPECT_EQ(ls.leaf_pairs_walked, ls.leaf_pairs) << what;
     EXPECT_EQ(ns.work.pairs, ns.leaf_pairs_walked) << what;
     EXPECT_EQ(got.link_offsets(), ref.link_offsets()) << what;

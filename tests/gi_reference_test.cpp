@@ -188,6 +188,7 @@ TEST_P(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
     const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 3000, 1),
                                         test::cpu_params(5, 4));
     RadiositySolver s(vm, gi_params(1e9f, 1));
+    expect_ran_here(s.stats().backend);
     s.bounce();
     const std::vector<Vec3> fg = s.final_gather(1e9f);
     const std::vector<Vec3> bf = brute_force_radiosity(vm, 2);

@@ -163,6 +163,7 @@ TEST_P(GiSolve, HierarchicalEqualsBruteForceWhenThetaIsHuge) {
     std::vector<std::vector<Vec3>> ref;
     brute_force_radiosity(vm, 3, &ref);
     RadiositySolver s(vm, gi_params(1e9f, 3, param()));
+    expect_ran_here(s.stats().backend);
     EXPECT_EQ(s.stats().node_interactions, 0u);
     for (int b = 0; b < 3; ++b) {
         s.bounce();

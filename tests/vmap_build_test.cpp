@@ -124,6 +124,7 @@ TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
         BuildStats st;
         VisibilityMap vm = build_vmap(ps, bp, &st);
         EXPECT_EQ(st.construction, name_of(method));
+        expect_ran_here(st.backend);
         const int32_t L = vm.octree().num_leaves();
         EXPECT_EQ(st.leaf_pairs, uint64_t(L) * (L - 1) / 2);
         EXPECT_EQ(st.work.pairs, st.leaf_pairs_walked) << "each walked pair once";
@@ -163,6 +164,7 @@ TEST_P(VmapBuild, TinyBatchesGiveTheSameLinks) {
         BuildStats st;
         const VisibilityMap small = build_vmap(ps, bp, &st);
         EXPECT_GT(st.batches, 10u) << name_of(method);
+        expect_ran_here(st.backend);
         EXPECT_EQ(small.link_offsets(), ref.link_offsets()) << name_of(method);
         EXPECT_TRUE(std::ranges::equal(small.link_targets(), ref.link_targets()))
             << name_of(method);

@@ -1,7 +1,8 @@
 // The radiosity solver on a CUDA GPU: the block refinement (gi_link_blocks, one thread per link
 // end), the three bounce steps of gi_kernels.h (one thread per element, point or node) and the
 // final gather (gi_final_gather_point, one thread per point), with the CPU's bodies and
-// summation orders (bit-identical with --fmad=false; docs/gi.md).
+// summation orders (bit-identical with --fmad=false; docs/gi.md). Every loop is an element-wise
+// parallel_for_device (util/parallel_cuda.cuh) over a small functor that calls the shared body.
 #include <cuda_runtime.h>
 
 #include <algorithm>

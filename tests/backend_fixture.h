@@ -18,6 +18,7 @@
 
 #include <cctype>
 #include <memory>
+#include <ostream>
 #include <string>
 #include <tuple>
 
@@ -104,6 +105,11 @@ class OnEachBackendWith : public ::testing::TestWithParam<std::tuple<Backend, Ca
     void SetUp() override { skip_if_unusable(); }
 };
 
+// gtest names for OnEachBackend instances: the backend's.
+inline std::string backend_name(const ::testing::TestParamInfo<Backend>& i) {
+    return name_of(i.param);
+}
+
 // The case type of an OnEachBackendWith<Case> suite.
 template <class Suite>
 using CaseOf = std::tuple_element_t<1, typename Suite::ParamType>;
@@ -121,6 +127,11 @@ auto case_names(Name name) {
 
 }  // namespace vmap::test
 
+namespace vmap {
+// gtest prints a Backend by its name (ctest's test names show parameter values).
+inline void PrintTo(Backend b, std::ostream* os) { *os << name_of(b); }
+}  // namespace vmap
+
 // In a plain TEST of the GPU alone: GTEST_SKIP with the reason when no device is usable.
 #define VMAP_REQUIRE_GPU()                                                          \
     do {                                                                            \
@@ -129,9 +140,11 @@ auto case_names(Name name) {
     } while (0)
 
 // Instantiates Suite (an OnEachBackend) as Cpu/Suite.* and Cuda/Suite.*.
-#define VMAP_ON_EACH_BACKEND(Suite)                                                 \
-    INSTANTIATE_TEST_SUITE_P(Cpu, Suite, ::testing::Values(::vmap::Backend::kCpu)); \
-    INSTANTIATE_TEST_SUITE_P(Cuda, Suite, ::testing::Values(::vmap::Backend::kCuda))
+#define VMAP_ON_EACH_BACKEND(Suite)                                                   \
+    INSTANTIATE_TEST_SUITE_P(Cpu, Suite, ::testing::Values(::vmap::Backend::kCpu),    \
+                             ::vmap::test::backend_name);                             \
+    INSTANTIATE_TEST_SUITE_P(Cuda, Suite, ::testing::Values(::vmap::Backend::kCuda),  \
+                             ::vmap::test::backend_name)
 
 // Instantiates Suite (an OnEachBackendWith<Case>) over the generator `cases`, names by
 // name(const Case&), as Cpu/Suite.*/<name> and Cuda/Suite.*/<name>.

@@ -151,6 +151,14 @@ if [[ "$cmd" == run ]]; then
                     "$bin/$t" > "$OUT/$t.log" 2>&1 || { rc=1; echo "FAILED $t"; }
                     grep -E "PASSED|FAILED|SKIPPED \]" "$OUT/$t.log" | tail -6
                 done
+                # Every OnEachBackend case's GPU instance (tests/backend_fixture.h), each against
+                # its own oracle; on the device none may skip.
+                for t in visibility_test vmap_build_test construction_test gi_test gi_reference_test; do
+                    [[ -x "$bin/$t" ]] || continue
+                    "$bin/$t" --gtest_filter='Cuda/*' > "$OUT/$t-cuda.log" 2>&1 || { rc=1; echo "FAILED $t (Cuda/*)"; }
+                    if grep -q "SKIPPED \]" "$OUT/$t-cuda.log"; then rc=1; echo "SKIPPED $t (Cuda/*) on the device"; fi
+                    echo "$t Cuda/*: $(grep -E "^\[  (PASSED|FAILED) " "$OUT/$t-cuda.log" | tr '\n' ' ')"
+                done
                 # The other kernel variants claim the same answers: check them too.
                 for v in ${GPU_VARIANTS:-lane}; do
                     VMAP_CUDA_VARIANT=$v "$bin/gpu_test" --gtest_filter='*GpuMatchesCpu*:*Rect*' \
@@ -165,6 +173,10 @@ if [[ "$cmd" == run ]]; then
                 "$san" --tool racecheck --error-exitcode 9 "$bin/gpu_test" \
                     --gtest_filter='GpuBackend.Rect*:GpuBackend.Small*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
                 tail -5 "$OUT/racecheck.log"
+                # parallel_for_device's kernels in a test of their own: the predicate cases.
+                "$san" --tool memcheck --error-exitcode 9 "$bin/visibility_test" \
+                    --gtest_filter='Cuda/Fig7.*:Cuda/Facing.*' > "$OUT/predicate-memcheck.log" 2>&1 || rc=1
+                tail -3 "$OUT/predicate-memcheck.log"
                 if [[ -x "$bin/gi_gpu_test" ]]; then
                     "$san" --tool memcheck --error-exitcode 9 "$bin/gi_gpu_test" \
                         --gtest_filter='*cornell_empty*' > "$OUT/gi-memcheck.log" 2>&1 || rc=1

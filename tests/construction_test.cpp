@@ -6,6 +6,7 @@
 #include <cmath>
 #include <random>
 
+#include "backend_fixture.h"
 #include "octree/records.h"
 #include "test_files.h"
 #include "test_util.h"
@@ -24,6 +25,7 @@ void expect_same_vmap(const PointSet& ps, BuildParams bp, const std::string& wha
     bp.construction = Construction::kNodes;
     const VisibilityMap got = build_vmap(ps, bp, &ns);
     ASSERT_EQ(ns.construction, "nodes");
+    ASSERT_EQ(ns.backend.rfind(name_of(bp.backend), 0), 0u) << ns.backend;
     EXPECT_EQ(ls.leaf_pairs_walked, ls.leaf_pairs) << what;
     EXPECT_EQ(ns.work.pairs, ns.leaf_pairs_walked) << what;
     EXPECT_EQ(got.link_offsets(), ref.link_offsets()) << what;
@@ -43,14 +45,14 @@ struct SceneCase {
     int height, leaf_points;
 };
 
-class SameVmapOnScenes : public ::testing::TestWithParam<SceneCase> {};
+class SameVmapOnScenes : public test::OnEachBackendWith<SceneCase> {};
 
 TEST_P(SameVmapOnScenes, NodePathMatchesLeafPairPath) {
-    const SceneCase c = GetParam();
+    const SceneCase c = param();
     const std::string file =
         c.scene[0] == '.' ? test::oracle_path(c.scene + 2) : test::scene_path(c.scene);
     BuildStats st;
-    expect_same_vmap(test::sample(file, 1000, 2), test::cpu_params(c.height, c.leaf_points), file,
+    expect_same_vmap(test::sample(file, 1000, 2), build_params(c.height, c.leaf_points), file,
                      &st);
     EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "some node pair should be decided";
 }
@@ -63,14 +65,11 @@ std::vector<SceneCase> scene_cases() {
     return v;
 }
 
-INSTANTIATE_TEST_SUITE_P(Shipped, SameVmapOnScenes, ::testing::ValuesIn(scene_cases()),
-                         [](const ::testing::TestParamInfo<SceneCase>& i) {
-                             std::string n = i.param.scene;
-                             for (char& ch : n)
-                                 if (!std::isalnum(static_cast<unsigned char>(ch))) ch = '_';
-                             return n + "_h" + std::to_string(i.param.height) + "_lp" +
-                                    std::to_string(i.param.leaf_points);
-                         });
+VMAP_ON_EACH_BACKEND_WITH(SameVmapOnScenes, ::testing::ValuesIn(scene_cases()),
+                          [](const SceneCase& c) {
+                              return std::string(c.scene) + "_h" + std::to_string(c.height) +
+                                     "_lp" + std::to_string(c.leaf_points);
+                          });
 
 TEST(Construction, SavedFilesAreByteIdentical) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 5);
@@ -178,12 +177,14 @@ PointSet random_scene(uint64_t seed) {
     return g.ps;
 }
 
-TEST(Construction, RandomScenesGiveTheLeafPairVmap) {
+class NodeConstruction : public test::OnEachBackend {};
+
+TEST_P(NodeConstruction, RandomScenesGiveTheLeafPairVmap) {
     uint64_t decided_scenes = 0;
     for (uint64_t seed = 1; seed <= 220; ++seed) {
         const PointSet ps = random_scene(seed);
         std::mt19937_64 r(seed * 7919);
-        BuildParams bp = test::cpu_params(3 + int(r() % 7), 1 + int(r() % 6));
+        BuildParams bp = build_params(3 + int(r() % 7), 1 + int(r() % 6));
         bp.visibility.K = 1 + int(r() % 3);
         bp.visibility.eps = std::array<float, 4>{0.f, 0.001f, 0.01f, 0.05f}[r() % 4];
         bp.visibility.facing_tol = std::array<float, 3>{0.f, 0.005f, 0.05f}[r() % 3];
@@ -200,10 +201,10 @@ TEST(Construction, RandomScenesGiveTheLeafPairVmap) {
 
 // The frontier held a pair at a time per level (the bound on memory) gives the same V-map and
 // the same counts as the frontier held whole, on both constructions.
-TEST(Construction, SlicedFrontierGivesTheSameVmap) {
+TEST_P(NodeConstruction, SlicedFrontierGivesTheSameVmap) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2500, 4);
     for (const Construction method : {Construction::kLeafPairs, Construction::kNodes}) {
-        BuildParams bp = test::cpu_params(7, 2);
+        BuildParams bp = build_params(7, 2);
         bp.construction = method;
         bp.walk_pairs = 64;
         BuildStats ws, ss;
@@ -220,9 +221,28 @@ TEST(Construction, SlicedFrontierGivesTheSameVmap) {
     }
 }
 
+// decide_node_pair for `pairs` on the backend, a byte per pair (PairDecision): on the device
+// when it decides (the GPU: the pairs worth_deciding, as the builder asks it), else on the host
+// (every pair, two leaves too).
+std::vector<uint8_t> decisions_on(detail::Backend& backend, const Octree& t,
+                                  const detail::NodePairContext& c,
+                                  const std::vector<detail::NodePairRef>& pairs) {
+    std::vector<uint8_t> out(pairs.size());
+    backend.prepare(t, c.vp, 1024);
+    backend.set_node_context(&c);
+    uint64_t shaft = 0;
+    if (backend.decide(pairs, out.data(), &shaft)) return out;
+    struct {
+        uint64_t shaft_node_tests = 0;
+    } wc;
+    for (size_t i = 0; i < pairs.size(); ++i)
+        out[i] = uint8_t(detail::decide_node_pair(c, pairs[i].a, pairs[i].b, &wc));
+    return out;
+}
+
 // Every node pair of disjoint subtrees, not only those the builder meets: a decision must hold
-// for each leaf pair under it.
-TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
+// for each leaf pair under it (the brute-force matrix).
+TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
     uint64_t all = 0, none = 0;
     for (uint64_t seed = 300; seed < 320; ++seed) {
         const PointSet ps = random_scene(seed);
@@ -235,26 +255,30 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
         const detail::NodePairContext c{
             octree_view(t),      nb.nodes.data(),      nb.cones.data(),
             t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])};
-        struct {
-            uint64_t shaft_node_tests = 0;
-        } wc;
-        const int32_t L = t.num_leaves();
+        std::vector<detail::NodePairRef> pairs;
         for (int32_t a = 0; a < t.num_nodes(); ++a)
-            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 1 + int32_t(seed % 3)) {
-                const auto d = detail::decide_node_pair(c, a, b, &wc);
-                if (d == detail::PairDecision::kUndecided) continue;
-                const bool want = d == detail::PairDecision::kAllVisible;
-                (want ? all : none)++;
-                for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
-                    for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y)
-                        ASSERT_EQ(bool(m[size_t(x) * L + y]), want)
-                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
-                            << ", " << y;
-            }
+            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 1 + int32_t(seed % 3))
+                pairs.push_back({a, b});
+        const std::vector<uint8_t> got = decisions_on(*leaf_pair_backend(), t, c, pairs);
+        const int32_t L = t.num_leaves();
+        for (size_t i = 0; i < pairs.size(); ++i) {
+            const auto d = detail::PairDecision(got[i]);
+            if (d == detail::PairDecision::kUndecided) continue;
+            const bool want = d == detail::PairDecision::kAllVisible;
+            (want ? all : none)++;
+            const auto [a, b] = pairs[i];
+            for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
+                for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y)
+                    ASSERT_EQ(bool(m[size_t(x) * L + y]), want)
+                        << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
+                        << ", " << y;
+        }
     }
     EXPECT_GT(all, 1000u);
     EXPECT_GT(none, 1000u);
 }
+
+VMAP_ON_EACH_BACKEND(NodeConstruction);
 
 // The default picks by backend: node-pair decisions on the CPU (where they pay), the leaf-pair
 // walk on the GPU (gpu_test checks that the two give the same V-map there).

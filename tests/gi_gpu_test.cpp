@@ -8,18 +8,12 @@
 
 #include <algorithm>
 
-#include "gi/gi_device.h"
+#include "backend_fixture.h"
 #include "test_util.h"
 #include "vmap/gi.h"
 
 namespace vmap {
 namespace {
-
-#define VMAP_REQUIRE_GPU()                                                    \
-    do {                                                                      \
-        std::string why_;                                                     \
-        if (!detail::make_gi_cuda(&why_)) GTEST_SKIP() << "no GPU: " << why_; \
-    } while (0)
 
 struct GiCase {
     const char* scene;

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "backend_fixture.h"
 #include "test_util.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
@@ -180,17 +181,14 @@ TEST(Sampling, LightPointsEmitTheLightsPower) {
     }
 }
 
-GiParams cpu_gi(float theta) {
-    GiParams p;
-    p.backend = Backend::kCpu;
-    p.theta = theta;
-    return p;
-}
+// The final gather on every backend (gi_final_gather_point on the GPU), against the brute force.
+class FinalGather : public test::OnEachBackend {};
 
-TEST(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
+TEST_P(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
     const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 3000, 1),
                                         test::cpu_params(5, 4));
-    RadiositySolver s(vm, cpu_gi(1e9f));
+    RadiositySolver s(vm, gi_params(1e9f, 1));
+    expect_ran_here(s.stats().backend);
     s.bounce();
     const std::vector<Vec3> fg = s.final_gather(1e9f);
     const std::vector<Vec3> bf = brute_force_radiosity(vm, 2);
@@ -201,10 +199,10 @@ TEST(FinalGather, EqualsOneBruteForceBounceWhenThetaIsHuge) {
     for (size_t k = 0; k < some.size(); ++k) EXPECT_EQ(part[k], fg[some[k]]);
 }
 
-TEST(FinalGather, IsCloseToTheBruteForceAtTheDefaults) {
+TEST_P(FinalGather, IsCloseToTheBruteForceAtTheDefaults) {
     const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 4000, 1),
                                         test::cpu_params(6, 4));
-    RadiositySolver s(vm, cpu_gi(4));
+    RadiositySolver s(vm, gi_params(4, 1));
     s.bounce();
     const std::vector<Vec3> fg = s.final_gather(2.0f);  // the CLI's default --gather-theta
     EXPECT_LT(relative_rms(fg, brute_force_radiosity(vm, 2)), 0.02);
@@ -212,6 +210,8 @@ TEST(FinalGather, IsCloseToTheBruteForceAtTheDefaults) {
     const std::vector<uint32_t> bad = {4000};
     EXPECT_THROW(s.final_gather(1, bad), Error);
 }
+
+VMAP_ON_EACH_BACKEND(FinalGather);
 
 }  // namespace
 }  // namespace vmap

@@ -12,6 +12,7 @@
 #include <numbers>
 #include <random>
 
+#include "backend_fixture.h"
 #include "test_util.h"
 #include "vmap/error.h"
 
@@ -64,11 +65,13 @@ GiParams cpu_gi(float theta, int bounces, GiRefine refine = GiRefine::kBlocks) {
     return p;
 }
 
-// sum_j F_ij per point i: one bounce with E = 1 and albedo 1 everywhere gives 1 + sum_j F_ij.
-std::vector<double> row_sums(VisibilityMap vm, float theta) {
+// sum_j F_ij per point i: one bounce with E = 1 and albedo 1 everywhere gives 1 + sum_j F_ij
+// (by the solver with `p`, one bounce; by the brute force when p.theta <= 0).
+std::vector<double> row_sums(VisibilityMap vm, GiParams p) {
     test::points_of(vm).emission.assign(vm.points().size(), Vec3{1, 1, 1});
     test::points_of(vm).colors.assign(vm.points().size(), Vec3{1, 1, 1});
-    const auto B = theta > 0 ? solve_radiosity(vm, cpu_gi(theta, 1)) : brute_force_radiosity(vm, 1);
+    p.bounces = 1;
+    const auto B = p.theta > 0 ? solve_radiosity(vm, p) : brute_force_radiosity(vm, 1);
     std::vector<double> s(B.size());
     for (size_t i = 0; i < B.size(); ++i) s[i] = double(B[i].x) - 1.0;
     return s;
@@ -152,13 +155,15 @@ TEST(Gi, BruteForceMatchesAPointPairOracle) {
     EXPECT_GT(lit, brute.size() / 2);
 }
 
-class GiMode : public ::testing::TestWithParam<GiRefine> {};
+// The hierarchical solver on every backend, each refinement, against the brute force.
+class GiSolve : public test::OnEachBackendWith<GiRefine> {};
 
-TEST_P(GiMode, HierarchicalEqualsBruteForceWhenThetaIsHuge) {
+TEST_P(GiSolve, HierarchicalEqualsBruteForceWhenThetaIsHuge) {
     const VisibilityMap vm = room_vmap("cornell-two-models", 2500, 7);
     std::vector<std::vector<Vec3>> ref;
     brute_force_radiosity(vm, 3, &ref);
-    RadiositySolver s(vm, cpu_gi(1e9f, 3, GetParam()));
+    RadiositySolver s(vm, gi_params(1e9f, 3, param()));
+    expect_ran_here(s.stats().backend);
     EXPECT_EQ(s.stats().node_interactions, 0u);
     for (int b = 0; b < 3; ++b) {
         s.bounce();
@@ -166,10 +171,10 @@ TEST_P(GiMode, HierarchicalEqualsBruteForceWhenThetaIsHuge) {
     }
 }
 
-TEST_P(GiMode, FormFactorsAreReciprocalAndBounded) {
+TEST_P(GiSolve, FormFactorsAreReciprocalAndBounded) {
     const VisibilityMap vm = room_vmap("cornell-two-models", 3000, 7);
     for (float theta : {0.5f, 2.0f}) {
-        RadiositySolver s(vm, cpu_gi(theta, 1, GetParam()));
+        RadiositySolver s(vm, gi_params(theta, 1, param()));
         std::vector<uint64_t> row;
         std::vector<uint32_t> src;
         std::vector<float> coef;
@@ -196,10 +201,10 @@ TEST_P(GiMode, FormFactorsAreReciprocalAndBounded) {
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(Refine, GiMode, ::testing::Values(GiRefine::kBlocks, GiRefine::kLinks),
-                         [](const auto& i) { return std::string(name_of(i.param)); });
+VMAP_ON_EACH_BACKEND_WITH(GiSolve, ::testing::Values(GiRefine::kBlocks, GiRefine::kLinks),
+                          [](GiRefine r) { return std::string(name_of(r)); });
 
-TEST_P(GiMode, ErrorFallsAsThetaTightens) {
+TEST_P(GiSolve, ErrorFallsAsThetaTightens) {
     const VisibilityMap vm = room_vmap("cornell-two-models", 4000, 7);
     std::vector<std::vector<Vec3>> ref;
     brute_force_radiosity(vm, 3, &ref);
@@ -207,7 +212,7 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     std::vector<uint64_t> node_links;
     const std::vector<float> thetas{0.5f, 1.0f, 4.0f, 16.0f};
     for (float theta : thetas) {
-        RadiositySolver s(vm, cpu_gi(theta, 3, GetParam()));
+        RadiositySolver s(vm, gi_params(theta, 3, param()));
         node_links.push_back(s.stats().node_interactions);
         err.emplace_back();
         for (int b = 0; b < 3; ++b) {
@@ -216,7 +221,7 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
         }
     }
     for (size_t t = 0; t < thetas.size(); ++t) {
-        std::cout << name_of(GetParam()) << ", theta " << thetas[t] << ": node interactions "
+        std::cout << name_of(param()) << ", theta " << thetas[t] << ": node interactions "
                   << node_links[t] << ", relative RMS per bounce";
         for (double e : err[t]) std::cout << " " << e;
         std::cout << "\n";
@@ -235,11 +240,14 @@ TEST_P(GiMode, ErrorFallsAsThetaTightens) {
     }
 }
 
-TEST(Gi, ClosedBoxKeepsEnergyWithAlbedoOne) {
+// The energy tests on every backend.
+class GiEnergy : public test::OnEachBackend {};
+
+TEST_P(GiEnergy, ClosedBoxKeepsEnergyWithAlbedoOne) {
     // Form factor row sums: ~1 in a closed box (each point sees the whole hemisphere), never
     // much above (the point-disc form factor overestimates slightly near edges and corners).
     const VisibilityMap vm = box_vmap(16, {1, 1, 1});
-    const auto rs = row_sums(vm, -1);
+    const auto rs = row_sums(vm, gi_params(-1, 1));
     double mean = 0, mx = 0;
     for (double s : rs) mean += s / rs.size(), mx = std::max(mx, s);
     std::cout << "row sums: mean " << mean << ", max " << mx << "\n";
@@ -250,7 +258,7 @@ TEST(Gi, ClosedBoxKeepsEnergyWithAlbedoOne) {
     // the centres, which underestimates the mean of 1/d^2 over a pair of nearby nodes).
     double gap_prev = 1;
     for (float theta : {0.5f, 1.0f, 2.0f, 4.0f}) {
-        const auto rh = row_sums(vm, theta);
+        const auto rh = row_sums(vm, gi_params(theta, 1));
         double mean_h = 0;
         for (double s : rh) mean_h += s / rh.size();
         std::cout << "theta " << theta << " mean row sum " << mean_h << "\n";
@@ -278,10 +286,10 @@ TEST(Gi, ClosedBoxKeepsEnergyWithAlbedoOne) {
     }
 }
 
-TEST(Gi, EachBounceAddsLessWithAlbedoBelowOne) {
+TEST_P(GiEnergy, EachBounceAddsLessWithAlbedoBelowOne) {
     for (const float rho : {0.5f, 0.8f}) {
         const VisibilityMap vm = box_vmap(12, {rho, rho, rho});
-        RadiositySolver s(vm, cpu_gi(1.0f, 5));
+        RadiositySolver s(vm, gi_params(1.0f, 5));
         float prev = total_power(vm, s.radiosity()).x, prev_inc = prev;
         for (int b = 0; b < 5; ++b) {
             s.bounce();
@@ -294,22 +302,22 @@ TEST(Gi, EachBounceAddsLessWithAlbedoBelowOne) {
     }
 }
 
-TEST(Gi, OpenRoomLosesEnergyThroughItsOpenSide) {
+TEST_P(GiEnergy, OpenRoomLosesEnergyThroughItsOpenSide) {
     VisibilityMap vm = room_vmap("cornell-empty", 3000, 6);
     test::points_of(vm).colors.assign(vm.points().size(), Vec3{1, 1, 1});
-    const auto rs = row_sums(vm, 1.0f);
+    const auto rs = row_sums(vm, gi_params(1.0f, 1));
     double mean = 0;
     for (double s : rs) mean += s / rs.size();
     EXPECT_LT(mean, 0.95);  // part of every hemisphere looks out of the open side
     EXPECT_GT(mean, 0.3);
 }
 
-TEST(Gi, PerChannelAlbedoColoursTheBounce) {
+TEST_P(GiEnergy, PerChannelAlbedoColoursTheBounce) {
     // Red walls reflect red: the second bounce's increment at a white floor point near the red
     // wall is redder than green.
     const VisibilityMap vm = room_vmap("cornell-empty", 3000, 6);
-    const auto one = solve_radiosity(vm, cpu_gi(1.0f, 1));
-    const auto two = solve_radiosity(vm, cpu_gi(1.0f, 2));
+    const auto one = solve_radiosity(vm, gi_params(1.0f, 1));
+    const auto two = solve_radiosity(vm, gi_params(1.0f, 2));
     const float W = 0.5528f;
     double red = 0, green = 0;
     for (size_t i = 0; i < one.size(); ++i) {
@@ -322,6 +330,8 @@ TEST(Gi, PerChannelAlbedoColoursTheBounce) {
     EXPECT_GT(red, 1.5 * green);
 }
 
+class GiMode : public ::testing::TestWithParam<GiRefine> {};
+
 TEST_P(GiMode, CpuResultDoesNotDependOnThreadCount) {
     const VisibilityMap vm = room_vmap("cornell-bunny", 3000, 7);
     std::vector<Vec3> a, b;
@@ -333,6 +343,9 @@ TEST_P(GiMode, CpuResultDoesNotDependOnThreadCount) {
     ASSERT_EQ(a.size(), b.size());
     for (size_t i = 0; i < a.size(); ++i) ASSERT_TRUE(a[i] == b[i]) << i;
 }
+
+INSTANTIATE_TEST_SUITE_P(Refine, GiMode, ::testing::Values(GiRefine::kBlocks, GiRefine::kLinks),
+                         [](const auto& i) { return std::string(name_of(i.param)); });
 
 TEST(Gi, BlockInteractionsGrowSlowerThanLinks) {
     // Links grow faster than the points; blocks about linearly. Four times the points:
@@ -369,11 +382,13 @@ TEST(Gi, EmissionStaysWithItsPointInOctreeOrder) {
     EXPECT_GT(emitting, 0u);
 }
 
-TEST(Gi, ZeroBouncesGiveTheEmission) {
+TEST_P(GiEnergy, ZeroBouncesGiveTheEmission) {
     const VisibilityMap vm = room_vmap("cornell-empty", 1000, 5);
-    const auto B = solve_radiosity(vm, cpu_gi(1.0f, 0));
+    const auto B = solve_radiosity(vm, gi_params(1.0f, 0));
     for (size_t i = 0; i < B.size(); ++i) ASSERT_TRUE(B[i] == vm.points().emission[i]);
 }
+
+VMAP_ON_EACH_BACKEND(GiEnergy);
 
 TEST(Gi, BadParametersAreErrors) {
     const VisibilityMap vm = room_vmap("cornell-empty", 500, 4);

@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <filesystem>
 
+#include "backend_fixture.h"
 #include "test_files.h"
 #include "test_util.h"
 #include "visibility/backend.h"
@@ -13,13 +14,6 @@
 namespace vmap {
 namespace {
 
-bool have_device(std::string* why) { return detail::make_cuda_backend(why) != nullptr; }
-
-#define VMAP_REQUIRE_GPU()                                           \
-    do {                                                             \
-        std::string why_;                                            \
-        if (!have_device(&why_)) GTEST_SKIP() << "no GPU: " << why_; \
-    } while (0)
 
 using test::BuildCase;
 
@@ -232,8 +226,8 @@ TEST(GpuBackend, AutoPicksTheGpuAndSaysSo) {
 }
 
 TEST(GpuBackend, CudaRequestWithoutDeviceIsAnError) {
-    std::string why;
-    if (have_device(&why)) GTEST_SKIP() << "a GPU is present; the error is not reachable";
+    if (test::why_unusable(Backend::kCuda).empty())
+        GTEST_SKIP() << "a GPU is present; the error is not reachable";
     BuildParams bp = test::cpu_params(5, 4);
     bp.backend = Backend::kCuda;
     try {

@@ -4,15 +4,16 @@
 #include <cmath>
 #include <random>
 
+#include "backend_fixture.h"
 #include "octree/records.h"
 #include "test_util.h"
+#include "visibility/predicate_cases.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/packet_walk.h"
 
 namespace vmap {
 namespace {
 
-using detail::is_actual_occluder;
 using detail::leaf_pair_visible;
 using detail::segment_meets_sphere;
 
@@ -42,89 +43,120 @@ TEST(SegmentSphere, AgreesWithDenseSamplingOfTheSegment) {
     EXPECT_GT(misses, 1000);
 }
 
-// Fig. 7 of the paper: p = origin, q = (1, 0, 0).
-struct Fig7 : ::testing::Test {
-    VisibilityParams vp;
-    Vec3 p{0, 0, 0}, d{1, 0, 0};
-    LeafDisc disc(Vec3 c, Vec3 n, float delta) {
-        LeafDisc x;
-        x.centroid = c;
-        x.normal = n / length(n);
-        x.delta = delta;
-        return x;
+LeafDisc disc(Vec3 c, Vec3 n, float delta) {
+    LeafDisc x;
+    x.centroid = c;
+    x.normal = n / length(n);
+    x.delta = delta;
+    return x;
+}
+
+// The predicate's pieces asked on the fixture's backend (visibility/predicate_cases.h).
+class OnBackend : public test::OnEachBackend {
+  protected:
+    bool ask(test::PredicateCase c) const {
+        return test::answers_on(backend(), std::span(&c, 1))[0] != 0;
+    }
+    // is_actual_occluder(p, d, len, x, vp)
+    bool occludes(Vec3 p, Vec3 d, float len, const LeafDisc& x, const VisibilityParams& vp) const {
+        test::PredicateCase c;
+        c.what = test::Predicate::kActualOccluder;
+        c.p = p, c.d = d, c.len = len, c.x = x, c.vp = vp;
+        return ask(c);
+    }
+    // leaves_face(a, b, d, len, vp)
+    bool face(const LeafDisc& a, const LeafDisc& b, Vec3 d, float len,
+              const VisibilityParams& vp) const {
+        test::PredicateCase c;
+        c.what = test::Predicate::kLeavesFace;
+        c.a = a, c.b = b, c.d = d, c.len = len, c.vp = vp;
+        return ask(c);
+    }
+    // counts_as_occluder(pair_segment(a, b, vp), x, vp), or in_front_of_ends when `front`.
+    bool counts(const LeafDisc& a, const LeafDisc& b, const LeafDisc& x,
+                const VisibilityParams& vp, bool front = false) const {
+        test::PredicateCase c;
+        c.what = front ? test::Predicate::kInFrontOfEnds : test::Predicate::kCountsAsOccluder;
+        c.a = a, c.b = b, c.x = x, c.vp = vp;
+        return ask(c);
     }
 };
 
-TEST_F(Fig7, PlaneCuttingTheSegmentNearItsCentroidOccludes) {
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, disc({0.5f, 0.05f, 0}, {1, 0.2f, 0}, 0.1f), vp));
+// Fig. 7 of the paper: p = origin, q = (1, 0, 0).
+struct Fig7 : OnBackend {
+    VisibilityParams vp;
+    Vec3 p{0, 0, 0}, d{1, 0, 0};
+    bool occludes(const LeafDisc& x) const { return OnBackend::occludes(p, d, 1, x, vp); }
+};
+
+TEST_P(Fig7, PlaneCuttingTheSegmentNearItsCentroidOccludes) {
+    EXPECT_TRUE(occludes(disc({0.5f, 0.05f, 0}, {1, 0.2f, 0}, 0.1f)));
 }
-TEST_F(Fig7, PlaneCutOutsideTheSegmentIsRejected) {  // x1
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({1.3f, 0, 0}, {1, 0, 0}, 0.5f), vp));
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({-0.2f, 0, 0}, {1, 0, 0}, 0.5f), vp));
+TEST_P(Fig7, PlaneCutOutsideTheSegmentIsRejected) {  // x1
+    EXPECT_FALSE(occludes(disc({1.3f, 0, 0}, {1, 0, 0}, 0.5f)));
+    EXPECT_FALSE(occludes(disc({-0.2f, 0, 0}, {1, 0, 0}, 0.5f)));
 }
-TEST_F(Fig7, CrossingFartherThanDeltaIsRejected) {  // x4
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.2f), vp));
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.31f), vp));
+TEST_P(Fig7, CrossingFartherThanDeltaIsRejected) {  // x4
+    EXPECT_FALSE(occludes(disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.2f)));
+    EXPECT_TRUE(occludes(disc({0.5f, 0.3f, 0}, {1, 0, 0}, 0.31f)));
 }
-TEST_F(Fig7, PlaneParallelToTheSegmentIsRejected) {  // x5
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0.5f, 0.01f, 0}, {0, 1, 0}, 0.5f), vp));
+TEST_P(Fig7, PlaneParallelToTheSegmentIsRejected) {  // x5
+    EXPECT_FALSE(occludes(disc({0.5f, 0.01f, 0}, {0, 1, 0}, 0.5f)));
 }
-TEST_F(Fig7, CrossingAtTheEndpointsIsNotAnOcclusion) {
+TEST_P(Fig7, CrossingAtTheEndpointsIsNotAnOcclusion) {
     // Neighbours on the same surface as p: their plane passes through p (t = 0 < eps).
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({0, 0.02f, 0}, {1, 0, 0}, 0.1f), vp));
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, disc({1, 0.02f, 0}, {1, 0, 0}, 0.1f), vp));
+    EXPECT_FALSE(occludes(disc({0, 0.02f, 0}, {1, 0, 0}, 0.1f)));
+    EXPECT_FALSE(occludes(disc({1, 0.02f, 0}, {1, 0, 0}, 0.1f)));
 }
-TEST_F(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
+TEST_P(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
     LeafDisc x = disc({0.5f, 0.05f, 0}, {1, 0, 0}, 0.1f);
     x.flags = kLeafNormalDegenerate;
     x.normal = {0, 0, 0};
-    EXPECT_TRUE(is_actual_occluder(p, d, 1, x, vp));
+    EXPECT_TRUE(occludes(x));
     x.centroid.y = 0.2f;
-    EXPECT_FALSE(is_actual_occluder(p, d, 1, x, vp));
+    EXPECT_FALSE(occludes(x));
 }
+
+VMAP_ON_EACH_BACKEND(Fig7);
 
 // A convex neighbour of end a: its centroid just behind a's tangent plane, its disc tilted so it
 // reaches into the segment's first stretch. It cuts the segment as a disc, but no surface
 // wholly behind a's plane can lie on a segment in front of it.
-struct EndPlanes : ::testing::Test {
+struct EndPlanes : OnBackend {
     VisibilityParams vp;
     LeafDisc a, b;
     Vec3 d;
-    LeafDisc disc(Vec3 c, Vec3 n, float delta) {
-        LeafDisc x;
-        x.centroid = c;
-        x.normal = n / length(n);
-        x.delta = delta;
-        return x;
-    }
     void SetUp() override {
+        OnBackend::SetUp();
+        if (IsSkipped()) return;
         a = disc({0, 0, 0}, {0, 1, 0}, 0.05f);
         b = disc({1, 0.1f, 0}, {-1, 0, 0}, 0.05f);
         d = b.centroid - a.centroid;
-        ASSERT_TRUE(detail::leaves_face(a, b, d, length(d), vp));
+        ASSERT_TRUE(face(a, b, d, length(d), vp));
     }
-    bool counts(const LeafDisc& x) {
-        return detail::counts_as_occluder(detail::pair_segment(a, b, vp), x, vp);
-    }
+    bool counts(const LeafDisc& x) const { return OnBackend::counts(a, b, x, vp); }
+    bool in_front_of_ends(const LeafDisc& x) const { return OnBackend::counts(a, b, x, vp, true); }
+    // As a disc, x cuts the segment from a to b.
+    bool cuts(const LeafDisc& x) const { return occludes(a.centroid, d, length(d), x, vp); }
 };
 
-TEST_F(EndPlanes, NeighbourBehindAnEndsTangentPlaneDoesNotCount) {
+TEST_P(EndPlanes, NeighbourBehindAnEndsTangentPlaneDoesNotCount) {
     const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));  // as a disc, it cuts
+    EXPECT_TRUE(cuts(x));  // as a disc, it cuts
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, SurfaceInFrontOfBothEndsCounts) {
+TEST_P(EndPlanes, SurfaceInFrontOfBothEndsCounts) {
     const LeafDisc x = disc({0.1f, 0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_TRUE(counts(x));
 }
-TEST_F(EndPlanes, BehindTheFarEndsPlaneDoesNotCountEither) {
+TEST_P(EndPlanes, BehindTheFarEndsPlaneDoesNotCountEither) {
     // Just behind b's plane (x > 1), tilted toward the segment's last stretch.
     const LeafDisc x = disc({1.004f, 0.08f, 0}, {1, 3, 0}, 0.08f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
+TEST_P(EndPlanes, AnEndWithoutANormalCullsNothing) {
     const LeafDisc x = disc({0.1f, -0.004f, 0}, {-0.3f, 1, 0}, 0.08f);
     a.flags = kLeafNormalDegenerate;
     a.normal = {0, 0, 0};
@@ -135,20 +167,20 @@ TEST_F(EndPlanes, AnEndWithoutANormalCullsNothing) {
 // the end's disc radius of that end, coming out of it (the end behind its plane), is the end's
 // own surface; one the segment goes into, or one cut farther out, still counts. a sits at the
 // origin with Delta 0.05 (half: 0.025) and the segment leaves along d = (1, 0.1, 0).
-TEST_F(EndPlanes, CrossedFromBehindRightAtAnEndDoesNotCount) {
+TEST_P(EndPlanes, CrossedFromBehindRightAtAnEndDoesNotCount) {
     // Centroid in front of a's plane (y > 0), a behind its plane: n . (a - c) < 0. Its plane
     // cuts the segment at about 0.012 from a, inside the disc.
     const LeafDisc x = disc({0.02f, 0.004f, 0}, {1, -0.3f, 0}, 0.05f);
-    ASSERT_TRUE(detail::in_front_of_ends(detail::pair_segment(a, b, vp), x));
+    ASSERT_TRUE(in_front_of_ends(x));
     ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
     // The same leaf facing the other way: the segment goes into it, so it counts.
     LeafDisc in = x;
     in.normal = -x.normal;
     EXPECT_TRUE(counts(in));
 }
-TEST_F(EndPlanes, CrossedFromBehindFartherOutCounts) {
+TEST_P(EndPlanes, CrossedFromBehindFartherOutCounts) {
     // The same geometry moved out to about 0.05 from a: more than half of a's Delta (0.025).
     const LeafDisc x = disc({0.06f, 0.01f, 0}, {1, -0.3f, 0}, 0.05f);
     ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
@@ -157,33 +189,38 @@ TEST_F(EndPlanes, CrossedFromBehindFartherOutCounts) {
     a.delta = 0.2f;
     EXPECT_FALSE(counts(x));
 }
-TEST_F(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
+TEST_P(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
     // Near b (centroid (1, 0.1, 0), normal -x): a leaf just in front of b's plane with b
     // behind its own plane, cut about 0.02 from b (b's Delta 0.05).
     const LeafDisc x = disc({0.98f, 0.1f, 0.f}, {-1, 0.2f, 0}, 0.05f);
-    const detail::PairSegment s = detail::pair_segment(a, b, vp);
-    ASSERT_TRUE(detail::in_front_of_ends(s, x));
+    ASSERT_TRUE(in_front_of_ends(x));
     ASSERT_LT(dot(x.normal, b.centroid - x.centroid), 0.f);
-    EXPECT_TRUE(is_actual_occluder(a.centroid, d, length(d), x, vp));
+    EXPECT_TRUE(cuts(x));
     EXPECT_FALSE(counts(x));
     b.flags = kLeafNormalDegenerate;  // an end without a plane drops nothing
     b.normal = {0, 0, 0};
     EXPECT_TRUE(counts(x));
 }
 
-TEST(Facing, BothNormalsMustFaceTheOther) {
+VMAP_ON_EACH_BACKEND(EndPlanes);
+
+class Facing : public OnBackend {};
+
+TEST_P(Facing, BothNormalsMustFaceTheOther) {
     VisibilityParams vp;
     LeafDisc a, b;
     a.normal = {0, 1, 0};
     b.normal = {0, -1, 0};
     const Vec3 d{0, 1, 0};
-    EXPECT_TRUE(detail::leaves_face(a, b, d, 1, vp));
+    EXPECT_TRUE(face(a, b, d, 1, vp));
     b.normal = {0, 1, 0};
-    EXPECT_FALSE(detail::leaves_face(a, b, d, 1, vp));
+    EXPECT_FALSE(face(a, b, d, 1, vp));
     // Coplanar leaves (d in the tangent plane) do not face each other.
     b.normal = {0, 1, 0};
-    EXPECT_FALSE(detail::leaves_face(a, b, {1, 0, 0}, 1, vp));
+    EXPECT_FALSE(face(a, b, {1, 0, 0}, 1, vp));
 }
+
+VMAP_ON_EACH_BACKEND(Facing);
 
 // The traversal (sphere pruning, early exit at K) against testing every leaf.
 bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
@@ -200,35 +237,77 @@ bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
     return occ < vp.K;
 }
 
-class TraversalOracle : public ::testing::TestWithParam<std::tuple<const char*, int, int>> {};
+// The backend's answers for leaf pairs (a < b each), one 1 x 1 rectangle a pair, in one batch;
+// its work added to *wc.
+std::vector<bool> visible_on(detail::Backend& backend, const Octree& t, const VisibilityParams& vp,
+                             const std::vector<std::pair<int32_t, int32_t>>& pairs,
+                             WorkCounters* wc) {
+    std::vector<detail::PairJob> jobs(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) {
+        jobs[k].row0 = pairs[k].first, jobs[k].rows = 1;
+        jobs[k].col0 = pairs[k].second, jobs[k].cols = 1;
+        jobs[k].word_offset = k;
+    }
+    backend.prepare(t, vp, std::max<uint64_t>(1, pairs.size()));
+    backend.submit(jobs, pairs.size(), 0);
+    const uint32_t* bits = backend.wait(0, *wc);
+    std::vector<bool> out(pairs.size());
+    for (size_t k = 0; k < pairs.size(); ++k) out[k] = bits[k] & 1u;
+    return out;
+}
 
+// Random leaf pairs, a < b.
+std::vector<std::pair<int32_t, int32_t>> random_pairs(int32_t num_leaves, int n, uint32_t seed) {
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<int32_t> pick(0, num_leaves - 1);
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    for (int it = 0; it < n; ++it) {
+        int32_t a = pick(rng), b = pick(rng);
+        if (a == b) continue;
+        pairs.push_back({std::min(a, b), std::max(a, b)});
+    }
+    return pairs;
+}
+
+class TraversalOracle : public test::OnEachBackendWith<std::tuple<const char*, int, int>> {};
+
+// The backend's walk (on the GPU: the default kernel) and the host's leaf_pair_visible against
+// testing every leaf.
 TEST_P(TraversalOracle, SpherePruningNeverDropsAnOccluder) {
-    const auto [scene, height, k] = GetParam();
+    const auto [scene, height, k] = param();
     PointSet ps = test::sample(test::scene_path(scene), 3000, 5);
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {height, 3}, order);
     VisibilityParams vp;
     vp.K = k;
     const OctreeView v = octree_view(t);
-    std::mt19937 rng(9);
-    std::uniform_int_distribution<int32_t> pick(0, v.num_leaves - 1);
+    const auto pairs = random_pairs(v.num_leaves, 4000, 9);
+    WorkCounters wc;
+    const std::vector<bool> got = visible_on(*leaf_pair_backend(), t, vp, pairs, &wc);
     int visible = 0, hidden = 0;
-    for (int it = 0; it < 4000; ++it) {
-        int32_t a = pick(rng), b = pick(rng);
-        if (a == b) continue;
-        if (a > b) std::swap(a, b);
-        const bool got = leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr));
-        ASSERT_EQ(got, visible_without_pruning(v, a, b, vp)) << a << " " << b;
-        (got ? visible : hidden)++;
+    for (size_t i = 0; i < pairs.size(); ++i) {
+        const auto [a, b] = pairs[i];
+        const bool want = visible_without_pruning(v, a, b, vp);
+        ASSERT_EQ(got[i], want) << "backend, leaves " << a << " " << b;
+        ASSERT_EQ(leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)), want)
+            << "host, leaves " << a << " " << b;
+        (got[i] ? visible : hidden)++;
     }
+    EXPECT_EQ(wc.pairs, pairs.size());
+    EXPECT_EQ(wc.visible_pairs, uint64_t(visible));
     EXPECT_GT(visible, 100);
     EXPECT_GT(hidden, 100);
 }
 
-INSTANTIATE_TEST_SUITE_P(Scenes, TraversalOracle,
-                         ::testing::Values(std::make_tuple("cornell-bunny", 6, 1),
-                                           std::make_tuple("cornell-bunny", 8, 2),
-                                           std::make_tuple("cornell-two-models", 7, 3)));
+VMAP_ON_EACH_BACKEND_WITH(TraversalOracle,
+                          ::testing::Values(std::make_tuple("cornell-bunny", 6, 1),
+                                            std::make_tuple("cornell-bunny", 8, 2),
+                                            std::make_tuple("cornell-two-models", 7, 3)),
+                          [](const std::tuple<const char*, int, int>& c) {
+                              return std::string(std::get<0>(c)) + "_h" +
+                                     std::to_string(std::get<1>(c)) + "_K" +
+                                     std::to_string(std::get<2>(c));
+                          });
 
 // A random scene for the packet walk: points on a few planes (some axis-aligned, with
 // coordinates on a coarse grid, so that many segments have an exactly zero direction component
@@ -359,19 +438,56 @@ TEST(PacketWalk, SegmentInABoxFaceIsWalkedLikeTheLeafPairWalk) {
     EXPECT_EQ(got.occluder_tests, want.occluder_tests);
 }
 
-TEST(Counting, CountedAndUncountedPredicatesAgree) {
+// The counting cases' tree (2000 bunny samples, height 7, 4 points a leaf) and leaf pairs.
+Octree counting_tree() {
     PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2000, 2);
     std::vector<uint32_t> order;
-    Octree t = Octree::build(ps, {7, 4}, order);
+    return Octree::build(ps, {7, 4}, order);
+}
+std::vector<std::pair<int32_t, int32_t>> counting_pairs(int32_t num_leaves) {
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    for (int32_t a = 0; a < 50; ++a)
+        for (int32_t b = a + 1; b < num_leaves; b += 7) pairs.push_back({a, b});
+    return pairs;
+}
+
+TEST(Counting, CountedAndUncountedPredicatesAgree) {
+    const Octree t = counting_tree();
     const OctreeView v = octree_view(t);
     VisibilityParams vp;
     WorkCounters wc;
-    for (int32_t a = 0; a < 50; ++a)
-        for (int32_t b = a + 1; b < v.num_leaves; b += 7)
-            ASSERT_EQ(leaf_pair_visible<true>(v, a, b, vp, &wc),
-                      leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
+    for (const auto& [a, b] : counting_pairs(v.num_leaves))
+        ASSERT_EQ(leaf_pair_visible<true>(v, a, b, vp, &wc),
+                  leaf_pair_visible<false>(v, a, b, vp, static_cast<WorkCounters*>(nullptr)));
     EXPECT_GT(wc.node_tests, wc.facing_pairs);
 }
+
+// The backend's work counts for a batch of pairs are the counted predicate's, pair by pair
+// summed, and its answers the uncounted one's.
+class Counting : public test::OnEachBackend {};
+
+TEST_P(Counting, BackendCountsTheCountedPredicatesWork) {
+    const Octree t = counting_tree();
+    const OctreeView v = octree_view(t);
+    VisibilityParams vp;
+    const auto pairs = counting_pairs(v.num_leaves);
+    WorkCounters want, got;
+    const std::vector<bool> vis = visible_on(*leaf_pair_backend(), t, vp, pairs, &got);
+    for (size_t i = 0; i < pairs.size(); ++i) {
+        const auto [a, b] = pairs[i];
+        leaf_pair_visible<true>(v, a, b, vp, &want);
+        ASSERT_EQ(vis[i], leaf_pair_visible<false>(v, a, b, vp,
+                                                   static_cast<WorkCounters*>(nullptr)))
+            << a << " " << b;
+    }
+    EXPECT_EQ(got.pairs, pairs.size());
+    EXPECT_EQ(got.facing_pairs, want.facing_pairs);
+    EXPECT_EQ(got.node_tests, want.node_tests);
+    EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+    EXPECT_GT(got.node_tests, got.facing_pairs);
+}
+
+VMAP_ON_EACH_BACKEND(Counting);
 
 }  // namespace
 }  // namespace vmap

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <set>
 
+#include "backend_fixture.h"
 #include "test_files.h"
 #include "test_util.h"
 #include "vmap/error.h"
@@ -110,52 +111,70 @@ void check_invariant(const VisibilityMap& vm) {
 
 using test::BuildCase;
 
-class VmapOracle : public ::testing::TestWithParam<BuildCase> {};
+// Both constructions on every backend, each against the brute-force matrix.
+class VmapOracle : public test::OnEachBackendWith<BuildCase> {};
 
 TEST_P(VmapOracle, LinksCoverExactlyTheVisibleLeafPairs) {
-    const BuildCase c = GetParam();
-    BuildStats st;
-    VisibilityMap vm = build_vmap(test::sample(c.file(), c.points, 3),
-                                  test::cpu_params(c.height, c.leaf_points), &st);
-    const int32_t L = vm.octree().num_leaves();
-    EXPECT_EQ(st.leaf_pairs, uint64_t(L) * (L - 1) / 2);
-    EXPECT_EQ(st.work.pairs, st.leaf_pairs_walked) << "each walked pair once";
-    EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "node-level decisions";
-    std::set<int> levels;
-    for (int32_t l : vm.octree().leaf_node()) levels.insert(vm.octree().level()[l]);
-    EXPECT_GE(levels.size(), 2u) << "the case should have leaves at mixed depths";
-    check_invariant(vm);
+    const BuildCase c = param();
+    const PointSet ps = test::sample(c.file(), c.points, 3);
+    for (const Construction method : {Construction::kNodes, Construction::kLeafPairs}) {
+        SCOPED_TRACE(name_of(method));
+        BuildParams bp = build_params(c.height, c.leaf_points);
+        bp.construction = method;
+        BuildStats st;
+        VisibilityMap vm = build_vmap(ps, bp, &st);
+        EXPECT_EQ(st.construction, name_of(method));
+        expect_ran_here(st.backend);
+        const int32_t L = vm.octree().num_leaves();
+        EXPECT_EQ(st.leaf_pairs, uint64_t(L) * (L - 1) / 2);
+        EXPECT_EQ(st.work.pairs, st.leaf_pairs_walked) << "each walked pair once";
+        if (method == Construction::kNodes)
+            EXPECT_LT(st.leaf_pairs_walked, st.leaf_pairs) << "node-level decisions";
+        else
+            EXPECT_EQ(st.leaf_pairs_walked, st.leaf_pairs) << "every leaf pair walked";
+        std::set<int> levels;
+        for (int32_t l : vm.octree().leaf_node()) levels.insert(vm.octree().level()[l]);
+        EXPECT_GE(levels.size(), 2u) << "the case should have leaves at mixed depths";
+        check_invariant(vm);
+    }
 }
 
-INSTANTIATE_TEST_SUITE_P(Scenes, VmapOracle,
-                         ::testing::Values(BuildCase{"cornell-empty", 1500, 4, 4},
-                                           BuildCase{"cornell-bunny", 2000, 5, 2},
-                                           BuildCase{"cornell-bunny", 2500, 7, 4},
-                                           BuildCase{"cornell-two-models", 2500, 8, 6},
-                                           BuildCase{"./room-with-block.json", 2000, 6, 1},
-                                           BuildCase{"./room-with-block.json", 3000, 9, 8}),
-                         [](const ::testing::TestParamInfo<BuildCase>& i) {
-                             return test::case_name(i.param, true);
-                         });
+VMAP_ON_EACH_BACKEND_WITH(VmapOracle,
+                          ::testing::Values(BuildCase{"cornell-empty", 1500, 4, 4},
+                                            BuildCase{"cornell-bunny", 2000, 5, 2},
+                                            BuildCase{"cornell-bunny", 2500, 7, 4},
+                                            BuildCase{"cornell-two-models", 2500, 8, 6},
+                                            BuildCase{"./room-with-block.json", 2000, 6, 1},
+                                            BuildCase{"./room-with-block.json", 3000, 9, 8}),
+                          [](const BuildCase& c) { return test::case_name(c, true); });
 
-TEST(VmapBuild, TinyBatchesGiveTheSameLinks) {
+class VmapBuild : public test::OnEachBackend {};
+
+TEST_P(VmapBuild, TinyBatchesGiveTheSameLinks) {
     // Batches of 1024 pairs force jobs of 64 pairs: node pairs split into sub-rectangles, links
-    // reassembled across jobs and batches.
+    // reassembled across jobs and batches. The reference: the CPU's leaf-pair build in one batch.
     const PointSet ps = test::sample(test::oracle_path("room-with-block.json"), 2500, 4);
-    const VisibilityMap ref = build_vmap(ps, test::cpu_params(7, 3));
-    BuildParams bp = test::cpu_params(7, 3);
-    bp.max_batch_pairs = 1024;
-    BuildStats st;
-    const VisibilityMap small = build_vmap(ps, bp, &st);
-    EXPECT_GT(st.batches, 10u);
-    EXPECT_EQ(small.link_offsets(), ref.link_offsets());
-    EXPECT_TRUE(std::ranges::equal(small.link_targets(), ref.link_targets()));
+    BuildParams ref_bp = test::cpu_params(7, 3);
+    ref_bp.construction = Construction::kLeafPairs;
+    const VisibilityMap ref = build_vmap(ps, ref_bp);
+    for (const Construction method : {Construction::kNodes, Construction::kLeafPairs}) {
+        BuildParams bp = build_params(7, 3);
+        bp.construction = method;
+        bp.max_batch_pairs = 1024;
+        BuildStats st;
+        const VisibilityMap small = build_vmap(ps, bp, &st);
+        EXPECT_GT(st.batches, 10u) << name_of(method);
+        expect_ran_here(st.backend);
+        EXPECT_EQ(small.link_offsets(), ref.link_offsets()) << name_of(method);
+        EXPECT_TRUE(std::ranges::equal(small.link_targets(), ref.link_targets()))
+            << name_of(method);
+    }
 }
 
-TEST(VmapBuild, CountingWithoutKeepingGivesTheSameNumberOfLinks) {
+TEST_P(VmapBuild, CountingWithoutKeepingGivesTheSameNumberOfLinks) {
     // Small batches, so links merge across jobs (the count must subtract the replaced ones).
     const PointSet ps = test::sample(test::oracle_path("room-with-block.json"), 2500, 4);
-    BuildParams bp = test::cpu_params(7, 3);
+    BuildParams bp = build_params(7, 3);
     bp.max_batch_pairs = 4096;
     BuildStats kept, counted;
     const VisibilityMap ref = build_vmap(ps, bp, &kept);
@@ -175,18 +194,9 @@ TEST(VmapBuild, CountingWithoutKeepingGivesTheSameNumberOfLinks) {
     EXPECT_FALSE(std::filesystem::exists(dir.path("none.vmap")));
 }
 
-TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {
-    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 3000, 8);
-    VisibilityMap many = build_vmap(ps, test::cpu_params(7, 3));
-    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
-    VisibilityMap single = build_vmap(ps, test::cpu_params(7, 3));
-    EXPECT_TRUE(std::ranges::equal(single.link_targets(), many.link_targets()));
-    EXPECT_EQ(single.order(), many.order());
-}
-
-TEST(VmapBuild, LinksAreStoredAtBothEndsSorted) {
+TEST_P(VmapBuild, LinksAreStoredAtBothEndsSorted) {
     const VisibilityMap vm = build_vmap(test::sample(test::scene_path("cornell-bunny"), 2000, 1),
-                                        test::cpu_params(6, 4));
+                                        build_params(6, 4));
     for (int32_t n = 0; n < vm.octree().num_nodes(); ++n) {
         const auto ls = vm.links(n);
         EXPECT_TRUE(std::is_sorted(ls.begin(), ls.end()));
@@ -195,6 +205,17 @@ TEST(VmapBuild, LinksAreStoredAtBothEndsSorted) {
             EXPECT_TRUE(std::binary_search(back.begin(), back.end(), n));
         }
     }
+}
+
+VMAP_ON_EACH_BACKEND(VmapBuild);
+
+TEST(VmapBuild, ResultDoesNotDependOnThreadCount) {
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 3000, 8);
+    VisibilityMap many = build_vmap(ps, test::cpu_params(7, 3));
+    tbb::global_control one(tbb::global_control::max_allowed_parallelism, 1);
+    VisibilityMap single = build_vmap(ps, test::cpu_params(7, 3));
+    EXPECT_TRUE(std::ranges::equal(single.link_targets(), many.link_targets()));
+    EXPECT_EQ(single.order(), many.order());
 }
 
 TEST(VmapBuild, AbsurdParametersAreRejected) {

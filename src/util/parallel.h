@@ -5,8 +5,8 @@
 // chunks the same way (f(begin, end, acc) returns acc with the chunk added; join(a, b) merges
 // two partial results: give it an associative, exact one, integers, for a result that does not
 // depend on the chunks), and parallel_sort sorts. Threads: the caller's oneTBB limit
-// (BuildParams::threads sets one for a build). The GPU's counterpart, one thread per index, is
-// launch_for in util/parallel_cuda.cuh.
+// (BuildParams::threads sets one for a build). The GPU's counterpart, of the same
+// shape, is parallel_for_device(n, body) in util/parallel_cuda.cuh.
 #pragma once
 
 #include <tbb/blocked_range.h>

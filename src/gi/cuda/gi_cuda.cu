@@ -1,7 +1,8 @@
 // The radiosity solver on a CUDA GPU: the block refinement (gi_link_blocks, one thread per link
 // end), the three bounce steps of gi_kernels.h (one thread per element, point or node) and the
 // final gather (gi_final_gather_point, one thread per point), with the CPU's bodies and
-// summation orders (bit-identical with --fmad=false; docs/gi.md).
+// summation orders (bit-identical with --fmad=false; docs/gi.md). Every loop is an element-wise
+// parallel_for_device (util/parallel_cuda.cuh) over a small functor that calls the shared body.
 #include <cuda_runtime.h>
 
 #include <algorithm>
@@ -12,17 +13,15 @@
 #include <string>
 
 #include "gi/gi_device.h"
-#include "util/device.h"
 #include "util/cuda_check.h"
+#include "util/device.h"
+#include "util/parallel_cuda.cuh"
 #include "vmap/error.h"
 
 namespace vmap::detail {
 namespace {
 
-constexpr int kThreads = 256;
 constexpr uint64_t kNoKey = ~uint64_t(0);
-
-unsigned blocks(uint64_t n) { return unsigned((n + kThreads - 1) / kThreads); }
 
 // A device array freed with its owner.
 template <class T>
@@ -64,19 +63,21 @@ void check_launch() {
     VMAP_CUDA_CHECK(cudaDeviceSynchronize());
 }
 
+// The loops' bodies (parallel_for_device: one index an element, link entry, block or point).
+
 // ---- bounces
-__global__ void gather_kernel(GiView v, uint64_t n) {
-    const uint64_t e = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (e < n) gi_gather(v, e);
-}
-__global__ void point_kernel(GiView v) {
-    const uint64_t i = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (i < v.num_points) gi_point_update(v, uint32_t(i));
-}
-__global__ void pull_kernel(GiView v) {
-    const int64_t n = int64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (n < v.num_nodes) gi_pull_up(v, int32_t(n));
-}
+struct Gather {
+    GiView v;
+    __device__ void operator()(uint64_t e) const { gi_gather(v, e); }
+};
+struct PointUpdate {
+    GiView v;
+    __device__ void operator()(uint64_t i) const { gi_point_update(v, uint32_t(i)); }
+};
+struct PullUp {
+    GiView v;
+    __device__ void operator()(uint64_t n) const { gi_pull_up(v, int32_t(n)); }
+};
 
 // ---- refinement
 struct CountOnly {
@@ -107,79 +108,112 @@ __device__ int32_t owner_of(const GiTree& t, uint64_t k) {
     return lo;
 }
 
-__global__ void count_parts_kernel(GiTree t, float theta, uint64_t n, uint64_t* count) {
-    const uint64_t k = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= n) return;
-    const int32_t x = owner_of(t, k), y = t.links[k];
-    count[k] = y > x ? gi_link_blocks(t, theta, x, y, CountOnly{}) : 0;
-}
+// Link entry k's number of parts (its link's, once: at the end x < y).
+struct CountParts {
+    GiTree t;
+    float theta;
+    uint64_t* count;
+    __device__ void operator()(uint64_t k) const {
+        const int32_t x = owner_of(t, k), y = t.links[k];
+        count[k] = y > x ? gi_link_blocks(t, theta, x, y, CountOnly{}) : 0;
+    }
+};
 
-__global__ void fill_parts_kernel(GiTree t, float theta, uint64_t n, const uint64_t* at,
-                                  uint64_t* key, double* w, uint32_t* node) {
-    const uint64_t k = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k >= n) return;
-    const int32_t x = owner_of(t, k), y = t.links[k];
-    if (y > x) gi_link_blocks(t, theta, x, y, FillParts{key, w, node, at[k], uint32_t(x)});
-}
+// Link entry k's parts, from at[k] on.
+struct FillPartsOf {
+    GiTree t;
+    float theta;
+    const uint64_t* at;
+    uint64_t* key;
+    double* w;
+    uint32_t* node;
+    __device__ void operator()(uint64_t k) const {
+        const int32_t x = owner_of(t, k), y = t.links[k];
+        if (y > x) gi_link_blocks(t, theta, x, y, FillParts{key, w, node, at[k], uint32_t(x)});
+    }
+};
 
 // Block s's weight: its parts in sorted order (stable: link-end order, then the walk's), summed
 // per link end, then the link ends' sums added in order, as the CPU's cpu_blocks does.
-__global__ void sum_blocks_kernel(const uint64_t* start, const uint32_t* len, const uint32_t* order,
-                                  const double* w, const uint32_t* node, uint64_t num_blocks,
-                                  double* out) {
-    const uint64_t s = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (s >= num_blocks) return;
-    double total = 0, part = 0;
-    uint32_t x = node[order[start[s]]];
-    for (uint64_t e = start[s]; e < start[s] + len[s]; ++e) {
-        const uint32_t j = order[e];
-        if (node[j] != x) total += part, part = 0, x = node[j];
-        part += w[j];
+struct SumBlocks {
+    const uint64_t* start;
+    const uint32_t *len, *order;
+    const double* w;
+    const uint32_t* node;
+    double* out;
+    __device__ void operator()(uint64_t s) const {
+        double total = 0, part = 0;
+        uint32_t x = node[order[start[s]]];
+        for (uint64_t e = start[s]; e < start[s] + len[s]; ++e) {
+            const uint32_t j = order[e];
+            if (node[j] != x) total += part, part = 0, x = node[j];
+            part += w[j];
+        }
+        out[s] = total + part;
     }
-    out[s] = total + part;
-}
+};
 
 // Both interactions of block s as (receiver << 32 | source, F); kNoKey for an element of no area.
-__global__ void interactions_kernel(GiTree t, const uint64_t* key, const double* w, uint64_t nb,
-                                    uint64_t* ikey, float* icoef) {
-    const uint64_t s = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (s >= nb) return;
-    const uint32_t e1 = uint32_t(key[s] >> 32), e2 = uint32_t(key[s]), N = uint32_t(t.num_nodes);
-    const double a1 = e1 < N ? double(t.geom[e1].area) : double(t.area[e1 - N]);
-    const double a2 = e2 < N ? double(t.geom[e2].area) : double(t.area[e2 - N]);
-    if (!(a1 > 0) || !(a2 > 0)) {
-        ikey[2 * s] = ikey[2 * s + 1] = kNoKey;
-        icoef[2 * s] = icoef[2 * s + 1] = 0;
-        return;
+struct Interactions {
+    GiTree t;
+    const uint64_t* key;
+    const double* w;
+    uint64_t* ikey;
+    float* icoef;
+    __device__ void operator()(uint64_t s) const {
+        const uint32_t e1 = uint32_t(key[s] >> 32), e2 = uint32_t(key[s]);
+        const uint32_t N = uint32_t(t.num_nodes);
+        const double a1 = e1 < N ? double(t.geom[e1].area) : double(t.area[e1 - N]);
+        const double a2 = e2 < N ? double(t.geom[e2].area) : double(t.area[e2 - N]);
+        if (!(a1 > 0) || !(a2 > 0)) {
+            ikey[2 * s] = ikey[2 * s + 1] = kNoKey;
+            icoef[2 * s] = icoef[2 * s + 1] = 0;
+            return;
+        }
+        const double f1 = w[s] / a1, f2 = w[s] / a2;  // as std::min(1.0, f) on the host
+        ikey[2 * s] = (uint64_t(e1) << 32) | e2, icoef[2 * s] = float(f1 < 1.0 ? f1 : 1.0);
+        ikey[2 * s + 1] = (uint64_t(e2) << 32) | e1, icoef[2 * s + 1] = float(f2 < 1.0 ? f2 : 1.0);
     }
-    const double f1 = w[s] / a1, f2 = w[s] / a2;  // as std::min(1.0, f) on the host
-    ikey[2 * s] = (uint64_t(e1) << 32) | e2, icoef[2 * s] = float(f1 < 1.0 ? f1 : 1.0);
-    ikey[2 * s + 1] = (uint64_t(e2) << 32) | e1, icoef[2 * s + 1] = float(f2 < 1.0 ? f2 : 1.0);
-}
+};
 
-// row[e] = the first sorted interaction of receiver e (e = num_el: the number of interactions).
-__global__ void rows_kernel(const uint64_t* ikey, uint64_t n, uint64_t num_el, uint64_t* row,
-                            uint32_t* src) {
-    const uint64_t e = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (e < n && ikey[e] != kNoKey) src[e] = uint32_t(ikey[e]);
-    if (e > num_el) return;
-    const uint64_t want = e << 32;
-    uint64_t lo = 0, hi = n;
-    while (lo < hi) {
-        const uint64_t mid = lo + (hi - lo) / 2;
-        if (ikey[mid] < want)
-            lo = mid + 1;
-        else
-            hi = mid;
+// row[e] = the first sorted interaction of receiver e (e = num_el: the number of interactions)
+// and src[e] = the source of sorted interaction e, for e < max(n, num_el + 1).
+struct Rows {
+    const uint64_t* ikey;
+    uint64_t n, num_el;
+    uint64_t* row;
+    uint32_t* src;
+    __device__ void operator()(uint64_t e) const {
+        if (e < n && ikey[e] != kNoKey) src[e] = uint32_t(ikey[e]);
+        if (e > num_el) return;
+        const uint64_t want = e << 32;
+        uint64_t lo = 0, hi = n;
+        while (lo < hi) {
+            const uint64_t mid = lo + (hi - lo) / 2;
+            if (ikey[mid] < want)
+                lo = mid + 1;
+            else
+                hi = mid;
+        }
+        row[e] = lo;
     }
-    row[e] = lo;
-}
+};
 
 // ---- final gather
-__global__ void final_gather_kernel(GiGatherView v, const uint32_t* points, uint64_t n, Vec3* out) {
-    const uint64_t k = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k < n) out[k] = gi_final_gather_point(v, points ? points[k] : uint32_t(k));
-}
+// Point k of the list (or point k when there is none).
+struct FinalGather {
+    GiGatherView v;
+    const uint32_t* points;
+    Vec3* out;
+    __device__ void operator()(uint64_t k) const {
+        out[k] = gi_final_gather_point(v, points ? points[k] : uint32_t(k));
+    }
+};
+
+struct Iota {
+    uint32_t* a;
+    __device__ void operator()(uint64_t k) const { a[k] = uint32_t(k); }
+};
 
 // cub's two-call pattern: size, then run.
 template <class F>
@@ -204,11 +238,6 @@ void sort_pairs(DevBuf<uint64_t>& key, DevBuf<V>& value, uint64_t n) {
     if (v.Current() != value.p) std::swap(value, value2);
 }
 
-__global__ void iota_kernel(uint32_t* a, uint64_t n) {
-    const uint64_t k = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;
-    if (k < n) a[k] = uint32_t(k);
-}
-
 class CudaGi final : public GiDevice {
   public:
     explicit CudaGi(std::string name) : name_(std::move(name)) {}
@@ -224,11 +253,9 @@ class CudaGi final : public GiDevice {
         d_.B = B_.p;
     }
     void bounce() override {
-        gather_kernel<<<blocks(elements_), kThreads>>>(d_, elements_);
-        VMAP_CUDA_CHECK(cudaGetLastError());
-        point_kernel<<<blocks(d_.num_points), kThreads>>>(d_);
-        VMAP_CUDA_CHECK(cudaGetLastError());
-        pull_kernel<<<blocks(uint64_t(d_.num_nodes)), kThreads>>>(d_);
+        parallel_for_device(elements_, Gather{d_});
+        parallel_for_device(d_.num_points, PointUpdate{d_});
+        parallel_for_device(uint64_t(d_.num_nodes), PullUp{d_});
         check_launch();
     }
     void download_radiosity(Vec3* B) const override { B_.to(B, elements_); }
@@ -278,7 +305,7 @@ void CudaGi::make_blocks(float theta, DevBuf<uint64_t>& key, DevBuf<double>& w) 
     const uint64_t L = link_entries_;
     DevBuf<uint64_t> at(L + 1);
     VMAP_CUDA_CHECK(cudaMemset(at.p + L, 0, sizeof(uint64_t)));
-    if (L) count_parts_kernel<<<blocks(L), kThreads>>>(t_, theta, L, at.p);
+    parallel_for_device(L, CountParts{t_, theta, at.p});
     check_launch();
     DevBuf<uint64_t> first(L + 1);
     with_temp([&](void* t, size_t& b) {
@@ -291,8 +318,8 @@ void CudaGi::make_blocks(float theta, DevBuf<uint64_t>& key, DevBuf<double>& w) 
     DevBuf<uint64_t> pkey(M);
     DevBuf<double> pw(M);
     DevBuf<uint32_t> pnode(M), order(M);
-    if (L) fill_parts_kernel<<<blocks(L), kThreads>>>(t_, theta, L, at.p, pkey.p, pw.p, pnode.p);
-    if (M) iota_kernel<<<blocks(M), kThreads>>>(order.p, M);
+    parallel_for_device(L, FillPartsOf{t_, theta, at.p, pkey.p, pw.p, pnode.p});
+    parallel_for_device(M, Iota{order.p});
     check_launch();
     at = DevBuf<uint64_t>();
     sort_pairs(pkey, order, M);
@@ -307,9 +334,7 @@ void CudaGi::make_blocks(float theta, DevBuf<uint64_t>& key, DevBuf<double>& w) 
         return cub::DeviceScan::ExclusiveSum(t, b, len.p, start.p, int64_t(nb));
     });
     w = DevBuf<double>(nb);
-    if (nb)
-        sum_blocks_kernel<<<blocks(nb), kThreads>>>(start.p, len.p, order.p, pw.p, pnode.p, nb,
-                                                    w.p);
+    parallel_for_device(nb, SumBlocks{start.p, len.p, order.p, pw.p, pnode.p, w.p});
     check_launch();
     key = std::move(ukey);
     key.n = nb;
@@ -324,14 +349,14 @@ void CudaGi::refine_blocks(float theta, const std::function<void(uint64_t)>& che
     const uint64_t nb = key.n, n = 2 * nb;
     DevBuf<uint64_t> ikey(n);
     DevBuf<float> icoef(n);
-    if (nb) interactions_kernel<<<blocks(nb), kThreads>>>(t_, key.p, w.p, nb, ikey.p, icoef.p);
+    parallel_for_device(nb, Interactions{t_, key.p, w.p, ikey.p, icoef.p});
     check_launch();
     key = DevBuf<uint64_t>(), w = DevBuf<double>();
     sort_pairs(ikey, icoef, n);
     const uint64_t num_el = uint64_t(t_.num_nodes) + t_.num_points;
     row_ = DevBuf<uint64_t>(num_el + 1);
     src_ = DevBuf<uint32_t>(n);
-    rows_kernel<<<blocks(std::max(n, num_el + 1)), kThreads>>>(ikey.p, n, num_el, row_.p, src_.p);
+    parallel_for_device(std::max(n, num_el + 1), Rows{ikey.p, n, num_el, row_.p, src_.p});
     check_launch();
     const uint64_t total = read_one(row_.p + num_el);
     check_total(total);
@@ -368,7 +393,7 @@ void CudaGi::final_gather(float theta, const uint32_t* points, size_t n, bool li
     if (listed) pts.from(points, n);
     DevBuf<Vec3> res(n);
     const GiGatherView v{t_, B_.p, emits_.p, emission_.p, albedo_.p, theta};
-    if (n) final_gather_kernel<<<blocks(n), kThreads>>>(v, listed ? pts.p : nullptr, n, res.p);
+    parallel_for_device(n, FinalGather{v, listed ? pts.p : nullptr, res.p});
     check_launch();
     res.to(out, n);
 }

@@ -1,0 +1,63 @@
+// The leaf-pair predicate's pieces (visibility/leaf_pair.h) asked on a backend: on the host, or
+// in a kernel (predicate_cases.cu, built with CUDA) that runs the same VMAP_HD code, so the
+// device's compiled predicate meets the expectations the host's does (visibility_test: Fig7,
+// EndPlanes, Facing).
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <vector>
+
+#include "visibility/leaf_pair.h"
+#include "vmap/error.h"
+#include "vmap/options.h"
+
+namespace vmap::test {
+
+enum class Predicate : uint8_t { kActualOccluder, kCountsAsOccluder, kLeavesFace, kInFrontOfEnds };
+
+// One question about the segment from leaf a's centroid p along d (length len) to leaf b:
+//   kActualOccluder    is_actual_occluder(p, d, len, x, vp)
+//   kCountsAsOccluder  counts_as_occluder(pair_segment(a, b, vp), x, vp)
+//   kLeavesFace        leaves_face(a, b, d, len, vp)
+//   kInFrontOfEnds     in_front_of_ends(pair_segment(a, b, vp), x)
+struct PredicateCase {
+    Predicate what = Predicate::kActualOccluder;
+    LeafDisc a, b, x;
+    Vec3 p{0, 0, 0}, d{0, 0, 0};
+    float len = 0;
+    VisibilityParams vp;
+};
+
+VMAP_HD bool answer(const PredicateCase& c) {
+    switch (c.what) {
+        case Predicate::kActualOccluder:
+            return detail::is_actual_occluder(c.p, c.d, c.len, c.x, c.vp);
+        case Predicate::kCountsAsOccluder:
+            return detail::counts_as_occluder(detail::pair_segment(c.a, c.b, c.vp), c.x, c.vp);
+        case Predicate::kLeavesFace:
+            return detail::leaves_face(c.a, c.b, c.d, c.len, c.vp);
+        case Predicate::kInFrontOfEnds:
+            return detail::in_front_of_ends(detail::pair_segment(c.a, c.b, c.vp), c.x);
+    }
+    return false;
+}
+
+#ifdef VMAP_TEST_CUDA
+// answer() of each case, in a kernel on CUDA device 0 (predicate_cases.cu).
+std::vector<uint8_t> answers_on_cuda(std::span<const PredicateCase> cases);
+#else
+inline std::vector<uint8_t> answers_on_cuda(std::span<const PredicateCase>) {
+    throw Error("this test was built without CUDA");
+}
+#endif
+
+// answer() of each case on backend b (cpu or cuda).
+inline std::vector<uint8_t> answers_on(Backend b, std::span<const PredicateCase> cases) {
+    if (b == Backend::kCuda) return answers_on_cuda(cases);
+    std::vector<uint8_t> out;
+    for (const PredicateCase& c : cases) out.push_back(answer(c));
+    return out;
+}
+
+}  // namespace vmap::test

@@ -78,12 +78,13 @@ std::vector<uint32_t> surface_of(Scene sc) {
     return out;
 }
 
-// Points with a sample of the same surface with (nearly) opposite true normal within three
-// splat radii: both faces of a plate or shell thinner than that.
-std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_t>& surf) {
+// Points with a sample j within three splat radii (among the 48 nearest) for which
+// `match(i, j)` holds.
+template <class Match>
+std::vector<uint8_t> with_sample_near(const PointSet& truth, Match match) {
     const detail::CloudAdaptor ad{truth.positions};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    std::vector<uint8_t> thin(truth.size(), 0);
+    std::vector<uint8_t> out(truth.size(), 0);
     parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         const float r = 3 * truth.radii[i];
@@ -91,12 +92,23 @@ std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_
         float d2[48];
         const float q[3] = {p.x, p.y, p.z};
         const size_t got = tree.knnSearch(q, 48, idx, d2);
-        for (size_t j = 0; j < got; ++j)
-            if (d2[j] <= r * r && surf[idx[j]] == surf[i] &&
-                dot(truth.normals[idx[j]], truth.normals[i]) < -0.5f)
-                thin[i] = 1;
+        for (size_t j = 0; j < got; ++j) out[i] |= d2[j] <= r * r && match(i, size_t(idx[j]));
     });
-    return thin;
+    return out;
+}
+
+// Points with a sample of the same surface with (nearly) opposite true normal within three
+// splat radii: both faces of a plate or shell thinner than that.
+std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_t>& surf) {
+    return with_sample_near(truth, [&](size_t i, size_t j) {
+        return surf[j] == surf[i] && dot(truth.normals[j], truth.normals[i]) < -0.5f;
+    });
+}
+
+// Points with a sample of another surface within three splat radii: near a wall, the floor
+// or another object.
+std::vector<uint8_t> near_other(const PointSet& truth, const std::vector<uint32_t>& surf) {
+    return with_sample_near(truth, [&](size_t i, size_t j) { return surf[j] != surf[i]; });
 }
 
 // Points hidden in any case: inside a solid (the first sample disc along the true normal, among
@@ -234,24 +246,6 @@ void write_signed(const std::string& stem, const PointSet& est, const std::vecto
     if (smooth.empty()) return;
     signed_like_truth(smooth);
     write_ply(stem + "-smooth.ply", out);
-}
-
-// Points with a sample of another surface within three splat radii: near a wall, the floor
-// or another object.
-std::vector<uint8_t> near_other(const PointSet& truth, const std::vector<uint32_t>& surf) {
-    const detail::CloudAdaptor ad{truth.positions};
-    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    std::vector<uint8_t> out(truth.size(), 0);
-    parallel_for(size_t(0), truth.size(), [&](size_t i) {
-        const Vec3 p = truth.positions[i];
-        const float r = 3 * truth.radii[i];
-        uint32_t idx[48];
-        float d2[48];
-        const float q[3] = {p.x, p.y, p.z};
-        const size_t got = tree.knnSearch(q, 48, idx, d2);
-        for (size_t j = 0; j < got; ++j) out[i] |= d2[j] <= r * r && surf[idx[j]] != surf[i];
-    });
-    return out;
 }
 
 // Per surface (mesh or wall): points, signs right, and where the wrong ones lie: hidden in any

@@ -171,14 +171,23 @@ def shelf():
                  [board, head, hang, ball, bull], 45000, 16)
 
 
+def layout(s):
+    """The shipped scenes' layout: one line per key, one line per mesh."""
+    one = lambda v: json.dumps(v, separators=(", ", ": "))
+    lines = [f'  "{k}": {one(v)}' for k, v in s.items() if k != "meshes" and k != "sampling"]
+    meshes = ",\n".join("    " + one(m) for m in s["meshes"])
+    lines.append(f'  "meshes": [\n{meshes}\n  ]')
+    lines.append(f'  "sampling": {one(s["sampling"])}')
+    return "{\n" + ",\n".join(lines) + "\n}\n"
+
+
 def main():
     out = os.path.join(ROOT, "scenes", "test", "held")
     os.makedirs(out, exist_ok=True)
     for make in (near_walls, touching, table, lone, cluttered, shelf):
         s = make()
         with open(os.path.join(out, s["name"] + ".json"), "w") as f:
-            json.dump(s, f, indent=2)
-            f.write("\n")
+            f.write(layout(s))
         print(os.path.join("scenes", "test", "held", s["name"] + ".json"))
 
 

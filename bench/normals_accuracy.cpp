@@ -55,7 +55,7 @@ struct Options {
     bool objects_only = false;
     bool angles = false, floor = false;
     bool orientation_given = false;
-    bool per_surface = false;  // --per-surface: a sign count per mesh on stderr
+    bool per_surface = false;    // --per-surface: a sign count per mesh on stderr
     double noise = 0;            // Gaussian, in sample spacings
     NormalEstimationParams fit;  // --fit-neighbours, --refits
     uint64_t points = 0;
@@ -266,8 +266,8 @@ void print_per_surface(const Scene& sc, const PointSet& truth, const PointSet& e
         fmt::print(stderr,
                    "  {} / {}: {} points, {} right; wrong: {} hidden, {} thin, {} near another "
                    "surface, {} elsewhere\n",
-                   sc.name, sc.surfaces[s].name, all[s].n, all[s].signs(), wrong[s][0],
-                   wrong[s][1], wrong[s][2], wrong[s][3]);
+                   sc.name, sc.surfaces[s].name, all[s].n, all[s].signs(), wrong[s][0], wrong[s][1],
+                   wrong[s][2], wrong[s][3]);
 }
 
 void run_angles(const std::string& path, Scene sc, const PointSet& truth,

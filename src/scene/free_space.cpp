@@ -587,7 +587,8 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
             const bool wall = room_wall[size_t(DiscCaster::exit_face(b, pts[i], free_n))];
-            float side = float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
+            float side =
+                float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
             SideCue cue = SideCue::kSpace;
             if (side == 0) {
                 side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);

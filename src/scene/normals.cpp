@@ -672,7 +672,8 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
             }
             rep.by_neighbours = agree_with_neighbours(pts, fits, votes, normals);
             const Graph g = symmetrise(fits, n);
-            rep.by_neighbours += spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals);
+            rep.by_neighbours +=
+                spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals);
             rep.method = votes.method;
             propagate(pts, centroid, g, fits.degenerate, fixed, normals);
             return;

@@ -1,7 +1,7 @@
 // normals_accuracy: how well raw-cloud normals and splat radii are recovered.
 //
-//   normals_accuracy [--objects-only] [--points N] [--orientation auto|outward|inward]
-//                    [--write-ply DIR] SCENE.json...
+//   normals_accuracy [--objects-only] [--per-surface] [--points N]
+//                    [--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...
 //   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
 //                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
 //
@@ -12,7 +12,9 @@
 // on thin parts (points with a surface of the opposite normal within three splat radii), and the
 // median ratio of estimated to true splat radius on the same sets, beside the old estimate (d_8 /
 // sqrt 8 over all neighbours). --objects-only drops the room (a lone object or several).
-// --write-ply writes the stripped cloud, for `vmap build`.
+// --write-ply writes the stripped cloud, for `vmap build`. --per-surface adds on stderr, per
+// surface: its points, the share signed right, and where the wrong ones lie (hidden, thin, near
+// another surface, elsewhere).
 //
 // --angles prints instead the unsigned angle between each estimated normal's axis and the true
 // one (so orientation is left out: it orients outward unless --orientation is given, which is
@@ -28,6 +30,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <filesystem>
@@ -52,6 +55,7 @@ struct Options {
     bool objects_only = false;
     bool angles = false, floor = false;
     bool orientation_given = false;
+    bool per_surface = false;    // --per-surface: a sign count per mesh on stderr
     double noise = 0;            // Gaussian, in sample spacings
     NormalEstimationParams fit;  // --fit-neighbours, --refits
     uint64_t points = 0;
@@ -74,12 +78,13 @@ std::vector<uint32_t> surface_of(Scene sc) {
     return out;
 }
 
-// Points with a sample of the same surface with (nearly) opposite true normal within three
-// splat radii: both faces of a plate or shell thinner than that.
-std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_t>& surf) {
+// Points with a sample j within three splat radii (among the 48 nearest) for which
+// `match(i, j)` holds.
+template <class Match>
+std::vector<uint8_t> with_sample_near(const PointSet& truth, Match match) {
     const detail::CloudAdaptor ad{truth.positions};
     const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    std::vector<uint8_t> thin(truth.size(), 0);
+    std::vector<uint8_t> out(truth.size(), 0);
     parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         const float r = 3 * truth.radii[i];
@@ -87,12 +92,23 @@ std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_
         float d2[48];
         const float q[3] = {p.x, p.y, p.z};
         const size_t got = tree.knnSearch(q, 48, idx, d2);
-        for (size_t j = 0; j < got; ++j)
-            if (d2[j] <= r * r && surf[idx[j]] == surf[i] &&
-                dot(truth.normals[idx[j]], truth.normals[i]) < -0.5f)
-                thin[i] = 1;
+        for (size_t j = 0; j < got; ++j) out[i] |= d2[j] <= r * r && match(i, size_t(idx[j]));
     });
-    return thin;
+    return out;
+}
+
+// Points with a sample of the same surface with (nearly) opposite true normal within three
+// splat radii: both faces of a plate or shell thinner than that.
+std::vector<uint8_t> thin_parts(const PointSet& truth, const std::vector<uint32_t>& surf) {
+    return with_sample_near(truth, [&](size_t i, size_t j) {
+        return surf[j] == surf[i] && dot(truth.normals[j], truth.normals[i]) < -0.5f;
+    });
+}
+
+// Points with a sample of another surface within three splat radii: near a wall, the floor
+// or another object.
+std::vector<uint8_t> near_other(const PointSet& truth, const std::vector<uint32_t>& surf) {
+    return with_sample_near(truth, [&](size_t i, size_t j) { return surf[j] != surf[i]; });
 }
 
 // Points hidden in any case: inside a solid (the first sample disc along the true normal, among
@@ -232,6 +248,28 @@ void write_signed(const std::string& stem, const PointSet& est, const std::vecto
     write_ply(stem + "-smooth.ply", out);
 }
 
+// Per surface (mesh or wall): points, signs right, and where the wrong ones lie: hidden in any
+// case (buried), on a thin part, near another surface (not thin), or elsewhere.
+void print_per_surface(const Scene& sc, const PointSet& truth, const PointSet& est,
+                       const std::vector<uint32_t>& surf, const std::vector<uint8_t>& inside,
+                       const std::vector<uint8_t>& thin) {
+    const std::vector<uint8_t> near = near_other(truth, surf);
+    const size_t m = sc.surfaces.size();
+    std::vector<Tally> all(m);
+    std::vector<std::array<uint64_t, 4>> wrong(m, {0, 0, 0, 0});
+    for (size_t i = 0; i < truth.size(); ++i) {
+        const bool ok = dot(est.normals[i], truth.normals[i]) > 0;
+        all[surf[i]].add(ok, 0, 0);
+        if (!ok) ++wrong[surf[i]][inside[i] ? 0 : thin[i] ? 1 : near[i] ? 2 : 3];
+    }
+    for (size_t s = 0; s < m; ++s)
+        fmt::print(stderr,
+                   "  {} / {}: {} points, {} right; wrong: {} hidden, {} thin, {} near another "
+                   "surface, {} elsewhere\n",
+                   sc.name, sc.surfaces[s].name, all[s].n, all[s].signs(), wrong[s][0], wrong[s][1],
+                   wrong[s][2], wrong[s][3]);
+}
+
 void run_angles(const std::string& path, Scene sc, const PointSet& truth,
                 const std::vector<uint32_t>& surf, const Options& o) {
     const std::vector<uint8_t> thin = thin_parts(truth, surf);
@@ -307,11 +345,12 @@ void run_scene(const std::string& path, const Options& o) {
         Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
     fmt::print(stderr, "{}: {}; {} by space, {} by rays, {} by neighbours\n", sc.name, rep.method,
                rep.by_space, rep.by_rays, rep.by_neighbours);
+    if (o.per_surface) print_per_surface(sc, truth, raw, surf, inside, thin);
 }
 
 int usage() {
     fmt::print(stderr,
-               "usage: normals_accuracy [--objects-only] [--points N] "
+               "usage: normals_accuracy [--objects-only] [--per-surface] [--points N] "
                "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n"
                "       normals_accuracy --angles [--noise F] [--floor] [--objects-only] "
                "[--points N] [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...\n");
@@ -327,6 +366,8 @@ int main(int argc, char** argv) {
         const bool more = i + 1 < argc;
         if (a == "--objects-only") {
             o.objects_only = true;
+        } else if (a == "--per-surface") {
+            o.per_surface = true;
         } else if (a == "--angles") {
             o.angles = true;
         } else if (a == "--floor") {

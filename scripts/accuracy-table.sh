@@ -5,7 +5,8 @@
 # docs/validation.md "Where people look".
 # Usage: scripts/accuracy-table.sh [-b path/to/vmap] [validate options...]
 # Environment: SCENES (default: scenes/*.json scenes/test/*.json), PAIRS (default 200000),
-# EYES (default 100), AS_CLOUD (normals|bare: score the samples as a raw cloud).
+# EYES (default 100), AS_CLOUD (normals|bare: score the samples as a raw cloud). The held-out
+# orientation scenes: SCENES="$(ls scenes/test/held/*.json)" (scripts/held-out-scenes.py).
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

@@ -522,8 +522,9 @@ int space_side(int plus, int minus, float box_exit_free_side, bool room_wall, fl
     return 0;
 }
 
-// The side whose rays travel farther (+1, -1), or 0 without clear evidence.
-int ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med) {
+// The side whose rays travel farther, signed (+ along n), weighted by the depth contrast
+// (far - near) / (far + near); 0 without clear evidence.
+float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med) {
     // Skips the point's own neighbours' discs, which a ray leaves at once.
     const float tmin = 0.5f * std::max(radius, 0.25f * r_med);
     const DiscCaster::Depth p = caster.side_depth(i, n, tmin), m = caster.side_depth(i, -n, tmin);
@@ -532,7 +533,8 @@ int ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r
     if (p.hits + m.hits == 0 ||
         std::max(p.mean, m.mean) <= 1.5f * std::min(p.mean, m.mean) + 0.1f * r_med)
         return 0;
-    return p.mean > m.mean ? 1 : -1;
+    const float contrast = (p.mean - m.mean) / (p.mean + m.mean);
+    return contrast != 0 ? contrast : (p.mean > m.mean ? 1e-6f : -1e-6f);
 }
 
 // The faces of the bounding box (axis * 2 + (side > 0)) that are a room's open-air walls: most
@@ -568,6 +570,7 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     SideVotes v;
     v.sign.assign(n, 1);
     v.cue.assign(n, SideCue::kNone);
+    v.weight.assign(n, 0.0f);
     const float r_med = median_radius(radii);
     const Bounds b = bounds_of(pts);
     if (n < 3 || !(r_med > 0) || !(max_extent(b) > 0)) {
@@ -584,15 +587,17 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
             const bool wall = room_wall[size_t(DiscCaster::exit_face(b, pts[i], free_n))];
-            int side = space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med);
+            float side =
+                float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
             SideCue cue = SideCue::kSpace;
             if (side == 0) {
                 side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);
                 cue = SideCue::kRays;
             }
             if (side == 0) continue;
-            v.sign[i] = int8_t(side);
+            v.sign[i] = int8_t(side > 0 ? 1 : -1);
             v.cue[i] = cue;
+            v.weight[i] = cue == SideCue::kSpace ? 2.0f : std::fabs(side);
         }
     });
     return v;

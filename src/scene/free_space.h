@@ -19,6 +19,9 @@ enum class SideCue : uint8_t {
 struct SideVotes {
     std::vector<int8_t> sign;  // +1: the normal as given points to the free side; -1: flip it
     std::vector<SideCue> cue;
+    // How sure each vote is, for weighing votes against each other: 2 for kSpace; for kRays the
+    // depth contrast (far - near) / (far + near) of the two sides' mean ray travel, in (0, 1].
+    std::vector<float> weight;
     std::string method;  // the free-space verdict, in words
 };
 

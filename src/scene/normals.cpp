@@ -529,6 +529,65 @@ size_t agree_with_neighbours(const std::vector<Vec3>& pts, const LocalFits& fits
     return flipped;
 }
 
+// The votes spread along the surface: kVoteRounds rounds in which every point's belief becomes
+// the mean of its own vote and its linked neighbours' beliefs, each signed by whether the two
+// normals agree (links: same-surface neighbours whose normal axes lie within about 37 degrees).
+// A point then faces the side its belief chooses. Over a few rounds a point hears a surface
+// patch some kVoteRounds spacings wide, weighted by confidence, so a small patch of wrong votes
+// (rays misled by a surface a few millimetres away, the inside of a thin part) inside a larger
+// right one turns, while a narrow contact (an object on the floor, touching another) passes
+// little: the two stay decided by their own points.
+constexpr int kVoteRounds = 8;
+constexpr float kVoteLinkCos = 0.8f;
+// ... and a link's chord leaves each tangent plane by at most this many splat radii: the other
+// face of a plate thinner than the spacing (within the same-surface test's angle at longer
+// chords) stays out, whose votes are right with the opposite sign.
+constexpr float kVoteLinkOffset = 0.5f;
+
+size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radii, const Graph& g,
+                    const std::vector<uint8_t>& degenerate, const detail::SideVotes& votes,
+                    std::vector<uint8_t>& fixed, std::vector<Vec3>& normals) {
+    const size_t n = pts.size();
+    // Belief along each point's current normal (already signed by its own vote).
+    std::vector<float> own(n, 0.0f);
+    for (size_t i = 0; i < n; ++i) own[i] = fixed[i] ? votes.weight[i] : 0.0f;
+    std::vector<float> cur = own, next(n);
+    auto linked = [&](uint32_t i, uint32_t j) {
+        const Vec3 d = pts[j] - pts[i];
+        const float reach = kVoteLinkOffset * std::min(radii[i], radii[j]);
+        return !degenerate[j] && std::fabs(dot(normals[i], normals[j])) >= kVoteLinkCos &&
+               std::fabs(dot(normals[i], d)) <= reach && std::fabs(dot(normals[j], d)) <= reach &&
+               detail::same_surface(pts[i], normals[i], pts[j], normals[j]);
+    };
+    for (int round = 0; round < kVoteRounds; ++round) {
+        parallel_for_range<size_t>(n, 1024, [&](size_t chunk_begin, size_t chunk_end) {
+            for (size_t i = chunk_begin; i < chunk_end; ++i) {
+                float sum = own[i];
+                int count = 1;
+                if (!degenerate[i])
+                    for (size_t e = g.offsets[i]; e < g.offsets[i + 1]; ++e) {
+                        const uint32_t j = g.adjacent[e];
+                        if (!linked(uint32_t(i), j)) continue;
+                        sum += dot(normals[i], normals[j]) > 0 ? cur[j] : -cur[j];
+                        ++count;
+                    }
+                next[i] = sum / float(count);
+            }
+        });
+        std::swap(cur, next);
+    }
+    size_t turned = 0;
+    for (size_t i = 0; i < n; ++i) {
+        if (degenerate[i] || cur[i] == 0) continue;
+        if (cur[i] < 0) {
+            normals[i] = -normals[i];
+            turned += fixed[i];
+        }
+        fixed[i] = 1;
+    }
+    return turned;
+}
+
 // Point indices in Morton (Z-curve) order. Working on the points in this order keeps
 // neighbours near each other in memory, which is most of the speed of the k-NN queries and of
 // the spanning tree on clouds stored in scan or random order.
@@ -612,8 +671,12 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 ++(votes.cue[i] == detail::SideCue::kSpace ? rep.by_space : rep.by_rays);
             }
             rep.by_neighbours = agree_with_neighbours(pts, fits, votes, normals);
+            const Graph g = symmetrise(fits, n);
+            rep.by_neighbours +=
+                spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals);
             rep.method = votes.method;
-            break;
+            propagate(pts, centroid, g, fits.degenerate, fixed, normals);
+            return;
         }
     }
     propagate(pts, centroid, symmetrise(fits, n), fits.degenerate, fixed, normals);

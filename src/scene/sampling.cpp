@@ -173,8 +173,8 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
                     estimate && had ? "the file's replaced" : "plane fits", rep.method);
     if (!sensed && rep.by_space + rep.by_rays > 0)
         line += fmt::format(
-            "; {} points by free space, {} by rays ({} of them then by their neighbours), {} "
-            "from their neighbours",
+            "; {} points by free space, {} by rays ({} of those then turned by their "
+            "neighbours' votes), {} from their neighbours",
             rep.by_space, rep.by_rays, rep.by_neighbours, ps.size() - rep.by_space - rep.by_rays);
     return line;
 }

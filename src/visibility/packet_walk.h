@@ -39,19 +39,20 @@ class SegmentPacket {
 
   public:
     // Takes the leaf pairs (a[k], b[k]), k < count, a[k] != b[k], that face each other
-    // (pair_faces) as its lanes. Returns whether there are any (a walk to make).
+    // (pair_faces) as its lanes. Returns whether there are any (a walk to make). `faced`: the
+    // caller has kept only pairs that face (pair_faces is not evaluated again).
     template <class Counters>
     uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
-                  const VisibilityParams& vp, Counters* wc) {
+                  const VisibilityParams& vp, Counters* wc, bool faced = false) {
         live_ = alone_ = 0;
         int n = 0;  // the lanes to walk, packed
         for (int k = 0; k < count; ++k) {
             const LeafDisc& la = t.leaves[a[k]];
             const LeafDisc& lb = t.leaves[b[k]];
-            if (!pair_faces(la, lb, vp)) continue;
+            if (!faced && !pair_faces(la, lb, vp)) continue;
             lane_[n] = k;
             a_[n] = a[k], b_[n] = b[k];
-            seg_[n] = pair_segment(la, lb, vp);
+            seg_[n] = pair_segment(la, lb, vp, true);
             const SlabRay& r = seg_[n].ray;
             const bool small =
                 fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f || fabsf(r.d.z) < 1e-30f;

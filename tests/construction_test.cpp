@@ -224,19 +224,35 @@ TEST(Construction, SlicedFrontierGivesTheSameVmap) {
 
 // Every node pair of disjoint subtrees, not only those the builder meets: a decision must hold
 // for each leaf pair under it.
+// A random scene's V-map (the leaf-pair path, height and leaf_points from the seed), every leaf
+// pair's answer, and the node tests' context.
+struct NodeTestScene {
+    VisibilityMap vm;
+    const Octree& t;
+    std::vector<uint8_t> m;  // leaf x, y: m[x * L + y]
+    detail::NodeBoundsSet nb;
+    detail::NodePairContext c;
+    NodeTestScene(uint64_t seed, int leaf_points)
+        : vm(build_vmap(random_scene(seed), [&] {
+              BuildParams bp = test::cpu_params(4 + int(seed % 4), leaf_points);
+              bp.construction = Construction::kLeafPairs;
+              return bp;
+          }())),
+          t(vm.octree()),
+          m(test::brute_matrix(vm)),
+          nb(detail::node_bounds(t)),
+          c{octree_view(t),  nb.nodes.data(),        nb.cones.data(),
+            t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])} {}
+    NodeTestScene(const NodeTestScene&) = delete;
+};
+
 TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
     uint64_t all = 0, none = 0;
     for (uint64_t seed = 300; seed < 320; ++seed) {
-        const PointSet ps = random_scene(seed);
-        BuildParams bp = test::cpu_params(4 + int(seed % 4), 2 + int(seed % 3));
-        bp.construction = Construction::kLeafPairs;
-        const VisibilityMap vm = build_vmap(ps, bp);
-        const Octree& t = vm.octree();
-        const auto m = test::brute_matrix(vm);
-        const auto nb = detail::node_bounds(t);
-        const detail::NodePairContext c{
-            octree_view(t),      nb.nodes.data(),      nb.cones.data(),
-            t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])};
+        const NodeTestScene sc(seed, 2 + int(seed % 3));
+        const Octree& t = sc.t;
+        const auto& m = sc.m;
+        const detail::NodePairContext& c = sc.c;
         struct {
             uint64_t shaft_node_tests = 0;
         } wc;
@@ -265,16 +281,10 @@ TEST(Construction, DecisionsAgreeWithEveryLeafPair) {
 TEST(Construction, ShaftListsGiveTheWholeWalksAnswers) {
     uint64_t pairs = 0, shorter = 0;
     for (uint64_t seed = 400; seed < 412; ++seed) {
-        const PointSet ps = random_scene(seed);
-        BuildParams bp = test::cpu_params(4 + int(seed % 4), 1 + int(seed % 3));
-        bp.construction = Construction::kLeafPairs;
-        const VisibilityMap vm = build_vmap(ps, bp);
-        const Octree& t = vm.octree();
-        const auto m = test::brute_matrix(vm);
-        const auto nb = detail::node_bounds(t);
-        detail::NodePairContext c{
-            octree_view(t),      nb.nodes.data(),      nb.cones.data(),
-            t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])};
+        NodeTestScene sc(seed, 1 + int(seed % 3));
+        const Octree& t = sc.t;
+        const auto& m = sc.m;
+        detail::NodePairContext& c = sc.c;
         c.leaves_stored = true;
         ASSERT_GT(c.margin, 0.0);
         const int32_t L = t.num_leaves();

@@ -2,7 +2,8 @@
 // host's counterpart of the GPU's packet kernel (cuda/cuda_backend.cu). The W segments of
 // neighbouring leaf pairs form a thin bundle, so they walk the preorder array together: each
 // node's box is tested against every lane's segment in one loop over the lanes (plain float
-// arrays, which the compiler turns into SIMD), the packet descends when any lane's own walk
+// arrays, which the compiler turns into SIMD; for 32 lanes on AVX-512, the same loop written
+// with intrinsics, walk_zmm), the packet descends when any lane's own walk
 // would, and a lane tests only the nodes on its own path (n >= resume[i]: it has not skipped
 // past the node's subtree). So each lane makes exactly the tests of leaf_pair_visible, in the
 // same order, with the same float operations (FMA contraction is off in the whole build): the

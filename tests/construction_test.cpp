@@ -3,6 +3,7 @@
 // walk of every leaf pair under it.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -11,6 +12,7 @@
 #include "test_files.h"
 #include "test_util.h"
 #include "visibility/node_pair.h"
+#include "visibility/packet_walk.h"
 
 namespace vmap {
 namespace {
@@ -240,21 +242,37 @@ std::vector<uint8_t> decisions_on(detail::Backend& backend, const Octree& t,
     return out;
 }
 
+// A random scene's V-map (the leaf-pair path, height and leaf_points from the seed), every leaf
+// pair's answer, and the node tests' context.
+struct NodeTestScene {
+    VisibilityMap vm;
+    const Octree& t;
+    std::vector<uint8_t> m;  // leaf x, y: m[x * L + y]
+    detail::NodeBoundsSet nb;
+    detail::NodePairContext c;
+    NodeTestScene(uint64_t seed, int leaf_points)
+        : vm(build_vmap(random_scene(seed), [&] {
+              BuildParams bp = test::cpu_params(4 + int(seed % 4), leaf_points);
+              bp.construction = Construction::kLeafPairs;
+              return bp;
+          }())),
+          t(vm.octree()),
+          m(test::brute_matrix(vm)),
+          nb(detail::node_bounds(t)),
+          c{octree_view(t),  nb.nodes.data(),        nb.cones.data(),
+            t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])} {}
+    NodeTestScene(const NodeTestScene&) = delete;
+};
+
 // Every node pair of disjoint subtrees, not only those the builder meets: a decision must hold
 // for each leaf pair under it (the brute-force matrix).
 TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
     uint64_t all = 0, none = 0;
     for (uint64_t seed = 300; seed < 320; ++seed) {
-        const PointSet ps = random_scene(seed);
-        BuildParams bp = test::cpu_params(4 + int(seed % 4), 2 + int(seed % 3));
-        bp.construction = Construction::kLeafPairs;
-        const VisibilityMap vm = build_vmap(ps, bp);
-        const Octree& t = vm.octree();
-        const auto m = test::brute_matrix(vm);
-        const auto nb = detail::node_bounds(t);
-        const detail::NodePairContext c{
-            octree_view(t),      nb.nodes.data(),      nb.cones.data(),
-            t.skip().data(), vm.visibility_params(), detail::node_pair_margin(t.boxes()[0])};
+        const NodeTestScene sc(seed, 2 + int(seed % 3));
+        const Octree& t = sc.t;
+        const auto& m = sc.m;
+        const detail::NodePairContext& c = sc.c;
         std::vector<detail::NodePairRef> pairs;
         for (int32_t a = 0; a < t.num_nodes(); ++a)
             for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 1 + int32_t(seed % 3))
@@ -279,6 +297,57 @@ TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
 }
 
 VMAP_ON_EACH_BACKEND(NodeConstruction);
+
+// The CPU walks a job's leaf pairs through the shaft list of an enclosing node pair (the split
+// pair it came from: cpu_backend.cpp): for every node pair (A, B) of disjoint subtrees, each leaf
+// pair under it, and so under any pair of A's and B's descendants, walked through (A, B)'s list
+// gets the answer of the whole walk, by the packet walk too.
+TEST(Construction, ShaftListsGiveTheWholeWalksAnswers) {
+    uint64_t pairs = 0, shorter = 0;
+    for (uint64_t seed = 400; seed < 412; ++seed) {
+        NodeTestScene sc(seed, 1 + int(seed % 3));
+        const Octree& t = sc.t;
+        const auto& m = sc.m;
+        detail::NodePairContext& c = sc.c;
+        c.leaves_stored = true;
+        ASSERT_GT(c.margin, 0.0);
+        const int32_t L = t.num_leaves();
+        std::vector<WalkNode> list;
+        std::vector<int32_t> scratch;
+        for (int32_t a = 0; a < t.num_nodes(); a += 1 + int32_t(seed % 2))
+            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 2 + int32_t(seed % 3)) {
+                detail::shaft_walk_nodes(c, a, b, list, scratch);
+                OctreeView lv = c.tree;
+                lv.walk = list.data();
+                lv.num_nodes = int32_t(list.size());
+                shorter += list.size() < size_t(t.num_nodes());
+                std::vector<int32_t> xs, ys;
+                for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
+                    for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y) {
+                        WorkCounters wc;
+                        ASSERT_EQ(detail::leaf_pair_visible<true>(lv, x, y, c.vp, &wc),
+                                  bool(m[size_t(x) * L + y]))
+                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
+                            << ", " << y;
+                        xs.push_back(x), ys.push_back(y);
+                        ++pairs;
+                    }
+                for (size_t k = 0; k < xs.size(); k += 32) {  // the packet walk, 32 at a time
+                    const int n = int(std::min<size_t>(32, xs.size() - k));
+                    detail::SegmentPacket<32> pk;
+                    WorkCounters wc;
+                    const uint32_t vis = pk.load(lv, xs.data() + k, ys.data() + k, n, c.vp, &wc)
+                                             ? pk.walk(lv, c.vp, &wc)
+                                             : 0u;
+                    for (int i = 0; i < n; ++i)
+                        ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k + i]) * L + ys[k + i]]))
+                            << "seed " << seed << ": packet, nodes " << a << ", " << b;
+                }
+            }
+    }
+    EXPECT_GT(pairs, 100000u);
+    EXPECT_GT(shorter, 1000u) << "the lists should leave out parts of the tree";
+}
 
 // The default picks by backend: node-pair decisions on the CPU (where they pay), the leaf-pair
 // walk on the GPU (gpu_test checks that the two give the same V-map there).

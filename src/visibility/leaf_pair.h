@@ -142,13 +142,14 @@ VMAP_HD bool pair_faces(const LeafDisc& la, const LeafDisc& lb, const Visibility
     // Coincident centroids: no direction to see along.
     return len > 0.f && leaves_face(la, lb, d, len, vp);
 }
+// `faces`: pair_faces(la, lb, vp), where the caller has it already.
 VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
-                                 const VisibilityParams& vp) {
+                                 const VisibilityParams& vp, bool faces) {
     PairSegment s;
     s.p = la.centroid;
     s.d = lb.centroid - s.p;
     s.len = sqrtf(length2(s.d));
-    s.faces = pair_faces(la, lb, vp);
+    s.faces = faces;
     s.ray = slab_ray(s.p, s.d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
     s.q = lb.centroid;
     s.na = la.normal;
@@ -158,6 +159,10 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.delta_a = la.delta;
     s.delta_b = lb.delta;
     return s;
+}
+VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
+                                 const VisibilityParams& vp) {
+    return pair_segment(la, lb, vp, pair_faces(la, lb, vp));
 }
 
 // Can leaf x stand between the ends at all? The segment lies in front of the tangent plane of

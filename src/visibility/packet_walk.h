@@ -2,7 +2,8 @@
 // host's counterpart of the GPU's packet kernel (cuda/cuda_backend.cu). The W segments of
 // neighbouring leaf pairs form a thin bundle, so they walk the preorder array together: each
 // node's box is tested against every lane's segment in one loop over the lanes (plain float
-// arrays, which the compiler turns into SIMD), the packet descends when any lane's own walk
+// arrays, which the compiler turns into SIMD; for 32 lanes on AVX-512, the same loop written
+// with intrinsics, walk_zmm), the packet descends when any lane's own walk
 // would, and a lane tests only the nodes on its own path (n >= resume[i]: it has not skipped
 // past the node's subtree). So each lane makes exactly the tests of leaf_pair_visible, in the
 // same order, with the same float operations (FMA contraction is off in the whole build): the
@@ -30,6 +31,9 @@
 #else
 #define VMAP_PACKET_ISA 0
 #endif
+#if VMAP_PACKET_ISA
+#include <immintrin.h>
+#endif
 
 namespace vmap::detail {
 
@@ -39,19 +43,20 @@ class SegmentPacket {
 
   public:
     // Takes the leaf pairs (a[k], b[k]), k < count, a[k] != b[k], that face each other
-    // (pair_faces) as its lanes. Returns whether there are any (a walk to make).
+    // (pair_faces) as its lanes. Returns whether there are any (a walk to make). `faced`: the
+    // caller has kept only pairs that face (pair_faces is not evaluated again).
     template <class Counters>
     uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
-                  const VisibilityParams& vp, Counters* wc) {
+                  const VisibilityParams& vp, Counters* wc, bool faced = false) {
         live_ = alone_ = 0;
         int n = 0;  // the lanes to walk, packed
         for (int k = 0; k < count; ++k) {
             const LeafDisc& la = t.leaves[a[k]];
             const LeafDisc& lb = t.leaves[b[k]];
-            if (!pair_faces(la, lb, vp)) continue;
+            if (!faced && !pair_faces(la, lb, vp)) continue;
             lane_[n] = k;
             a_[n] = a[k], b_[n] = b[k];
-            seg_[n] = pair_segment(la, lb, vp);
+            seg_[n] = pair_segment(la, lb, vp, true);
             const SlabRay& r = seg_[n].ray;
             const bool small =
                 fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f || fabsf(r.d.z) < 1e-30f;
@@ -170,7 +175,83 @@ class SegmentPacket {
     __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq,prefer-vector-width=512"), noinline))
     int64_t
     walk_avx512(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
-        return walk_nodes(t, vp, live, wc);
+        if constexpr (W == 32)
+            return walk_zmm(t, vp, live, wc);
+        else
+            return walk_nodes(t, vp, live, wc);
+    }
+    // walk_nodes for 32 lanes in two AVX-512 registers, written out: the same float operations
+    // (vminps(a, b) is a < b ? a : b and vmaxps(a, b) is a > b ? a : b, min_f and max_f; no NaN
+    // arises, as there), so the same bits; what differs is that the lanes' hits
+    // come out of the compare as a mask (GCC's vectorised loop ORs 32 words together at every
+    // node) and the lanes' resume points stay in registers between occluder tests.
+    template <class Counters>
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), always_inline)) inline int64_t
+    walk_zmm(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
+        __m512 p[3][2], inv[3][2], t0[2], t1[2];
+        __m512i resume[2], tests[2];
+        for (int h = 0; h < 2; ++h) {
+            for (int k = 0; k < 3; ++k) {
+                p[k][h] = _mm512_load_ps(p_[k] + 16 * h);
+                inv[k][h] = _mm512_load_ps(inv_[k] + 16 * h);
+            }
+            t0[h] = _mm512_load_ps(t0_ + 16 * h);
+            t1[h] = _mm512_load_ps(t1_ + 16 * h);
+            resume[h] = _mm512_load_si512(resume_ + 16 * h);
+            tests[h] = _mm512_setzero_si512();
+        }
+        const __m512i one = _mm512_set1_epi32(1);
+        int32_t n = 0;
+        while (n < t.num_nodes && live > 0) {
+            const WalkNode w = t.walk[n];
+            const float lo[3] = {w.lo.x, w.lo.y, w.lo.z}, hi[3] = {w.hi.x, w.hi.y, w.hi.z};
+            const __m512i at = _mm512_set1_epi32(n), skip = _mm512_set1_epi32(w.skip);
+            uint32_t hits = 0;  // the lanes whose walks enter node n
+            for (int h = 0; h < 2; ++h) {
+                __m512 tmin = t0[h], tmax = t1[h];
+                for (int k = 0; k < 3; ++k) {
+                    const __m512 ta = _mm512_mul_ps(_mm512_sub_ps(_mm512_set1_ps(lo[k]), p[k][h]),
+                                                    inv[k][h]);
+                    const __m512 tb = _mm512_mul_ps(_mm512_sub_ps(_mm512_set1_ps(hi[k]), p[k][h]),
+                                                    inv[k][h]);
+                    tmin = max_zmm(tmin, min_zmm(ta, tb));
+                    tmax = min_zmm(tmax, max_zmm(ta, tb));
+                }
+                const __mmask16 on = _mm512_cmpge_epi32_mask(at, resume[h]);
+                const __mmask16 hit = _mm512_mask_cmp_ps_mask(on, tmin, tmax, _CMP_LE_OQ);
+                tests[h] = _mm512_mask_add_epi32(tests[h], on, tests[h], one);
+                resume[h] = _mm512_mask_mov_epi32(resume[h], __mmask16(on & ~hit), skip);
+                hits |= uint32_t(hit) << (16 * h);
+            }
+            if (!hits) {
+                n = w.skip;
+                continue;
+            }
+            if (w.leaf >= 0) {  // occluders_at reads and sets resume_
+                _mm512_store_si512(resume_, resume[0]);
+                _mm512_store_si512(resume_ + 16, resume[1]);
+                live -= occluders_at(t, w.leaf, hits, vp, wc);
+                resume[0] = _mm512_load_si512(resume_);
+                resume[1] = _mm512_load_si512(resume_ + 16);
+            }
+            ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
+        }
+        alignas(64) int32_t sums[W];
+        _mm512_store_si512(sums, tests[0]);
+        _mm512_store_si512(sums + 16, tests[1]);
+        int64_t sum = 0;
+        for (int i = 0; i < W; ++i) sum += sums[i];
+        return sum;
+    }
+    // _mm512_min_ps and _mm512_max_ps, all lanes through the mask (GCC 12's unmasked forms start
+    // from _mm512_undefined_ps, which -Wuninitialized reports).
+    __attribute__((target("avx512f"), always_inline)) static inline __m512 min_zmm(__m512 a,
+                                                                                 __m512 b) {
+        return _mm512_mask_min_ps(a, __mmask16(0xffff), a, b);
+    }
+    __attribute__((target("avx512f"), always_inline)) static inline __m512 max_zmm(__m512 a,
+                                                                                 __m512 b) {
+        return _mm512_mask_max_ps(a, __mmask16(0xffff), a, b);
     }
 #endif
     // One axis of slab_meets_box for lane i.

@@ -13,10 +13,10 @@
 
 #include "apps/commands.h"
 #include "apps/gi_cmd.h"
-#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
 #include "vmap/gi_reference.h"
+#include "vmap/parallel.h"
 #include "vmap/render.h"
 #include "vmap/scene.h"
 #include "vmap/validate.h"

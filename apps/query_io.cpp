@@ -7,9 +7,9 @@
 #include <fstream>
 #include <iterator>
 
-#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/npy.h"
+#include "vmap/parallel.h"
 
 namespace vmap::cli {
 namespace {

@@ -41,10 +41,10 @@
 #include <vector>
 
 #include "scene/cloud_knn.h"
-#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
+#include "vmap/parallel.h"
 #include "vmap/scene.h"
 
 namespace {

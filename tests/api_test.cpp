@@ -31,7 +31,7 @@ TEST(Api, OneThreadBuildsTheSameLinksAsAllCores) {
     BuildStats st;
     const VisibilityMap one =
         build_vmap(test::sample(test::scene_path("cornell-empty"), 1500, 2), bp, &st);
-    EXPECT_NE(st.backend.find("1 threads"), std::string::npos) << st.backend;
+    EXPECT_NE(st.backend.find("(1 thread)"), std::string::npos) << st.backend;
     EXPECT_EQ(one.link_offsets(), small_map().link_offsets());
     EXPECT_TRUE(std::equal(one.link_targets().begin(), one.link_targets().end(),
                            small_map().link_targets().begin(), small_map().link_targets().end()));

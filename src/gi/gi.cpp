@@ -16,9 +16,9 @@
 #include "gi/gi_hier.h"
 #include "gi/gi_kernels.h"
 #include "util/device.h"
-#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
+#include "vmap/parallel.h"
 
 namespace vmap {
 namespace {
@@ -235,7 +235,7 @@ Blocks cpu_blocks(const detail::GiTree& tree, float theta, const ProgressCallbac
 }
 
 std::string cpu_name() {
-    return fmt::format("cpu ({} threads)", tbb::this_task_arena::max_concurrency());
+    return "cpu (" + cpu_threads() + ")";
 }
 
 }  // namespace

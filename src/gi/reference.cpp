@@ -8,10 +8,10 @@
 #include <mutex>
 #include <numbers>
 
-#include "util/parallel.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/gi_reference.h"
+#include "vmap/parallel.h"
 #include "vmap/validate.h"
 
 namespace vmap {

@@ -14,7 +14,7 @@
 //           units per octree unit: points and octree are stored in the octree's frame)
 //     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
-#include "util/parallel.h"
+#include "vmap/parallel.h"
 
 #include <fcntl.h>
 #include <sys/mman.h>

@@ -7,7 +7,7 @@
 #include <utility>
 #include <unordered_set>
 
-#include "util/parallel.h"
+#include "vmap/parallel.h"
 
 namespace vmap::mpi {
 namespace {

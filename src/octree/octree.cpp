@@ -9,10 +9,10 @@
 #include <numeric>
 
 #include "geom/morton.h"
-#include "octree/records.h"
-#include "util/parallel.h"
 #include "octree/delta_rule.h"
+#include "octree/records.h"
 #include "vmap/error.h"
+#include "vmap/parallel.h"
 
 namespace vmap {
 namespace {

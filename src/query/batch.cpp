@@ -1,8 +1,8 @@
 // Batches of queries (vmap/query.h): point pairs and visible sets on all cores.
 #include <fmt/format.h>
 
-#include "util/parallel.h"
 #include "vmap/error.h"
+#include "vmap/parallel.h"
 #include "vmap/query.h"
 
 namespace vmap {

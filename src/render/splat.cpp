@@ -7,8 +7,8 @@
 #include <cmath>
 #include <limits>
 
-#include "util/parallel.h"
 #include "vmap/error.h"
+#include "vmap/parallel.h"
 #include "vmap/render.h"
 
 namespace vmap {

@@ -16,7 +16,7 @@
 #include <numeric>
 #include <optional>
 
-#include "util/parallel.h"
+#include "vmap/parallel.h"
 
 namespace vmap::detail {
 namespace {

@@ -21,8 +21,8 @@
 #include "geom/morton.h"
 #include "scene/cloud_knn.h"
 #include "scene/free_space.h"
-#include "util/parallel.h"
 #include "vmap/error.h"
+#include "vmap/parallel.h"
 
 namespace vmap {
 namespace {

@@ -9,9 +9,9 @@
 #include <vector>
 
 #include "scene/cloud_knn.h"
-#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/normals.h"
+#include "vmap/parallel.h"
 
 namespace vmap {
 namespace {

@@ -4,10 +4,10 @@
 #include <algorithm>
 #include <cmath>
 
-#include "util/parallel.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
+#include "vmap/parallel.h"
 #include "vmap/scene.h"
 
 namespace vmap {

@@ -1,5 +1,5 @@
 // The library's one element-wise loop on a CUDA GPU, the counterpart of parallel_for in
-// util/parallel.h: parallel_for_device(n, body) calls body(i) on the device for every i in
+// vmap/parallel.h: parallel_for_device(n, body) calls body(i) on the device for every i in
 // [0, n), i a uint64_t, in a grid-stride loop of kParallelForThreads-thread blocks (one thread
 // an index up to kParallelForMaxBlocks blocks, then each thread takes every stride-th index).
 // body is a functor with a __device__ operator()(uint64_t) const, copied by value into the

@@ -9,6 +9,7 @@
 #include "visibility/leaf_pair.h"
 #include "visibility/node_pair.h"
 #include "visibility/packet_walk.h"
+#include "vmap/parallel.h"
 
 namespace vmap::detail {
 namespace {
@@ -16,7 +17,7 @@ namespace {
 class CpuBackend final : public HostBackend<CpuBackend> {
   public:
     std::string name() const override {
-        return "cpu (" + std::to_string(tbb::this_task_arena::max_concurrency()) + " threads)";
+        return "cpu (" + cpu_threads() + ")";
     }
 
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {

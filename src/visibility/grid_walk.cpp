@@ -9,6 +9,7 @@
 
 #include "visibility/host_backend.h"
 #include "visibility/leaf_pair.h"
+#include "vmap/parallel.h"
 
 namespace vmap::detail {
 
@@ -66,8 +67,7 @@ namespace {
 class GridWalkBackend final : public HostBackend<GridWalkBackend> {
   public:
     std::string name() const override {
-        return "cpu grid walk (" + std::to_string(tbb::this_task_arena::max_concurrency()) +
-               " threads)";
+        return "cpu grid walk (" + cpu_threads() + ")";
     }
 
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {

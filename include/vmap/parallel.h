@@ -1,4 +1,5 @@
-// The library's one parallel loop on the CPU (oneTBB underneath): parallel_for(n, f) calls f(i)
+// The library's one parallel loop on the CPU (oneTBB underneath; public for callers that run
+// their own loops the same way, the CLI among them): parallel_for(n, f) calls f(i)
 // for every i in [0, n), parallel_for(begin, end, f) for every i in [begin, end), and
 // parallel_for_range(n, grain, f) calls f(begin, end) on chunks of about `grain` indices (for
 // bodies that keep per-chunk state). parallel_reduce_range(n, grain, identity, f, join) folds
@@ -13,8 +14,10 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
 #include <tbb/parallel_sort.h>
+#include <tbb/task_arena.h>
 
 #include <cstddef>
+#include <string>
 #include <type_traits>
 
 namespace vmap {
@@ -57,6 +60,12 @@ void parallel_sort(It first, It last, Less&& less) {
 template <class It>
 void parallel_sort(It first, It last) {
     tbb::parallel_sort(first, last);
+}
+
+// The threads these loops use here, in words: "1 thread", "16 threads" (for "cpu (16 threads)").
+inline std::string cpu_threads() {
+    const int n = tbb::this_task_arena::max_concurrency();
+    return std::to_string(n) + (n == 1 ? " thread" : " threads");
 }
 
 }  // namespace vmap

@@ -456,7 +456,6 @@ ProgressCallback whole_job_progress(ProgressCallback inner, int ranks) {
     return [inner = std::move(inner), ranks, where](const ProgressInfo& p) {
         ProgressInfo q = p;
         q.done = std::min(p.total, p.done * uint64_t(ranks));
-        if (p.done >= p.total) q.done = p.total;
         q.estimate_seconds = p.estimate_seconds / ranks;
         q.eta_seconds = q.done ? p.seconds * double(q.total - q.done) / double(q.done) : 0;
         if (*p.backend) {

@@ -4,8 +4,8 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
-#include <utility>
 #include <unordered_set>
+#include <utility>
 
 #include "vmap/parallel.h"
 

@@ -27,4 +27,5 @@ write_basic_package_version_file(${CMAKE_BINARY_DIR}/generated/vmapConfigVersion
                                  COMPATIBILITY SameMinorVersion)
 install(FILES ${CMAKE_BINARY_DIR}/generated/vmapConfig.cmake
               ${CMAKE_BINARY_DIR}/generated/vmapConfigVersion.cmake
+              ${CMAKE_SOURCE_DIR}/cmake/Findstreamvbyte.cmake
         DESTINATION ${VMAP_CMAKE_DIR})

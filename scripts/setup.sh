@@ -9,6 +9,7 @@ here="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
 pkgs=(build-essential cmake ninja-build pkg-config
       libtbb-dev libembree-dev libcli11-dev libfmt-dev nlohmann-json3-dev libnanoflann-dev
       libstb-dev libgtest-dev libgmock-dev libbenchmark-dev zlib1g-dev ca-certificates
+      libstreamvbyte-dev  # the .vmap file's link lists (delta StreamVByte)
       libcpp-httplib-dev chromium  # `vmap view` serves with cpp-httplib; its test drives chromium
       python3-dev python3-pybind11 pybind11-dev python3-numpy python3-pytest  # the Python module
       clang-14 libclang-rt-14-dev  # clang's libFuzzer and sanitizer runtimes (scripts/fuzz.sh)

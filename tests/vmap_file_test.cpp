@@ -3,14 +3,19 @@
 #include "vmap/map_access.h"
 #include "octree/records.h"
 #include "io/vmap_file.h"
+#include "io/link_codec.h"
 
 #include <gtest/gtest.h>
+#include <streamvbytedelta.h>
+#include <streamvbyte.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <random>
 #include <span>
 #include <string>
 #include <string_view>
@@ -59,6 +64,32 @@ size_t section_data(const std::string& bytes, const char* tag) {
     }
     ADD_FAILURE() << "no section " << tag;
     return 0;
+}
+
+// A file image with its LINK section (the last one) replaced by one holding `offsets` and
+// `targets`, coded (version 5) or raw (version 4, the header's version set to match).
+std::string with_links(const std::string& bytes, std::span<const uint64_t> offsets,
+                       std::span<const int32_t> targets, bool raw) {
+    std::string out = bytes.substr(0, section_data(bytes, "LINK") - 12);
+    auto put = [&](const void* p, size_t n) { out.append(static_cast<const char*>(p), n); };
+    std::string body;
+    body.append(reinterpret_cast<const char*>(offsets.data()), offsets.size() * 8);
+    if (raw) {
+        body.append(reinterpret_cast<const char*>(targets.data()), targets.size() * 4);
+    } else {
+        const detail::EncodedLinks e = detail::encode_links(offsets, targets);
+        const uint64_t chunks = e.chunk_node.size() - 1;
+        body.append(reinterpret_cast<const char*>(&chunks), 8);
+        body.append(reinterpret_cast<const char*>(e.chunk_node.data()), e.chunk_node.size() * 4);
+        body.append(reinterpret_cast<const char*>(e.chunk_byte.data()), e.chunk_byte.size() * 8);
+        for (const auto& c : e.chunks) body.append(reinterpret_cast<const char*>(c.data()), c.size());
+    }
+    const uint64_t len = body.size();
+    put("LINK", 4), put(&len, 8);
+    out += body;
+    const uint32_t version = raw ? 4 : 5;
+    std::memcpy(out.data() + 8, &version, 4);
+    return out;
 }
 
 #define EXPECT_LOAD_ERROR(path, ...)                                       \
@@ -285,7 +316,7 @@ TEST_F(VmapFile, BadMagicIsRejected) {
 TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
-    for (uint32_t version : {0u, 1u, 2u, 3u, 5u, 0xffffffffu}) {
+    for (uint32_t version : {0u, 1u, 2u, 3u, 6u, 0xffffffffu}) {
         SCOPED_TRACE(version);
         std::string bytes = whole;
         std::memcpy(bytes.data() + 8, &version, 4);
@@ -339,14 +370,117 @@ TEST_F(VmapFile, AnOrderThatIsNotAPermutationIsRejected) {
 
 TEST_F(VmapFile, ALinkTargetOutOfRangeIsRejected) {
     ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
+    const std::string bytes = slurp(saved(dir));
+    const auto& off = map().link_offsets();
     ASSERT_GT(map().link_targets().size(), 0u);
-    for (int32_t bad : {-1, map().octree().num_nodes(), INT32_MAX}) {
-        SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + bytes.size() - 4, &bad, 4);  // the last link target
-        const std::string p = write_resealed(dir, "link.vmap", bytes);
+    for (bool raw : {false, true}) {
+        for (int32_t bad : {-1, map().octree().num_nodes(), INT32_MAX}) {
+            SCOPED_TRACE(::testing::Message() << "raw " << raw << ", target " << bad);
+            std::vector<int32_t> t(map().link_targets().begin(), map().link_targets().end());
+            t.back() = bad;  // the last node with links: still sorted, as unsigned values
+            const std::string p = write_resealed(dir, "link.vmap", with_links(bytes, off, t, raw));
+            EXPECT_LOAD_ERROR(p, "LINK", "out of range");
+        }
+    }
+}
+
+TEST_F(VmapFile, UnsortedLinksAreRejected) {
+    ScratchDir dir;
+    const auto& off = map().link_offsets();
+    std::vector<int32_t> t(map().link_targets().begin(), map().link_targets().end());
+    size_t n = 0;
+    while (n + 1 < off.size() && off[n + 1] - off[n] < 2) ++n;
+    ASSERT_LT(n + 1, off.size()) << "no node with two links";
+    std::swap(t[off[n]], t[off[n] + 1]);
+    const std::string p =
+        write_resealed(dir, "unsorted.vmap", with_links(slurp(saved(dir)), off, t, false));
+    EXPECT_LOAD_ERROR(p, "LINK", "not sorted");
+}
+
+TEST_F(VmapFile, ACorruptLinkStreamIsRejected) {
+    // Control bytes that promise more (or fewer) data bytes than the node's stream holds, with
+    // the checksum resealed: the decoder must notice before it reads past the section.
+    ScratchDir dir;
+    const std::string whole = slurp(saved(dir));
+    const size_t at = section_data(whole, "LINK") + (map().octree().num_nodes() + 1) * 8;
+    uint64_t chunks;
+    std::memcpy(&chunks, whole.data() + at, 8);
+    const size_t stream = at + 8 + (chunks + 1) * 12;
+    for (uint8_t key : {uint8_t(0x00), uint8_t(0xff)}) {
+        SCOPED_TRACE(int(key));
+        std::string bytes = whole;
+        ASSERT_NE(uint8_t(bytes[stream]), key) << "pick another control byte";
+        bytes[stream] = char(key);
+        const std::string p = write_resealed(dir, "stream.vmap", bytes);
         EXPECT_LOAD_ERROR(p, "LINK");
     }
+    std::string bytes = whole;
+    const uint64_t too_many = UINT64_MAX / 2;  // the chunk count
+    std::memcpy(bytes.data() + at, &too_many, 8);
+    EXPECT_LOAD_ERROR(write_resealed(dir, "chunks.vmap", bytes), "LINK", "chunk");
+}
+
+TEST_F(VmapFile, AVersion4FileWithRawLinksStillLoads) {
+    ScratchDir dir;
+    const auto& off = map().link_offsets();
+    const auto t = map().link_targets();
+    const std::string p = write_resealed(
+        dir, "v4.vmap", with_links(slurp(saved(dir)), off, std::vector<int32_t>(t.begin(), t.end()), true));
+    const VisibilityMap back = load_vmap(p);
+    EXPECT_EQ(back.link_offsets(), off);
+    expect_same_bytes(back.link_targets(), t, "link targets");
+    // ... and saving it again writes the current version, as the build would.
+    save_vmap(dir.path("again.vmap"), back);
+    EXPECT_EQ(slurp(dir.path("again.vmap")), slurp(saved(dir, "now.vmap")));
+}
+
+TEST_F(VmapFile, LinksAreStoredInUnderHalfTheirRawSize) {
+    ScratchDir dir;
+    const std::string bytes = slurp(saved(dir));
+    const size_t link = section_data(bytes, "LINK");
+    const size_t coded = bytes.size() - link - map().link_offsets().size() * 8;
+    const size_t raw = map().link_targets().size() * 4;
+    EXPECT_LT(coded, raw / 2) << coded << " bytes coded, " << raw << " raw";
+}
+
+TEST(LinkCodec, StreamLengthsMatchTheEncoder) {
+    std::mt19937 rng(7);
+    for (uint32_t count : {1u, 2u, 3u, 4u, 5u, 7u, 8u, 9u, 100u, 1027u}) {
+        for (uint32_t width : {8u, 16u, 24u, 31u}) {
+            SCOPED_TRACE(::testing::Message() << count << " values below 2^" << width);
+            std::vector<uint32_t> v(count);
+            for (auto& x : v) x = rng() & ((1u << width) - 1);
+            std::vector<uint8_t> buf(streamvbyte_max_compressedbytes(count));
+            const size_t n = streamvbyte_encode(v.data(), count, buf.data());
+            EXPECT_EQ(detail::stream_bytes(buf.data(), n, count), n);
+            EXPECT_EQ(detail::stream_bytes(buf.data(), n - 1, count), SIZE_MAX);
+        }
+    }
+}
+
+TEST(LinkCodec, RandomListsRoundTrip) {
+    // Empty nodes, one huge node, many chunks (over 2^22 ends), gaps of every width.
+    std::mt19937 rng(11);
+    const int32_t nn = 300000;
+    std::vector<uint64_t> off{0};
+    std::vector<int32_t> t;
+    for (int32_t n = 0; n < nn; ++n) {
+        const uint32_t deg = n == 777 ? 150000 : (rng() % 4 == 0 ? 0 : rng() % 60);
+        std::vector<int32_t> mine(deg);
+        for (auto& x : mine) x = int32_t(rng() % uint32_t(nn));
+        std::sort(mine.begin(), mine.end());
+        mine.erase(std::unique(mine.begin(), mine.end()), mine.end());
+        t.insert(t.end(), mine.begin(), mine.end());
+        off.push_back(t.size());
+    }
+    const detail::EncodedLinks e = detail::encode_links(off, t);
+    EXPECT_GT(e.chunk_node.size(), 2u);
+    std::vector<uint8_t> stream;
+    for (const auto& c : e.chunks) stream.insert(stream.end(), c.begin(), c.end());
+    ASSERT_EQ(stream.size(), e.chunk_byte.back());
+    std::vector<int32_t> back(t.size(), -1);
+    EXPECT_EQ(detail::decode_links(off, e.chunk_node, e.chunk_byte, stream.data(), back.data()), "");
+    EXPECT_EQ(back, t);
 }
 
 TEST_F(VmapFile, AnInconsistentTreeIsRejected) {

@@ -12,8 +12,11 @@
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
 //           units per octree unit: points and octree are stored in the octree's frame)
-//     LINK: u64 offsets[nodes + 1] | i32 targets[offsets[nodes]]
+//     LINK: u64 offsets[nodes + 1] | the targets, each node's sorted: version 5 as chunks of
+//           delta-coded StreamVByte streams (io/link_codec.h: about a third of the raw size),
+//           version 4 (still read) as i32 targets[offsets[nodes]]
 #include "io/vmap_file.h"
+#include "io/link_codec.h"
 #include "vmap/parallel.h"
 
 #include <fcntl.h>
@@ -43,9 +46,10 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 4;  // 2: 64-bit link offsets; 3: emission in octree order and
+constexpr uint32_t kVersion = 5;  // 2: 64-bit link offsets; 3: emission in octree order and
                                   // the measured Delta rule (a version-2 file is built wrong);
-                                  // 4: the octree's frame (scale)
+                                  // 4: the octree's frame (scale); 5: coded link targets
+constexpr uint32_t kOldestRead = 4;  // version 4 differs in the LINK section only
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -142,6 +146,14 @@ struct Writer {
         if (!open) return;
         pieces.push_back({owned.back().data(), owned.back().size()});
         open = false;
+    }
+    // A large buffer of bytes, kept until the file is written.
+    void take(std::vector<uint8_t>&& v) {
+        if (v.empty()) return;
+        close_small();
+        size += v.size();
+        owned.push_back(std::move(v));
+        pieces.push_back({owned.back().data(), owned.back().size()});
     }
     template <class T>
     void put(const T& v) {
@@ -263,7 +275,11 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.end(s);
     s = w.begin("LINK");
     w.vec(vm.link_offsets());
-    w.vec(vm.link_targets());
+    detail::EncodedLinks links = detail::encode_links(vm.link_offsets(), vm.link_targets());
+    w.put(uint64_t(links.chunk_node.size() - 1));
+    for (uint32_t x : links.chunk_node) w.put(x);  // a few per 4M link ends: copied
+    for (uint64_t x : links.chunk_byte) w.put(x);
+    for (auto& c : links.chunks) w.take(std::move(c));
     w.end(s);
     w.finish();
 }
@@ -370,7 +386,7 @@ VisibilityMap load_vmap(const std::string& path) {
 namespace {
 
 // The header: magic, version, payload size and checksum against the file's bytes.
-void check_header(const std::string& path, const uint8_t* data, uint64_t size) {
+uint32_t check_header(const std::string& path, const uint8_t* data, uint64_t size) {
     if (size < kHeader) throw Error(fmt::format("{}: header: truncated ({} bytes)", path, size));
     if (std::memcmp(data, kMagic, 8) != 0)
         throw Error(fmt::format("{}: header: not a .vmap file (bad magic)", path));
@@ -379,16 +395,17 @@ void check_header(const std::string& path, const uint8_t* data, uint64_t size) {
     std::memcpy(&version, data + 8, 4);
     std::memcpy(&payload, data + 16, 8);
     std::memcpy(&sum, data + 24, 8);
-    if (version != kVersion)
+    if (version < kOldestRead || version > kVersion)
         throw Error(fmt::format(
-            "{}: header: version {} not supported (this vmap reads version {}); rebuild it with "
-            "`vmap build`",
-            path, version, kVersion));
+            "{}: header: version {} not supported (this vmap reads versions {} to {}); rebuild "
+            "it with `vmap build`",
+            path, version, kOldestRead, kVersion));
     if (payload != size - kHeader)
         throw Error(fmt::format("{}: truncated: header promises {} payload bytes, file has {}",
                                 path, payload, size - kHeader));
     if (detail::payload_hash(data + kHeader, payload) != sum)
         throw Error(fmt::format("{}: checksum mismatch: the file is corrupt", path));
+    return version;
 }
 
 // PARM, PNTS and ORDR: the parameters, the points and their order (a permutation, checked);
@@ -469,22 +486,56 @@ int32_t read_tree(Reader& r, detail::MapData& d, uint64_t n) {
     return nn;
 }
 
-// LINK: the offsets (non-decreasing from 0) and the targets (node ids).
-void read_links(Reader& r, VisibilityMap& vm, int32_t nn) {
+// Version 4's targets: raw i32 node ids.
+void read_raw_targets(Reader& r, detail::MapData& d, int32_t nn) {
+    const uint64_t num_targets = d.link_offsets[size_t(nn)];
+    if (num_targets > uint64_t(r.end - r.p) / sizeof(int32_t))
+        r.fail(fmt::format("truncated: {} items expected", num_targets));
+    int32_t* targets = detail::allocate_link_targets(d, num_targets);
+    copy_bytes(reinterpret_cast<uint8_t*>(targets), r.p, num_targets * sizeof(int32_t));
+    r.p += num_targets * sizeof(int32_t);
+    for (uint64_t i = 0; i < num_targets; ++i)
+        if (targets[i] < 0 || targets[i] >= nn) r.fail("link target out of range");
+}
+
+// Version 5's targets: the chunk table, checked, then the coded streams (io/link_codec.h).
+void read_coded_targets(Reader& r, detail::MapData& d, int32_t nn) {
+    const uint64_t chunks = r.get<uint64_t>();
+    if (chunks < 1 || chunks > uint64_t(nn)) r.fail(fmt::format("bad chunk count {}", chunks));
+    std::vector<uint32_t> chunk_node;
+    std::vector<uint64_t> chunk_byte;
+    r.vec(chunk_node, chunks + 1);
+    r.vec(chunk_byte, chunks + 1);
+    if (chunk_node[0] != 0 || chunk_node[chunks] != uint32_t(nn) || chunk_byte[0] != 0)
+        r.fail("bad chunk table");
+    for (uint64_t k = 0; k < chunks; ++k)
+        if (chunk_node[k + 1] <= chunk_node[k] || chunk_byte[k + 1] < chunk_byte[k])
+            r.fail("bad chunk table");
+    const uint64_t bytes = chunk_byte[chunks];
+    if (bytes > uint64_t(r.end - r.p)) r.fail(fmt::format("truncated: {} bytes expected", bytes));
+    // Every value takes at least one byte: a count beyond the stream is corrupt (and no
+    // allocation follows from it).
+    const uint64_t num_targets = d.link_offsets[size_t(nn)];
+    if (num_targets > bytes) r.fail(fmt::format("{} link ends in {} bytes", num_targets, bytes));
+    int32_t* targets = detail::allocate_link_targets(d, num_targets);
+    const std::string err =
+        detail::decode_links(d.link_offsets, chunk_node, chunk_byte, r.p, targets);
+    if (!err.empty()) r.fail(err);
+    r.p += bytes;
+}
+
+// LINK: the offsets (non-decreasing from 0) and the targets (node ids, sorted per node).
+void read_links(Reader& r, VisibilityMap& vm, int32_t nn, uint32_t version) {
     detail::MapData& d = detail::MapAccess::data(vm);
     const uint8_t* e = r.begin_section("LINK");
     r.vec(d.link_offsets, uint64_t(nn) + 1);
     if (d.link_offsets[0] != 0) r.fail("bad offsets");
     for (int32_t i = 0; i < nn; ++i)
         if (d.link_offsets[i + 1] < d.link_offsets[i]) r.fail("bad offsets");
-    const uint64_t num_targets = d.link_offsets[nn];
-    if (num_targets > uint64_t(r.end - r.p) / sizeof(int32_t))
-        r.fail(fmt::format("truncated: {} items expected", num_targets));
-    int32_t* targets = detail::allocate_link_targets(d, num_targets);
-    copy_bytes(reinterpret_cast<uint8_t*>(targets), r.p, num_targets * sizeof(int32_t));
-    r.p += num_targets * sizeof(int32_t);
-    for (int32_t x : vm.link_targets())
-        if (x < 0 || x >= nn) r.fail("link target out of range");
+    if (version >= 5)
+        read_coded_targets(r, d, nn);
+    else
+        read_raw_targets(r, d, nn);
     r.end_section(e);
 }
 
@@ -496,13 +547,13 @@ VisibilityMap detail::load_vmap_file(const std::string& path) {
         throw Error(fmt::format("{}: not a regular file (or no such file)", path));
     const MappedFile data(path);
     const uint64_t size = data.size();
-    check_header(path, data.data(), size);
+    const uint32_t version = check_header(path, data.data(), size);
     VisibilityMap vm;
     detail::MapData& d = detail::MapAccess::data(vm);
     Reader r{data.data() + kHeader, data.data() + size, path, "header"};
     const uint64_t n = read_points(r, d);
     const int32_t nn = read_tree(r, d, n);
-    read_links(r, vm, nn);
+    read_links(r, vm, nn, version);
     if (r.p != r.end) throw Error(fmt::format("{}: trailing bytes after the last section", path));
     return vm;
 }

@@ -1,0 +1,42 @@
+// The .vmap file's LINK section from version 5 on: each node's sorted link targets as a
+// delta-coded StreamVByte stream (libstreamvbyte), nodes grouped into chunks that encode and
+// decode in parallel. The targets of a node are increasing node ids, so their gaps are small:
+// 1.3 bytes a link end on the default scene's map against 4 raw (docs/formats.md).
+//
+// Layout: u64 chunks | u32 chunk_node[chunks + 1] | u64 chunk_byte[chunks + 1] | u8 stream[]
+// (after the u64 offsets[nodes + 1] of every version). Chunk k holds the nodes
+// [chunk_node[k], chunk_node[k + 1]) and the stream bytes [chunk_byte[k], chunk_byte[k + 1]);
+// in it each node with links has its own stream of offsets[n + 1] - offsets[n] values,
+// streamvbyte_delta_encode'd from 0, one after the other.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace vmap::detail {
+
+struct EncodedLinks {
+    std::vector<uint32_t> chunk_node;            // chunks + 1 node boundaries, 0 .. nodes
+    std::vector<uint64_t> chunk_byte;            // chunks + 1 byte boundaries, 0 .. stream size
+    std::vector<std::vector<uint8_t>> chunks;    // each chunk's bytes
+};
+
+// Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node).
+EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets);
+
+// The length in bytes of a StreamVByte stream of `count` values that starts at p, read off its
+// control bytes; SIZE_MAX when it would run past `avail` bytes.
+size_t stream_bytes(const uint8_t* p, size_t avail, uint32_t count);
+
+// Decodes `stream` (chunk boundaries as above, already checked to be increasing and within the
+// stream) into targets (offsets[nodes] entries). Returns "" or what is wrong (the first chunk's
+// problem found): a node's stream running out of its chunk, a chunk with bytes left over, a
+// target out of [0, nodes), targets of a node not in increasing order.
+std::string decode_links(std::span<const uint64_t> offsets, std::span<const uint32_t> chunk_node,
+                         std::span<const uint64_t> chunk_byte, const uint8_t* stream,
+                         int32_t* targets);
+
+}  // namespace vmap::detail

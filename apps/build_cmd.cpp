@@ -50,6 +50,7 @@ struct BuildOptions {
     bool json = false;
     bool shards = false;                // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
+    float delta_floor = OctreeParams::kDefaultDeltaFloor;
     BuildParams params;
 };
 
@@ -168,6 +169,7 @@ PointSet prepare_build(BuildOptions& o, std::string& what) {
     what = input.description;
     BuildParams& bp = o.params;
     bp.octree = input.octree;
+    bp.octree.delta_floor = o.delta_floor;
     warn_if_long(in.path, input.points.size(), bp.octree);
     bp.progress = stderr_progress();
     bp.keep_links = !o.count_links;
@@ -218,6 +220,7 @@ Command add_build_command(CLI::App& app) {
                       "estimated if absent). Default: scenes/cornell-bunny.json");
     build->add_option("-o,--output", bo->output, "Output .vmap file (default: <input name>.vmap)");
     add_predicate_options(build, bo->params.visibility);
+    add_delta_floor_option(build, bo->delta_floor, "");
     add_choice(build, "--backend", bo->params.backend, "auto (GPU when present), cpu or cuda");
     add_choice(build, "--occluders", bo->params.occluders,
                     "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "

@@ -40,6 +40,15 @@ CLI::Validator eps_check() {
                       fmt::format("FLOAT in [0 - {})", VisibilityParams::kEpsLimit));
 }
 
+void add_delta_floor_option(CLI::App* app, float& floor, const std::string& note) {
+    app->add_option("--delta-floor", floor,
+                    "V-map built here: a leaf's occluder disc is at least this many splat radii "
+                    "wide" + note)
+        ->check(checked_by(&OctreeParams::delta_floor,
+                           fmt::format("FLOAT in [0 - {}]", OctreeParams::kDeltaFloorLimit)))
+        ->capture_default_str();
+}
+
 void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     using P = VisibilityParams;
     const std::string tol = fmt::format("FLOAT in [0 - {})", P::kTolLimit);

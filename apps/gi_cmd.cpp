@@ -46,9 +46,10 @@ size_t count_emitters(const PointSet& ps, const std::string& input) {
 VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
-    if (has_extension(o.in.path, ".vmap") && (o.K != kGiVmapK || o.eps != kGiVmapEps))
-        throw Error(fmt::format("{}: -K/--eps apply when the V-map is built, not to a .vmap",
-                                o.in.path));
+    if (has_extension(o.in.path, ".vmap") &&
+        (o.K != kGiVmapK || o.eps != kGiVmapEps || o.delta_floor != kGiDeltaFloor))
+        throw Error(fmt::format(
+            "{}: -K/--eps/--delta-floor apply when the V-map is built, not to a .vmap", o.in.path));
     Input in = load_input(o.in);
     print_notes(in.notes);
     camera = in.camera;
@@ -276,6 +277,7 @@ BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, con
     if (scene_octree) bp.octree = *scene_octree;
     if (o.in.max_height) bp.octree.max_height = *o.in.max_height;
     if (o.in.leaf_points) bp.octree.leaf_points = *o.in.leaf_points;
+    bp.octree.delta_floor = o.delta_floor;
     bp.visibility.K = o.K;
     bp.visibility.eps = o.eps;
     bp.backend = o.gi.backend;
@@ -348,6 +350,7 @@ void add_build_options(CLI::App* gi, GiOptions* o) {
                    "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
         ->check(eps_check())
         ->capture_default_str();
+    add_delta_floor_option(gi, o->delta_floor, " (the GI's default is below vmap build's)");
 }
 
 void add_reference_options(CLI::App* gi, GiOptions* o) {

@@ -19,6 +19,9 @@ namespace vmap::cli {
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
 inline constexpr int kGiVmapK = 2;
 inline constexpr float kGiVmapEps = 0.05f;
+// ... and its occluder discs: Delta at least 2 splat radii, not 2.5 (docs/gi.md): wider discs
+// hide the near pairs of a curved model from each other, which the GI weighs most.
+inline constexpr float kGiDeltaFloor = 2.0f;
 
 // The options of `vmap gi`.
 struct GiOptions {
@@ -27,6 +30,7 @@ struct GiOptions {
     std::string image, ply, pfm;
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
+    float delta_floor = kGiDeltaFloor;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power

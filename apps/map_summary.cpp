@@ -41,9 +41,11 @@ void print_tree_summary(const VisibilityMap& vm) {
 void print_params(const VisibilityMap& vm) {
     const auto& o = vm.octree_params();
     const auto& v = vm.visibility_params();
-    fmt::print("octree:     max_height {}, leaf_points {} -> height {}, {} nodes, {} leaves\n",
-               o.max_height, o.leaf_points, vm.octree().height(), vm.octree().num_nodes(),
-               vm.octree().num_leaves());
+    fmt::print(
+        "octree:     max_height {}, leaf_points {}, delta_floor {} -> height {}, {} nodes, {} "
+        "leaves\n",
+        o.max_height, o.leaf_points, o.delta_floor, vm.octree().height(), vm.octree().num_nodes(),
+        vm.octree().num_leaves());
     fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}\n", v.K, v.eps,
                v.facing_tol, v.parallel_tol);
 }
@@ -53,6 +55,7 @@ nlohmann::json params_json(const VisibilityMap& vm) {
     const auto& v = vm.visibility_params();
     return {{"max_height", o.max_height},
             {"leaf_points", o.leaf_points},
+            {"delta_floor", o.delta_floor},
             {"height", vm.octree().height()},
             {"nodes", vm.octree().num_nodes()},
             {"leaves", vm.octree().num_leaves()},

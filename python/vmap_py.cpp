@@ -76,6 +76,7 @@ PointSet point_set(const Array<float>& points, const std::optional<Array<float>>
 // The build options, named as BuildParams' fields (and the CLI's options).
 struct BuildArgs {
     std::optional<int> max_height, leaf_points;
+    std::optional<float> delta_floor;
     int K = VisibilityParams{}.K;
     float eps = VisibilityParams{}.eps, facing_tol = VisibilityParams{}.facing_tol,
           parallel_tol = VisibilityParams{}.parallel_tol;
@@ -89,6 +90,7 @@ struct BuildArgs {
         if (file_octree) bp.octree = *file_octree;
         if (max_height) bp.octree.max_height = *max_height;
         if (leaf_points) bp.octree.leaf_points = *leaf_points;
+        if (delta_floor) bp.octree.delta_floor = *delta_floor;
         bp.visibility = {K, eps, facing_tol, parallel_tol};
         bp.backend = parse<Backend>(backend, "backend");
         bp.occluders = parse<OccluderSearch>(occluders, "occluders");
@@ -277,6 +279,7 @@ BuildArgs build_args(const py::kwargs& kw) {
     static const std::map<std::string, Set> setters = {
         {"max_height", [](BuildArgs& a, py::handle v) { a.max_height = v.cast<int>(); }},
         {"leaf_points", [](BuildArgs& a, py::handle v) { a.leaf_points = v.cast<int>(); }},
+        {"delta_floor", [](BuildArgs& a, py::handle v) { a.delta_floor = v.cast<float>(); }},
         {"K", [](BuildArgs& a, py::handle v) { a.K = v.cast<int>(); }},
         {"eps", [](BuildArgs& a, py::handle v) { a.eps = v.cast<float>(); }},
         {"facing_tol", [](BuildArgs& a, py::handle v) { a.facing_tol = v.cast<float>(); }},
@@ -316,7 +319,7 @@ void def_build(py::module_& m) {
         py::arg("colors") = py::none(), py::arg("emission") = py::none(),
         "V-map of a point set: points N x 3; normals N x 3 (estimated when None), radii N "
         "(splat radii), colors N x 3 (albedo, 0.8 grey when None), emission N x 3. Options as "
-        "the CLI's build: max_height, leaf_points, K, eps, facing_tol, parallel_tol, backend "
+        "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, backend "
         "('auto', 'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
         "(a function of a dict; returning False cancels).");
     m.def(

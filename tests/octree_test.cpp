@@ -4,6 +4,8 @@
 
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <cmath>
 #include <numeric>
 #include <random>
@@ -219,6 +221,28 @@ TEST(Octree, OnePointLeafStillOccludesThroughItsSplat) {
     Octree t = Octree::build(ps, {4, 1}, order);
     ASSERT_EQ(t.num_leaves(), 2);
     for (const LeafDisc& d : leaf_discs(t)) EXPECT_FLOAT_EQ(d.delta, detail::kDeltaSplatFloor * 0.05f);
+}
+
+TEST(Octree, DeltaFloorSetsTheSmallestDisc) {
+    PointSet ps;
+    ps.positions = {{0, 0, 0}, {1, 1, 1}};
+    ps.normals = {{0, 0, 1}, {0, 0, 1}};
+    ps.radii = {0.05f, 0.05f};
+    for (float floor : {0.f, 1.f, 2.f, 4.f}) {
+        SCOPED_TRACE(floor);
+        PointSet copy = ps;
+        std::vector<uint32_t> order;
+        OctreeParams p{4, 1};
+        p.delta_floor = floor;
+        Octree t = Octree::build(copy, p, order);
+        EXPECT_EQ(t.params().delta_floor, floor);
+        for (const LeafDisc& d : leaf_discs(t)) EXPECT_FLOAT_EQ(d.delta, floor * 0.05f);
+    }
+    for (float bad : {-0.5f, 10.5f, std::numeric_limits<float>::quiet_NaN()}) {
+        OctreeParams p;
+        p.delta_floor = bad;
+        EXPECT_THROW(p.check("test"), Error) << bad;
+    }
 }
 
 TEST(Octree, LeafWhoseNormalsCancelIsFlagged) {

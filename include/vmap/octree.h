@@ -22,6 +22,13 @@ struct OctreeParams {
     int max_height = 9;   // deepest level a leaf may have (root = level 0)
     int leaf_points = 1;  // a node splits while it holds more points than this (and is not at
                           // max_height)
+    // A leaf's occluder disc radius Delta is the distance from its centroid to its farthest
+    // point, but never below delta_floor times its largest splat radius: discs wide enough to
+    // close the gaps between samples (docs/validation.md chose 2.5 for pair agreement; `vmap gi`
+    // builds with kGiDeltaFloor, docs/gi.md). In [0, kDeltaFloorLimit].
+    static constexpr float kDefaultDeltaFloor = 2.5f;
+    static constexpr float kDeltaFloorLimit = 10.f;
+    float delta_floor = kDefaultDeltaFloor;
 
     // Throws vmap::Error naming `source` and the field for a value out of range.
     void check(const std::string& source) const;

@@ -79,6 +79,18 @@ def test_save_and_load(small, tmp_path):
         small.num_points, small.num_links, small.height)
 
 
+def test_delta_floor_matches_the_cli(small, tmp_path):
+    py_file, cli_file = tmp_path / "py.vmap", tmp_path / "cli.vmap"
+    vmap.build_file(SCENE, points=2000, seed=3, delta_floor=1.5, **OPTS).save(str(py_file))
+    subprocess.run([vmap_bin(), "-q", "build", SCENE, "--points", "2000", "--seed", "3",
+                    "--max-height", "5", "--leaf-points", "4", "--backend", "cpu",
+                    "--delta-floor", "1.5", "-o", str(cli_file)], check=True)
+    assert py_file.read_bytes() == cli_file.read_bytes()
+    small_file = tmp_path / "small.vmap"
+    small.save(str(small_file))
+    assert py_file.read_bytes() != small_file.read_bytes()
+
+
 def test_one_thread_gives_the_same_map(small):
     one = vmap.build_file(SCENE, points=2000, seed=3, threads=1, **OPTS)
     pairs = np.random.default_rng(5).integers(0, small.num_points, size=(2000, 2))

@@ -5,7 +5,7 @@
 //   header: "VMAPFILE" | u32 version | u32 reserved | u64 payload bytes | u64 payload checksum
 //           (payload_hash below)
 //   payload: sections, each: 4-char tag | u64 bytes | data
-//     PARM: octree and visibility parameters
+//     PARM: octree and visibility parameters (version 5: the octree's delta_floor last)
 //     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission) | positions, normals, [colours],
 //           [radii], [emission]  (octree order)
 //     ORDR: u32 order[n] (octree position -> input index)
@@ -48,8 +48,9 @@ namespace {
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
 constexpr uint32_t kVersion = 5;  // 2: 64-bit link offsets; 3: emission in octree order and
                                   // the measured Delta rule (a version-2 file is built wrong);
-                                  // 4: the octree's frame (scale); 5: coded link targets
-constexpr uint32_t kOldestRead = 4;  // version 4 differs in the LINK section only
+                                  // 4: the octree's frame (scale); 5: coded link targets,
+                                  // the octree's delta_floor
+constexpr uint32_t kOldestRead = 4;  // version 4 lacks PARM's delta_floor and codes no links
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
 // The checksum: a 64-bit multiply-xorshift hash of each 1 MiB block of the payload (8 bytes at a
@@ -246,6 +247,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.put(vm.visibility_params().eps);
     w.put(vm.visibility_params().facing_tol);
     w.put(vm.visibility_params().parallel_tol);
+    w.put(vm.octree_params().delta_floor);
     w.end(s);
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
@@ -410,7 +412,7 @@ uint32_t check_header(const std::string& path, const uint8_t* data, uint64_t siz
 
 // PARM, PNTS and ORDR: the parameters, the points and their order (a permutation, checked);
 // returns the number of points.
-uint64_t read_points(Reader& r, detail::MapData& d) {
+uint64_t read_points(Reader& r, detail::MapData& d, uint32_t version) {
     const uint8_t* e = r.begin_section("PARM");
     d.octree_params.max_height = r.get<int32_t>();
     d.octree_params.leaf_points = r.get<int32_t>();
@@ -418,6 +420,12 @@ uint64_t read_points(Reader& r, detail::MapData& d) {
     d.visibility_params.eps = r.get<float>();
     d.visibility_params.facing_tol = r.get<float>();
     d.visibility_params.parallel_tol = r.get<float>();
+    // Version 4 predates the field: its maps were built with the default floor.
+    d.octree_params.delta_floor =
+        version >= 5 ? r.get<float>() : OctreeParams::kDefaultDeltaFloor;
+    if (!(d.octree_params.delta_floor >= 0 &&
+          d.octree_params.delta_floor <= OctreeParams::kDeltaFloorLimit))
+        r.fail(fmt::format("delta_floor {} out of range", d.octree_params.delta_floor));
     r.end_section(e);
 
     e = r.begin_section("PNTS");
@@ -551,7 +559,7 @@ VisibilityMap detail::load_vmap_file(const std::string& path) {
     VisibilityMap vm;
     detail::MapData& d = detail::MapAccess::data(vm);
     Reader r{data.data() + kHeader, data.data() + size, path, "header"};
-    const uint64_t n = read_points(r, d);
+    const uint64_t n = read_points(r, d, version);
     const int32_t nn = read_tree(r, d, n);
     read_links(r, vm, nn, version);
     if (r.p != r.end) throw Error(fmt::format("{}: trailing bytes after the last section", path));

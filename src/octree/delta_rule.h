@@ -3,8 +3,10 @@
 // radius of its points. The floor was chosen by measurement (docs/validation.md).
 #pragma once
 
+#include "vmap/octree.h"
+
 namespace vmap::detail {
 
-inline constexpr float kDeltaSplatFloor = 2.5f;
+inline constexpr float kDeltaSplatFloor = OctreeParams::kDefaultDeltaFloor;  // vmap/octree.h
 
 }  // namespace vmap::detail

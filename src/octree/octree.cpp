@@ -274,7 +274,7 @@ Octree Octree::build(PointSet& points, const OctreeParams& params, std::vector<u
                                            t.root_min, t.root_size, -1);
     leaf_means(t, points);
     const float slack = detail::content_slack(extent.maxabs, t.root_size);
-    detail::apply_delta_rule(tree, points, 1.f, detail::kDeltaSplatFloor, slack);
+    detail::apply_delta_rule(tree, points, 1.f, params.delta_floor, slack);
     bounding_spheres(tree, points, slack);
     return tree;
 }

@@ -13,6 +13,9 @@ void OctreeParams::check(const std::string& source) const {
     if (leaf_points < 1 || leaf_points > kLeafPointsLimit)
         throw Error(fmt::format("{}: leaf_points {} out of range (1..{})", source, leaf_points,
                                 kLeafPointsLimit));
+    if (!(delta_floor >= 0 && delta_floor <= kDeltaFloorLimit))
+        throw Error(fmt::format("{}: delta_floor {} out of range (0..{})", source, delta_floor,
+                                kDeltaFloorLimit));
 }
 
 void VisibilityParams::check(const std::string& source) const {

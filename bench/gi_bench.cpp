@@ -3,6 +3,8 @@
 // pair (up to --brute-max points), with medians, spread, the work per bounce and the fitted
 // log-log slopes (time ~ points^slope). The one-off setup (node sums, refinement, upload) is
 // reported apart from the bounces; the V-map build is not timed here (`vmap bench` does that).
+#include "bench/gi_bench.h"
+
 #include <fmt/format.h>
 #include <tbb/task_arena.h>
 #include <unistd.h>
@@ -14,7 +16,6 @@
 #include <filesystem>
 #include <fstream>
 
-#include "bench/gi_bench.h"
 #include "vmap/error.h"
 #include "vmap/files.h"
 #include "vmap/gi.h"
@@ -186,7 +187,6 @@ std::string csv_table(const std::vector<Row>& rows) {
                            r.brute.median, r.brute.lo, r.brute.hi, r.rms);
     return csv;
 }
-
 
 }  // namespace
 

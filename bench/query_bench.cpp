@@ -6,6 +6,8 @@
 // gives the median latency per query and the min-max spread over runs, with the work done (set
 // sizes, node and disc tests per ray). The last line fits latency ~ N^k between the smallest and
 // largest size: k < 1 is sub-linear.
+#include "bench/query_bench.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -16,7 +18,6 @@
 #include <memory>
 #include <random>
 
-#include "bench/query_bench.h"
 #include "vmap/error.h"
 #include "vmap/files.h"
 #include "vmap/query.h"
@@ -201,7 +202,6 @@ std::string csv_table(const std::vector<Row>& rows) {
                            r.hit_rate, r.brute.median);
     return csv;
 }
-
 
 }  // namespace
 

@@ -7,14 +7,14 @@
 # before of their means, and whether both did the same work (links, interactions).
 # Usage: bench/gi-throughput.sh OUT VMAP_BEFORE VMAP_AFTER
 #   BACKEND     cpu or cuda (default cuda)
-#   GIT_SCENE   scene file (default scenes/cornell-two-models.json)
-#   GIT_POINTS  point counts (default 40000,150000)
-#   GIT_RUNS    solver runs per size (bench-gi --runs, default 3); GIT_BOUNCES bounces per run
-#               (default 10); GIT_ROUNDS rounds of (before, after) (default 2)
-#   GIT_TIMEOUT seconds one bench-gi call may take (default 90; past it the call is stopped
+#   GT_SCENE    scene file (default scenes/cornell-two-models.json)
+#   GT_POINTS   point counts (default 40000,150000)
+#   GT_RUNS     solver runs per size (bench-gi --runs, default 3); GT_BOUNCES bounces per run
+#               (default 10); GT_ROUNDS rounds of (before, after) (default 2)
+#   GT_TIMEOUT  seconds one bench-gi call may take (default 90; past it the call is stopped
 #               and its round is missing from the table)
-#   GIT_ARGS    more bench-gi options (e.g. "--theta 1 --max-height 10")
-#   e.g. BACKEND=cpu GIT_SCENE=scenes/cornell-empty.json GIT_POINTS=2000,4000 GIT_RUNS=1 \
+#   GT_ARGS     more bench-gi options (e.g. "--theta 1 --max-height 10")
+#   e.g. BACKEND=cpu GT_SCENE=scenes/cornell-empty.json GT_POINTS=2000,4000 GT_RUNS=1 \
 #        bench/gi-throughput.sh /tmp/git /tmp/vmap-before build-cpu/vmap
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -27,19 +27,19 @@ for b in "$before" "$after"; do
 done
 export VMAP_DATA_DIR="${VMAP_DATA_DIR:-$root}"
 mkdir -p "$out"
-read -r -a extra <<< "${GIT_ARGS:-}"
-args=(bench-gi --backends "$backend" --scene "${GIT_SCENE:-$root/scenes/cornell-two-models.json}"
-      --points "${GIT_POINTS:-40000,150000}" --runs "${GIT_RUNS:-3}"
-      --bounces "${GIT_BOUNCES:-10}" --brute-max 0 "${extra[@]}")
+read -r -a extra <<< "${GT_ARGS:-}"
+args=(bench-gi --backends "$backend" --scene "${GT_SCENE:-$root/scenes/cornell-two-models.json}"
+      --points "${GT_POINTS:-40000,150000}" --runs "${GT_RUNS:-3}"
+      --bounces "${GT_BOUNCES:-10}" --brute-max 0 "${extra[@]}")
 rc=0
-for ((r = 1; r <= ${GIT_ROUNDS:-2}; r++)); do
+for ((r = 1; r <= ${GT_ROUNDS:-2}; r++)); do
     for label in before after; do
         bin=$before
         [[ $label == after ]] && bin=$after
         dir="$out/gi-$label-$r"
         t0=$(date +%s.%N)
         status=0
-        timeout "${GIT_TIMEOUT:-90}" "$bin" "${args[@]}" --out "$dir" > "$dir.log" 2>&1 || status=$?
+        timeout "${GT_TIMEOUT:-90}" "$bin" "${args[@]}" --out "$dir" > "$dir.log" 2>&1 || status=$?
         if [[ $status != 0 ]]; then
             rc=1
             echo "gi-throughput: $label round $r failed (rc $status), see $dir.log" >&2

@@ -27,7 +27,7 @@
 #        gi-throughput  vmap bench-gi on the GPU for .device/bin/vmap-before (bundled with
 #                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
 #                  and per-bounce medians in $OUT/gi-throughput/gi-throughput.md
-#                  (bench/gi-throughput.sh: BACKEND, GIT_POINTS, GIT_RUNS, ... pass through)
+#                  (bench/gi-throughput.sh: BACKEND, GT_POINTS, GT_RUNS, ... pass through)
 #   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older
 #   commit), bundled as .device/bin/vmap-before for gi-throughput.
 #      Logs and tables go to $OUT.

@@ -45,9 +45,12 @@ Command add_render_command(CLI::App& app);       // apps/render_cmd.cpp
 Command add_gi_command(CLI::App& app);           // apps/gi_cmd.cpp
 Command add_validate_command(CLI::App& app);     // apps/validate_cmd.cpp
 Command add_view_command(CLI::App& app);         // apps/view_cmd.cpp
+// The benchmarks' programs are bench/<name>.cpp, on the public headers only, each with its
+// options and run function in bench/<name>.h; their subcommands are registered here as the
+// others are.
 Command add_bench_command(CLI::App& app);        // apps/bench_cmd.cpp (bench/bench.cpp)
-Command add_bench_query_command(CLI::App& app);  // bench/query_bench.cpp
-Command add_bench_gi_command(CLI::App& app);     // bench/gi_bench.cpp
+Command add_bench_query_command(CLI::App& app);  // apps/bench_query_cmd.cpp (bench/query_bench.cpp)
+Command add_bench_gi_command(CLI::App& app);     // apps/bench_gi_cmd.cpp (bench/gi_bench.cpp)
 
 // What a V-map holds (apps/map_summary.cpp, for build and info): the links per octree level
 // (each link once, at its first end's level), the level table, the parameters as two lines or

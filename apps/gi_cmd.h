@@ -1,5 +1,5 @@
-// What `vmap gi` (apps/gi_cmd.cpp), its error table (apps/gi_error.cpp) and `vmap bench-gi`
-// (bench/gi_bench.cpp) share; the commands are registered as every other (apps/commands.h).
+// What `vmap gi` (apps/gi_cmd.cpp) and its error table (apps/gi_error.cpp) share; the commands
+// are registered as every other (apps/commands.h).
 #pragma once
 
 #include <CLI/CLI.hpp>

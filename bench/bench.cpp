@@ -16,9 +16,7 @@
 #include <ctime>
 #include <filesystem>
 #include <fstream>
-#include <random>
 
-#include "visibility/backend.h"
 #include "vmap/error.h"
 #include "vmap/files.h"
 #include "vmap/scene.h"
@@ -56,37 +54,6 @@ struct Row {
     std::vector<double> kernel;  // backend busy seconds per GPU run
 };
 
-// CPU leaf-pair rate on a seeded sample of the leaf-pair matrix: blocks of 8 rows by 32
-// consecutive columns at uniform random places above the diagonal, the access pattern of a real
-// run (one row against 32 neighbouring columns, neighbouring rows after each other), so the
-// caches behave as they would.
-double sampled_cpu_rate(const Octree& t, const BuildParams& bp, uint64_t samples) {
-    const int32_t L = t.num_leaves();
-    if (L < 64) return 1e9;  // too small to sample; any full run is instant
-    std::mt19937_64 rng(12345);
-    std::uniform_int_distribution<int32_t> pick(0, L - 40);
-    std::vector<detail::PairJob> jobs;
-    uint64_t pairs = 0, words = 0;
-    while (pairs < samples) {
-        int32_t a = pick(rng), b = pick(rng);
-        if (a > b) std::swap(a, b);
-        if (b - a < 8) continue;
-        detail::PairJob j;
-        j.row0 = a, j.rows = 8, j.col0 = b, j.cols = std::min(32, L - b), j.word_offset = words;
-        words += detail::job_words(j);
-        pairs += uint64_t(j.rows) * j.cols;
-        jobs.push_back(j);
-    }
-    auto cpu = detail::make_cpu_backend();
-    cpu->prepare(t, bp.visibility, words);
-    WorkCounters wc;
-    const auto t0 = Clock::now();
-    cpu->submit(jobs, words, 0);
-    cpu->wait(0, wc);
-    const double s = std::chrono::duration<double>(Clock::now() - t0).count();
-    return double(pairs) / s;
-}
-
 std::string git_commit() {
     if (const char* c = getenv("VMAP_COMMIT")) return c;
     return vmap::commit();
@@ -111,7 +78,7 @@ struct Session {
 // The backends asked for (default: cpu, plus cuda where a device answers).
 void pick_backends(Session& s) {
     std::vector<std::string> backends = s.o.backends;
-    s.have_gpu = detail::make_cuda_backend(&s.why) != nullptr;
+    s.have_gpu = !cuda_backend_name(&s.why).empty();
     if (backends.empty()) {
         backends.push_back("cpu");
         if (s.have_gpu) backends.push_back("cuda");
@@ -171,7 +138,8 @@ void time_cpu(const Session& s, const PointSet& pts, BuildParams bp, Row& r, Tim
     PointSet copy = pts;
     std::vector<uint32_t> order;
     const Octree t = Octree::build(copy, bp.octree, order, "bench");
-    r.cpu_pair_rate = sampled_cpu_rate(t, bp, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
+    r.cpu_pair_rate =
+        sampled_cpu_pair_rate(t, bp.visibility, std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
     // The GPU run, when there was one, says how many leaf pairs are walked.
     const uint64_t pairs =
         r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;
@@ -291,10 +259,7 @@ Header table_header(const Session& s) {
     const std::time_t now = std::time(nullptr);
     std::strftime(date, sizeof date, "%Y-%m-%d", std::gmtime(&now));
     hd.date = date;
-    if (s.have_gpu) {
-        std::string why;
-        hd.device = detail::make_cuda_backend(&why)->name();
-    }
+    if (s.have_gpu) hd.device = cuda_backend_name();
     return hd;
 }
 

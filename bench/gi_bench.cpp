@@ -3,6 +3,8 @@
 // pair (up to --brute-max points), with medians, spread, the work per bounce and the fitted
 // log-log slopes (time ~ points^slope). The one-off setup (node sums, refinement, upload) is
 // reported apart from the bounces; the V-map build is not timed here (`vmap bench` does that).
+#include "bench/gi_bench.h"
+
 #include <fmt/format.h>
 #include <tbb/task_arena.h>
 #include <unistd.h>
@@ -14,15 +16,13 @@
 #include <filesystem>
 #include <fstream>
 
-#include "apps/commands.h"
-#include "apps/gi_cmd.h"
 #include "vmap/error.h"
 #include "vmap/files.h"
 #include "vmap/gi.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
 
-namespace vmap::cli {
+namespace vmap::bench {
 namespace {
 
 struct Stat {
@@ -39,18 +39,6 @@ std::string fmt_stat(const Stat& s) {
     if (!s.done) return "-";
     return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);
 }
-
-struct BenchOptions {
-    std::string scene;
-    std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
-    int max_height = 12, leaf_points = 4;
-    float theta = 4.0f;
-    std::string refine = "blocks";
-    int bounces = 3, runs = 3;
-    uint64_t brute_max = 20000;
-    std::vector<std::string> backends;  // cpu, cuda (default: cpu, plus cuda with a device)
-    std::string out_dir;
-};
 
 struct Row {
     uint64_t points = 0;
@@ -76,8 +64,8 @@ double slope(const std::vector<Row>& rows, Stat Row::*m) {
 
 // What one `vmap bench-gi` call carries from size to size.
 struct GiSession {
-    explicit GiSession(BenchOptions& opts) : o(opts) {}
-    BenchOptions& o;
+    explicit GiSession(GiBenchOptions& opts) : o(opts) {}
+    GiBenchOptions& o;
     bool explicit_backends = false;
     bool gpu_used = false;
     std::string gpu_name;
@@ -87,7 +75,7 @@ struct GiSession {
 // No device for cuda: dropped with a note (an error if cuda was asked for).
 void time_solver(GiSession& s, const VisibilityMap& vm, const std::string& be, Row& r,
                  std::vector<Vec3>& hier) {
-    BenchOptions& o = s.o;
+    GiBenchOptions& o = s.o;
     GiParams gp;
     gp.theta = o.theta;
     gp.backend = parse<Backend>(be, "--backends");
@@ -116,7 +104,7 @@ void time_solver(GiSession& s, const VisibilityMap& vm, const std::string& be, R
 }
 
 // The brute-force gather (2 bounces x max(1, runs/2)) and the hierarchical solution's error.
-void time_brute(const BenchOptions& o, const VisibilityMap& vm, const std::vector<Vec3>& hier,
+void time_brute(const GiBenchOptions& o, const VisibilityMap& vm, const std::vector<Vec3>& hier,
                 Row& r) {
     std::vector<double> per;
     std::vector<Vec3> B;
@@ -131,7 +119,7 @@ void time_brute(const BenchOptions& o, const VisibilityMap& vm, const std::vecto
 }
 
 Row bench_size(GiSession& s, const Scene& base, uint64_t n) {
-    const BenchOptions& o = s.o;
+    const GiBenchOptions& o = s.o;
     Scene sc = base;
     sc.points = n;
     BuildParams bp;
@@ -152,7 +140,7 @@ Row bench_size(GiSession& s, const Scene& base, uint64_t n) {
 }
 
 std::string md_table(const GiSession& s, const std::vector<Row>& rows) {
-    const BenchOptions& o = s.o;
+    const GiBenchOptions& o = s.o;
     char host[256] = {0};
     gethostname(host, sizeof(host) - 1);
     const std::time_t now = std::time(nullptr);
@@ -200,7 +188,9 @@ std::string csv_table(const std::vector<Row>& rows) {
     return csv;
 }
 
-int run_bench(BenchOptions& o) {
+}  // namespace
+
+int run_gi(GiBenchOptions& o) {
     if (o.scene.empty()) o.scene = default_scene_path();
     if (!o.out_dir.empty()) io::make_output_folder(o.out_dir, "--out");
     GiSession s(o);
@@ -222,42 +212,4 @@ int run_bench(BenchOptions& o) {
     return 0;
 }
 
-}  // namespace
-
-Command add_bench_gi_command(CLI::App& app) {
-    auto o = std::make_shared<BenchOptions>();
-    auto* b = app.add_subcommand(
-        "bench-gi", "Time per GI bounce against points: hierarchical (CPU, GPU) vs brute force");
-    b->add_option("--scene", o->scene, "Scene file (default: scenes/cornell-bunny.json)");
-    b->add_option("--points", o->points, "Point counts")
-        ->delimiter(',')
-        ->check(CLI::Range(uint64_t(100), uint64_t(50000000)))
-        ->capture_default_str();
-    b->add_option("--max-height", o->max_height, "Octree max_height for every size")
-        ->check(CLI::Range(1, 21))
-        ->capture_default_str();
-    b->add_option("--leaf-points", o->leaf_points, "Octree leaf_points for every size")
-        ->check(CLI::Range(1, 1000000))
-        ->capture_default_str();
-    b->add_option("--theta", o->theta, "Separation parameter")
-        ->check(CLI::Range(1e-3, 1e3))
-        ->capture_default_str();
-    b->add_option("--refine", o->refine, "blocks or links (see vmap gi --help)")
-        ->check(CLI::IsMember({"blocks", "links"}))
-        ->capture_default_str();
-    b->add_option("--bounces", o->bounces, "Bounces per run")
-        ->check(CLI::Range(1, 1000))
-        ->capture_default_str();
-    b->add_option("--runs", o->runs, "Runs per size and backend")
-        ->check(CLI::Range(1, 100))
-        ->capture_default_str();
-    b->add_option("--brute-max", o->brute_max, "Brute force only up to this many points")
-        ->capture_default_str();
-    b->add_option("--backends", o->backends, "cpu and/or cuda (default: cpu, and cuda if present)")
-        ->delimiter(',')
-        ->check(CLI::IsMember({"cpu", "cuda"}));
-    b->add_option("--out", o->out_dir, "Write bench-gi.md and bench-gi.csv into this folder");
-    return {b, [o] { return run_bench(*o); }, true};
-}
-
-}  // namespace vmap::cli
+}  // namespace vmap::bench

@@ -34,13 +34,11 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
-#include <nanoflann.hpp>
 #include <random>
 #include <set>
 #include <string>
 #include <vector>
 
-#include "scene/cloud_knn.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
@@ -82,16 +80,14 @@ std::vector<uint32_t> surface_of(Scene sc) {
 // `match(i, j)` holds.
 template <class Match>
 std::vector<uint8_t> with_sample_near(const PointSet& truth, Match match) {
-    const detail::CloudAdaptor ad{truth.positions};
-    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const NearestPoints tree(truth.positions);
     std::vector<uint8_t> out(truth.size(), 0);
     parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         const float r = 3 * truth.radii[i];
         uint32_t idx[48];
         float d2[48];
-        const float q[3] = {p.x, p.y, p.z};
-        const size_t got = tree.knnSearch(q, 48, idx, d2);
+        const size_t got = tree.find(p, 48, idx, d2);
         for (size_t j = 0; j < got; ++j) out[i] |= d2[j] <= r * r && match(i, size_t(idx[j]));
     });
     return out;
@@ -116,15 +112,13 @@ std::vector<uint8_t> near_other(const PointSet& truth, const std::vector<uint32_
 // radius, as an object's flat base covers the floor it stands on). Their sign is arbitrary, so
 // the table also scores the area without them.
 std::vector<uint8_t> buried(const PointSet& truth) {
-    const detail::CloudAdaptor ad{truth.positions};
-    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const NearestPoints tree(truth.positions);
     std::vector<uint8_t> out(truth.size(), 0);
     parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i], d = truth.normals[i];
         uint32_t idx[64];
         float d2[64];
-        const float q[3] = {p.x, p.y, p.z};
-        const size_t got = tree.knnSearch(q, 64, idx, d2);
+        const size_t got = tree.find(p, 64, idx, d2);
         float best = 1e30f;
         bool back = false;
         for (size_t j = 0; j < got; ++j) {
@@ -146,14 +140,12 @@ std::vector<uint8_t> buried(const PointSet& truth) {
 
 // d_8 / sqrt(8) over all neighbours: the radii raw clouds got before estimate_radii.
 std::vector<float> old_radii(const std::vector<Vec3>& pts) {
-    const detail::CloudAdaptor ad{pts};
-    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const NearestPoints tree(pts);
     std::vector<float> r(pts.size());
     parallel_for(size_t(0), pts.size(), [&](size_t i) {
         uint32_t idx[9];
         float d2[9];
-        const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
-        const size_t got = tree.knnSearch(q, 9, idx, d2);
+        const size_t got = tree.find(pts[i], 9, idx, d2);
         r[i] = got > 1 ? std::sqrt(d2[got - 1]) / std::sqrt(float(got - 1)) : 0.f;
     });
     return r;
@@ -206,15 +198,13 @@ std::vector<Vec3> dense_fit_normals(Scene sc, const PointSet& truth) {
     NormalEstimationParams np;
     np.orientation = Orientation::kOutward;
     estimate_normals(dense, np, "dense sample");
-    const detail::CloudAdaptor ad{dense.positions};
-    const detail::KdTree tree(3, ad, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const NearestPoints tree(dense.positions);
     std::vector<Vec3> out(truth.size());
     parallel_for(size_t(0), truth.size(), [&](size_t i) {
         const Vec3 p = truth.positions[i];
         uint32_t idx = 0;
         float d2 = 0;
-        const float q[3] = {p.x, p.y, p.z};
-        tree.knnSearch(q, 1, &idx, &d2);
+        tree.find(p, 1, &idx, &d2);
         out[i] = dense.normals[idx];
     });
     return out;

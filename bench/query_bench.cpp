@@ -6,6 +6,8 @@
 // gives the median latency per query and the min-max spread over runs, with the work done (set
 // sizes, node and disc tests per ray). The last line fits latency ~ N^k between the smallest and
 // largest size: k < 1 is sub-linear.
+#include "bench/query_bench.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -16,22 +18,13 @@
 #include <memory>
 #include <random>
 
-#include "apps/commands.h"
 #include "vmap/error.h"
 #include "vmap/files.h"
 #include "vmap/query.h"
 #include "vmap/scene.h"
 
-namespace vmap::cli {
+namespace vmap::bench {
 namespace {
-
-struct QueryBenchArgs {
-    std::string scene;
-    std::vector<uint64_t> points{5000, 10000, 20000, 40000, 80000};
-    int max_height = 10, leaf_points = 4, queries = 2000, runs = 5;
-    Backend backend = Backend::kAuto;
-    std::string out_dir;
-};
 
 struct Spread {
     double median = 0, lo = 0, hi = 0;
@@ -74,7 +67,7 @@ std::string fmt_spread(const Spread& s) {
 
 volatile uint64_t g_sink;  // keeps the timed loops from being optimised away
 
-VisibilityMap build_sized(const QueryBenchArgs& a, uint64_t n, Row& r) {
+VisibilityMap build_sized(const QueryBenchOptions& a, uint64_t n, Row& r) {
     Scene sc = load_scene(a.scene);
     sc.points = n;
     PointSet pts = sample_scene(sc);
@@ -82,7 +75,7 @@ VisibilityMap build_sized(const QueryBenchArgs& a, uint64_t n, Row& r) {
     bp.octree.max_height = a.max_height;
     bp.octree.leaf_points = a.leaf_points;
     bp.backend = a.backend;
-    bp.progress = cli::stderr_progress();
+    bp.progress = a.progress;
     BuildStats st;
     VisibilityMap vm = build_vmap(std::move(pts), bp, &st, a.scene);
     r.points = n;
@@ -168,7 +161,7 @@ void count_work(const VisibilityMap& vm, const Queries& q, Row& r) {
     r.hit_rate = double(hits) / Q;
 }
 
-std::string md_table(const QueryBenchArgs& a, const std::vector<Row>& rows) {
+std::string md_table(const QueryBenchOptions& a, const std::vector<Row>& rows) {
     std::string md = fmt::format(
         "Scene {}, max_height {}, leaf_points {}; {} queries per batch ({} for listings and "
         "brute-force rays), {} timed runs after a warm-up; microseconds per query, median "
@@ -210,7 +203,9 @@ std::string csv_table(const std::vector<Row>& rows) {
     return csv;
 }
 
-int run_bench_query(QueryBenchArgs& a) {
+}  // namespace
+
+int run_query(QueryBenchOptions& a) {
     if (a.scene.empty()) a.scene = default_scene_path();
     if (a.points.size() < 2) throw Error("--points: give at least two sizes");
     if (!a.out_dir.empty()) io::make_output_folder(a.out_dir, "--out");
@@ -234,31 +229,4 @@ int run_bench_query(QueryBenchArgs& a) {
     return 0;
 }
 
-}  // namespace
-
-Command add_bench_query_command(CLI::App& app) {
-    auto a = std::make_shared<QueryBenchArgs>();
-    auto* c = app.add_subcommand("bench-query",
-                                 "Time pair, visible-set and ray queries against scene size");
-    c->add_option("--scene", a->scene, "Scene file (default: scenes/cornell-bunny.json)");
-    c->add_option("--points", a->points, "Point counts, e.g. 5000,20000,80000")
-        ->delimiter(',')
-        ->check(CLI::Range(uint64_t(100), uint64_t(50000000)));
-    c->add_option("--max-height", a->max_height, "Octree max height for every size")
-        ->check(CLI::Range(1, 21))
-        ->capture_default_str();
-    c->add_option("--leaf-points", a->leaf_points, "Octree leaf_points for every size")
-        ->check(CLI::Range(1, 1000000))
-        ->capture_default_str();
-    c->add_option("--queries", a->queries, "Queries per batch")
-        ->check(CLI::Range(20, 10000000))
-        ->capture_default_str();
-    c->add_option("--runs", a->runs, "Timed runs per batch")
-        ->check(CLI::Range(1, 100))
-        ->capture_default_str();
-    cli::add_choice(c, "--backend", a->backend, "Backend for the builds: auto, cpu or cuda");
-    c->add_option("--out", a->out_dir, "Write bench-query.md and bench-query.csv here");
-    return {c, [a] { return run_bench_query(*a); }, true};
-}
-
-}  // namespace vmap::cli
+}  // namespace vmap::bench

@@ -24,6 +24,12 @@
 #                  .vmap compared with the single-process build; one table in mpi-summary.md
 #                  (MPI_SCENE, default cornell-bunny at 30000 points)
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
+#        gi-throughput  vmap bench-gi on the GPU for .device/bin/vmap-before (bundled with
+#                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
+#                  and per-bounce medians in $OUT/gi-throughput/gi-throughput.md
+#                  (bench/gi-throughput.sh: BACKEND, GT_POINTS, GT_RUNS, ... pass through)
+#   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older
+#   commit), bundled as .device/bin/vmap-before for gi-throughput.
 #      Logs and tables go to $OUT.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -100,6 +106,7 @@ if [[ "$cmd" == bundle ]]; then
     rm -rf .device
     mkdir -p .device/bin .device/lib .device/models
     cp build-device/vmap .device/bin/
+    if [[ -n "${BEFORE:-}" ]]; then cp "$BEFORE" .device/bin/vmap-before; fi
     cp build-device/tests/*_test .device/bin/
     # Benchmark drivers built as programs of their own, where the build has any.
     if [[ -d build-device/bench ]]; then
@@ -310,6 +317,11 @@ if [[ "$cmd" == run ]]; then
                         -o /tmp/prof.vmap --backend cuda > "$OUT/profile-$v.txt" 2>&1 || true
                     grep -E "Duration|Throughput|Achieved Occupancy|Registers Per|Warp Cycles Per Issued|Avg. Active Threads|Hit Rate|Stall|Issued Ipc|No Eligible" "$OUT/profile-$v.txt" | head -40
                 done ;;
+            gi-throughput)
+                if [[ ! -x "$bin/vmap-before" ]]; then
+                    echo "gi-throughput: no $bin/vmap-before (bundle with BEFORE=/path/to/vmap)"; rc=1; continue
+                fi
+                bench/gi-throughput.sh "$OUT/gi-throughput" "$bin/vmap-before" "$bin/vmap" || rc=1 ;;
             *) echo "unknown step $step" >&2; rc=2 ;;
         esac
     done

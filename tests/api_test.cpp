@@ -5,6 +5,7 @@
 #include <stdlib.h>
 
 #include <atomic>
+#include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <mutex>
@@ -108,6 +109,34 @@ TEST(Api, CudaWithoutAUsableDeviceIsAnErrorAndAutoFallsBackWithANote) {
     build_vmap(pts, bp, &st);
     EXPECT_NE(note.find("no usable GPU"), std::string::npos) << note;
     EXPECT_EQ(st.note, note);
+}
+
+// The benchmarks' entry points (vmap/visibility_map.h): the CUDA backend's name as the backend
+// gives it, or the reason there is none; the CPU's leaf-pair rate on a sample.
+TEST(Api, CudaBackendNameIsTheBackendsOwnOrEmptyWithTheReason) {
+    std::string why, why_public;
+    const auto backend = detail::make_cuda_backend(&why);
+    const std::string name = cuda_backend_name(&why_public);
+    if (backend) {
+        EXPECT_EQ(name, backend->name());
+    } else {
+        EXPECT_EQ(name, "");
+        EXPECT_EQ(why_public, why);
+        EXPECT_FALSE(why.empty());
+    }
+}
+
+TEST(Api, SampledCpuPairRateIsPositiveAndSmallTreesAreNotSampled) {
+    PointSet pts = test::sample(test::scene_path("cornell-empty"), 4000, 1);
+    std::vector<uint32_t> order;
+    const Octree big = Octree::build(pts, {7, 4}, order);
+    ASSERT_GE(big.num_leaves(), 64);
+    const double rate = sampled_cpu_pair_rate(big, VisibilityParams{}, 20000);
+    EXPECT_TRUE(std::isfinite(rate) && rate > 0) << rate;
+    PointSet few = test::sample(test::scene_path("cornell-empty"), 100, 1);
+    const Octree small = Octree::build(few, {3, 4}, order);
+    ASSERT_LT(small.num_leaves(), 64);
+    EXPECT_EQ(sampled_cpu_pair_rate(small, VisibilityParams{}, 20000), 1e9);
 }
 
 TEST(Api, BatchQueriesAgreeWithSingleOnes) {

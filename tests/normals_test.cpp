@@ -1051,5 +1051,35 @@ TEST(RawCloud, BuildWarnsWhenNormalsLookInconsistent) {
     EXPECT_NE(st.warnings[0].find("inconsistent"), std::string::npos) << st.warnings[0];
 }
 
+// NearestPoints (the estimators' k-d tree behind the public header) against a brute-force
+// search: the same neighbours in the same order, nearest first, with the same squared
+// distances, for k below, at and above the number of points.
+TEST(NearestPoints, MatchesBruteForce) {
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.f, 1.f);
+    std::vector<Vec3> pts(500);
+    for (Vec3& p : pts) p = {u(rng), u(rng), u(rng)};
+    const NearestPoints tree(pts);
+    for (int q = 0; q < 50; ++q) {
+        const Vec3 c = q < 5 ? pts[size_t(q)] : Vec3{u(rng), u(rng), u(rng)};
+        std::vector<std::pair<float, uint32_t>> all;
+        for (uint32_t i = 0; i < pts.size(); ++i) {
+            const Vec3 d = pts[i] - c;
+            all.push_back({d.x * d.x + d.y * d.y + d.z * d.z, i});
+        }
+        std::sort(all.begin(), all.end());
+        for (size_t k : {size_t(1), size_t(9), size_t(48), size_t(500), size_t(600)}) {
+            std::vector<uint32_t> idx(k);
+            std::vector<float> d2(k);
+            const size_t got = tree.find(c, k, idx.data(), d2.data());
+            ASSERT_EQ(got, std::min(k, pts.size())) << "k " << k;
+            for (size_t j = 0; j < got; ++j) {
+                EXPECT_EQ(idx[j], all[j].second) << "query " << q << ", k " << k << ", rank " << j;
+                EXPECT_FLOAT_EQ(d2[j], all[j].first) << "query " << q << ", k " << k;
+            }
+        }
+    }
+}
+
 }  // namespace
 }  // namespace vmap

@@ -2,6 +2,8 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -84,5 +86,23 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params = {},
 // plane, normals within ~35 degrees of one axis) whose normals point to opposite sides: about 0
 // for consistent normals. Needs normals; 0 for fewer than 2 points.
 double normal_inconsistency(const PointSet& points, size_t k = 8);
+
+// The k-d tree over positions that normal and radius estimation search (nanoflann, leaf size
+// 16), for tools that score what they estimate (bench/normals_accuracy.cpp). It refers to
+// `positions`, which must outlive it and stay unchanged.
+class NearestPoints {
+  public:
+    explicit NearestPoints(const std::vector<Vec3>& positions);
+    ~NearestPoints();
+    NearestPoints(const NearestPoints&) = delete;
+    NearestPoints& operator=(const NearestPoints&) = delete;
+    // The k nearest positions to q (fewer when there are fewer), nearest first: their indices
+    // into idx[0..k) and squared distances into d2[0..k). Returns how many were found.
+    size_t find(Vec3 q, size_t k, uint32_t* idx, float* d2) const;
+
+  private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace vmap

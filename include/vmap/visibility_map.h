@@ -177,6 +177,17 @@ class VisibilityMap {
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
                          const std::string& source = "points");
 
+// For benchmarks (`vmap bench`, bench/bench.cpp), the backends of build_vmap apart from a build:
+// the CUDA backend's name as BuildStats::backend gives it ("cuda (NVIDIA H200, 132 SMs)") when
+// a usable device is present, else an empty string with the reason in *why.
+std::string cuda_backend_name(std::string* why = nullptr);
+// Leaf pairs per second the CPU backend decides with `vp` on a seeded sample of at least
+// `samples` of `tree`'s leaf pairs: blocks of 8 rows by 32 consecutive columns at uniform random
+// places above the diagonal of the leaf-by-leaf matrix, the access pattern of a build, so the
+// caches behave as they would (1e9 for a tree of fewer than 64 leaves: too small to sample).
+// Estimates a CPU build too long to run in full.
+double sampled_cpu_pair_rate(const Octree& tree, const VisibilityParams& vp, uint64_t samples);
+
 // The .vmap file (versioned binary with a checksum; io/vmap_file.cpp). save writes to a
 // temporary name and renames it; load throws vmap::Error for a missing, truncated, corrupt or
 // wrong-version file, naming the file and the section.

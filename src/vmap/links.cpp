@@ -3,13 +3,16 @@
 #include "vmap/map_access.h"
 
 #include <fmt/format.h>
+#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
 #include <bit>
+#include <cstdlib>
 #include <memory>
+#include <new>
 
 #include "vmap/error.h"
 
@@ -189,19 +192,21 @@ void scatter(const Buckets& bk, const std::vector<uint64_t>& off, const Spans& p
     });
 }
 
-// Sorts keys[0, n) by their low `bits` bits (LSD radix, digits of at most 11 bits; a digit the
-// same in every key is skipped), tmp as room; returns where the sorted keys are.
+// Sorts keys[0, n) by their low `bits` bits (LSD radix, as few passes of at most kDigit bits as
+// will do, with counts that stay in L1 for 2^13 digits; a digit the same in every key is
+// skipped), tmp as room; returns where the sorted keys are.
 uint32_t* radix_sort(uint32_t* keys, uint32_t* tmp, size_t n, int bits) {
-    const int passes = (bits + 10) / 11;
+    constexpr int kDigit = 13;
+    const int passes = (bits + kDigit - 1) / kDigit;
     if (passes == 0) return keys;
     const int digit = (bits + passes - 1) / passes;
     const uint32_t mask = (uint32_t(1) << digit) - 1;
-    std::array<size_t, 2048> cnt;
+    std::array<uint32_t, size_t(1) << kDigit> cnt;
     for (int shift = 0; shift < bits; shift += digit) {
         std::fill(cnt.begin(), cnt.begin() + mask + 1, 0);
         for (size_t i = 0; i < n; ++i) ++cnt[(keys[i] >> shift) & mask];
         if (cnt[(keys[0] >> shift) & mask] == n) continue;
-        size_t sum = 0;
+        uint32_t sum = 0;
         for (size_t d = 0; d <= mask; ++d) sum += std::exchange(cnt[d], sum);
         for (size_t i = 0; i < n; ++i) tmp[cnt[(keys[i] >> shift) & mask]++] = keys[i];
         std::swap(keys, tmp);
@@ -277,6 +282,26 @@ void LinkArrays::finish(VisibilityMap& vm, const Spans& pieces) {
     uint32_t* keys = reinterpret_cast<uint32_t*>(out);
     scatter(bk, off, pieces, keys);
     sort_buckets(bk, off, keys);
+}
+
+// 2 MiB aligned and advised as huge pages when large: the arrays' writers scatter over
+// gigabytes, where 4 KiB pages would cost a TLB miss and soon a page fault every few writes.
+// Only advice: without transparent huge pages the pages stay small, the bytes the same.
+int32_t* allocate_link_targets(MapData& d, size_t n) {
+    constexpr size_t kHuge = size_t(2) << 20;
+    const size_t bytes = n * sizeof(int32_t);
+    if (bytes < 4 * kHuge) {
+        d.link_targets = std::shared_ptr<int32_t[]>(new int32_t[n]);
+    } else {
+        const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
+        void* p = std::aligned_alloc(kHuge, size);
+        if (!p) throw std::bad_alloc();
+        madvise(p, size, MADV_HUGEPAGE);
+        d.link_targets =
+            std::shared_ptr<int32_t[]>(static_cast<int32_t*>(p), [](int32_t* q) { std::free(q); });
+    }
+    d.num_link_targets = n;
+    return d.link_targets.get();
 }
 
 std::vector<uint8_t> leafy_nodes(const Octree& t) {

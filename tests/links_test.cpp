@@ -133,5 +133,13 @@ TEST(LinkArrays, OutOfRangeAndSelfLinksAreRefused) {
     }
 }
 
+TEST(LinkArrays, FinishingOtherPiecesThanCountedIsAnError) {
+    const std::vector<Link> counted{{0, 1}, {2, 4}}, other{{0, 1}, {3, 4}, {1, 2}};
+    detail::LinkArrays la(5);
+    la.count({std::span<const Link>(counted)});
+    VisibilityMap vm;
+    EXPECT_THROW(la.finish(vm, {std::span<const Link>(other)}), Error);
+}
+
 }  // namespace
 }  // namespace vmap

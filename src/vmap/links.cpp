@@ -177,10 +177,14 @@ void scatter(const Buckets& bk, const std::vector<uint64_t>& off, const Spans& p
         for (auto sp : tasks[k])
             for (auto [a, b] : sp) ++c[bk.of[a]], ++c[bk.of[b]];
     });
+    std::atomic<bool> mismatch{false};
     tbb::parallel_for(size_t(0), nb, [&](size_t b) {
         uint64_t p = off[bk.first[b]];
         for (size_t k = 0; k < tasks.size(); ++k) p += std::exchange(cur[k * nb + b], p);
+        if (p != off[bk.first[b + 1]]) mismatch = true;
     });
+    // The ranges come from count(): other pieces would write outside them.
+    if (mismatch) throw Error("link arrays: the pieces finished are not the pieces counted");
     tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
         uint64_t* c = cur.data() + k * nb;
         for (auto sp : tasks[k])

@@ -14,17 +14,18 @@
 // scene: 3.3e7 links) or, on the GPU machine, `vmap build scenes/cornell-dragon.json --backend
 // cuda --max-height 10 --leaf-points 1 -o lp1.vmap` (4.6e8 links).
 #include <fmt/format.h>
+#include <sys/resource.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <charconv>
 #include <chrono>
 #include <cstdint>
 #include <cstring>
 #include <random>
-#include <sys/resource.h>
 #include <span>
 #include <string>
 #include <vector>
@@ -51,22 +52,36 @@ Options parse(int argc, char** argv) {
     Options o;
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
-        auto value = [&]() -> std::string {
-            if (i + 1 >= argc) throw vmap::Error(fmt::format("links_bench: {} needs a value", a));
-            return argv[++i];
+        auto value = [&]() -> uint64_t {
+            const char* v = i + 1 < argc ? argv[++i] : "";
+            uint64_t x = 0;
+            const auto [end, ec] = std::from_chars(v, v + std::strlen(v), x);
+            if (ec != std::errc() || *end || !*v)
+                throw vmap::Error(fmt::format("links_bench: {} needs a number, not '{}'", a, v));
+            return x;
         };
-        if (a == "--runs") o.runs = std::stoi(value());
-        else if (a == "--threads") o.threads = std::stoi(value());
-        else if (a == "--seed") o.seed = std::stoull(value());
-        else if (a == "--job-leaves") o.job_leaves = std::stoi(value());
-        else if (a == "--sinks") o.sinks = std::stoi(value());
-        else if (!a.empty() && a[0] != '-' && o.file.empty()) o.file = a;
-        else throw vmap::Error(fmt::format("links_bench: unknown argument '{}'", a));
+        if (a == "--runs")
+            o.runs = int(std::min<uint64_t>(value(), 1000000));
+        else if (a == "--threads")
+            o.threads = int(std::min<uint64_t>(value(), 65536));
+        else if (a == "--seed")
+            o.seed = value();
+        else if (a == "--job-leaves")
+            o.job_leaves = int32_t(std::min<uint64_t>(value(), 1 << 30));
+        else if (a == "--sinks")
+            o.sinks = int(std::min<uint64_t>(value(), 65536));
+        else if (!a.empty() && a[0] != '-' && o.file.empty())
+            o.file = a;
+        else
+            throw vmap::Error(fmt::format("links_bench: unknown argument '{}'", a));
     }
-    if (o.file.empty()) throw vmap::Error("links_bench: usage: links_bench FILE.vmap [--runs N] "
-                                          "[--threads T] [--seed S] [--job-leaves L] [--sinks S]");
+    if (o.file.empty())
+        throw vmap::Error(
+            "links_bench: usage: links_bench FILE.vmap [--runs N] "
+            "[--threads T] [--seed S] [--job-leaves L] [--sinks S]");
     if (o.runs < 1 || o.threads < 0 || o.job_leaves < 1 || o.sinks < 1)
-        throw vmap::Error("links_bench: --runs, --job-leaves and --sinks must be >= 1, --threads >= 0");
+        throw vmap::Error(
+            "links_bench: --runs, --job-leaves and --sinks must be >= 1, --threads >= 0");
     return o;
 }
 
@@ -155,9 +170,10 @@ int run(const Options& o) {
     std::vector<std::span<const Link>> spans(blocks.begin(), blocks.end());
     const int threads = o.threads ? o.threads : tbb::info::default_concurrency();
     const int32_t nodes = vm.octree().num_nodes();
-    fmt::print("{}: {} nodes, {} links ({} link ends, {:.2f} GB of targets), {} blocks, {} threads\n",
-               o.file, nodes, vm.num_links(), ref_targets.size(), ref_targets.size() * 4e-9,
-               blocks.size(), threads);
+    fmt::print(
+        "{}: {} nodes, {} links ({} link ends, {:.2f} GB of targets), {} blocks, {} threads\n",
+        o.file, nodes, vm.num_links(), ref_targets.size(), ref_targets.size() * 4e-9, blocks.size(),
+        threads);
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
     tbb::task_arena arena(threads);
     std::vector<double> tc, tf, tt, cpu;
@@ -183,12 +199,17 @@ int run(const Options& o) {
         tc.push_back(c), tf.push_back(f), tt.push_back(c + f), cpu.push_back(cpu1 - cpu0);
     }
     const Spread c = spread(tc), f = spread(tf), t = spread(tt), u = spread(cpu);
-    fmt::print("| threads | runs | count s | finish s (seconds_links) | count + finish s | links/s | CPU s |\n");
+    fmt::print(
+        "| threads | runs | count s | finish s (seconds_links) | count + finish s | links/s | CPU "
+        "s |\n");
     fmt::print("|---:|---:|---|---|---|---:|---:|\n");
-    fmt::print("| {} | {} | {:.3f} ({:.3f}..{:.3f}) | {:.3f} ({:.3f}..{:.3f}) | {:.3f} ({:.3f}..{:.3f}) | {:.3g} | {:.2f} |\n",
-               threads, o.runs, c.median, c.lo, c.hi, f.median, f.lo, f.hi, t.median, t.lo, t.hi,
-               double(vm.num_links()) / t.median, u.median);
-    fmt::print("{}\n", same ? "arrays byte-identical to the file's" : "ARRAYS DIFFER from the file's");
+    fmt::print(
+        "| {} | {} | {:.3f} ({:.3f}..{:.3f}) | {:.3f} ({:.3f}..{:.3f}) | {:.3f} ({:.3f}..{:.3f}) | "
+        "{:.3g} | {:.2f} |\n",
+        threads, o.runs, c.median, c.lo, c.hi, f.median, f.lo, f.hi, t.median, t.lo, t.hi,
+        double(vm.num_links()) / t.median, u.median);
+    fmt::print("{}\n",
+               same ? "arrays byte-identical to the file's" : "ARRAYS DIFFER from the file's");
     return same ? 0 : 1;
 }
 

@@ -1,6 +1,8 @@
 // The per-node link arrays (detail::LinkArrays, src/vmap/links.cpp) against a plain reference:
 // random link lists (no duplicates, either end first, in pieces of any size) must give each
 // node's targets sorted, at both ends, whatever the pieces, the order and the thread count.
+#include "vmap/links.h"
+
 #include <gtest/gtest.h>
 #include <tbb/task_arena.h>
 
@@ -12,7 +14,6 @@
 #include <vector>
 
 #include "vmap/error.h"
-#include "vmap/links.h"
 #include "vmap/map_access.h"
 #include "vmap/vmap.h"
 

@@ -170,7 +170,8 @@ void scatter(const Buckets& bk, const std::vector<uint64_t>& off, const Spans& p
              uint32_t* out) {
     const size_t nb = bk.size();
     const size_t cap = std::max<size_t>(1, (size_t(1) << 27) / std::max<size_t>(nb, 1));
-    const auto tasks = deal(pieces, std::min(cap, 4 * size_t(tbb::this_task_arena::max_concurrency())));
+    const auto tasks =
+        deal(pieces, std::min(cap, 4 * size_t(tbb::this_task_arena::max_concurrency())));
     std::vector<uint64_t> cur(tasks.size() * nb, 0);
     tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
         uint64_t* c = cur.data() + k * nb;
@@ -280,7 +281,7 @@ void LinkArrays::finish(VisibilityMap& vm, const Spans& pieces) {
     detail::MapData& d = detail::MapAccess::data(vm);
     d.link_offsets = degrees();
     const std::vector<uint64_t>& off = d.link_offsets;
-    int32_t* out = detail::allocate_link_targets(d, off.back());  // uninitialised: all written below
+    int32_t* out = detail::allocate_link_targets(d, off.back());  // uninitialised: written below
     const Buckets bk(off);
     // The keys live in the targets' own memory (a target is >= 0: its int32_t has the same bits).
     uint32_t* keys = reinterpret_cast<uint32_t*>(out);

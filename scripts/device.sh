@@ -28,6 +28,9 @@
 #                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
 #                  and per-bounce medians in $OUT/gi-throughput/gi-throughput.md
 #                  (bench/gi-throughput.sh: BACKEND, GT_POINTS, GT_RUNS, ... pass through)
+#        links     the per-node link arrays (bench/links_bench.cpp) from the cornell-dragon h10 V-map
+#                  at LINKS_LEAF_POINTS (default 1: 4.6e8 links), at LINKS_THREADS (default 16),
+#                  LINKS_RUNS runs (default 3); tables in $OUT/links.md
 #   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older
 #   commit), bundled as .device/bin/vmap-before for gi-throughput.
 #      Logs and tables go to $OUT.
@@ -307,6 +310,16 @@ if [[ "$cmd" == run ]]; then
                 grep -h "^mpi:\|^note:" "$OUT"/mpi-cpu-8.log "$OUT"/mpi-gpu-2-shared.log >> "$sum" || true
                 rm -f "$ref"
                 cat "$sum" ;;
+            links)
+                lp=${LINKS_LEAF_POINTS:-1}
+                "$bin/vmap" -v build scenes/cornell-dragon.json --backend cuda --max-height 10 \
+                    --leaf-points "$lp" -o /tmp/links.vmap > "$OUT/links-build.log" 2>&1 || rc=1
+                grep -E "^links:|link arrays" "$OUT/links-build.log" | tee -a "$OUT/links.md"
+                for th in ${LINKS_THREADS:-16}; do
+                    "$bin/links_bench" /tmp/links.vmap --threads "$th" --runs "${LINKS_RUNS:-3}" 2>&1 |
+                        tee -a "$OUT/links.md" || rc=1
+                done
+                rm -f /tmp/links.vmap ;;
             profile)
                 # Nsight Compute on one batch of the leaf-pair kernel (VARIANTS, default scene).
                 ncu=$(command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1 || true)
@@ -331,5 +344,5 @@ if [[ "$cmd" == run ]]; then
         tar czf logs.tgz -T - && find . -maxdepth 1 -type f \( -name '*.log' \) -delete)
     exit $rc
 fi
-echo "usage: scripts/device.sh bundle | run [gpu|sanitize|cpu|dragon|bench]..." >&2
+echo "usage: scripts/device.sh bundle | run [gpu|sanitize|cpu|dragon|bench|links|...]..." >&2
 exit 2

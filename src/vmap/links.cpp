@@ -3,10 +3,16 @@
 #include "vmap/map_access.h"
 
 #include <fmt/format.h>
+#include <sys/mman.h>
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <array>
+#include <bit>
+#include <cstdlib>
+#include <memory>
+#include <new>
 
 #include "vmap/error.h"
 
@@ -94,26 +100,160 @@ void Extractor::split(int32_t a, int32_t b) {
 }
 
 namespace {
-std::vector<std::span<const Link>> split_pieces(const std::vector<std::span<const Link>>& pieces) {
-    std::vector<std::span<const Link>> tasks;
+
+using Spans = std::vector<std::span<const Link>>;
+
+// Blocks of at most 2^20 links, for the degree count.
+Spans split_pieces(const Spans& pieces) {
+    Spans tasks;
     for (auto sp : pieces)
         for (size_t i = 0; i < sp.size(); i += (1u << 20))
             tasks.push_back(sp.subspan(i, std::min<size_t>(1u << 20, sp.size() - i)));
     return tasks;
 }
+
+// The links of the pieces cut into `parts` runs of about equal length, each a list of spans:
+// the scatter keeps a cursor per task and bucket, so it wants few tasks, not one per block.
+std::vector<Spans> deal(const Spans& pieces, size_t parts) {
+    size_t total = 0;
+    for (auto sp : pieces) total += sp.size();
+    const size_t each = std::max<size_t>(1, (total + parts - 1) / parts);
+    std::vector<Spans> tasks(1);
+    size_t room = each;
+    for (auto sp : pieces) {
+        while (!sp.empty()) {
+            if (room == 0) tasks.emplace_back(), room = each;
+            const size_t k = std::min(room, sp.size());
+            tasks.back().push_back(sp.first(k));
+            sp = sp.subspan(k);
+            room -= k;
+        }
+    }
+    return tasks;
+}
+
+// The nodes in runs (buckets) of at most kEnds link ends (a node with more is a bucket of its
+// own), so that one bucket's ends sort in a core's cache, and of at most 2^(32 - tb) nodes for
+// targets of tb bits, so that an end is one 32-bit key: (source in its bucket, target).
+struct Buckets {
+    static constexpr uint64_t kEnds = uint64_t(1) << 16;
+    int tb;                      // bits of a target
+    std::vector<uint32_t> of;    // per node, its bucket
+    std::vector<int32_t> first;  // per bucket, its first node; then the number of nodes
+    explicit Buckets(const std::vector<uint64_t>& offsets) : of(offsets.size() - 1) {
+        const int32_t nn = int32_t(of.size());
+        tb = std::bit_width(uint32_t(std::max(nn, 1) - 1));
+        const int64_t max_nodes = int64_t(1) << (32 - tb);
+        uint64_t ends = 0;
+        for (int32_t n = 0; n < nn; ++n) {
+            const uint64_t d = offsets[n + 1] - offsets[n];
+            if (first.empty() || n - first.back() == max_nodes || (ends > 0 && ends + d > kEnds)) {
+                first.push_back(n);
+                ends = 0;
+            }
+            of[n] = uint32_t(first.size() - 1);
+            ends += d;
+        }
+        first.push_back(nn);
+    }
+    size_t size() const { return first.size() - 1; }
+    uint32_t key(int32_t s, int32_t t, uint32_t b) const {
+        return (uint32_t(s - first[b]) << tb) | uint32_t(t);
+    }
+};
+
+// Every link end as its key into its source's bucket, a contiguous range of `out` (the bucket's
+// nodes' ranges). A first pass counts each task's ends per bucket, so that each task writes
+// sub-ranges of its own: no atomics, and a few streams per task rather than a random place per
+// end. The tasks are few (the cursors are tasks x buckets).
+void scatter(const Buckets& bk, const std::vector<uint64_t>& off, const Spans& pieces,
+             uint32_t* out) {
+    const size_t nb = bk.size();
+    const size_t cap = std::max<size_t>(1, (size_t(1) << 27) / std::max<size_t>(nb, 1));
+    const auto tasks =
+        deal(pieces, std::min(cap, 4 * size_t(tbb::this_task_arena::max_concurrency())));
+    std::vector<uint64_t> cur(tasks.size() * nb, 0);
+    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+        uint64_t* c = cur.data() + k * nb;
+        for (auto sp : tasks[k])
+            for (auto [a, b] : sp) ++c[bk.of[a]], ++c[bk.of[b]];
+    });
+    std::atomic<bool> mismatch{false};
+    tbb::parallel_for(size_t(0), nb, [&](size_t b) {
+        uint64_t p = off[bk.first[b]];
+        for (size_t k = 0; k < tasks.size(); ++k) p += std::exchange(cur[k * nb + b], p);
+        if (p != off[bk.first[b + 1]]) mismatch = true;
+    });
+    // The ranges come from count(): other pieces would write outside them.
+    if (mismatch) throw Error("link arrays: the pieces finished are not the pieces counted");
+    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+        uint64_t* c = cur.data() + k * nb;
+        for (auto sp : tasks[k])
+            for (auto [a, b] : sp) {
+                const uint32_t ba = bk.of[a], bb = bk.of[b];
+                out[c[ba]++] = bk.key(a, b, ba);
+                out[c[bb]++] = bk.key(b, a, bb);
+            }
+    });
+}
+
+// Sorts keys[0, n) by their low `bits` bits (LSD radix, as few passes of at most kDigit bits as
+// will do, with counts that stay in L1 for 2^13 digits; a digit the same in every key is
+// skipped), tmp as room; returns where the sorted keys are.
+uint32_t* radix_sort(uint32_t* keys, uint32_t* tmp, size_t n, int bits) {
+    constexpr int kDigit = 13;
+    const int passes = (bits + kDigit - 1) / kDigit;
+    if (passes == 0) return keys;
+    const int digit = (bits + passes - 1) / passes;
+    const uint32_t mask = (uint32_t(1) << digit) - 1;
+    std::array<uint32_t, size_t(1) << kDigit> cnt;
+    for (int shift = 0; shift < bits; shift += digit) {
+        std::fill(cnt.begin(), cnt.begin() + mask + 1, 0);
+        for (size_t i = 0; i < n; ++i) ++cnt[(keys[i] >> shift) & mask];
+        if (cnt[(keys[0] >> shift) & mask] == n) continue;
+        uint32_t sum = 0;
+        for (size_t d = 0; d <= mask; ++d) sum += std::exchange(cnt[d], sum);
+        for (size_t i = 0; i < n; ++i) tmp[cnt[(keys[i] >> shift) & mask]++] = keys[i];
+        std::swap(keys, tmp);
+    }
+    return keys;
+}
+
+// Each bucket's keys sorted (by source in the bucket, then target) and the targets written
+// back: each node's range then holds its targets, sorted.
+void sort_buckets(const Buckets& bk, const std::vector<uint64_t>& off, uint32_t* out) {
+    tbb::enumerable_thread_specific<std::vector<uint32_t>> scratch;
+    const uint32_t tmask = (uint64_t(1) << bk.tb) - 1;
+    tbb::parallel_for(size_t(0), bk.size(), [&](size_t b) {
+        uint32_t* k = out + off[bk.first[b]];
+        const size_t n = off[bk.first[b + 1]] - off[bk.first[b]];
+        uint32_t* sorted = k;
+        if (n <= 64) {
+            std::sort(k, k + n);
+        } else {
+            std::vector<uint32_t>& tmp = scratch.local();
+            if (tmp.size() < n) tmp.resize(n);
+            const int lb = std::bit_width(uint32_t(bk.first[b + 1] - bk.first[b] - 1));
+            sorted = radix_sort(k, tmp.data(), n, bk.tb + lb);
+        }
+        for (size_t i = 0; i < n; ++i) k[i] = sorted[i] & tmask;
+    });
+}
+
 }  // namespace
 
-void LinkArrays::count(const std::vector<std::span<const Link>>& pieces) {
+void LinkArrays::count(const Spans& pieces) {
     const auto tasks = split_pieces(pieces);
     std::atomic<bool> bad{false};
     tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
+        std::vector<uint32_t>& ends = ends_.local();
+        if (ends.empty()) ends.assign(size_t(nn_), 0);
         for (auto [a, b] : tasks[k]) {
             if (a < 0 || b < 0 || a >= nn_ || b >= nn_ || a == b) {
                 bad = true;
                 return;
             }
-            std::atomic_ref<uint64_t>(deg_[a + 1]).fetch_add(1, std::memory_order_relaxed);
-            std::atomic_ref<uint64_t>(deg_[b + 1]).fetch_add(1, std::memory_order_relaxed);
+            ++ends[a], ++ends[b];
         }
     });
     if (bad)
@@ -121,22 +261,52 @@ void LinkArrays::count(const std::vector<std::span<const Link>>& pieces) {
             fmt::format("a link is out of range ({} nodes) or joins a node to itself", nn_));
 }
 
-void LinkArrays::finish(VisibilityMap& vm, const std::vector<std::span<const Link>>& pieces) {
-    std::vector<uint64_t>& deg = deg_;
-    for (int32_t n = 0; n < nn_; ++n) deg[n + 1] += deg[n];
-    detail::MapData& d = detail::MapAccess::data(vm);
-    d.link_offsets = deg;
-    int32_t* out = detail::allocate_link_targets(d, deg.back());  // uninitialised: all written below
-    std::vector<uint64_t> fill(deg.begin(), deg.end() - 1);
-    const auto tasks = split_pieces(pieces);
-    tbb::parallel_for(size_t(0), tasks.size(), [&](size_t k) {
-        for (auto [a, b] : tasks[k]) {
-            out[std::atomic_ref<uint64_t>(fill[a]).fetch_add(1, std::memory_order_relaxed)] = b;
-            out[std::atomic_ref<uint64_t>(fill[b]).fetch_add(1, std::memory_order_relaxed)] = a;
-        }
+std::vector<uint64_t> LinkArrays::degrees() {
+    std::vector<const uint32_t*> per_thread;
+    for (const auto& e : ends_)
+        if (!e.empty()) per_thread.push_back(e.data());
+    std::vector<uint64_t> off(size_t(nn_) + 1, 0);
+    tbb::parallel_for(tbb::blocked_range<int32_t>(0, nn_, 4096), [&](auto r) {
+        for (const uint32_t* e : per_thread)
+            for (int32_t n = r.begin(); n < r.end(); ++n) off[n + 1] += e[n];
     });
-    tbb::parallel_for(int32_t(0), nn_,
-                      [&](int32_t n) { std::sort(out + deg[n], out + deg[n + 1]); });
+    for (int32_t n = 0; n < nn_; ++n) off[n + 1] += off[n];
+    return off;
+}
+
+// Bucketed: every end goes into its source's bucket (a contiguous range of the output), then
+// each bucket is sorted in cache. The result is each node's targets, sorted, whatever the
+// order of the links and of the passes.
+void LinkArrays::finish(VisibilityMap& vm, const Spans& pieces) {
+    detail::MapData& d = detail::MapAccess::data(vm);
+    d.link_offsets = degrees();
+    const std::vector<uint64_t>& off = d.link_offsets;
+    int32_t* out = detail::allocate_link_targets(d, off.back());  // uninitialised: written below
+    const Buckets bk(off);
+    // The keys live in the targets' own memory (a target is >= 0: its int32_t has the same bits).
+    uint32_t* keys = reinterpret_cast<uint32_t*>(out);
+    scatter(bk, off, pieces, keys);
+    sort_buckets(bk, off, keys);
+}
+
+// 2 MiB aligned and advised as huge pages when large: the arrays' writers scatter over
+// gigabytes, where 4 KiB pages would cost a TLB miss and soon a page fault every few writes.
+// Only advice: without transparent huge pages the pages stay small, the bytes the same.
+int32_t* allocate_link_targets(MapData& d, size_t n) {
+    constexpr size_t kHuge = size_t(2) << 20;
+    const size_t bytes = n * sizeof(int32_t);
+    if (bytes < 4 * kHuge) {
+        d.link_targets = std::shared_ptr<int32_t[]>(new int32_t[n]);
+    } else {
+        const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
+        void* p = std::aligned_alloc(kHuge, size);
+        if (!p) throw std::bad_alloc();
+        madvise(p, size, MADV_HUGEPAGE);
+        d.link_targets =
+            std::shared_ptr<int32_t[]>(static_cast<int32_t*>(p), [](int32_t* q) { std::free(q); });
+    }
+    d.num_link_targets = n;
+    return d.link_targets.get();
 }
 
 std::vector<uint8_t> leafy_nodes(const Octree& t) {

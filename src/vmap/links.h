@@ -58,12 +58,13 @@ struct Extractor {
     void split(int32_t a, int32_t b);
 };
 
-// Both-direction compact arrays from pieces of links, in parallel: count ends per node
-// (relaxed atomics; the builder counts each piece's links while the backend works on the next),
-// then scatter, then sort each node's targets (so the result does not depend on the order).
+// Both-direction compact arrays from pieces of links, in parallel: count ends per node (per
+// thread, no atomics; the builder counts each piece's links while the backend works on the
+// next), then put every end into a bucket of nodes and sort each bucket in cache (so the result,
+// each node's targets sorted, does not depend on the order of the links or the threads).
 class LinkArrays {
   public:
-    explicit LinkArrays(int32_t nodes) : nn_(nodes), deg_(size_t(nodes) + 1, 0) {}
+    explicit LinkArrays(int32_t nodes) : nn_(nodes) {}
     // Throws vmap::Error for a link out of range or joining a node to itself.
     void count(const std::vector<std::span<const Link>>& pieces);
     // The arrays of vm from every piece counted.
@@ -71,7 +72,9 @@ class LinkArrays {
 
   private:
     int32_t nn_;
-    std::vector<uint64_t> deg_;  // 64-bit: a million leaves can mean over 2^32 link ends
+    // Per thread, link ends per node (32 bits: a node has at most one link to each other node).
+    tbb::enumerable_thread_specific<std::vector<uint32_t>> ends_;
+    std::vector<uint64_t> degrees();  // per node + 1, ends before it (summed over threads)
 };
 
 // The pairs a node pair (a, b) splits into (DESIGN.md "The V-map": both internal, their

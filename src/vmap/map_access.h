@@ -19,11 +19,8 @@ struct MapAccess {
 using MapData = std::remove_reference_t<decltype(MapAccess::data(std::declval<VisibilityMap&>()))>;
 
 // Sizes the link targets to n, uninitialised (the caller writes every slot), and returns them.
-inline int32_t* allocate_link_targets(MapData& d, size_t n) {
-    d.link_targets = std::shared_ptr<int32_t[]>(new int32_t[n]);
-    d.num_link_targets = n;
-    return d.link_targets.get();
-}
+// Large ones are advised as transparent huge pages (src/vmap/links.cpp).
+int32_t* allocate_link_targets(MapData& d, size_t n);
 
 // Sets the inverse permutation from d.order.
 inline void set_inverse(MapData& d) {

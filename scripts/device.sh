@@ -28,7 +28,7 @@
 #                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
 #                  and per-bounce medians in $OUT/gi-throughput/gi-throughput.md
 #                  (bench/gi-throughput.sh: BACKEND, GT_POINTS, GT_RUNS, ... pass through)
-#        links     the per-node link arrays (bench/links_bench.cpp) from the cornell-dragon h10 V-map
+#        links     the per-node link arrays (bench/internal/links_bench.cpp) from the cornell-dragon h10 V-map
 #                  at LINKS_LEAF_POINTS (default 1: 4.6e8 links), at LINKS_THREADS (default 16),
 #                  LINKS_RUNS runs (default 3); tables in $OUT/links.md
 #   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older

@@ -148,9 +148,8 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
     if (!o.count_links) fmt::print("wrote:      {}\n", o.output);
 }
 
-// Checks what can be checked before any work, reads the input (vmap/input.h) and completes
-// the build parameters from it.
-PointSet prepare_build(BuildOptions& o, std::string& what) {
+// Checks what can be checked before any work, and the build parameters the input does not set.
+void check_build(BuildOptions& o) {
     InputOptions& in = o.input;
     if (in.path.empty()) in.path = default_scene_path();
     if (o.output.empty()) o.output = fs::path(in.path).stem().string() + ".vmap";
@@ -162,36 +161,45 @@ PointSet prepare_build(BuildOptions& o, std::string& what) {
         throw UsageError("--shards: one file per rank, under mpirun only");
     if (!o.count_links) check_output(o.output, "-o", {in.path});
     in.cloud = cloud_options(o);
-    Input input = load_input(in);
+    o.params.progress = stderr_progress();
+    o.params.keep_links = !o.count_links;
+}
+
+// Reads the input (vmap/input.h) and completes bp from it (o.params too).
+PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
+    Input input = load_input(o.input);
     print_notes(input.notes);
     for (const std::string& line : input.done) fmt::print(stderr, "vmap build: {}\n", line);
     what = input.description;
-    BuildParams& bp = o.params;
-    bp.octree = input.octree;
-    warn_if_long(in.path, input.points.size(), bp.octree);
-    bp.progress = stderr_progress();
-    bp.keep_links = !o.count_links;
+    bp.octree = o.params.octree = input.octree;
+    warn_if_long(o.input.path, input.points.size(), bp.octree);
     return std::move(input.points);
 }
 
 int run_build(BuildOptions& o) {
     std::string what;
-    PointSet pts = prepare_build(o, what);
-    const BuildParams& bp = o.params;
+    check_build(o);
     BuildStats st;
-    const size_t npts = pts.size();
+    size_t npts = 0;
     VisibilityMap vm;
     double save_s = 0;
     std::vector<std::string> ranks;
     if (mpi::launched()) {  // mpirun -np N vmap build: the ranks share the work, rank 0 reports
-        mpi::Result r = mpi::build(std::move(pts), bp,
+        auto read = [&](BuildParams& bp) {
+            PointSet pts = read_build_input(o, bp, what);
+            npts = pts.size();
+            return pts;
+        };
+        mpi::Result r = mpi::build(read, o.params,
                                    {o.output, o.shards, o.count_links, o.schedule, threads()},
                                    o.input.path);
         if (!r.root) return r.exit_code;
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
         ranks = std::move(r.summary);
     } else {
-        vm = build_vmap(std::move(pts), bp, &st, o.input.path);
+        PointSet pts = read_build_input(o, o.params, what);
+        npts = pts.size();
+        vm = build_vmap(std::move(pts), o.params, &st, o.input.path);
         const auto ts = std::chrono::steady_clock::now();
         if (!o.count_links) save_vmap(o.output, vm);
         save_s = seconds_since(ts);

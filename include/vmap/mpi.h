@@ -14,7 +14,9 @@
 // independent single-process builds, as before.
 #pragma once
 
+#include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "vmap/vmap.h"
@@ -39,10 +41,19 @@ struct Result {
     BuildStats stats;   // summed over the ranks (times: the slowest rank's)
     double save_seconds = 0;
     std::vector<std::string> summary;  // lines about the ranks, for the build summary
+    // Rank 0: the slowest rank's seconds in each phase, in order: start (the process's start
+    // to MPI_Init done), input, probe octree, job list, construction, settle, exchange (links
+    // to the owners of their ends), gather (to rank 0), save.
+    std::vector<std::pair<std::string, double>> phases;
 };
 
-// The shared build: every rank calls it with its own reading of the same input. Rank 0 throws
+// A rank's reading of the input: the points, with the build parameters completed (the
+// octree's). Run after MPI starts: its failure on one rank ends the job like any other.
+using ReadInput = std::function<PointSet(BuildParams&)>;
+
+// The shared build: every rank calls it, each reading the same input itself. Rank 0 throws
 // vmap::Error with the failing rank's message; the others return exit_code 1.
-Result build(PointSet points, BuildParams params, const Options& opt, const std::string& source);
+Result build(const ReadInput& read, BuildParams params, const Options& opt,
+             const std::string& source);
 
 }  // namespace vmap::mpi

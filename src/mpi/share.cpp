@@ -7,6 +7,8 @@
 #include <unordered_set>
 #include <utility>
 
+#include "vmap/build_parts.h"
+#include "vmap/map_access.h"
 #include "vmap/parallel.h"
 
 namespace vmap::mpi {
@@ -18,25 +20,21 @@ constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
 
 VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks, TopPairs& tp,
                     BuildStats& stats, const std::string& source) {
-    BuildParams p = params;
-    p.progress = nullptr;
-    p.top_pairs = [&](const Octree& t) {
-        tp = make_top_pairs_for(t, ranks);
-        return std::vector<NodePair>{};
-    };
-    return build_vmap(points, p, &stats, source);
+    VisibilityMap vm = detail::build_octree(points, params, stats, source);
+    tp = make_top_pairs_for(vm.octree(), ranks);
+    return vm;
 }
 
-void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+void build_round(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out) {
     bool given = false;
-    build_rounds(points, params, tp,
+    build_rounds(base, params, tp,
                  [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep, source,
                  out);
 }
 
-void build_rounds(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                   const std::function<const std::vector<uint32_t>*()>& next, bool keep,
                   const std::string& source, ShareResult& out) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -54,7 +52,8 @@ void build_rounds(const PointSet& points, const BuildParams& params, const TopPa
         return job_pairs(tp, *jobs);
     };
     BuildStats st;
-    const VisibilityMap vm = build_vmap(points, p, &st, source);
+    base = detail::build_links(std::move(base), p, &st, source);
+    const VisibilityMap& vm = base;
     out.full.resize(tp.pairs.size(), 0);
     for (uint32_t j : done) {
         const auto l = vm.links(tp.pairs[j].a);
@@ -79,6 +78,10 @@ void build_rounds(const PointSet& points, const BuildParams& params, const TopPa
         out.stats.peak_device_bytes = std::max(out.stats.peak_device_bytes, st.peak_device_bytes);
     }
     out.rounds += chunks;
+    detail::MapData& d = detail::MapAccess::data(base);  // back to the probe's map: no links
+    d.link_offsets.clear();
+    d.link_targets.reset();
+    d.num_link_targets = 0;
     out.seconds += seconds_since(t0);
 }
 

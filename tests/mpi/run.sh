@@ -81,7 +81,7 @@ printf '{"name": "bad", "meshes": [{"file": 3}]}' > "$tmp/bad.json"
 out="$tmp/bad.vmap"
 check "bad input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build ${bunny[*]} \
     -o '$out' : -np 1 '$vmap' build '$tmp/bad.json' -q -o '$out' 2> '$tmp/err' &&
-    grep -q 'bad.json: meshes\[0\].file' '$tmp/err'"
+    grep -q 'rank 1 of 2: .*bad.json: meshes\[0\].file' '$tmp/err'"
 check "bad input: no output" no_output "$out"
 check "differing input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build \
     ${bunny[*]} -o '$out' : -np 1 '$vmap' build ${bunny[*]} --seed 7 -o '$out' 2> '$tmp/err' &&

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
+#include <unordered_map>
 #include <unordered_set>
 #include <utility>
 
@@ -15,6 +16,29 @@ namespace vmap::mpi {
 namespace {
 
 constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
+
+// Which of `jobs` came back fully visible: their own single link is among `links`.
+void mark_full(const TopPairs& tp, const std::vector<uint32_t>& jobs,
+               const std::vector<NodePair>& links, std::vector<uint8_t>& full) {
+    auto key = [](int32_t a, int32_t b) {
+        if (a > b) std::swap(a, b);
+        return uint64_t(uint32_t(a)) << 32 | uint32_t(b);
+    };
+    std::unordered_map<uint64_t, uint32_t> job_of;
+    std::vector<uint8_t> is_end;  // per node: an end of one of the jobs (a cheap filter)
+    for (uint32_t j : jobs) {
+        const TopPair& q = tp.pairs[j];
+        job_of.emplace(key(q.a, q.b), j);
+        const size_t hi = size_t(std::max(q.a, q.b)) + 1;
+        if (is_end.size() < hi) is_end.resize(hi, 0);
+        is_end[size_t(q.a)] = is_end[size_t(q.b)] = 1;
+    }
+    full.resize(tp.pairs.size(), 0);
+    auto end = [&](int32_t n) { return size_t(n) < is_end.size() && is_end[size_t(n)]; };
+    for (const auto& [a, b] : links)
+        if (end(a) && end(b))
+            if (auto it = job_of.find(key(a, b)); it != job_of.end()) full[it->second] = 1;
+}
 
 }  // namespace
 
@@ -52,20 +76,19 @@ void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs
         return job_pairs(tp, *jobs);
     };
     BuildStats st;
-    base = detail::build_links(std::move(base), p, &st, source);
-    const VisibilityMap& vm = base;
-    out.full.resize(tp.pairs.size(), 0);
-    for (uint32_t j : done) {
-        const auto l = vm.links(tp.pairs[j].a);
-        out.full[j] = std::binary_search(l.begin(), l.end(), tp.pairs[j].b);
+    std::vector<NodePair> raw;
+    base = detail::build_links(std::move(base), p, &st, source, &raw);
+    mark_full(tp, done, raw, out.full);
+    out.links_counted += raw.size();
+    if (keep) {
+        for (auto& [a, b] : raw)
+            if (a > b) std::swap(a, b);
+        if (out.links.empty())
+            out.links = std::move(raw);
+        else
+            out.links.insert(out.links.end(), raw.begin(), raw.end());
     }
-    const Octree& t = vm.octree();
-    for (int32_t n = 0; n < t.num_nodes(); ++n)
-        for (int32_t m : vm.links(n))
-            if (m > n) {
-                ++out.links_counted;
-                if (keep) out.links.emplace_back(n, m);
-            }
+    const Octree& t = base.octree();
     const size_t levels = size_t(t.height()) + 1, leaves = size_t(t.num_leaves());
     if (out.rounds == 0) {
         out.stats = st;
@@ -78,10 +101,6 @@ void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs
         out.stats.peak_device_bytes = std::max(out.stats.peak_device_bytes, st.peak_device_bytes);
     }
     out.rounds += chunks;
-    detail::MapData& d = detail::MapAccess::data(base);  // back to the probe's map: no links
-    d.link_offsets.clear();
-    d.link_targets.reset();
-    d.num_link_targets = 0;
     out.seconds += seconds_since(t0);
 }
 
@@ -136,23 +155,27 @@ void add_counters(BuildStats& st, const std::vector<uint64_t>& c, size_t levels,
 }
 
 LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1) {
-    // Each end in range as one 64-bit key (node, target): sorting the keys sorts by node, then
-    // by target, which is the arrays' order.
-    std::vector<uint64_t> keys;
-    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
-    for (const auto& [a, b] : links) {
-        if (in(a)) keys.push_back(uint64_t(uint32_t(a)) << 32 | uint32_t(b));
-        if (in(b)) keys.push_back(uint64_t(uint32_t(b)) << 32 | uint32_t(a));
-    }
-    parallel_sort(keys.begin(), keys.end());
+    // Each end in range counted per node, placed at its node's cursor, then each node's
+    // targets sorted: the arrays' order, as a sort of (node, target) keys gives it.
     LinkRange r;
     r.n0 = n0, r.n1 = n1;
     r.offsets.assign(size_t(n1 - n0) + 1, 0);
-    r.targets.resize(keys.size());
-    parallel_for(size_t(0), keys.size(),
-                 [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
-    for (uint64_t k : keys) r.offsets[size_t(int32_t(k >> 32) - n0) + 1]++;
+    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
+    for (const auto& [a, b] : links) {
+        if (in(a)) r.offsets[size_t(a - n0) + 1]++;
+        if (in(b)) r.offsets[size_t(b - n0) + 1]++;
+    }
     for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
+    r.targets.resize(r.offsets.back());
+    std::vector<uint64_t> at(r.offsets.begin(), r.offsets.end() - 1);
+    for (const auto& [a, b] : links) {
+        if (in(a)) r.targets[at[size_t(a - n0)]++] = b;
+        if (in(b)) r.targets[at[size_t(b - n0)]++] = a;
+    }
+    parallel_for(size_t(0), size_t(n1 - n0), [&](size_t i) {
+        std::sort(r.targets.begin() + ptrdiff_t(r.offsets[i]),
+                  r.targets.begin() + ptrdiff_t(r.offsets[i + 1]));
+    });
     return r;
 }
 

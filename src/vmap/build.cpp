@@ -146,9 +146,13 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
 
 // The per-node link arrays from every link made (or only their number).
 void links_step(VisibilityMap& vm, detail::Frontier& fr, const BuildParams& params,
-                BuildStats& st) {
+                BuildStats& st, std::vector<detail::Link>* raw) {
     const auto tl = Clock::now();
-    if (params.keep_links) {
+    if (params.keep_links && raw) {  // the links as made, no arrays (build_parts.h)
+        for (const auto& p : fr.pieces) raw->insert(raw->end(), p.begin(), p.end());
+        detail::MapAccess::data(vm).link_offsets.clear();
+        st.links = raw->size();
+    } else if (params.keep_links) {
         std::vector<std::span<const detail::Link>> spans;
         for (const auto& p : fr.pieces) spans.emplace_back(p);
         fr.arrays.finish(vm, spans);
@@ -162,11 +166,12 @@ void links_step(VisibilityMap& vm, detail::Frontier& fr, const BuildParams& para
 
 // The construction over the points and octree of vm (octree_step's), from t0 (the build's start).
 VisibilityMap links_in_arena(VisibilityMap vm, const BuildParams& params, BuildStats& st,
-                             const std::string& source, Clock::time_point t0) {
+                             const std::string& source, Clock::time_point t0,
+                             std::vector<detail::Link>* raw = nullptr) {
     const auto t1 = Clock::now();
     NodeTests nt;
     std::unique_ptr<detail::Frontier> fr = frontier_step(vm.octree(), params, source, st, nt);
-    links_step(vm, *fr, params, st);
+    links_step(vm, *fr, params, st, raw);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
     if (!params.top_pairs) detail::check_facing(st);  // a share cannot judge the whole
@@ -205,11 +210,12 @@ VisibilityMap build_octree(PointSet points, const BuildParams& params, BuildStat
 }
 
 VisibilityMap build_links(VisibilityMap base, const BuildParams& params, BuildStats* stats,
-                          const std::string& source) {
+                          const std::string& source, std::vector<Link>* raw) {
     params.check(source);
     return in_arena(params, [&] {
         BuildStats st;
-        VisibilityMap vm = links_in_arena(std::move(base), params, st, source, Clock::now());
+        VisibilityMap vm =
+            links_in_arena(std::move(base), params, st, source, Clock::now(), raw);
         if (stats) *stats = std::move(st);
         return vm;
     });

@@ -236,17 +236,17 @@ double process_age() {
 
 // CPU threads for this rank: as asked, else the host's cores shared by its ranks (within the
 // cores mpirun bound the rank to).
-int threads_for(const Comm& c, int requested, std::string& note) {
+int threads_for(int rank, int local_size, int requested, std::string& note) {
     const int hw = std::max(1u, std::thread::hardware_concurrency());
     cpu_set_t set;
     const int bound = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : hw;
     if (requested > 0) return requested;
-    const int share = std::max(1, hw / c.local_size);
+    const int share = std::max(1, hw / std::max(1, local_size));
     if (bound < share)
         note = fmt::format(
             "mpirun bound rank {} to {} cores of the {} its share would be: it runs {} threads "
             "(mpirun --bind-to none, or --map-by slot:PE={}, gives it its share)",
-            c.rank, bound, share, bound, share);
+            rank, bound, share, bound, share);
     return std::min(share, bound);
 }
 
@@ -535,7 +535,7 @@ ProgressCallback whole_job_progress(ProgressCallback inner, int ranks) {
 
 // Threads, device and progress of this rank.
 void configure(Run& r) {
-    r.threads = threads_for(r.c, r.opt.threads, r.note);
+    r.threads = threads_for(r.c.rank, r.c.local_size, r.opt.threads, r.note);
     r.params.threads = r.threads;
     if (r.params.device < 0 && r.params.backend != Backend::kCpu) {
         const int gpus = detail::cuda_device_count();
@@ -556,18 +556,55 @@ void configure(Run& r) {
     }
 }
 
-// Input, octree and job list (every rank the same; checked), each phase agreed.
-std::string prepare(Run& r, const ReadInput& read, Phases& ph) {
-    PointSet points;
-    std::string err = r.c.agree(attempt([&] { points = read(r.params); }));
-    ph.lap(kInput);
-    if (err.empty())
-        err = r.c.agree(attempt([&] {
-            configure(r);
-            r.vm = detail::build_octree(std::move(points), r.params, r.probe_stats, r.source);
-        }));
+// What a rank does before it needs the others, on a thread of its own while MPI starts
+// (MPI_Init waits on every rank): it reads the input and builds the octree. Its failure is
+// agreed once MPI is up (prepare).
+struct Early {
+    BuildParams params;
+    VisibilityMap vm;
+    BuildStats stats;
+    std::string err;
+    double input_s = 0, octree_s = 0;
+    std::thread thread;
+    Early(const ReadInput& read, BuildParams p, const Options& opt, const std::string& source)
+        : params(std::move(p)) {
+        auto env = [](const char* name) {
+            const char* v = std::getenv(name);
+            return v ? std::atoi(v) : 0;
+        };
+        std::string note;  // configure() gives it, with MPI's figures
+        params.threads = threads_for(env("OMPI_COMM_WORLD_RANK"),
+                                     env("OMPI_COMM_WORLD_LOCAL_SIZE"), opt.threads, note);
+        thread = std::thread([this, &read, &source] {
+            err = attempt([&] {
+                auto t = Clock::now();
+                PointSet points = read(params);
+                input_s = seconds_since(t);
+                t = Clock::now();
+                vm = detail::build_octree(std::move(points), params, stats, source);
+                octree_s = seconds_since(t);
+            });
+        });
+    }
+    ~Early() {
+        if (thread.joinable()) thread.join();
+    }
+};
+
+// The input and octree (every rank the same; checked) and the job list, each phase agreed.
+std::string prepare(Run& r, Early& e, Phases& ph) {
+    e.thread.join();
+    std::string err = r.c.agree(e.err);
+    if (err.empty()) {
+        r.params = std::move(e.params);
+        r.vm = std::move(e.vm);
+        r.probe_stats = std::move(e.stats);
+        err = r.c.agree(attempt([&] { configure(r); }));
+    }
     if (err.empty()) err = check_same_input(r.c, r.vm);
-    ph.lap(kProbe);
+    ph.s[kInput] = e.input_s;
+    ph.s[kProbe] = e.octree_s;
+    ph.lap(kProbe);  // with the wait for the thread and the checks
     if (!err.empty()) return err;
     r.tp = make_top_pairs_for(r.vm.octree(), r.c.size);
     r.parts = r.schedule == "static" ? static_shares(r.tp, r.c.size)
@@ -595,10 +632,11 @@ bool launched() { return std::getenv("OMPI_COMM_WORLD_SIZE") || std::getenv("PMI
 Result build(const ReadInput& read, BuildParams params, const Options& opt,
              const std::string& source) {
     const auto t0 = Clock::now();
+    Early e(read, std::move(params), opt, source);
     Comm c;
     Phases ph;
     ph.s[kStart] = process_age();
-    Run r(c, opt, std::move(params), source);
+    Run r(c, opt, BuildParams{}, source);
     Result res;
     res.root = c.rank == 0;
     auto fail = [&](const std::string& e) {
@@ -606,7 +644,7 @@ Result build(const ReadInput& read, BuildParams params, const Options& opt,
         res.exit_code = 1;
         return std::move(res);
     };
-    std::string err = prepare(r, read, ph);
+    std::string err = prepare(r, e, ph);
     if (err.empty()) err = c.agree(r.schedule == "static" ? run_static(r) : run_dynamic(r));
     ph.lap(kConstruction);
     if (!err.empty()) return fail(err);

@@ -23,6 +23,7 @@ Result build(const ReadInput&, BuildParams, const Options&, const std::string&) 
 #include <time.h>
 #include <unistd.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -99,6 +100,14 @@ std::string attempt(F&& f) {
     } catch (const std::exception& e) {
         return e.what();
     }
+}
+
+// f() in an arena of n threads (the rank's: apps/main.cpp sets no process-wide limit under
+// mpirun, so that rank 0's save may use more).
+template <class F>
+auto in_arena(int n, F&& f) {
+    tbb::task_arena arena(std::max(1, n));
+    return arena.execute(f);
 }
 
 // Large buffers in messages of at most kChunkBytes, with a partner that does the same.
@@ -388,6 +397,8 @@ BuildStats reduce_stats(Run& r) {
     if (r.c.rank != 0) return st;
     add_counters(st, sum, levels, leaves);
     if (!r.share.stats.construction.empty()) st.construction = r.share.stats.construction;
+    st.backend = r.share.stats.backend;  // the probe built the octree only
+    if (st.note.empty()) st.note = r.share.stats.note;
     st.seconds_plan = st.seconds_decide = t_max[0], st.seconds_wait = t_max[1];
     st.seconds_backend = t_max[2], st.seconds_extract = t_max[3], st.seconds_links = t_max[4];
     st.peak_device_bytes = uint64_t(t_max[5]);
@@ -413,8 +424,11 @@ std::string write_single(Run& r, LinkRange& range, Phases& ph) {
     gather_ranges(r.c, range, r.vm, r.gathered);
     range = LinkRange{};
     ph.lap(kGather);
+    // The other ranks of this host only wait now (a core each, polling): rank 0 takes the rest.
+    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+    const int cores = std::max(r.threads, hw - (r.c.local_size - 1));
     return r.c.agree(attempt([&] {
-        if (r.c.rank == 0) save_vmap(r.opt.output, r.vm);
+        if (r.c.rank == 0) in_arena(cores, [&] { save_vmap(r.opt.output, r.vm); });
     }));
 }
 
@@ -578,7 +592,7 @@ struct Early {
         thread = std::thread([this, &read, &source] {
             err = attempt([&] {
                 auto t = Clock::now();
-                PointSet points = read(params);
+                PointSet points = in_arena(params.threads, [&] { return read(params); });
                 input_s = seconds_since(t);
                 t = Clock::now();
                 vm = detail::build_octree(std::move(points), params, stats, source);
@@ -601,7 +615,7 @@ std::string prepare(Run& r, Early& e, Phases& ph) {
         r.probe_stats = std::move(e.stats);
         err = r.c.agree(attempt([&] { configure(r); }));
     }
-    if (err.empty()) err = check_same_input(r.c, r.vm);
+    if (err.empty()) err = in_arena(r.threads, [&] { return check_same_input(r.c, r.vm); });
     ph.s[kInput] = e.input_s;
     ph.s[kProbe] = e.octree_s;
     ph.lap(kProbe);  // with the wait for the thread and the checks
@@ -618,9 +632,11 @@ std::string prepare(Run& r, Early& e, Phases& ph) {
 std::string output(Run& r, Phases& ph) {
     LinkRange range;
     std::vector<int32_t> bounds;
-    std::string err = own_range(r, range, bounds);
+    std::string err = in_arena(r.threads, [&] { return own_range(r, range, bounds); });
     ph.lap(kExchange);
-    if (err.empty()) err = r.opt.shards ? write_shards(r, range) : write_single(r, range, ph);
+    if (err.empty())
+        err = r.opt.shards ? in_arena(r.threads, [&] { return write_shards(r, range); })
+                           : write_single(r, range, ph);
     ph.lap(kSave);
     return err;
 }

@@ -5,7 +5,6 @@
 #include <chrono>
 #include <functional>
 #include <unordered_map>
-#include <unordered_set>
 #include <utility>
 
 #include "vmap/build_parts.h"
@@ -17,27 +16,48 @@ namespace {
 
 constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
 
+// Some top pairs, to be found among links by their nodes (either order): a per-node filter
+// first, since most links touch none of their nodes.
+class PairIndex {
+  public:
+    PairIndex(const TopPairs& tp, const std::vector<uint8_t>& pick) {
+        for (size_t i = 0; i < pick.size(); ++i)
+            if (pick[i]) add(tp.pairs[i], uint32_t(i));
+    }
+    PairIndex(const TopPairs& tp, const std::vector<uint32_t>& pick) {
+        for (uint32_t i : pick) add(tp.pairs[i], i);
+    }
+    bool empty() const { return of_.empty(); }
+    // The index of the top pair with nodes a and b, or -1.
+    int64_t find(int32_t a, int32_t b) const {
+        if (!end(a) || !end(b)) return -1;
+        const auto it = of_.find(key(a, b));
+        return it == of_.end() ? -1 : int64_t(it->second);
+    }
+
+  private:
+    static uint64_t key(int32_t a, int32_t b) {
+        if (a > b) std::swap(a, b);
+        return uint64_t(uint32_t(a)) << 32 | uint32_t(b);
+    }
+    bool end(int32_t n) const { return size_t(n) < end_.size() && end_[size_t(n)]; }
+    void add(const TopPair& q, uint32_t i) {
+        of_.emplace(key(q.a, q.b), i);
+        const size_t hi = size_t(std::max(q.a, q.b)) + 1;
+        if (end_.size() < hi) end_.resize(hi, 0);
+        end_[size_t(q.a)] = end_[size_t(q.b)] = 1;
+    }
+    std::unordered_map<uint64_t, uint32_t> of_;
+    std::vector<uint8_t> end_;  // per node: an end of one of the pairs
+};
+
 // Which of `jobs` came back fully visible: their own single link is among `links`.
 void mark_full(const TopPairs& tp, const std::vector<uint32_t>& jobs,
                const std::vector<NodePair>& links, std::vector<uint8_t>& full) {
-    auto key = [](int32_t a, int32_t b) {
-        if (a > b) std::swap(a, b);
-        return uint64_t(uint32_t(a)) << 32 | uint32_t(b);
-    };
-    std::unordered_map<uint64_t, uint32_t> job_of;
-    std::vector<uint8_t> is_end;  // per node: an end of one of the jobs (a cheap filter)
-    for (uint32_t j : jobs) {
-        const TopPair& q = tp.pairs[j];
-        job_of.emplace(key(q.a, q.b), j);
-        const size_t hi = size_t(std::max(q.a, q.b)) + 1;
-        if (is_end.size() < hi) is_end.resize(hi, 0);
-        is_end[size_t(q.a)] = is_end[size_t(q.b)] = 1;
-    }
+    const PairIndex index(tp, jobs);
     full.resize(tp.pairs.size(), 0);
-    auto end = [&](int32_t n) { return size_t(n) < is_end.size() && is_end[size_t(n)]; };
     for (const auto& [a, b] : links)
-        if (end(a) && end(b))
-            if (auto it = job_of.find(key(a, b)); it != job_of.end()) full[it->second] = 1;
+        if (const int64_t i = index.find(a, b); i >= 0) full[size_t(i)] = 1;
 }
 
 }  // namespace
@@ -105,12 +125,9 @@ void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs
 }
 
 void drop_merged(const TopPairs& tp, const Merge& m, std::vector<NodePair>& links) {
-    std::unordered_set<uint64_t> gone;
-    auto key = [](int32_t a, int32_t b) { return uint64_t(uint32_t(a)) << 32 | uint32_t(b); };
-    for (size_t i = 0; i < m.drop.size(); ++i)
-        if (m.drop[i]) gone.insert(key(tp.pairs[i].a, tp.pairs[i].b));
+    const PairIndex gone(tp, m.drop);
     if (gone.empty()) return;
-    std::erase_if(links, [&](const NodePair& l) { return gone.count(key(l.first, l.second)); });
+    std::erase_if(links, [&](const NodePair& l) { return gone.find(l.first, l.second) >= 0; });
 }
 
 size_t counter_count(size_t levels, size_t leaves) {

@@ -298,7 +298,7 @@ if [[ "$cmd" == run ]]; then
                          for (p = 1; p <= 8; p *= 2) if (w[p] > 0)
                              printf "| %d | %.2f | %.2f | %.2f | %.2f |\n", p, w[1] / w[p], w[1] / w[p] / p, c[1] / c[p], c[1] / c[p] / p}' \
                     "$sum" >> "$sum.tail" && cat "$sum.tail" >> "$sum" && rm -f "$sum.tail"
-                { echo; echo "Phases, the slowest rank's seconds (src/mpi/mpi_build.cpp; input and probe octree run during start):"
+                { echo; echo "Phases, the slowest rank's seconds (src/mpi/mpi_build.cpp):"
                   cat "$sum.phases"; } >> "$sum" && rm -f "$sum.phases"
                 grep -h "^mpi:\|^note:" "$OUT"/mpi-cpu-8.log "$OUT"/mpi-gpu-2-shared.log >> "$sum" || true
                 rm -f "$ref"

@@ -42,8 +42,9 @@ struct Result {
     double save_seconds = 0;
     std::vector<std::string> summary;  // lines about the ranks, for the build summary
     // Rank 0: the slowest rank's seconds in each phase, in order: start (the process's start
-    // to MPI_Init done), input, probe octree, job list, construction, settle, exchange (links
-    // to the owners of their ends), gather (to rank 0), save.
+    // to MPI_Init done), input and octree (on a thread during start), probe (the rest of them
+    // after MPI_Init, and the input check), job list, construction, settle, exchange (links to
+    // the owners of their ends), gather (to rank 0), save.
     std::vector<std::pair<std::string, double>> phases;
 };
 

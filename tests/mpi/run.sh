@@ -74,7 +74,7 @@ check "progress names the ranks" bash -c "${mpi[*]} -np 2 '$vmap' build \
 check "summary: backend and phases" bash -c "${mpi[*]} -np 2 '$vmap' build \
     '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \
     -o '$tmp/p.vmap' > '$tmp/out' && grep -q '^backend: *cpu (' '$tmp/out' &&
-    grep -qE '^phases: .*start [0-9.]+, input [0-9.]+, .*construction [0-9.]+, .*save [0-9.]+$' '$tmp/out'"
+    grep -qE '^phases: .*start [0-9.]+ \\(.*input [0-9.]+, octree [0-9.]+\\), probe .*construction [0-9.]+, .*save [0-9.]+$' '$tmp/out'"
 
 # A shard missing or corrupt: one clear error naming it.
 rm -f "$tmp/sh-0.vmap.shard-1-of-3"

@@ -50,6 +50,7 @@ struct BuildOptions {
     bool json = false;
     bool shards = false;                // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
+    int chunks_per_rank = mpi::Options{}.chunks_per_rank;
     BuildParams params;
 };
 
@@ -191,7 +192,8 @@ int run_build(BuildOptions& o) {
             return pts;
         };
         mpi::Result r = mpi::build(read, o.params,
-                                   {o.output, o.shards, o.count_links, o.schedule, threads()},
+                                   {o.output, o.shards, o.count_links, o.schedule, threads(),
+                                    o.chunks_per_rank},
                                    o.input.path);
         if (!r.root) return r.exit_code;
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
@@ -274,6 +276,11 @@ Command add_build_command(CLI::App& app) {
                       "rank asks: balanced better, docs/scaling.md) or static (a share each by a "
                       "work estimate)")
         ->check(CLI::IsMember({"static", "dynamic"}))
+        ->capture_default_str();
+    build->add_option("--chunks-per-rank", bo->chunks_per_rank,
+                      "Under mpirun, dynamic schedule: chunks of jobs per rank (more balance "
+                      "better, each costs a message and a round; the same map at any number)")
+        ->check(CLI::Range(1, 4096))
         ->capture_default_str();
     return {
         build, [bo]() {

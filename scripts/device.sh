@@ -283,6 +283,7 @@ if [[ "$cmd" == run ]]; then
                 }
                 th=${MPI_THREADS:-2}
                 for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                for per in 32 64; do mrun "cpu-8-c$per" 8 "$th" cpu dynamic --chunks-per-rank "$per"; done
                 mrun cpu-8-static 8 "$th" cpu static
                 mrun cpu-4-static 4 "$th" cpu static
                 for np in 1 2 4; do mrun "cores-$np" "$np" $((16 / np)) cpu dynamic; done

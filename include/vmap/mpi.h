@@ -32,6 +32,7 @@ struct Options {
     bool count_links = false;         // count, write nothing (BuildParams::keep_links false)
     std::string schedule = "dynamic";  // dynamic | static (docs/scaling.md: dynamic balanced better)
     int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
+    int chunks_per_rank = 16;  // dynamic: chunks of jobs handed out, per rank (top_pairs.h)
 };
 
 struct Result {

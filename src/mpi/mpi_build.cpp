@@ -627,7 +627,7 @@ std::string prepare(Run& r, Early& e, Phases& ph) {
     if (!err.empty()) return err;
     r.tp = make_top_pairs_for(r.vm.octree(), r.c.size);
     r.parts = r.schedule == "static" ? static_shares(r.tp, r.c.size)
-                                     : dynamic_chunks(r.tp, r.c.size);
+                                     : dynamic_chunks(r.tp, r.c.size, r.opt.chunks_per_rank);
     r.chunks = int(r.parts.size());
     ph.lap(kJobs);
     return "";

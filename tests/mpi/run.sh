@@ -58,6 +58,14 @@ for k in "${!scenes[@]}"; do
         check "scene $k: np $np $sched byte-identical" cmp "$one" "$out"
         rm -f "$out"
     done
+    if [[ $k -eq 0 ]]; then  # the dynamic schedule's chunks, few or many: the same file
+        for per in 1 40; do
+            check "scene 0: np 2, $per chunks a rank, byte-identical" bash -c "${mpi[*]} -np 2 \
+                '$vmap' -q build ${args[*]} --backend cpu --chunks-per-rank $per -o '$tmp/c.vmap' &&
+                cmp '$one' '$tmp/c.vmap'"
+            rm -f "$tmp/c.vmap"
+        done
+    fi
     check "scene $k: np 3 shards" "${mpi[@]}" -np 3 "$vmap" -q build "${args[@]}" --backend cpu \
         --shards -o "$tmp/sh-$k.vmap"
     check "scene $k: shards read back equal" "$equal" "$one" "$tmp/sh-$k.vmap"

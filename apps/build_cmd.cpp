@@ -51,6 +51,7 @@ struct BuildOptions {
     bool shards = false;                // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
     float delta_floor = OctreeParams::kDefaultDeltaFloor;
+    int chunks_per_rank = mpi::Options{}.chunks_per_rank;
     BuildParams params;
 };
 
@@ -149,9 +150,8 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
     if (!o.count_links) fmt::print("wrote:      {}\n", o.output);
 }
 
-// Checks what can be checked before any work, reads the input (vmap/input.h) and completes
-// the build parameters from it.
-PointSet prepare_build(BuildOptions& o, std::string& what) {
+// Checks what can be checked before any work, and the build parameters the input does not set.
+void check_build(BuildOptions& o) {
     InputOptions& in = o.input;
     if (in.path.empty()) in.path = default_scene_path();
     if (o.output.empty()) o.output = fs::path(in.path).stem().string() + ".vmap";
@@ -163,37 +163,48 @@ PointSet prepare_build(BuildOptions& o, std::string& what) {
         throw UsageError("--shards: one file per rank, under mpirun only");
     if (!o.count_links) check_output(o.output, "-o", {in.path});
     in.cloud = cloud_options(o);
-    Input input = load_input(in);
+    o.params.progress = stderr_progress();
+    o.params.keep_links = !o.count_links;
+}
+
+// Reads the input (vmap/input.h) and completes bp from it (o.params too).
+PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
+    Input input = load_input(o.input);
     print_notes(input.notes);
     for (const std::string& line : input.done) fmt::print(stderr, "vmap build: {}\n", line);
     what = input.description;
-    BuildParams& bp = o.params;
     bp.octree = input.octree;
     bp.octree.delta_floor = o.delta_floor;
-    warn_if_long(in.path, input.points.size(), bp.octree);
-    bp.progress = stderr_progress();
-    bp.keep_links = !o.count_links;
+    o.params.octree = bp.octree;
+    warn_if_long(o.input.path, input.points.size(), bp.octree);
     return std::move(input.points);
 }
 
 int run_build(BuildOptions& o) {
     std::string what;
-    PointSet pts = prepare_build(o, what);
-    const BuildParams& bp = o.params;
+    check_build(o);
     BuildStats st;
-    const size_t npts = pts.size();
+    size_t npts = 0;
     VisibilityMap vm;
     double save_s = 0;
     std::vector<std::string> ranks;
     if (mpi::launched()) {  // mpirun -np N vmap build: the ranks share the work, rank 0 reports
-        mpi::Result r = mpi::build(std::move(pts), bp,
-                                   {o.output, o.shards, o.count_links, o.schedule, threads()},
+        auto read = [&](BuildParams& bp) {
+            PointSet pts = read_build_input(o, bp, what);
+            npts = pts.size();
+            return pts;
+        };
+        mpi::Result r = mpi::build(read, o.params,
+                                   {o.output, o.shards, o.count_links, o.schedule, threads(),
+                                    o.chunks_per_rank},
                                    o.input.path);
         if (!r.root) return r.exit_code;
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
         ranks = std::move(r.summary);
     } else {
-        vm = build_vmap(std::move(pts), bp, &st, o.input.path);
+        PointSet pts = read_build_input(o, o.params, what);
+        npts = pts.size();
+        vm = build_vmap(std::move(pts), o.params, &st, o.input.path);
         const auto ts = std::chrono::steady_clock::now();
         if (!o.count_links) save_vmap(o.output, vm);
         save_s = seconds_since(ts);
@@ -269,6 +280,11 @@ Command add_build_command(CLI::App& app) {
                       "rank asks: balanced better, docs/scaling.md) or static (a share each by a "
                       "work estimate)")
         ->check(CLI::IsMember({"static", "dynamic"}))
+        ->capture_default_str();
+    build->add_option("--chunks-per-rank", bo->chunks_per_rank,
+                      "Under mpirun, dynamic schedule: chunks of jobs per rank (more balance "
+                      "better, each costs a message and a round; the same map at any number)")
+        ->check(CLI::Range(1, 4096))
         ->capture_default_str();
     return {
         build, [bo]() {

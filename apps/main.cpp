@@ -20,6 +20,7 @@
 
 #include "apps/commands.h"
 #include "vmap/error.h"
+#include "vmap/mpi.h"
 #include "vmap/version.h"
 
 namespace {
@@ -117,7 +118,10 @@ int main(int argc, char** argv) {
                        : verbose ? cli::Verbosity::kVerbose
                                  : cli::Verbosity::kNormal;
     std::unique_ptr<tbb::global_control> limit;
-    if (cli::threads() > 0)
+    // Under mpirun, vmap build gives each rank --threads itself (vmap/mpi.h), all but rank 0's
+    // save: that may use the cores the other ranks have finished with.
+    const bool per_rank = vmap::mpi::launched() && app.got_subcommand("build");
+    if (cli::threads() > 0 && !per_rank)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       cli::threads());
     for (const cli::Command& c : commands) {

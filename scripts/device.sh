@@ -288,10 +288,12 @@ if [[ "$cmd" == run ]]; then
                     else cmp -s "$ref" "$out" && same=yes; fi
                     [[ "$same" == NO ]] && rc=1
                     echo "| $label | $np | $th | $be | $sc | $wall | $cons | $imb | $same |" >> "$sum"
+                    sed -n "s/^phases: *slowest rank's s: /$label (wall $wall): /p" "$OUT/mpi-$label.log" >> "$sum.phases"
                     rm -f "$out"
                 }
                 th=${MPI_THREADS:-2}
                 for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                for per in 32 64; do mrun "cpu-8-c$per" 8 "$th" cpu dynamic --chunks-per-rank "$per"; done
                 mrun cpu-8-static 8 "$th" cpu static
                 mrun cpu-4-static 4 "$th" cpu static
                 for np in 1 2 4; do mrun "cores-$np" "$np" $((16 / np)) cpu dynamic; done
@@ -307,6 +309,8 @@ if [[ "$cmd" == run ]]; then
                          for (p = 1; p <= 8; p *= 2) if (w[p] > 0)
                              printf "| %d | %.2f | %.2f | %.2f | %.2f |\n", p, w[1] / w[p], w[1] / w[p] / p, c[1] / c[p], c[1] / c[p] / p}' \
                     "$sum" >> "$sum.tail" && cat "$sum.tail" >> "$sum" && rm -f "$sum.tail"
+                { echo; echo "Phases, the slowest rank's seconds (src/mpi/mpi_build.cpp):"
+                  cat "$sum.phases"; } >> "$sum" && rm -f "$sum.phases"
                 grep -h "^mpi:\|^note:" "$OUT"/mpi-cpu-8.log "$OUT"/mpi-gpu-2-shared.log >> "$sum" || true
                 rm -f "$ref"
                 cat "$sum" ;;

@@ -9,7 +9,9 @@
 #include "mpi/shard_file.h"
 #include "mpi/share.h"
 #include "mpi/top_pairs.h"
+#include "test_files.h"
 #include "test_util.h"
+#include "vmap/build_parts.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -43,7 +45,7 @@ std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, i
         if (guided) {
             size_t next = k;
             mpi::build_rounds(
-                pts, bp, tp,
+                vm, bp, tp,
                 [&]() -> const std::vector<uint32_t>* {
                     if (next >= parts.size()) return nullptr;
                     next += procs;
@@ -52,7 +54,7 @@ std::vector<NodePair> shared_links(const PointSet& pts, const BuildParams& bp, i
                 true, "test", got[k]);
             EXPECT_EQ(got[k].rounds, int((parts.size() - k + procs - 1) / procs));
         } else {
-            mpi::build_round(pts, bp, tp, parts[k], true, "test", got[k]);
+            mpi::build_round(vm, bp, tp, parts[k], true, "test", got[k]);
         }
         for (size_t i = 0; i < full.size(); ++i)
             full[i] |= got[k].full.size() > i && got[k].full[i];
@@ -138,6 +140,40 @@ TEST(MpiSplit, SimulatedRanksGiveTheSingleProcessMap) {
     }
 }
 
+// The MPI build builds the octree once (the probe) and resolves its share over it
+// (build_links): the saved file is byte for byte build_vmap's, on points without radii (the
+// probe estimates them) too, and the rounds give the probe's map back as it was, no links.
+TEST(MpiSplit, TheProbesOctreeReusedGivesTheSameFile) {
+    PointSet pts = test::sample(test::scene_path("cornell-bunny"), 1200);
+    pts.radii.clear();
+    const BuildParams bp = test::cpu_params(6, 1);
+    test::ScratchDir dir;
+    save_vmap(dir.path("a.vmap"), build_vmap(pts, bp));
+    BuildStats st;
+    VisibilityMap base = detail::build_octree(pts, bp, st, "test");
+    EXPECT_FALSE(base.has_links());
+    EXPECT_GT(st.seconds_octree, 0);
+    const std::vector<float> radii = base.points().radii;
+    ASSERT_EQ(radii.size(), pts.size());
+    save_vmap(dir.path("b.vmap"), detail::build_links(base, bp, nullptr, "test"));
+    EXPECT_EQ(test::slurp(dir.path("a.vmap")), test::slurp(dir.path("b.vmap")));
+
+    mpi::TopPairs tp;
+    VisibilityMap vm = mpi::probe(pts, bp, 2, tp, st, "test");
+    mpi::ShareResult got;
+    mpi::build_round(vm, bp, tp, tp.jobs, true, "test", got);
+    EXPECT_FALSE(vm.has_links());
+    EXPECT_EQ(vm.points().radii, radii);
+    EXPECT_EQ(vm.octree().num_nodes(), base.octree().num_nodes());
+    const mpi::Merge m = mpi::merge_full(tp, got.full);
+    std::vector<NodePair> links = m.add;
+    mpi::drop_merged(tp, m, got.links);
+    links.insert(links.end(), got.links.begin(), got.links.end());
+    set_links(vm, std::move(links));
+    save_vmap(dir.path("c.vmap"), vm);
+    EXPECT_EQ(test::slurp(dir.path("a.vmap")), test::slurp(dir.path("c.vmap")));
+}
+
 // A rank of the dynamic schedule resolves every chunk it is handed in one build; an empty
 // chunk (more bins than jobs) must not end its rounds, or the chunks after it would be lost.
 TEST(MpiSplit, EmptyChunksDoNotEndARanksRounds) {
@@ -152,7 +188,7 @@ TEST(MpiSplit, EmptyChunksDoNotEndARanksRounds) {
     size_t next = 0;
     mpi::ShareResult got;
     mpi::build_rounds(
-        pts, bp, tp,
+        vm, bp, tp,
         [&]() -> const std::vector<uint32_t>* {
             return next < chunks.size() ? &chunks[next++] : nullptr;
         },

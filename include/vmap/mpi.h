@@ -14,7 +14,9 @@
 // independent single-process builds, as before.
 #pragma once
 
+#include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "vmap/vmap.h"
@@ -30,6 +32,7 @@ struct Options {
     bool count_links = false;         // count, write nothing (BuildParams::keep_links false)
     std::string schedule = "dynamic";  // dynamic | static (docs/scaling.md: dynamic balanced better)
     int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
+    int chunks_per_rank = 16;  // dynamic: chunks of jobs handed out, per rank (top_pairs.h)
 };
 
 struct Result {
@@ -39,10 +42,20 @@ struct Result {
     BuildStats stats;   // summed over the ranks (times: the slowest rank's)
     double save_seconds = 0;
     std::vector<std::string> summary;  // lines about the ranks, for the build summary
+    // Rank 0: the slowest rank's seconds in each phase, in order: start (the process's start
+    // to MPI_Init done), input and octree (on a thread during start), probe (the rest of them
+    // after MPI_Init, and the input check), job list, construction, settle, exchange (links to
+    // the owners of their ends), gather (to rank 0), save.
+    std::vector<std::pair<std::string, double>> phases;
 };
 
-// The shared build: every rank calls it with its own reading of the same input. Rank 0 throws
+// A rank's reading of the input: the points, with the build parameters completed (the
+// octree's). Run after MPI starts: its failure on one rank ends the job like any other.
+using ReadInput = std::function<PointSet(BuildParams&)>;
+
+// The shared build: every rank calls it, each reading the same input itself. Rank 0 throws
 // vmap::Error with the failing rank's message; the others return exit_code 1.
-Result build(PointSet points, BuildParams params, const Options& opt, const std::string& source);
+Result build(const ReadInput& read, BuildParams params, const Options& opt,
+             const std::string& source);
 
 }  // namespace vmap::mpi

@@ -10,7 +10,7 @@
 
 namespace vmap::mpi {
 bool launched() { return false; }
-Result build(PointSet, BuildParams, const Options&, const std::string&) {
+Result build(const ReadInput&, BuildParams, const Options&, const std::string&) {
     throw Error("this vmap was built without MPI (libopenmpi-dev was not found at build time)");
 }
 }  // namespace vmap::mpi
@@ -20,13 +20,18 @@ Result build(PointSet, BuildParams, const Options&, const std::string&) {
 #include <fmt/format.h>
 #include <mpi.h>
 #include <sched.h>
+#include <time.h>
+#include <unistd.h>
 #include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <sstream>
 #include <memory>
 #include <numeric>
 #include <thread>
@@ -35,6 +40,7 @@ Result build(PointSet, BuildParams, const Options&, const std::string&) {
 #include "mpi/shard_file.h"
 #include "visibility/backend.h"
 #include "vmap/build_checks.h"
+#include "vmap/build_parts.h"
 
 namespace vmap::mpi {
 namespace {
@@ -94,6 +100,14 @@ std::string attempt(F&& f) {
     } catch (const std::exception& e) {
         return e.what();
     }
+}
+
+// f() in an arena of n threads (the rank's: apps/main.cpp sets no process-wide limit under
+// mpirun, so that rank 0's save may use more).
+template <class F>
+auto in_arena(int n, F&& f) {
+    tbb::task_arena arena(std::max(1, n));
+    return arena.execute(f);
 }
 
 // Large buffers in messages of at most kChunkBytes, with a partner that does the same.
@@ -179,32 +193,70 @@ struct Run {
     const Comm& c;
     const Options& opt;
     BuildParams params;
-    const PointSet& points;
     std::string source;
     VisibilityMap vm;  // the probe's: points and octree (rank 0 adds the links)
     BuildStats probe_stats;
     TopPairs tp;
     ShareResult share;
-    uint64_t links = 0, moved = 0;
+    uint64_t links = 0, moved = 0, gathered = 0;  // bytes sent: the exchange, the gather
     int threads = 0, chunks = 0;
     std::string schedule, note;
-    Run(const Comm& comm, const Options& o, BuildParams p, const PointSet& pts, std::string src)
-        : c(comm), opt(o), params(std::move(p)), points(pts), source(std::move(src)) {}
+    std::vector<std::vector<uint32_t>> parts;  // static: a share per rank; dynamic: the chunks
+    Run(const Comm& comm, const Options& o, BuildParams p, std::string src)
+        : c(comm), opt(o), params(std::move(p)), source(std::move(src)) {}
 };
+
+// This rank's seconds in each phase of the build, in order; Result::phases gets the slowest
+// rank's of each. Input and octree run on a thread during start (Early); probe is what is left
+// of them after MPI_Init, with the agreement and the input check.
+enum PhaseId { kStart, kInput, kOctree, kProbe, kJobs, kConstruction, kSettle, kExchange,
+               kGather, kSave, kPhases };
+constexpr const char* kPhaseNames[kPhases] = {
+    "start",        "input",  "octree",   "probe",  "job list",
+    "construction", "settle", "exchange", "gather", "save"};
+struct Phases {
+    double s[kPhases] = {};
+    Clock::time_point at = Clock::now();
+    void lap(PhaseId k) {
+        const auto now = Clock::now();
+        s[k] += std::chrono::duration<double>(now - at).count();
+        at = now;
+    }
+};
+
+// Seconds since this process started (Linux: its start time in /proc/self/stat against the
+// boot clock, to 1/100 s), 0 where that cannot be read.
+double process_age() {
+    std::ifstream in("/proc/self/stat");
+    std::string line;
+    std::getline(in, line);
+    const size_t close = line.rfind(')');
+    if (close == std::string::npos) return 0;
+    std::istringstream rest(line.substr(close + 2));
+    std::string field;
+    for (int k = 3; k <= 22 && rest >> field; ++k)  // field 22: starttime, in clock ticks
+        if (k == 22) {
+            timespec now{};
+            clock_gettime(CLOCK_BOOTTIME, &now);
+            const double started = std::stod(field) / double(sysconf(_SC_CLK_TCK));
+            return std::max(0.0, double(now.tv_sec) + now.tv_nsec * 1e-9 - started);
+        }
+    return 0;
+}
 
 // CPU threads for this rank: as asked, else the host's cores shared by its ranks (within the
 // cores mpirun bound the rank to).
-int threads_for(const Comm& c, int requested, std::string& note) {
+int threads_for(int rank, int local_size, int requested, std::string& note) {
     const int hw = std::max(1u, std::thread::hardware_concurrency());
     cpu_set_t set;
     const int bound = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : hw;
     if (requested > 0) return requested;
-    const int share = std::max(1, hw / c.local_size);
+    const int share = std::max(1, hw / std::max(1, local_size));
     if (bound < share)
         note = fmt::format(
             "mpirun bound rank {} to {} cores of the {} its share would be: it runs {} threads "
             "(mpirun --bind-to none, or --map-by slot:PE={}, gives it its share)",
-            c.rank, bound, share, bound, share);
+            rank, bound, share, bound, share);
     return std::min(share, bound);
 }
 
@@ -217,6 +269,7 @@ uint64_t input_hash(const VisibilityMap& vm) {
     const VisibilityParams& vp = vm.visibility_params();
     const std::vector<float> params{float(vm.octree_params().max_height),
                                     float(vm.octree_params().leaf_points),
+                                    vm.octree_params().delta_floor,
                                     float(vp.K),
                                     vp.eps,
                                     vp.facing_tol,
@@ -241,11 +294,9 @@ std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
 }
 
 std::string run_static(Run& r) {
-    const auto shares = static_shares(r.tp, r.c.size);
-    r.chunks = r.c.size;
     return attempt([&] {
-        build_round(r.points, r.params, r.tp, shares[r.c.rank], !r.opt.count_links, r.source,
-                    r.share);
+        build_round(r.vm, r.params, r.tp, r.parts[size_t(r.c.rank)], !r.opt.count_links,
+                    r.source, r.share);
     });
 }
 
@@ -274,13 +325,12 @@ void dispatch(const Comm& c, int chunks, std::atomic<int>& next, std::atomic<boo
 }
 
 std::string run_dynamic(Run& r) {
-    const auto chunks = dynamic_chunks(r.tp, r.c.size);
-    r.chunks = int(chunks.size());
+    const auto& chunks = r.parts;
     const int n = r.chunks;
     // One build_vmap a rank: the chunks it is handed are resolved over one octree.
     auto rounds = [&](const std::function<int()>& take) {
         build_rounds(
-            r.points, r.params, r.tp,
+            r.vm, r.params, r.tp,
             [&]() -> const std::vector<uint32_t>* {
                 const int k = take();
                 return k < 0 ? nullptr : &chunks[size_t(k)];
@@ -349,6 +399,8 @@ BuildStats reduce_stats(Run& r) {
     if (r.c.rank != 0) return st;
     add_counters(st, sum, levels, leaves);
     if (!r.share.stats.construction.empty()) st.construction = r.share.stats.construction;
+    st.backend = r.share.stats.backend;  // the probe built the octree only
+    if (st.note.empty()) st.note = r.share.stats.note;
     st.seconds_plan = st.seconds_decide = t_max[0], st.seconds_wait = t_max[1];
     st.seconds_backend = t_max[2], st.seconds_extract = t_max[3], st.seconds_links = t_max[4];
     st.peak_device_bytes = uint64_t(t_max[5]);
@@ -370,11 +422,15 @@ std::string own_range(Run& r, LinkRange& range, std::vector<int32_t>& bounds) {
         attempt([&] { range = link_range(got, bounds[r.c.rank], bounds[r.c.rank + 1]); }));
 }
 
-std::string write_single(Run& r, LinkRange& range) {
-    gather_ranges(r.c, range, r.vm, r.moved);
+std::string write_single(Run& r, LinkRange& range, Phases& ph) {
+    gather_ranges(r.c, range, r.vm, r.gathered);
     range = LinkRange{};
+    ph.lap(kGather);
+    // The other ranks of this host only wait now (a core each, polling): rank 0 takes the rest.
+    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+    const int cores = std::max(r.threads, hw - (r.c.local_size - 1));
     return r.c.agree(attempt([&] {
-        if (r.c.rank == 0) save_vmap(r.opt.output, r.vm);
+        if (r.c.rank == 0) in_arena(cores, [&] { save_vmap(r.opt.output, r.vm); });
     }));
 }
 
@@ -419,18 +475,48 @@ std::string write_shards(Run& r, const LinkRange& range) {
     return err;
 }
 
-// Per-rank construction times and rounds, gathered into lines for rank 0's summary.
-std::vector<std::string> summary(const Run& r, double output_s) {
-    const double mine[3] = {r.share.seconds, double(r.share.rounds), double(r.c.local_rank == 0)};
-    std::vector<double> all(size_t(r.c.size) * 3);
-    MPI_Gather(mine, 3, MPI_DOUBLE, all.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
-    if (r.c.rank != 0) return {};
-    double lo = 1e300, hi = 0, sum = 0, rlo = 1e300, rhi = 0, hosts = 0;
-    for (int k = 0; k < r.c.size; ++k) {
-        const double s = all[3 * k], n = all[3 * k + 1];
-        lo = std::min(lo, s), hi = std::max(hi, s), sum += s;
-        rlo = std::min(rlo, n), rhi = std::max(rhi, n), hosts += all[3 * k + 2];
+// The slowest rank's seconds of each phase, on rank 0 (named as in kPhaseNames).
+std::vector<std::pair<std::string, double>> slowest_phases(const Comm& c, const Phases& ph) {
+    double hi[kPhases] = {};
+    MPI_Reduce(ph.s, hi, kPhases, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
+    std::vector<std::pair<std::string, double>> out;
+    if (c.rank == 0)
+        for (int k = 0; k < kPhases; ++k) out.emplace_back(kPhaseNames[k], hi[k]);
+    return out;
+}
+
+// The phases line of the summary: the slowest rank's seconds, bytes where bytes move.
+std::string phases_line(const Run& r, const std::vector<std::pair<std::string, double>>& ph) {
+    std::string line = "phases:     slowest rank's s:";
+    for (size_t k = 0; k < ph.size(); ++k) {
+        if (k == kInput || k == kOctree) continue;
+        line += fmt::format("{} {} {:.3f}", k ? "," : "", ph[k].first, ph[k].second);
+        if (k == kStart)
+            line += fmt::format(" (meanwhile on a thread: input {:.3f}, octree {:.3f})",
+                                ph[kInput].second, ph[kOctree].second);
+        if (k == kExchange) line += fmt::format(" ({:.1f} MiB)", double(r.moved) / 1048576.0);
+        if (k == kGather) line += fmt::format(" ({:.1f} MiB)", double(r.gathered) / 1048576.0);
     }
+    return line;
+}
+
+// Per-rank construction times and rounds, gathered into lines for rank 0's summary.
+std::vector<std::string> summary(Run& r, double output_s,
+                                 const std::vector<std::pair<std::string, double>>& ph) {
+    constexpr int kN = 5;
+    const double mine[kN] = {r.share.seconds, double(r.share.rounds),
+                             double(r.c.local_rank == 0), double(r.moved), double(r.gathered)};
+    std::vector<double> all(size_t(r.c.size) * kN);
+    MPI_Gather(mine, kN, MPI_DOUBLE, all.data(), kN, MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    if (r.c.rank != 0) return {};
+    double lo = 1e300, hi = 0, sum = 0, rlo = 1e300, rhi = 0, hosts = 0, moved = 0, gathered = 0;
+    for (int k = 0; k < r.c.size; ++k) {
+        const double* x = all.data() + kN * k;
+        lo = std::min(lo, x[0]), hi = std::max(hi, x[0]), sum += x[0];
+        rlo = std::min(rlo, x[1]), rhi = std::max(rhi, x[1]), hosts += x[2];
+        moved += x[3], gathered += x[4];
+    }
+    r.moved = uint64_t(moved), r.gathered = uint64_t(gathered);  // every rank's
     const double mean = sum / r.c.size;
     std::vector<std::string> lines{
         fmt::format("mpi:        {} ranks on {} host(s), {} threads each{}, schedule {} ({} "
@@ -442,8 +528,9 @@ std::vector<std::string> summary(const Run& r, double output_s) {
                     "mean {:.3f}), {}-{} rounds",
                     lo, hi, mean, hi / std::max(1e-9, mean), int(rlo), int(rhi)),
         fmt::format("            links moved between ranks {:.1f} MiB; output {:.3f} s{}",
-                    double(r.moved) / 1048576.0, output_s,
-                    r.opt.shards ? fmt::format(" ({} shards + index)", r.c.size) : "")};
+                    double(r.moved + r.gathered) / 1048576.0, output_s,
+                    r.opt.shards ? fmt::format(" ({} shards + index)", r.c.size) : ""),
+        phases_line(r, ph)};
     if (!r.note.empty()) lines.push_back("note:       " + r.note);
     return lines;
 }
@@ -468,7 +555,7 @@ ProgressCallback whole_job_progress(ProgressCallback inner, int ranks) {
 
 // Threads, device and progress of this rank.
 void configure(Run& r) {
-    r.threads = threads_for(r.c, r.opt.threads, r.note);
+    r.threads = threads_for(r.c.rank, r.c.local_size, r.opt.threads, r.note);
     r.params.threads = r.threads;
     if (r.params.device < 0 && r.params.backend != Backend::kCpu) {
         const int gpus = detail::cuda_device_count();
@@ -489,14 +576,89 @@ void configure(Run& r) {
     }
 }
 
+// What a rank does before it needs the others, on a thread of its own while MPI starts
+// (MPI_Init waits on every rank): it reads the input and builds the octree. Its failure is
+// agreed once MPI is up (prepare).
+struct Early {
+    BuildParams params;
+    VisibilityMap vm;
+    BuildStats stats;
+    std::string err;
+    double input_s = 0, octree_s = 0;
+    std::thread thread;
+    Early(const ReadInput& read, BuildParams p, const Options& opt, const std::string& source)
+        : params(std::move(p)) {
+        auto env = [](const char* name) {
+            const char* v = std::getenv(name);
+            return v ? std::atoi(v) : 0;
+        };
+        std::string note;  // configure() gives it, with MPI's figures
+        params.threads = threads_for(env("OMPI_COMM_WORLD_RANK"),
+                                     env("OMPI_COMM_WORLD_LOCAL_SIZE"), opt.threads, note);
+        thread = std::thread([this, &read, &source] {
+            err = attempt([&] {
+                auto t = Clock::now();
+                PointSet points = in_arena(params.threads, [&] { return read(params); });
+                input_s = seconds_since(t);
+                t = Clock::now();
+                vm = detail::build_octree(std::move(points), params, stats, source);
+                octree_s = seconds_since(t);
+            });
+        });
+    }
+    ~Early() {
+        if (thread.joinable()) thread.join();
+    }
+};
+
+// The input and octree (every rank the same; checked) and the job list, each phase agreed.
+std::string prepare(Run& r, Early& e, Phases& ph) {
+    e.thread.join();
+    std::string err = r.c.agree(e.err);
+    if (err.empty()) {
+        r.params = std::move(e.params);
+        r.vm = std::move(e.vm);
+        r.probe_stats = std::move(e.stats);
+        err = r.c.agree(attempt([&] { configure(r); }));
+    }
+    if (err.empty()) err = in_arena(r.threads, [&] { return check_same_input(r.c, r.vm); });
+    ph.s[kInput] = e.input_s;
+    ph.s[kOctree] = e.octree_s;
+    ph.lap(kProbe);
+    if (!err.empty()) return err;
+    r.tp = make_top_pairs_for(r.vm.octree(), r.c.size);
+    r.parts = r.schedule == "static" ? static_shares(r.tp, r.c.size)
+                                     : dynamic_chunks(r.tp, r.c.size, r.opt.chunks_per_rank);
+    r.chunks = int(r.parts.size());
+    ph.lap(kJobs);
+    return "";
+}
+
+// The links to their owners, then to rank 0's file or to every rank's shard.
+std::string output(Run& r, Phases& ph) {
+    LinkRange range;
+    std::vector<int32_t> bounds;
+    std::string err = in_arena(r.threads, [&] { return own_range(r, range, bounds); });
+    ph.lap(kExchange);
+    if (err.empty())
+        err = r.opt.shards ? in_arena(r.threads, [&] { return write_shards(r, range); })
+                           : write_single(r, range, ph);
+    ph.lap(kSave);
+    return err;
+}
+
 }  // namespace
 
 bool launched() { return std::getenv("OMPI_COMM_WORLD_SIZE") || std::getenv("PMIX_RANK"); }
 
-Result build(PointSet points, BuildParams params, const Options& opt, const std::string& source) {
+Result build(const ReadInput& read, BuildParams params, const Options& opt,
+             const std::string& source) {
     const auto t0 = Clock::now();
+    Early e(read, std::move(params), opt, source);
     Comm c;
-    Run r(c, opt, std::move(params), points, source);
+    Phases ph;
+    ph.s[kStart] = process_age();
+    Run r(c, opt, BuildParams{}, source);
     Result res;
     res.root = c.rank == 0;
     auto fail = [&](const std::string& e) {
@@ -504,27 +666,20 @@ Result build(PointSet points, BuildParams params, const Options& opt, const std:
         res.exit_code = 1;
         return std::move(res);
     };
-    std::string err = c.agree(attempt([&] {
-        configure(r);
-        r.vm = probe(points, r.params, c.size, r.tp, r.probe_stats, source);
-    }));
-    if (err.empty()) err = check_same_input(c, r.vm);
+    std::string err = prepare(r, e, ph);
     if (err.empty()) err = c.agree(r.schedule == "static" ? run_static(r) : run_dynamic(r));
+    ph.lap(kConstruction);
     if (!err.empty()) return fail(err);
     settle(r);
     res.stats = reduce_stats(r);
+    ph.lap(kSettle);
     const auto tw = Clock::now();
-    if (!opt.count_links) {
-        LinkRange range;
-        std::vector<int32_t> bounds;
-        err = own_range(r, range, bounds);
-        if (err.empty()) err = opt.shards ? write_shards(r, range) : write_single(r, range);
-        if (!err.empty()) return fail(err);
-    }
+    if (!opt.count_links && !(err = output(r, ph)).empty()) return fail(err);
     res.save_seconds = seconds_since(tw);
-    res.summary = summary(r, res.save_seconds);
+    res.phases = slowest_phases(c, ph);
+    res.summary = summary(r, res.save_seconds, res.phases);
     if (c.rank != 0) return res;
-    res.stats.seconds_total = seconds_since(t0) - res.save_seconds;
+    res.stats.seconds_total = seconds_since(t0) - res.save_seconds - ph.s[kInput];
     res.stats.seconds_visibility = res.stats.seconds_total - res.stats.seconds_octree;
     if (opt.count_links || opt.shards) detail::MapAccess::data(r.vm).link_offsets.clear();
     res.vm = std::move(r.vm);

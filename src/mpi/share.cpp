@@ -4,9 +4,11 @@
 #include <algorithm>
 #include <chrono>
 #include <functional>
-#include <unordered_set>
+#include <unordered_map>
 #include <utility>
 
+#include "vmap/build_parts.h"
+#include "vmap/map_access.h"
 #include "vmap/parallel.h"
 
 namespace vmap::mpi {
@@ -14,29 +16,69 @@ namespace {
 
 constexpr size_t kWork = 6, kLevel = 9, kScalars = 4;
 
+// Some top pairs, to be found among links by their nodes (either order): a per-node filter
+// first, since most links touch none of their nodes.
+class PairIndex {
+  public:
+    PairIndex(const TopPairs& tp, const std::vector<uint8_t>& pick) {
+        for (size_t i = 0; i < pick.size(); ++i)
+            if (pick[i]) add(tp.pairs[i], uint32_t(i));
+    }
+    PairIndex(const TopPairs& tp, const std::vector<uint32_t>& pick) {
+        for (uint32_t i : pick) add(tp.pairs[i], i);
+    }
+    bool empty() const { return of_.empty(); }
+    // The index of the top pair with nodes a and b, or -1.
+    int64_t find(int32_t a, int32_t b) const {
+        if (!end(a) || !end(b)) return -1;
+        const auto it = of_.find(key(a, b));
+        return it == of_.end() ? -1 : int64_t(it->second);
+    }
+
+  private:
+    static uint64_t key(int32_t a, int32_t b) {
+        if (a > b) std::swap(a, b);
+        return uint64_t(uint32_t(a)) << 32 | uint32_t(b);
+    }
+    bool end(int32_t n) const { return size_t(n) < end_.size() && end_[size_t(n)]; }
+    void add(const TopPair& q, uint32_t i) {
+        of_.emplace(key(q.a, q.b), i);
+        const size_t hi = size_t(std::max(q.a, q.b)) + 1;
+        if (end_.size() < hi) end_.resize(hi, 0);
+        end_[size_t(q.a)] = end_[size_t(q.b)] = 1;
+    }
+    std::unordered_map<uint64_t, uint32_t> of_;
+    std::vector<uint8_t> end_;  // per node: an end of one of the pairs
+};
+
+// Which of `jobs` came back fully visible: their own single link is among `links`.
+void mark_full(const TopPairs& tp, const std::vector<uint32_t>& jobs,
+               const std::vector<NodePair>& links, std::vector<uint8_t>& full) {
+    const PairIndex index(tp, jobs);
+    full.resize(tp.pairs.size(), 0);
+    for (const auto& [a, b] : links)
+        if (const int64_t i = index.find(a, b); i >= 0) full[size_t(i)] = 1;
+}
+
 }  // namespace
 
 VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks, TopPairs& tp,
                     BuildStats& stats, const std::string& source) {
-    BuildParams p = params;
-    p.progress = nullptr;
-    p.top_pairs = [&](const Octree& t) {
-        tp = make_top_pairs_for(t, ranks);
-        return std::vector<NodePair>{};
-    };
-    return build_vmap(points, p, &stats, source);
+    VisibilityMap vm = detail::build_octree(points, params, stats, source);
+    tp = make_top_pairs_for(vm.octree(), ranks);
+    return vm;
 }
 
-void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+void build_round(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out) {
     bool given = false;
-    build_rounds(points, params, tp,
+    build_rounds(base, params, tp,
                  [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep, source,
                  out);
 }
 
-void build_rounds(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                   const std::function<const std::vector<uint32_t>*()>& next, bool keep,
                   const std::string& source, ShareResult& out) {
     const auto t0 = std::chrono::steady_clock::now();
@@ -54,19 +96,19 @@ void build_rounds(const PointSet& points, const BuildParams& params, const TopPa
         return job_pairs(tp, *jobs);
     };
     BuildStats st;
-    const VisibilityMap vm = build_vmap(points, p, &st, source);
-    out.full.resize(tp.pairs.size(), 0);
-    for (uint32_t j : done) {
-        const auto l = vm.links(tp.pairs[j].a);
-        out.full[j] = std::binary_search(l.begin(), l.end(), tp.pairs[j].b);
+    std::vector<NodePair> raw;
+    base = detail::build_links(std::move(base), p, &st, source, &raw);
+    mark_full(tp, done, raw, out.full);
+    out.links_counted += raw.size();
+    if (keep) {
+        for (auto& [a, b] : raw)
+            if (a > b) std::swap(a, b);
+        if (out.links.empty())
+            out.links = std::move(raw);
+        else
+            out.links.insert(out.links.end(), raw.begin(), raw.end());
     }
-    const Octree& t = vm.octree();
-    for (int32_t n = 0; n < t.num_nodes(); ++n)
-        for (int32_t m : vm.links(n))
-            if (m > n) {
-                ++out.links_counted;
-                if (keep) out.links.emplace_back(n, m);
-            }
+    const Octree& t = base.octree();
     const size_t levels = size_t(t.height()) + 1, leaves = size_t(t.num_leaves());
     if (out.rounds == 0) {
         out.stats = st;
@@ -83,12 +125,9 @@ void build_rounds(const PointSet& points, const BuildParams& params, const TopPa
 }
 
 void drop_merged(const TopPairs& tp, const Merge& m, std::vector<NodePair>& links) {
-    std::unordered_set<uint64_t> gone;
-    auto key = [](int32_t a, int32_t b) { return uint64_t(uint32_t(a)) << 32 | uint32_t(b); };
-    for (size_t i = 0; i < m.drop.size(); ++i)
-        if (m.drop[i]) gone.insert(key(tp.pairs[i].a, tp.pairs[i].b));
+    const PairIndex gone(tp, m.drop);
     if (gone.empty()) return;
-    std::erase_if(links, [&](const NodePair& l) { return gone.count(key(l.first, l.second)); });
+    std::erase_if(links, [&](const NodePair& l) { return gone.find(l.first, l.second) >= 0; });
 }
 
 size_t counter_count(size_t levels, size_t leaves) {
@@ -133,23 +172,27 @@ void add_counters(BuildStats& st, const std::vector<uint64_t>& c, size_t levels,
 }
 
 LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1) {
-    // Each end in range as one 64-bit key (node, target): sorting the keys sorts by node, then
-    // by target, which is the arrays' order.
-    std::vector<uint64_t> keys;
-    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
-    for (const auto& [a, b] : links) {
-        if (in(a)) keys.push_back(uint64_t(uint32_t(a)) << 32 | uint32_t(b));
-        if (in(b)) keys.push_back(uint64_t(uint32_t(b)) << 32 | uint32_t(a));
-    }
-    parallel_sort(keys.begin(), keys.end());
+    // Each end in range counted per node, placed at its node's cursor, then each node's
+    // targets sorted: the arrays' order, as a sort of (node, target) keys gives it.
     LinkRange r;
     r.n0 = n0, r.n1 = n1;
     r.offsets.assign(size_t(n1 - n0) + 1, 0);
-    r.targets.resize(keys.size());
-    parallel_for(size_t(0), keys.size(),
-                 [&](size_t i) { r.targets[i] = int32_t(uint32_t(keys[i])); });
-    for (uint64_t k : keys) r.offsets[size_t(int32_t(k >> 32) - n0) + 1]++;
+    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
+    for (const auto& [a, b] : links) {
+        if (in(a)) r.offsets[size_t(a - n0) + 1]++;
+        if (in(b)) r.offsets[size_t(b - n0) + 1]++;
+    }
     for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
+    r.targets.resize(r.offsets.back());
+    std::vector<uint64_t> at(r.offsets.begin(), r.offsets.end() - 1);
+    for (const auto& [a, b] : links) {
+        if (in(a)) r.targets[at[size_t(a - n0)]++] = b;
+        if (in(b)) r.targets[at[size_t(b - n0)]++] = a;
+    }
+    parallel_for(size_t(0), size_t(n1 - n0), [&](size_t i) {
+        std::sort(r.targets.begin() + ptrdiff_t(r.offsets[i]),
+                  r.targets.begin() + ptrdiff_t(r.offsets[i + 1]));
+    });
     return r;
 }
 

@@ -25,19 +25,20 @@ struct ShareResult {
     double seconds = 0;  // in build_vmap, all rounds
 };
 
-// The octree and points of the build (no links: the map of no node pairs) and the jobs for
-// `ranks` processes. Throws what build_vmap throws.
+// The octree and points of the build (build_octree's map: no links) and the jobs for `ranks`
+// processes. Throws what build_vmap throws.
 VisibilityMap probe(const PointSet& points, const BuildParams& params, int ranks, TopPairs& tp,
                     BuildStats& stats, const std::string& source);
 
-// build_vmap started from `jobs`; adds its links (kept when keep, else counted), full flags and
-// counters to `out`.
-void build_round(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+// build_vmap started from `jobs`, over the points and octree of `base` (the probe's: they are
+// not built again); adds its links (kept when keep, else counted), full flags and counters to
+// `out`. base is given back as it came (no links), or left empty when this throws.
+void build_round(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out);
 // The same for the chunks of jobs `next` hands out (nullptr: no more), all in one build_vmap:
 // one octree and one backend for every chunk (a round each).
-void build_rounds(const PointSet& points, const BuildParams& params, const TopPairs& tp,
+void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
                   const std::function<const std::vector<uint32_t>*()>& next, bool keep,
                   const std::string& source, ShareResult& out);
 

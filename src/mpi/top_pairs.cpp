@@ -87,8 +87,8 @@ std::vector<std::vector<uint32_t>> static_shares(const TopPairs& tp, int ranks) 
     return shares;
 }
 
-std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks) {
-    return static_shares(tp, kChunksPerRank * std::max(1, ranks));
+std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks, int per_rank) {
+    return static_shares(tp, std::max(1, per_rank) * std::max(1, ranks));
 }
 
 std::vector<NodePair> job_pairs(const TopPairs& tp, const std::vector<uint32_t>& jobs) {

@@ -54,8 +54,10 @@ std::vector<std::vector<uint32_t>> static_shares(const TopPairs& tp, int ranks);
 // the estimate undercounts the small jobs' cost (the large ones are mostly decided at node level).
 // A rank resolves all its chunks in one build_vmap (mpi::build_rounds), so a chunk costs one
 // message, not an octree: 16 a rank balanced 8 ranks to 1.03 (4: 1.08-1.12; docs/scaling.md).
+// (--chunks-per-rank sets another number: any gives the same map.)
 constexpr int kChunksPerRank = 16;
-std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks);
+std::vector<std::vector<uint32_t>> dynamic_chunks(const TopPairs& tp, int ranks,
+                                                  int per_rank = kChunksPerRank);
 
 // The node pairs of the given jobs, for BuildParams::top_pairs.
 std::vector<NodePair> job_pairs(const TopPairs& tp, const std::vector<uint32_t>& jobs);

@@ -22,6 +22,7 @@
 #include "visibility/grid_walk.h"
 #include "visibility/node_pair.h"
 #include "vmap/build_checks.h"
+#include "vmap/build_parts.h"
 #include "vmap/error.h"
 #include "vmap/frontier.h"
 #include "vmap/map_access.h"
@@ -145,9 +146,13 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
 
 // The per-node link arrays from every link made (or only their number).
 void links_step(VisibilityMap& vm, detail::Frontier& fr, const BuildParams& params,
-                BuildStats& st) {
+                BuildStats& st, std::vector<detail::Link>* raw) {
     const auto tl = Clock::now();
-    if (params.keep_links) {
+    if (params.keep_links && raw) {  // the links as made, no arrays (build_parts.h)
+        for (const auto& p : fr.pieces) raw->insert(raw->end(), p.begin(), p.end());
+        detail::MapAccess::data(vm).link_offsets.clear();
+        st.links = raw->size();
+    } else if (params.keep_links) {
         std::vector<std::span<const detail::Link>> spans;
         for (const auto& p : fr.pieces) spans.emplace_back(p);
         fr.arrays.finish(vm, spans);
@@ -159,20 +164,26 @@ void links_step(VisibilityMap& vm, detail::Frontier& fr, const BuildParams& para
     st.seconds_links = seconds_since(tl);
 }
 
-VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildStats* stats,
-                             const std::string& source) {
-    const auto t0 = Clock::now();
-    BuildStats st;
-    VisibilityMap vm = octree_step(std::move(points), params, st, source);
+// The construction over the points and octree of vm (octree_step's), from t0 (the build's start).
+VisibilityMap links_in_arena(VisibilityMap vm, const BuildParams& params, BuildStats& st,
+                             const std::string& source, Clock::time_point t0,
+                             std::vector<detail::Link>* raw = nullptr) {
     const auto t1 = Clock::now();
     NodeTests nt;
     std::unique_ptr<detail::Frontier> fr = frontier_step(vm.octree(), params, source, st, nt);
-    links_step(vm, *fr, params, st);
+    links_step(vm, *fr, params, st, raw);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
     if (!params.top_pairs) detail::check_facing(st);  // a share cannot judge the whole
-    if (stats) *stats = std::move(st);
     return vm;
+}
+
+// f() in an arena of params.threads threads (0: the caller's).
+template <class F>
+auto in_arena(const BuildParams& params, F&& f) {
+    if (params.threads == 0) return f();
+    tbb::task_arena arena(params.threads);
+    return arena.execute(f);
 }
 
 }  // namespace
@@ -180,9 +191,35 @@ VisibilityMap build_in_arena(PointSet points, const BuildParams& params, BuildSt
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
                          const std::string& source) {
     params.check(source);
-    if (params.threads == 0) return build_in_arena(std::move(points), params, stats, source);
-    tbb::task_arena arena(params.threads);
-    return arena.execute([&] { return build_in_arena(std::move(points), params, stats, source); });
+    return in_arena(params, [&] {
+        const auto t0 = Clock::now();
+        BuildStats st;
+        VisibilityMap vm = octree_step(std::move(points), params, st, source);
+        vm = links_in_arena(std::move(vm), params, st, source, t0);
+        if (stats) *stats = std::move(st);
+        return vm;
+    });
 }
 
+namespace detail {
+
+VisibilityMap build_octree(PointSet points, const BuildParams& params, BuildStats& stats,
+                           const std::string& source) {
+    params.check(source);
+    return in_arena(params, [&] { return octree_step(std::move(points), params, stats, source); });
+}
+
+VisibilityMap build_links(VisibilityMap base, const BuildParams& params, BuildStats* stats,
+                          const std::string& source, std::vector<Link>* raw) {
+    params.check(source);
+    return in_arena(params, [&] {
+        BuildStats st;
+        VisibilityMap vm =
+            links_in_arena(std::move(base), params, st, source, Clock::now(), raw);
+        if (stats) *stats = std::move(st);
+        return vm;
+    });
+}
+
+}  // namespace detail
 }  // namespace vmap

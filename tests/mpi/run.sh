@@ -58,6 +58,14 @@ for k in "${!scenes[@]}"; do
         check "scene $k: np $np $sched byte-identical" cmp "$one" "$out"
         rm -f "$out"
     done
+    if [[ $k -eq 0 ]]; then  # the dynamic schedule's chunks, few or many: the same file
+        for per in 1 40; do
+            check "scene 0: np 2, $per chunks a rank, byte-identical" bash -c "${mpi[*]} -np 2 \
+                '$vmap' -q build ${args[*]} --backend cpu --chunks-per-rank $per -o '$tmp/c.vmap' &&
+                cmp '$one' '$tmp/c.vmap'"
+            rm -f "$tmp/c.vmap"
+        done
+    fi
     check "scene $k: np 3 shards" "${mpi[@]}" -np 3 "$vmap" -q build "${args[@]}" --backend cpu \
         --shards -o "$tmp/sh-$k.vmap"
     check "scene $k: shards read back equal" "$equal" "$one" "$tmp/sh-$k.vmap"
@@ -70,6 +78,12 @@ check "progress names the ranks" bash -c "${mpi[*]} -np 2 '$vmap' build \
     '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \
     -o '$tmp/p.vmap' 2> '$tmp/err' && grep -q '^leaf pairs: [0-9]* to do on 2 ranks, cpu' '$tmp/err'"
 
+# Rank 0's summary: the backend the ranks ran and the slowest rank's seconds per phase.
+check "summary: backend and phases" bash -c "${mpi[*]} -np 2 '$vmap' build \
+    '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \
+    -o '$tmp/p.vmap' > '$tmp/out' && grep -q '^backend: *cpu (' '$tmp/out' &&
+    grep -qE '^phases: .*start [0-9.]+ \\(.*input [0-9.]+, octree [0-9.]+\\), probe .*construction [0-9.]+, .*save [0-9.]+$' '$tmp/out'"
+
 # A shard missing or corrupt: one clear error naming it.
 rm -f "$tmp/sh-0.vmap.shard-1-of-3"
 check "missing shard named" bash -c "! '$vmap' info '$tmp/sh-0.vmap' 2> '$tmp/err' &&
@@ -81,7 +95,7 @@ printf '{"name": "bad", "meshes": [{"file": 3}]}' > "$tmp/bad.json"
 out="$tmp/bad.vmap"
 check "bad input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build ${bunny[*]} \
     -o '$out' : -np 1 '$vmap' build '$tmp/bad.json' -q -o '$out' 2> '$tmp/err' &&
-    grep -q 'bad.json: meshes\[0\].file' '$tmp/err'"
+    grep -q 'rank 1 of 2: .*bad.json: meshes\[0\].file' '$tmp/err'"
 check "bad input: no output" no_output "$out"
 check "differing input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build \
     ${bunny[*]} -o '$out' : -np 1 '$vmap' build ${bunny[*]} --seed 7 -o '$out' 2> '$tmp/err' &&

@@ -350,7 +350,7 @@ void add_build_options(CLI::App* gi, GiOptions* o) {
                    "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
         ->check(eps_check())
         ->capture_default_str();
-    add_delta_floor_option(gi, o->delta_floor, " (the GI's default is below vmap build's)");
+    add_delta_floor_option(gi, o->delta_floor, " (the GI's default is vmap build's)");
 }
 
 void add_reference_options(CLI::App* gi, GiOptions* o) {

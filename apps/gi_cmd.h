@@ -19,9 +19,9 @@ namespace vmap::cli {
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
 inline constexpr int kGiVmapK = 2;
 inline constexpr float kGiVmapEps = 0.05f;
-// ... and its occluder discs: Delta at least 2 splat radii, not 2.5 (docs/gi.md): wider discs
-// hide the near pairs of a curved model from each other, which the GI weighs most.
-inline constexpr float kGiDeltaFloor = 2.0f;
+// ... and its occluder discs' floor: vmap build's 2.5. 2.0 was better at reduced point counts
+// but worse at the scenes' full counts on the H200 (docs/gi.md "The occluder disc's floor").
+inline constexpr float kGiDeltaFloor = 2.5f;
 
 // The options of `vmap gi`.
 struct GiOptions {

@@ -4,6 +4,7 @@
 // rate is measured on a seeded uniform sample of the leaf pairs and scaled to all pairs; the
 // octree and link work of the GPU build (host work either way) is added; such entries are
 // marked "est.".
+#include "bench/stats.h"
 #include "bench/bench.h"
 
 #include <fmt/format.h>
@@ -28,15 +29,8 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-struct Stat {
-    double median = 0, lo = 0, hi = 0;
-};
-Stat stat(std::vector<double> v) {
-    if (v.empty()) return {};
-    std::sort(v.begin(), v.end());
-    const size_t n = v.size();
-    return {n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v.front(), v.back()};
-}
+using bench_stats::Stat;
+using bench_stats::stat;
 
 struct Row {
     std::string scene;

@@ -3,6 +3,7 @@
 // pair (up to --brute-max points), with medians, spread, the work per bounce and the fitted
 // log-log slopes (time ~ points^slope). The one-off setup (node sums, refinement, upload) is
 // reported apart from the bounces; the V-map build is not timed here (`vmap bench` does that).
+#include "bench/stats.h"
 #include "bench/gi_bench.h"
 
 #include <fmt/format.h>
@@ -25,16 +26,8 @@
 namespace vmap::bench {
 namespace {
 
-struct Stat {
-    double median = 0, lo = 0, hi = 0;
-    bool done = false;
-};
-Stat stat(std::vector<double> v) {
-    if (v.empty()) return {};
-    std::sort(v.begin(), v.end());
-    const size_t n = v.size();
-    return {n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]), v.front(), v.back(), true};
-}
+using bench_stats::Stat;
+using bench_stats::stat;
 std::string fmt_stat(const Stat& s) {
     if (!s.done) return "-";
     return fmt::format("{:.3g} [{:.3g}-{:.3g}]", s.median, s.lo, s.hi);

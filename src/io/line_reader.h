@@ -67,7 +67,7 @@ class InputFile {
     // Copies the next n bytes to `out`; returns how many there were (fewer at the end).
     size_t read_bytes(char* out, size_t n) {
         size_t got = std::min(n, end_ - pos_);
-        std::memcpy(out, buffer_.data() + pos_, got);
+        if (got > 0) std::memcpy(out, buffer_.data() + pos_, got);  // out may be null when n is 0
         pos_ += got;
         if (got < n) {
             const size_t more = std::fread(out + got, 1, n - got, file_.get());

@@ -50,7 +50,6 @@ struct BuildOptions {
     bool json = false;
     bool shards = false;                // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
-    float delta_floor = OctreeParams::kDefaultDeltaFloor;
     int chunks_per_rank = mpi::Options{}.chunks_per_rank;
     BuildParams params;
 };
@@ -174,7 +173,6 @@ PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
     for (const std::string& line : input.done) fmt::print(stderr, "vmap build: {}\n", line);
     what = input.description;
     bp.octree = input.octree;
-    bp.octree.delta_floor = o.delta_floor;
     o.params.octree = bp.octree;
     warn_if_long(o.input.path, input.points.size(), bp.octree);
     return std::move(input.points);
@@ -231,7 +229,6 @@ Command add_build_command(CLI::App& app) {
                       "estimated if absent). Default: scenes/cornell-bunny.json");
     build->add_option("-o,--output", bo->output, "Output .vmap file (default: <input name>.vmap)");
     add_predicate_options(build, bo->params.visibility);
-    add_delta_floor_option(build, bo->delta_floor, "");
     add_choice(build, "--backend", bo->params.backend, "auto (GPU when present), cpu or cuda");
     add_choice(build, "--occluders", bo->params.occluders,
                     "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "

@@ -40,15 +40,6 @@ CLI::Validator eps_check() {
                       fmt::format("FLOAT in [0 - {})", VisibilityParams::kEpsLimit));
 }
 
-void add_delta_floor_option(CLI::App* app, float& floor, const std::string& note) {
-    app->add_option("--delta-floor", floor,
-                    "V-map built here: a leaf's occluder disc is at least this many splat radii "
-                    "wide" + note)
-        ->check(checked_by(&OctreeParams::delta_floor,
-                           fmt::format("FLOAT in [0 - {}]", OctreeParams::kDeltaFloorLimit)))
-        ->capture_default_str();
-}
-
 void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     using P = VisibilityParams;
     const std::string tol = fmt::format("FLOAT in [0 - {})", P::kTolLimit);
@@ -76,6 +67,14 @@ void add_input_options(CLI::App* app, InputOptions& in, const std::string& help)
                     "Scene and mesh files: sample this many points instead of the scene's number")
         ->check(CLI::Range(uint64_t(1), uint64_t(50000000)));
     app->add_option("--seed", in.seed, "Scene and mesh files: the sampling seed instead of the scene's");
+    std::map<std::string, SamplePattern> patterns;
+    for (const std::string& n : names_of<SamplePattern>())
+        patterns.emplace(n, parse<SamplePattern>(n, "--sampling"));
+    app->add_option("--sampling", in.pattern,
+                    "Scene and mesh files: blue-noise (uniform candidates thinned so samples keep "
+                    "about the spacing apart) or uniform (independent points); default: the "
+                    "scene's sampling.pattern, else blue-noise")
+        ->transform(CLI::CheckedTransformer(patterns));
     app->add_option("--max-height", in.max_height,
                     fmt::format("Deepest octree level (root = 0) of a V-map built here; default: "
                                 "the scene's octree.max_height, else {}",
@@ -86,6 +85,14 @@ void add_input_options(CLI::App* app, InputOptions& in, const std::string& help)
                                 "built here); default: the scene's octree.leaf_points, else {}",
                                 fallback.leaf_points))
         ->check(leaf_points_check());
+    app->add_option("--delta-floor", in.delta_floor,
+                    fmt::format("A V-map built here: a leaf's occluder disc is at least this many "
+                                "splat radii wide; default: the scene's octree.delta_floor, else "
+                                "{} for blue-noise samples and {} for uniform samples and point "
+                                "clouds",
+                                OctreeParams::kEvenDeltaFloor, OctreeParams::kDefaultDeltaFloor))
+        ->check(checked_by(&OctreeParams::delta_floor,
+                           fmt::format("FLOAT in [0 - {}]", OctreeParams::kDeltaFloorLimit)));
 }
 
 void add_camera_options(CLI::App* app, CameraOptions& c) {

@@ -109,8 +109,6 @@ CLI::Validator eps_check();
 // The predicate's options (-K, --eps, --facing-tol, --parallel-tol) into `vp`, in the ranges
 // VisibilityParams::check accepts.
 void add_predicate_options(CLI::App* app, VisibilityParams& vp);
-// --delta-floor (OctreeParams::delta_floor) for a V-map built by the command; `note` ends the help.
-void add_delta_floor_option(CLI::App* app, float& floor, const std::string& note);
 
 // The input of build, render, gi and view and its overrides into `in` (vmap/input.h): the
 // positional `input` (described by `help`), --as-points, --points, --seed, --max-height and

@@ -47,7 +47,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
     if (has_extension(o.in.path, ".vmap") &&
-        (o.K != kGiVmapK || o.eps != kGiVmapEps || o.delta_floor != kGiDeltaFloor))
+        (o.K != kGiVmapK || o.eps != kGiVmapEps || o.in.delta_floor))
         throw Error(fmt::format(
             "{}: -K/--eps/--delta-floor apply when the V-map is built, not to a .vmap", o.in.path));
     Input in = load_input(o.in);
@@ -272,12 +272,12 @@ int run_gi(GiOptions& o) {
 
 }  // namespace
 
-BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o) {
+BuildParams gi_build_params(const OctreeParams& octree, const GiOptions& o) {
     BuildParams bp;
-    if (scene_octree) bp.octree = *scene_octree;
+    bp.octree = octree;
     if (o.in.max_height) bp.octree.max_height = *o.in.max_height;
     if (o.in.leaf_points) bp.octree.leaf_points = *o.in.leaf_points;
-    bp.octree.delta_floor = o.delta_floor;
+    if (o.in.delta_floor) bp.octree.delta_floor = *o.in.delta_floor;
     bp.visibility.K = o.K;
     bp.visibility.eps = o.eps;
     bp.backend = o.gi.backend;
@@ -350,7 +350,6 @@ void add_build_options(CLI::App* gi, GiOptions* o) {
                    "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
         ->check(eps_check())
         ->capture_default_str();
-    add_delta_floor_option(gi, o->delta_floor, " (the GI's default is vmap build's)");
 }
 
 void add_reference_options(CLI::App* gi, GiOptions* o) {

@@ -19,9 +19,8 @@ namespace vmap::cli {
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
 inline constexpr int kGiVmapK = 2;
 inline constexpr float kGiVmapEps = 0.05f;
-// ... and its occluder discs' floor: vmap build's 2.5. 2.0 was better at reduced point counts
-// but worse at the scenes' full counts on the H200 (docs/gi.md "The occluder disc's floor").
-inline constexpr float kGiDeltaFloor = 2.5f;
+// Its occluder discs' floor is vmap build's (scene_octree: by how the scene is sampled; docs/gi.md
+// "The occluder disc's floor").
 
 // The options of `vmap gi`.
 struct GiOptions {
@@ -30,7 +29,6 @@ struct GiOptions {
     std::string image, ply, pfm;
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
-    float delta_floor = kGiDeltaFloor;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power
@@ -50,7 +48,7 @@ struct GiOptions {
 
 // The build parameters of the V-map `vmap gi` makes from a scene file: the scene's octree
 // defaults and the options above.
-BuildParams gi_build_params(const std::optional<OctreeParams>& scene_octree, const GiOptions& o);
+BuildParams gi_build_params(const OctreeParams& octree, const GiOptions& o);
 
 // apps/gi_error.cpp: `vmap gi SCENE --reference`, the error table.
 int run_gi_reference(GiOptions& o);

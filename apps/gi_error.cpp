@@ -296,10 +296,11 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     sc = load_scene(saved ? o.cam.scene : o.in.path);
     if (o.in.points) sc.points = *o.in.points;
     if (o.in.seed) sc.seed = *o.in.seed;
+    if (o.in.pattern) sc.pattern = *o.in.pattern;
     const auto t0 = Clock::now();
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
-        if (o.K != kGiVmapK || o.eps != kGiVmapEps || o.delta_floor != kGiDeltaFloor)
+        if (o.K != kGiVmapK || o.eps != kGiVmapEps || o.in.delta_floor)
             throw Error(fmt::format(
                 "{}: -K/--eps/--delta-floor apply to a V-map built from a scene file", o.in.path));
         VisibilityMap vm = load_vmap(o.in.path);
@@ -316,11 +317,11 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
             vm.visibility_params().eps, vm.num_links(), seconds_since(t0));
         return vm;
     }
-    const BuildParams bp = gi_build_params(sc.octree, o);
+    const BuildParams bp = gi_build_params(scene_octree(sc), o);
     VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.in.path);
     fmt::print(
         "scene:      {} ({}): {} points, V-map (K {}, eps {}, delta floor {}) {} links in {:.2f} s\n",
-        sc.name, o.in.path, vm.points().size(), o.K, o.eps, o.delta_floor, vm.num_links(),
+        sc.name, o.in.path, vm.points().size(), o.K, o.eps, bp.octree.delta_floor, vm.num_links(),
         seconds_since(t0));
     return vm;
 }

@@ -48,6 +48,10 @@ void add_sample_options(CLI::App* c) {
         ->required();
     c->add_option("--points", opt.vp.points, "Override the scene's number of sample points")
         ->check(CLI::Range(uint64_t(2), uint64_t(50000000)));
+    c->add_option("--sampling", opt.vp.sampling,
+                  "The samples' pattern instead of the scene's: blue-noise or uniform (the "
+                  "octree's disc floor follows it unless --splat-floor is given)")
+        ->check(CLI::IsMember(names_of<SamplePattern>()));
     c->add_option("--pairs", opt.vp.pairs, "Random point pairs")
         ->check(CLI::Range(uint64_t(1), uint64_t(1000000000)))
         ->capture_default_str();

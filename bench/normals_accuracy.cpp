@@ -193,6 +193,7 @@ std::string percentiles(std::vector<float> v) {
 std::vector<Vec3> dense_fit_normals(Scene sc, const PointSet& truth) {
     sc.points = 16 * truth.size();
     sc.seed += 1000;
+    sc.pattern = SamplePattern::kUniform;
     PointSet dense;
     dense.positions = sample_scene(sc).positions;
     NormalEstimationParams np;

@@ -142,7 +142,7 @@ VisibilityMap build_file(const std::string& path, std::optional<uint64_t> points
     Scene sc = load_scene(path);
     if (points) sc.points = *points;
     if (seed) sc.seed = *seed;
-    return build_points(sample_scene(sc), a, path, sc.octree);
+    return build_points(sample_scene(sc), a, path, scene_octree(sc));
 }
 
 uint32_t id_of(const VisibilityMap& vm, int64_t i, const char* what) {
@@ -343,6 +343,8 @@ void def_map(py::module_& m) {
         .def_property_readonly("num_leaves",
                                [](const VisibilityMap& v) { return v.octree().num_leaves(); })
         .def_property_readonly("height", [](const VisibilityMap& v) { return v.octree().height(); })
+        .def_property_readonly("delta_floor",
+                               [](const VisibilityMap& v) { return v.octree_params().delta_floor; })
         .def_property_readonly(
             "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
             "Positions, N x 3 float32, in input order.")

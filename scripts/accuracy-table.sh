@@ -23,7 +23,7 @@ printf '|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|--
 for s in $scenes; do
     h=$(sed -n 's/.*"max_height": *\([0-9]*\).*/\1/p' "$s" | head -1)
     "$vmap" validate "$s" --predict direct --heights "${h:-9}" --pairs "${PAIRS:-200000}" \
-        --eyes "${EYES:-100}" --md /dev/null --json "$work/r.json" "${extra[@]}" "$@" >&2
+        --eyes "${EYES:-100}" --md "$work/r.md" --json "$work/r.json" "${extra[@]}" "$@" >&2
     python3 - "$work/r.json" <<'PY'
 import json, sys
 r = json.load(open(sys.argv[1]))[0]

@@ -26,7 +26,7 @@ for s in $scenes; do
     h=$(sed -n 's/.*"max_height": *\([0-9]*\).*/\1/p' "$s" | head -1)
     name="$(basename "$s" .json)"
     "$vmap" validate "$s" --predict direct --heights "${h:-9}" --pairs 1 --eyes "${EYES:-50}" \
-        --md /dev/null --dump-eyes "$work/$name.npz" "${extra[@]}" ${VALIDATE:-} >&2
+        --md "$work/discard.md" --dump-eyes "$work/$name.npz" "${extra[@]}" ${VALIDATE:-} >&2
     dumps+=("$work/$name.npz")
 done
 "$py" scripts/hpr-compare.py "$@" "${dumps[@]}"

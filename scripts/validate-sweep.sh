@@ -27,7 +27,7 @@ trap 'rm -rf "$work"' EXIT
 run() {  # tag scene args...
     local tag="$1" scene="$2"
     shift 2
-    "$vmap" validate "scenes/cornell-$scene.json" --pairs "$pairs" --md /dev/null \
+    "$vmap" validate "scenes/cornell-$scene.json" --pairs "$pairs" --md "$work/discard.md" \
         --json "$work/$tag.$scene.json" "$@"
 }
 
@@ -63,7 +63,7 @@ for s in $scenes; do
 done
 echo "== V-map mode (bunny, $vpoints points)" >&2
 "$vmap" validate scenes/cornell-bunny.json --points "$vpoints" --pairs "$pairs" --heights 5,6,7,8 \
-    --backend cpu --md /dev/null --json "$work/vmap.bunny.json"
+    --backend cpu --md "$work/discard.md" --json "$work/vmap.bunny.json"
 echo "== V-map mode, spheres vs Bresenham build time (bunny, $vpoints points, height 7)" >&2
 for occ in spheres bresenham; do
     for r in 1 2 3; do
@@ -73,7 +73,7 @@ for occ in spheres bresenham; do
     done
 done
 "$vmap" validate scenes/cornell-bunny.json --points "$vpoints" --pairs "$pairs" --heights 5,6,7 \
-    --backend cpu --occluders bresenham --md /dev/null --json "$work/vmapbres.bunny.json"
+    --backend cpu --occluders bresenham --md "$work/discard.md" --json "$work/vmapbres.bunny.json"
 
 python3 - "$work" "$root/docs/validation.md" "$(git rev-parse --short HEAD)" "$pairs" <<'PY'
 import json, sys, glob, os, datetime, platform, re

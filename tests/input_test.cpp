@@ -52,8 +52,23 @@ TEST(Input, ACloudIsReadAndSamplingOverridesAreAnErrorNamingTheFile) {
     EXPECT_EQ(in.points.size(), 50u);
     EXPECT_EQ(in.octree.leaf_points, 3);
     EXPECT_EQ(in.name, "c.xyzn");
+    EXPECT_EQ(in.octree.delta_floor, OctreeParams::kDefaultDeltaFloor);  // no sampling known
     o.seed = 1;
-    EXPECT_TRUE(throws_naming(o, "c.xyzn: points and seed (--points, --seed)"));
+    EXPECT_TRUE(throws_naming(o, "c.xyzn: points, seed and sampling (--points, --seed"));
+    o.seed.reset();
+    o.pattern = SamplePattern::kUniform;
+    EXPECT_TRUE(throws_naming(o, "c.xyzn: points, seed and sampling"));
+}
+
+TEST(Input, ASceneFloorFollowsItsSamplingUnlessGiven) {
+    InputOptions o;
+    o.path = test::scene_path("cornell-bunny");
+    o.points = 500;
+    EXPECT_EQ(load_input(o).octree.delta_floor, OctreeParams::kEvenDeltaFloor);
+    o.pattern = SamplePattern::kUniform;
+    EXPECT_EQ(load_input(o).octree.delta_floor, OctreeParams::kDefaultDeltaFloor);
+    o.delta_floor = 3.5f;
+    EXPECT_EQ(load_input(o).octree.delta_floor, 3.5f);
 }
 
 TEST(Input, AVmapIsLoadedAndOctreeOverridesAreAnError) {
@@ -70,8 +85,11 @@ TEST(Input, AVmapIsLoadedAndOctreeOverridesAreAnError) {
     EXPECT_EQ(in.octree.max_height, 4);
     EXPECT_TRUE(in.points.positions.empty());
     o.max_height = 6;
-    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height and leaf_points"));
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points and delta_floor"));
     o.max_height.reset();
+    o.delta_floor = 2.0f;
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points and delta_floor"));
+    o.delta_floor.reset();
     o.points = 10;
     EXPECT_TRUE(throws_naming(o, "not to a .vmap"));
 }

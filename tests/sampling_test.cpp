@@ -182,5 +182,90 @@ TEST(SceneSampling, DensityCountsMeshAreaToo) {
     EXPECT_GT(double(sc.points), 2500.0 * (total_area(sc) - surface_area(sc.surfaces[6])) + 10);
 }
 
+
+// ---- blue noise (sample elimination) --------------------------------------------------------
+
+// The share of points whose nearest neighbour on the same side of a surface (normals less than
+// 90 degrees apart) lies closer than `frac` splat radii.
+double crowded_share(const PointSet& ps, float frac) {
+    const float lim = frac * ps.radii[0];
+    size_t crowded = 0;
+    for (size_t i = 0; i < ps.size(); ++i) {
+        float best = 1e30f;
+        for (size_t j = 0; j < ps.size(); ++j)
+            if (j != i && dot(ps.normals[i], ps.normals[j]) > 0)
+                best = std::min(best, length(ps.positions[j] - ps.positions[i]));
+        crowded += best < lim;
+    }
+    return double(crowded) / double(ps.size());
+}
+
+TEST(SceneSampling, BlueNoiseKeepsSamplesApartUniformDoesNot) {
+    Scene sc = load_scene(kScenes + "cornell-empty.json");
+    sc.points = 3000;
+    ASSERT_EQ(sc.pattern, SamplePattern::kBlueNoise);  // the default
+    const double blue = crowded_share(sample_scene(sc), 0.6f);
+    sc.pattern = SamplePattern::kUniform;
+    const double uniform = crowded_share(sample_scene(sc), 0.6f);
+    // Independent points: P(nearest < 0.6 r) = 1 - exp(-0.36) = 30%.
+    EXPECT_GT(uniform, 0.2) << uniform;
+    EXPECT_LT(blue, 0.01) << blue;
+}
+
+// Every surface keeps its share of the area, the two faces of a 3 mm plate included: the
+// elimination thins each side on its own.
+TEST(SceneSampling, BlueNoiseKeepsEverySurfacesShare) {
+    Scene sc = load_scene(kScenes + "test/test-plates.json");
+    sc.points = 20000;
+    std::vector<uint32_t> surf;
+    const PointSet ps = sample_scene(sc, &surf);
+    ASSERT_EQ(surf.size(), ps.size());
+    const double total = total_area(sc);
+    std::vector<size_t> count(sc.surfaces.size(), 0);
+    for (uint32_t s : surf) count[s]++;
+    for (size_t s = 0; s < sc.surfaces.size(); ++s) {
+        SCOPED_TRACE(sc.surfaces[s].name);
+        const double p = surface_area(sc.surfaces[s]) / total;
+        const double sigma = std::sqrt(p * (1 - p) / double(ps.size()));
+        EXPECT_NEAR(double(count[s]) / double(ps.size()), p, std::max(4 * sigma, 0.03 * p))
+            << count[s] << " points";
+    }
+}
+
+TEST(SceneSampling, UniformAndBlueNoiseAreBothDeterministic) {
+    Scene sc = load_scene(kScenes + "cornell-bunny.json");
+    sc.points = 4000;
+    for (SamplePattern p : {SamplePattern::kUniform, SamplePattern::kBlueNoise}) {
+        sc.pattern = p;
+        PointSet one;
+        {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+            one = sample_scene(sc);
+        }
+        expect_bits_equal(one, sample_scene(sc));
+    }
+}
+
+TEST(SceneSampling, ThePatternAndTheFloorComeFromTheFile) {
+    ScratchDir dir;
+    auto scene = [&](const std::string& sampling, const std::string& octree) {
+        return load_scene(dir.write("s.json", R"({ "sampling": { "points": 100)" + sampling +
+                                                  R"( } )" + octree + "}"));
+    };
+    const Scene blue = scene("", "");
+    EXPECT_EQ(blue.pattern, SamplePattern::kBlueNoise);
+    EXPECT_EQ(scene_octree(blue).delta_floor, OctreeParams::kEvenDeltaFloor);
+    const Scene uni = scene(R"(, "pattern": "uniform")", "");
+    EXPECT_EQ(uni.pattern, SamplePattern::kUniform);
+    EXPECT_EQ(scene_octree(uni).delta_floor, OctreeParams::kDefaultDeltaFloor);
+    const Scene given = scene("", R"(, "octree": { "delta_floor": 3, "max_height": 6 })");
+    EXPECT_EQ(scene_octree(given).delta_floor, 3.0f);
+    EXPECT_EQ(scene_octree(given).max_height, 6);
+    expect_error([&] { (void)scene(R"(, "pattern": "poisson")", ""); },
+                 {"sampling.pattern", "poisson", "blue-noise"});
+    expect_error([&] { (void)scene("", R"(, "octree": { "delta_floor": 11 })"); },
+                 {"octree.delta_floor"});
+}
+
 }  // namespace
 }  // namespace vmap

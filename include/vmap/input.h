@@ -19,7 +19,9 @@ struct InputOptions {
     std::string path;
     bool as_points = false;                      // a mesh file's vertices as a point cloud
     std::optional<uint64_t> points, seed;        // sampling: scene and mesh files only
+    std::optional<SamplePattern> pattern;        // sampling: scene and mesh files only
     std::optional<int> max_height, leaf_points;  // the octree: not for a .vmap (it has one)
+    std::optional<float> delta_floor;            // the octree: not for a .vmap
     CloudOptions cloud;                          // point clouds only
 };
 
@@ -39,10 +41,10 @@ struct Input {
 
 // Reads `o.path`: a .vmap as it is; a scene file, or a mesh file unless o.as_points
 // (is_scene_input), sampled with o.points and o.seed in place of the scene's; any other file as
-// a point cloud (load_point_cloud with o.cloud). o.max_height and o.leaf_points replace the
-// scene's octree parameters (else BuildParams' defaults). Throws vmap::Error naming the file
-// for what its loader refuses, for points or seed given with a cloud or a .vmap, and for
-// max_height or leaf_points given with a .vmap.
+// a point cloud (load_point_cloud with o.cloud). o.max_height, o.leaf_points and o.delta_floor
+// replace the scene's octree parameters (scene_octree; else BuildParams' defaults). Throws vmap::Error naming the file
+// for what its loader refuses, for points, seed or pattern given with a cloud or a .vmap, and
+// for max_height, leaf_points or delta_floor given with a .vmap.
 Input load_input(const InputOptions& o);
 
 }  // namespace vmap

@@ -24,9 +24,13 @@ struct OctreeParams {
                           // max_height)
     // A leaf's occluder disc radius Delta is the distance from its centroid to its farthest
     // point, but never below delta_floor times its largest splat radius: discs wide enough to
-    // close the gaps between samples (docs/validation.md chose 2.5 for pair agreement; `vmap gi`
-    // builds with kGiDeltaFloor, docs/gi.md). In [0, kDeltaFloorLimit].
+    // close the gaps between samples. Independent uniform samples leave holes, so a point cloud
+    // gets kDefaultDeltaFloor (docs/validation.md chose 2.5 for pair agreement); a scene sampled
+    // as blue noise has no holes wider than about the spacing and gets kEvenDeltaFloor
+    // (scene_octree in vmap/scene.h; docs/validation.md "Blue-noise samples"). In
+    // [0, kDeltaFloorLimit].
     static constexpr float kDefaultDeltaFloor = 2.5f;
+    static constexpr float kEvenDeltaFloor = 2.0f;
     static constexpr float kDeltaFloorLimit = 10.f;
     float delta_floor = kDefaultDeltaFloor;
 

@@ -24,10 +24,16 @@ enum class Construction { kAuto, kNodes, kLeafPairs };
 // How GI turns links into interactions (vmap/gi.h): blocks of the refinement, or every link.
 enum class GiRefine { kBlocks, kLinks };
 
+// How a scene's surfaces are sampled (vmap/scene.h): independent uniform points, or blue noise
+// (uniform candidates thinned by sample elimination, so that no two samples of one surface side
+// lie much closer than the spacing).
+enum class SamplePattern { kUniform, kBlueNoise };
+
 const char* name_of(Backend);
 const char* name_of(OccluderSearch);
 const char* name_of(Construction);
 const char* name_of(GiRefine);
+const char* name_of(SamplePattern);
 
 // Every accepted name of E (first the canonical ones, then accepted old spellings).
 template <class E>

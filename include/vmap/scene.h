@@ -25,8 +25,10 @@
 //                                                   // radii set when the file has none
 //   Without a room, a mesh or cloud with none of size, scale, rotate and position keeps the
 //   file's coordinates exactly; with some, position defaults to its own bottom centre.
-//   "sampling": { "points": 60000, "seed": 1 }      // or "density": points per square metre
-//   "octree": { "max_height": 9, "leaf_points": 4 } // defaults for `vmap build`
+//   "sampling": { "points": 60000, "seed": 1 }      // or "density": points per square metre;
+//                                                   // "pattern": "blue-noise" (default) | "uniform"
+//   "octree": { "max_height": 9, "leaf_points": 4 } // defaults for `vmap build` (and
+//                                                   // "delta_floor", else by the pattern)
 //   "camera": { "eye": [x,y,z], "target": [x,y,z], "fov": 40, "up": [0,1,0] }  // `vmap render`
 // }
 // The room is open at z = 0, the side a camera looks in from.
@@ -40,6 +42,7 @@
 #include "vmap/camera.h"
 #include "vmap/mesh.h"
 #include "vmap/octree.h"
+#include "vmap/options.h"
 
 namespace vmap {
 
@@ -65,7 +68,9 @@ struct Scene {
     std::vector<PointSet> clouds;
     uint64_t points = 60000;  // samples of the surfaces in total (after any density rule)
     uint64_t seed = 1;
+    SamplePattern pattern = SamplePattern::kBlueNoise;  // "sampling": {"pattern": ...}
     std::optional<OctreeParams> octree;  // the file's defaults, if it gave any
+    std::optional<float> delta_floor;    // "octree": {"delta_floor": ...}, if the file gave it
     bool has_room = true;
     // The room's size; without a room, the size of the surfaces' and clouds' bounding box (the
     // scene's scale, for validation tolerances).
@@ -94,6 +99,12 @@ bool is_scene_input(const std::string& path, bool as_points = false);
 // into scene.surfaces (kNoSurface for a cloud's points).
 inline constexpr uint32_t kNoSurface = 0xffffffffu;
 PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
+
+// The octree parameters a V-map of the scene's samples is built with by default: the file's
+// max_height and leaf_points (else OctreeParams'), and its delta_floor, else the floor for how
+// the scene is sampled (OctreeParams::kEvenDeltaFloor for blue noise, kDefaultDeltaFloor for
+// uniform samples).
+OctreeParams scene_octree(const Scene& scene);
 
 // What to do with a raw cloud's normals (`vmap build --normals`).
 enum class NormalsMode {

@@ -45,6 +45,7 @@ struct Confusion {
 
 struct ValidateParams {
     uint64_t points = 0;                          // 0: the scene's own count
+    std::string sampling;  // "uniform" or "blue-noise": the samples' pattern; "": the scene's
     uint64_t pairs = 200000;                      // random point pairs (i != j), 1..1e9
     uint64_t pair_seed = 1;                       // seed of the pair sample
     std::vector<int> heights{5, 6, 7, 8, 9, 10};  // octree max_height values, 1..21
@@ -127,6 +128,9 @@ struct ValidationReport {
     uint64_t buried_points = 0, live_pairs = 0;
     uint64_t dropped_points = 0;  // with drop_buried: points left out before sampling
     uint64_t model_points = 0;    // points on a model (a mesh of the scene, not the room)
+    // The occluder discs' floor the octrees were built with: splat_floor when given, else the
+    // scene's (scene_octree), or OctreeParams::kDefaultDeltaFloor for the raw-cloud modes.
+    float delta_floor = 0;
     uint64_t model_pairs = 0;     // pairs of the model-pair sample (as many as `pairs`)
     uint64_t eyes = 0;            // eyes per set (0 when the scene has no model points)
     std::string source;           // what the prediction was built from, in words

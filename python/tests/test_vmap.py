@@ -63,8 +63,10 @@ def test_query_matches_the_visible_sets(small):
 
 
 def test_build_from_arrays_round_trips(small):
+    # Arrays are a point cloud (the 2.5 floor) unless told the scene's floor (2.0, blue noise).
+    assert small.delta_floor == 2.0
     again = vmap.build(small.points, small.normals, small.radii, small.colors, small.emission,
-                       **OPTS)
+                       delta_floor=small.delta_floor, **OPTS)
     assert again.num_links == small.num_links
     assert again.num_leaves == small.num_leaves
     pairs = np.random.default_rng(4).integers(0, small.num_points, size=(2000, 2))

@@ -15,13 +15,14 @@ namespace {
 void apply_octree_overrides(const InputOptions& o, OctreeParams& p) {
     if (o.max_height) p.max_height = *o.max_height;
     if (o.leaf_points) p.leaf_points = *o.leaf_points;
+    if (o.delta_floor) p.delta_floor = *o.delta_floor;
 }
 
 void load_map(const InputOptions& o, Input& in) {
-    if (o.max_height || o.leaf_points)
+    if (o.max_height || o.leaf_points || o.delta_floor)
         throw Error(fmt::format(
-            "{}: max_height and leaf_points (--max-height, --leaf-points) apply when building a "
-            "V-map, not to a .vmap",
+            "{}: max_height, leaf_points and delta_floor (--max-height, --leaf-points, "
+            "--delta-floor) apply when building a V-map, not to a .vmap",
             o.path));
     in.kind = InputKind::kVmap;
     in.vmap = load_vmap(o.path);
@@ -43,7 +44,8 @@ void load_sampled(const InputOptions& o, Input& in) {
     in.kind = scene_file ? InputKind::kScene : InputKind::kMesh;
     if (o.points) sc.points = *o.points;
     if (o.seed) sc.seed = *o.seed;
-    in.octree = sc.octree.value_or(BuildParams{}.octree);
+    if (o.pattern) sc.pattern = *o.pattern;
+    in.octree = scene_octree(sc);
     apply_octree_overrides(o, in.octree);
     in.name = sc.name;
     in.camera = sc.camera;
@@ -52,6 +54,7 @@ void load_sampled(const InputOptions& o, Input& in) {
         scene_file ? fmt::format("scene {} ({}), {} surfaces", sc.name, o.path, sc.surfaces.size())
                    : fmt::format("mesh {} ({} triangles, area-sampled)", o.path,
                                  sc.surfaces[0].mesh.triangles.size());
+    in.description += fmt::format(", {} samples", name_of(sc.pattern));
     in.points = sample_scene(sc);
 }
 
@@ -62,10 +65,10 @@ Input load_input(const InputOptions& o) {
     in.name = std::filesystem::path(o.path).filename().string();
     const bool is_vmap = has_extension(o.path, ".vmap");
     if (is_vmap || !is_scene_input(o.path, o.as_points)) {
-        if (o.points || o.seed)
+        if (o.points || o.seed || o.pattern)
             throw Error(fmt::format(
-                "{}: points and seed (--points, --seed) apply when building from a scene or mesh "
-                "file, not to {}",
+                "{}: points, seed and sampling (--points, --seed, --sampling) apply when building "
+                "from a scene or mesh file, not to {}",
                 o.path, is_vmap ? "a .vmap" : "a point cloud"));
         is_vmap ? load_map(o, in) : load_cloud(o, in);
         return in;

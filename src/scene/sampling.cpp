@@ -66,44 +66,37 @@ void append_clouds(const Scene& scene, PointSet& ps) {
 
 }  // namespace
 
-PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
+namespace {
+
+// The scene's triangles with their cumulative areas, for area-weighted draws.
+struct SurfaceDraw {
+    const Scene& scene;
     std::vector<Tri> tris;
     std::vector<double> cdf;
-    std::vector<double> surface_area(scene.surfaces.size(), 0.0);
+    std::vector<double> surface_area;
     double area = 0;
-    for (uint32_t s = 0; s < scene.surfaces.size(); ++s) {
-        const Mesh& m = scene.surfaces[s].mesh;
-        for (uint32_t k = 0; k < m.triangles.size(); ++k) {
-            const auto& t = m.triangles[k];
-            const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
-            const Vec3 x = cross(b - a, c - a);
-            const double ar =
-                0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
-            if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
-            tris.push_back({s, k, a, b, c, x / float(2 * ar)});
-            area += ar;
-            surface_area[s] += ar;
-            cdf.push_back(area);
+
+    explicit SurfaceDraw(const Scene& sc) : scene(sc), surface_area(sc.surfaces.size(), 0.0) {
+        for (uint32_t s = 0; s < sc.surfaces.size(); ++s) {
+            const Mesh& m = sc.surfaces[s].mesh;
+            for (uint32_t k = 0; k < m.triangles.size(); ++k) {
+                const auto& t = m.triangles[k];
+                const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
+                const Vec3 x = cross(b - a, c - a);
+                const double ar =
+                    0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
+                if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
+                tris.push_back({s, k, a, b, c, x / float(2 * ar)});
+                area += ar;
+                surface_area[s] += ar;
+                cdf.push_back(area);
+            }
         }
     }
-    PointSet ps;
-    if (tris.empty() && !scene.clouds.empty()) {
-        append_clouds(scene, ps);
-        if (surface_of) surface_of->assign(ps.size(), kNoSurface);
-        return ps;
-    }
-    if (tris.empty()) throw Error(fmt::format("{}: the scene has no surface area", scene.path));
-    const uint64_t n = scene.points;
-    if (n == 0) throw Error(fmt::format("{}: sampling.points must be at least 1", scene.path));
-    ps.positions.resize(n);
-    ps.normals.resize(n);
-    ps.colors.resize(n);
-    ps.emission.resize(n);
-    std::vector<uint32_t> surf(n);
-    // Each sample stands for an equal share of the area: a disc of that area.
-    ps.radii.assign(n, float(std::sqrt(area / (M_PI * double(n)))));
-    const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
-    parallel_for(n, [&](uint64_t i) {
+
+    // Draw i of the stream `seed` into slot `at` of ps and surf (arrays already sized).
+    void draw(uint64_t seed, uint64_t i, uint64_t at, PointSet& ps,
+              std::vector<uint32_t>& surf) const {
         const uint64_t r0 = mix(seed + 3 * i), r1 = mix(seed + 3 * i + 1),
                        r2 = mix(seed + 3 * i + 2);
         const double pick = u01(r0) * area;
@@ -113,16 +106,216 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
         // Uniform point in a triangle: (1 - sqrt(u), sqrt(u)(1 - v), sqrt(u) v).
         const double su = std::sqrt(u01(r1)), v = u01(r2);
         const double w0 = 1 - su, w1 = su * (1 - v), w2 = su * v;
-        ps.positions[i] = {float(w0 * t.a.x + w1 * t.b.x + w2 * t.c.x),
-                           float(w0 * t.a.y + w1 * t.b.y + w2 * t.c.y),
-                           float(w0 * t.a.z + w1 * t.b.z + w2 * t.c.z)};
-        ps.normals[i] = t.n;
+        ps.positions[at] = {float(w0 * t.a.x + w1 * t.b.x + w2 * t.c.x),
+                            float(w0 * t.a.y + w1 * t.b.y + w2 * t.c.y),
+                            float(w0 * t.a.z + w1 * t.b.z + w2 * t.c.z)};
+        ps.normals[at] = t.n;
         const SceneSurface& s = scene.surfaces[t.surface];
-        ps.colors[i] = at_corner(s.vertex_colors, s.mesh, t.index, s.albedo, w0, w1, w2);
-        ps.emission[i] = at_corner(s.vertex_emission, s.mesh, t.index, s.emission, w0, w1, w2);
-        surf[i] = t.surface;
+        ps.colors[at] = at_corner(s.vertex_colors, s.mesh, t.index, s.albedo, w0, w1, w2);
+        ps.emission[at] = at_corner(s.vertex_emission, s.mesh, t.index, s.emission, w0, w1, w2);
+        surf[at] = t.surface;
+    }
+};
+
+void resize_points(PointSet& ps, std::vector<uint32_t>& surf, uint64_t n) {
+    ps.positions.resize(n);
+    ps.normals.resize(n);
+    ps.colors.resize(n);
+    ps.emission.resize(n);
+    surf.resize(n);
+}
+
+// Blue noise by sample elimination (after Yuksel, "Sample Elimination for Generating Poisson
+// Disk Sample Sets", 2015): of the candidates (uniform over the area), the one most crowded by
+// its neighbours is removed, one at a time, until `keep` remain. Crowding is the sum over the
+// neighbours within 2 r_max of (1 - d / 2 r_max)^8, where r_max = sqrt(area / (2 sqrt(3) keep))
+// is the disc radius of the densest packing of `keep` discs on the area, and d is clamped below
+// at 2 r_min (Yuksel's weight limit, r_min = 0.65 r_max (1 - (keep / candidates)^1.5)) so that
+// a tight cluster does not outweigh everything else. Only neighbours on the same side of a
+// surface count (normals less than 90 degrees apart): the two faces of a thin plate, or an
+// object and the wall it touches, are thinned each on its own. Returns the kept candidates'
+// indices, ascending. Deterministic: the neighbour lists do not depend on the thread count, and
+// the elimination runs in one thread (ties to the larger index).
+std::vector<uint64_t> eliminate(const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
+                                uint64_t keep, double area) {
+    const uint64_t M = pos.size();
+    if (keep >= M) {
+        std::vector<uint64_t> all(M);
+        for (uint64_t i = 0; i < M; ++i) all[i] = i;
+        return all;
+    }
+    const double rmax = std::sqrt(area / (2 * std::sqrt(3.0) * double(keep)));
+    const double rmin = 0.65 * rmax * (1 - std::pow(double(keep) / double(M), 1.5));
+    const double reach = 2 * rmax, floor_d = 2 * rmin;
+    constexpr int kNb = 32;  // about 14.5 same-side candidates lie within reach at 4x
+    // Neighbours from a grid of cells `reach` wide: a candidate's lie in the 27 cells around it.
+    // Cells are keyed by their integer coordinates; the candidates sorted by key (then index).
+    Vec3 lo = pos[0], hi = pos[0];
+    for (const Vec3& p : pos) {
+        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
+        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
+    }
+    // At least `reach` wide, and at most 2^20 cells an axis (21-bit coordinates in the key).
+    const double extent = std::max({double(hi.x - lo.x), double(hi.y - lo.y), double(hi.z - lo.z)});
+    const double cell = std::max(reach, extent / double(1 << 20));
+    auto cell_of = [&](Vec3 p, int axis) {
+        const float v = axis == 0 ? p.x - lo.x : axis == 1 ? p.y - lo.y : p.z - lo.z;
+        return int64_t(std::floor(double(v) / cell));
+    };
+    auto key_of = [](int64_t x, int64_t y, int64_t z) {
+        return (uint64_t(x) << 42) | (uint64_t(y) << 21) | uint64_t(z);
+    };
+    std::vector<std::pair<uint64_t, uint32_t>> by_cell(M);
+    parallel_for(M, [&](uint64_t i) {
+        by_cell[i] = {key_of(cell_of(pos[i], 0), cell_of(pos[i], 1), cell_of(pos[i], 2)),
+                      uint32_t(i)};
     });
-    match_emitted_power(surface_area, surf, ps);
+    parallel_sort(by_cell.begin(), by_cell.end(), std::less<>());
+    std::vector<uint64_t> cell_key;
+    std::vector<uint64_t> cell_start;
+    for (uint64_t k = 0; k < M; ++k)
+        if (k == 0 || by_cell[k].first != by_cell[k - 1].first) {
+            cell_key.push_back(by_cell[k].first);
+            cell_start.push_back(k);
+        }
+    cell_start.push_back(M);
+    std::vector<uint32_t> nb(M * kNb);
+    std::vector<float> nw(M * kNb);
+    std::vector<uint8_t> count(M, 0);
+    std::vector<double> W(M, 0.0);
+    parallel_for_range<uint64_t>(M, 1024, [&](uint64_t b, uint64_t e) {
+        std::vector<std::pair<double, uint32_t>> found;
+        for (uint64_t i = b; i < e; ++i) {
+            found.clear();
+            const int64_t cx = cell_of(pos[i], 0), cy = cell_of(pos[i], 1), cz = cell_of(pos[i], 2);
+            for (int64_t dx = -1; dx <= 1; ++dx)
+                for (int64_t dy = -1; dy <= 1; ++dy)
+                    for (int64_t dz = -1; dz <= 1; ++dz) {
+                        if (cx + dx < 0 || cy + dy < 0 || cz + dz < 0) continue;
+                        const uint64_t key = key_of(cx + dx, cy + dy, cz + dz);
+                        const auto it = std::lower_bound(cell_key.begin(), cell_key.end(), key);
+                        if (it == cell_key.end() || *it != key) continue;
+                        const size_t c = size_t(it - cell_key.begin());
+                        for (uint64_t k = cell_start[c]; k < cell_start[c + 1]; ++k) {
+                            const uint32_t j = by_cell[k].second;
+                            if (j == i || !(dot(nrm[i], nrm[j]) > 0)) continue;
+                            const Vec3 d = pos[j] - pos[i];
+                            const double dd = std::sqrt(double(d.x) * d.x + double(d.y) * d.y +
+                                                        double(d.z) * d.z);
+                            if (dd < reach) found.push_back({dd, j});
+                        }
+                    }
+            // The nearest kNb (ties by index), in that order.
+            std::sort(found.begin(), found.end());
+            const int n = int(std::min<size_t>(found.size(), kNb));
+            double sum = 0;
+            for (int c = 0; c < n; ++c) {
+                const double t = 1 - std::max(found[c].first, floor_d) / reach;
+                const double t2 = t * t, t4 = t2 * t2;
+                const float w = float(t4 * t4);
+                nb[i * kNb + c] = found[c].second;
+                nw[i * kNb + c] = w;
+                sum += w;
+            }
+            count[i] = uint8_t(n);
+            W[i] = sum;
+        }
+    });
+    // Removing i lowers each neighbour j's crowding by the weight j's own list holds for i (a
+    // list cut at kNb may lack it).
+    auto weight_in = [&](uint64_t j, uint64_t i) -> double {
+        for (int c = 0; c < count[j]; ++c)
+            if (nb[j * kNb + c] == i) return nw[j * kNb + c];
+        return 0.0;
+    };
+    // An indexed binary max-heap on (W, index): removing a candidate lowers its neighbours'
+    // crowding, and each moves down in place (no stale entries).
+    std::vector<uint32_t> heap(M), where(M);
+    for (uint64_t i = 0; i < M; ++i) heap[i] = uint32_t(i);
+    auto above = [&](uint32_t a, uint32_t b) { return W[a] > W[b] || (W[a] == W[b] && a > b); };
+    auto place = [&](uint64_t at, uint32_t item) {
+        heap[at] = item;
+        where[item] = uint32_t(at);
+    };
+    uint64_t size = M;
+    auto sift_down = [&](uint64_t at) {
+        const uint32_t item = heap[at];
+        for (;;) {
+            uint64_t c = 2 * at + 1;
+            if (c >= size) break;
+            if (c + 1 < size && above(heap[c + 1], heap[c])) ++c;
+            if (!above(heap[c], item)) break;
+            place(at, heap[c]);
+            at = c;
+        }
+        place(at, item);
+    };
+    for (uint64_t i = 0; i < M; ++i) where[i] = uint32_t(i);
+    for (uint64_t at = M / 2; at-- > 0;) sift_down(at);
+    std::vector<uint8_t> gone(M, 0);
+    while (size > keep) {
+        const uint32_t i = heap[0];
+        gone[i] = 1;
+        place(0, heap[--size]);
+        if (size > 0) sift_down(0);
+        for (int c = 0; c < count[i]; ++c) {
+            const uint64_t j = nb[uint64_t(i) * kNb + c];
+            if (gone[j]) continue;
+            const double wj = weight_in(j, i);
+            if (wj == 0) continue;
+            W[j] -= wj;
+            sift_down(where[j]);
+        }
+    }
+    std::vector<uint64_t> kept;
+    kept.reserve(keep);
+    for (uint64_t i = 0; i < M; ++i)
+        if (!gone[i]) kept.push_back(i);
+    return kept;
+}
+
+// Candidates per kept sample for blue noise (Yuksel: 3-5x; more gives little).
+constexpr uint64_t kBlueNoiseCandidates = 4;
+
+}  // namespace
+
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
+    const SurfaceDraw draw(scene);
+    PointSet ps;
+    if (draw.tris.empty() && !scene.clouds.empty()) {
+        append_clouds(scene, ps);
+        if (surface_of) surface_of->assign(ps.size(), kNoSurface);
+        return ps;
+    }
+    if (draw.tris.empty())
+        throw Error(fmt::format("{}: the scene has no surface area", scene.path));
+    const uint64_t n = scene.points;
+    if (n == 0) throw Error(fmt::format("{}: sampling.points must be at least 1", scene.path));
+    std::vector<uint32_t> surf;
+    const uint64_t seed = mix(scene.seed ^ 0x766d6170ULL);
+    if (scene.pattern == SamplePattern::kUniform) {
+        resize_points(ps, surf, n);
+        parallel_for(n, [&](uint64_t i) { draw.draw(seed, i, i, ps, surf); });
+    } else {
+        const uint64_t m = n * kBlueNoiseCandidates;
+        PointSet cand;
+        std::vector<uint32_t> cand_surf;
+        resize_points(cand, cand_surf, m);
+        parallel_for(m, [&](uint64_t i) { draw.draw(seed, i, i, cand, cand_surf); });
+        const std::vector<uint64_t> kept = eliminate(cand.positions, cand.normals, n, draw.area);
+        resize_points(ps, surf, n);
+        parallel_for(n, [&](uint64_t k) {
+            const uint64_t i = kept[k];
+            ps.positions[k] = cand.positions[i];
+            ps.normals[k] = cand.normals[i];
+            ps.colors[k] = cand.colors[i];
+            ps.emission[k] = cand.emission[i];
+            surf[k] = cand_surf[i];
+        });
+    }
+    // Each sample stands for an equal share of the area: a disc of that area.
+    ps.radii.assign(n, float(std::sqrt(draw.area / (M_PI * double(n)))));
+    match_emitted_power(draw.surface_area, surf, ps);
     append_clouds(scene, ps);
     if (surface_of) {
         *surface_of = std::move(surf);

@@ -320,7 +320,7 @@ void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::pat
 
 void read_sampling(const Ctx& cx, const json& j, Scene& sc) {
     const json sampling = j.value("sampling", json::object());
-    cx.known(sampling, "sampling", {"points", "density", "seed"});
+    cx.known(sampling, "sampling", {"points", "density", "seed", "pattern"});
     if (sampling.contains("points") && sampling.contains("density"))
         cx.fail("sampling", "give points or density, not both");
     if (sampling.contains("points"))
@@ -340,17 +340,29 @@ void read_sampling(const Ctx& cx, const json& j, Scene& sc) {
     }
     if (sampling.contains("seed"))
         sc.seed = uint64_t(cx.number(sampling["seed"], "sampling.seed", 0, 1e15));
+    if (sampling.contains("pattern")) {
+        const std::string p = cx.text(sampling, "pattern", "sampling.pattern", "");
+        try {
+            sc.pattern = parse<SamplePattern>(p, "sampling.pattern");
+        } catch (const Error&) {
+            cx.fail("sampling.pattern", fmt::format("unknown value '{}' (expected uniform or "
+                                                    "blue-noise)", p));
+        }
+    }
 }
 
 void read_octree(const Ctx& cx, const json& j, Scene& sc) {
     if (!j.contains("octree")) return;
     const json& o = j["octree"];
-    cx.known(o, "octree", {"max_height", "leaf_points"});
+    cx.known(o, "octree", {"max_height", "leaf_points", "delta_floor"});
     OctreeParams op;
     if (o.contains("max_height"))
         op.max_height = int(cx.number(o["max_height"], "octree.max_height", 1, 21));
     if (o.contains("leaf_points"))
         op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
+    if (o.contains("delta_floor"))
+        sc.delta_floor = float(cx.number(o["delta_floor"], "octree.delta_floor", 0,
+                                         OctreeParams::kDeltaFloorLimit));
     sc.octree = op;
 }
 
@@ -414,6 +426,14 @@ Scene mesh_file_scene(const std::string& path) {
 }  // namespace
 
 std::string default_scene_path() { return data_dir() + "/scenes/cornell-bunny.json"; }
+
+OctreeParams scene_octree(const Scene& scene) {
+    OctreeParams op = scene.octree.value_or(OctreeParams{});
+    op.delta_floor = scene.delta_floor.value_or(scene.pattern == SamplePattern::kBlueNoise
+                                                    ? OctreeParams::kEvenDeltaFloor
+                                                    : OctreeParams::kDefaultDeltaFloor);
+    return op;
+}
 
 bool is_scene_input(const std::string& path, bool as_points) {
     if (has_extension(path, ".json")) return true;

@@ -39,6 +39,12 @@ struct Names<GiRefine> {
                                                                  {"links", GiRefine::kLinks}};
 };
 
+template <>
+struct Names<SamplePattern> {
+    static constexpr std::pair<const char*, SamplePattern> table[] = {
+        {"uniform", SamplePattern::kUniform}, {"blue-noise", SamplePattern::kBlueNoise}};
+};
+
 template <class E>
 const char* lookup(E e) {
     for (const auto& [name, value] : Names<E>::table)
@@ -64,6 +70,7 @@ const char* name_of(Backend e) { return lookup(e); }
 const char* name_of(OccluderSearch e) { return lookup(e); }
 const char* name_of(Construction e) { return lookup(e); }
 const char* name_of(GiRefine e) { return lookup(e); }
+const char* name_of(SamplePattern e) { return lookup(e); }
 
 template <class E>
 std::vector<std::string> names_of() {
@@ -83,9 +90,11 @@ template std::vector<std::string> names_of<Backend>();
 template std::vector<std::string> names_of<OccluderSearch>();
 template std::vector<std::string> names_of<Construction>();
 template std::vector<std::string> names_of<GiRefine>();
+template std::vector<std::string> names_of<SamplePattern>();
 template Backend parse<Backend>(std::string_view, std::string_view);
 template OccluderSearch parse<OccluderSearch>(std::string_view, std::string_view);
 template Construction parse<Construction>(std::string_view, std::string_view);
 template GiRefine parse<GiRefine>(std::string_view, std::string_view);
+template SamplePattern parse<SamplePattern>(std::string_view, std::string_view);
 
 }  // namespace vmap

@@ -101,10 +101,6 @@ struct Pair {
     uint32_t i, j;
 };
 
-float floor_of(const ValidateParams& p) {
-    return p.splat_floor >= 0.f ? p.splat_floor : detail::kDeltaSplatFloor;
-}
-
 // Seeded uniform pairs i != j of n points; the same seed gives the same pairs everywhere.
 std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
     std::mt19937_64 rng(seed);
@@ -184,6 +180,7 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
     sp.pred = load_point_cloud(cloud);
     Scene dense = scene;
     dense.points = std::clamp<uint64_t>(8 * sp.pred.size(), 200000, 4000000);
+    dense.pattern = SamplePattern::kUniform;  // a lookup table: no need to thin it
     std::vector<uint32_t> surf;
     const PointSet ref = sample_scene(dense, &surf);
     using Tree =
@@ -402,7 +399,7 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
     std::vector<uint32_t> order;
     hp.t = Octree::build(copy, op, order, path);
     if (params.delta_scale != 1.f || params.splat_floor >= 0.f)
-        apply_delta_rule(hp.t, copy, params.delta_scale, floor_of(params));
+        apply_delta_rule(hp.t, copy, params.delta_scale, op.delta_floor);
     hp.inverse.resize(order.size());
     for (uint32_t k = 0; k < order.size(); ++k) hp.inverse[order[k]] = k;
     if (params.occluders == OccluderSearch::kGridWalk) hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
@@ -418,14 +415,15 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
 // points and score every pair set; the eye sets' answers go to `answers` when given.
 HeightResult validate_height(const PointSet& pred_pts, const PairSets& ps,
                              const std::vector<uint8_t>& buried, const ValidateParams& params,
-                             int leaf_points, int max_height, const std::string& path,
-                             EyeAnswers* answers) {
+                             int leaf_points, int max_height, float delta_floor,
+                             const std::string& path, EyeAnswers* answers) {
     HeightResult row;
     row.max_height = max_height;
     row.leaf_points = leaf_points;
     OctreeParams op;
     op.max_height = max_height;
     op.leaf_points = leaf_points;
+    op.delta_floor = delta_floor;
     const auto tb = Clock::now();
     HeightPredictor hp;
     build_predictor(hp, row, pred_pts, params, op, path);
@@ -518,6 +516,7 @@ Scene validation_scene(const std::string& path, const ValidateParams& params) {
                         "point cloud does not have",
                         path));
     if (params.points) sc.points = params.points;
+    if (!params.sampling.empty()) sc.pattern = parse<SamplePattern>(params.sampling, "sampling");
     return sc;
 }
 
@@ -597,6 +596,10 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     if (n < 2) throw Error(fmt::format("{}: {} point(s): no pairs to validate", path, n));
 
     ValidationReport r = report_header(sc, sp, path, params);
+    const bool raw = !params.as_cloud.empty() || !params.cloud.empty();
+    r.delta_floor = params.splat_floor >= 0.f ? params.splat_floor
+                    : raw                     ? OctreeParams::kDefaultDeltaFloor
+                                              : scene_octree(sc).delta_floor;
     r.dropped_points = dropped;
     r.offset = offset;
     r.triangles = exact.triangles();
@@ -612,7 +615,8 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
         EyeAnswers answers;
         const bool dump = hi == 0 && !params.dump_eyes.empty();
         r.rows.push_back(validate_height(sp.pred, ps, buried, params, r.params.leaf_points,
-                                         params.heights[hi], path, dump ? &answers : nullptr));
+                                         params.heights[hi], r.delta_floor, path,
+                                         dump ? &answers : nullptr));
         if (dump) write_eye_dump(params.dump_eyes, sp, ps, answers, r);
         progress.set(hi + 1);
         progress.throw_if_cancelled();
@@ -646,7 +650,7 @@ std::string validation_markdown(const ValidationReport& r) {
         "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
         name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
-        floor_of(p), r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
+        r.delta_floor, r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
         r.live_pairs,
         r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
                                        r.dropped_points)
@@ -726,7 +730,7 @@ std::string validation_json(const ValidationReport& r) {
            {"facing_tol", p.visibility.facing_tol},
            {"parallel_tol", p.visibility.parallel_tol},
            {"delta_scale", p.delta_scale},
-           {"splat_floor", floor_of(p)},
+           {"splat_floor", r.delta_floor},
            {"model_points", r.model_points},
            {"model_pairs", r.model_pairs},
            {"eyes", r.eyes},

@@ -168,13 +168,19 @@ void check_build(BuildOptions& o) {
 
 // Reads the input (vmap/input.h) and completes bp from it (o.params too).
 PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
+    // A long build is announced before a scene is sampled, not after.
+    bool warned = false;
+    o.input.before_sampling = [&](uint64_t points, const OctreeParams& op) {
+        warn_if_long(o.input.path, points, op);
+        warned = true;
+    };
     Input input = load_input(o.input);
     print_notes(input.notes);
     for (const std::string& line : input.done) fmt::print(stderr, "vmap build: {}\n", line);
     what = input.description;
     bp.octree = input.octree;
     o.params.octree = bp.octree;
-    warn_if_long(o.input.path, input.points.size(), bp.octree);
+    if (!warned) warn_if_long(o.input.path, input.points.size(), bp.octree);
     return std::move(input.points);
 }
 

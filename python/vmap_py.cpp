@@ -133,15 +133,18 @@ VisibilityMap build_points(PointSet ps, const BuildArgs& a, const std::string& s
 }
 
 VisibilityMap build_file(const std::string& path, std::optional<uint64_t> points,
-                         std::optional<uint64_t> seed, const BuildArgs& a) {
+                         std::optional<uint64_t> seed, std::optional<std::string> sampling,
+                         const BuildArgs& a) {
     const bool scene = path.size() >= 5 && path.compare(path.size() - 5, 5, ".json") == 0;
     if (!scene) {
-        if (points || seed) throw Error(path + ": points/seed apply to scene files, not clouds");
+        if (points || seed || sampling)
+            throw Error(path + ": points/seed/sampling apply to scene files, not clouds");
         return build_points(load_point_cloud(path), a, path, std::nullopt);
     }
     Scene sc = load_scene(path);
     if (points) sc.points = *points;
     if (seed) sc.seed = *seed;
+    if (sampling) sc.pattern = parse<SamplePattern>(*sampling, "sampling");
     return build_points(sample_scene(sc), a, path, scene_octree(sc));
 }
 
@@ -325,11 +328,13 @@ void def_build(py::module_& m) {
     m.def(
         "build_file",
         [args](const std::string& path, std::optional<uint64_t> points,
-               std::optional<uint64_t> seed,
-               py::kwargs kw) { return build_file(path, points, seed, args(kw)); },
+               std::optional<uint64_t> seed, std::optional<std::string> sampling,
+               py::kwargs kw) { return build_file(path, points, seed, sampling, args(kw)); },
         py::arg("path"), py::arg("points") = py::none(), py::arg("seed") = py::none(),
-        "V-map of a scene file (.json: sampled with `points` and `seed` when given, its octree "
-        "defaults) or a point cloud (.ply/.off); options as build().");
+        py::arg("sampling") = py::none(),
+        "V-map of a scene file (.json: sampled with `points`, `seed` and `sampling` ('blue-noise' "
+        "or 'uniform') when given, its octree defaults, the disc floor by the sampling) or a "
+        "point cloud (.ply/.off); options as build().");
     m.def("load", &load_vmap, py::arg("path"), py::call_guard<py::gil_scoped_release>(),
           "Reads a .vmap file.");
 }

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -23,6 +24,10 @@ struct InputOptions {
     std::optional<int> max_height, leaf_points;  // the octree: not for a .vmap (it has one)
     std::optional<float> delta_floor;            // the octree: not for a .vmap
     CloudOptions cloud;                          // point clouds only
+    // Scene and mesh files: called with the number of points and the octree parameters before
+    // the sampling starts (which takes seconds for millions of points), e.g. to warn that the
+    // build will be long before any work.
+    std::function<void(uint64_t points, const OctreeParams&)> before_sampling;
 };
 
 enum class InputKind { kScene, kMesh, kCloud, kVmap };

@@ -81,6 +81,19 @@ def test_save_and_load(small, tmp_path):
         small.num_points, small.num_links, small.height)
 
 
+def test_uniform_sampling_matches_the_cli(small, tmp_path):
+    py_file, cli_file = tmp_path / "py.vmap", tmp_path / "cli.vmap"
+    uni = vmap.build_file(SCENE, points=2000, seed=3, sampling="uniform", **OPTS)
+    assert uni.delta_floor == 2.5 and small.delta_floor == 2.0
+    uni.save(str(py_file))
+    subprocess.run([vmap_bin(), "-q", "build", SCENE, "--points", "2000", "--seed", "3",
+                    "--max-height", "5", "--leaf-points", "4", "--backend", "cpu",
+                    "--sampling", "uniform", "-o", str(cli_file)], check=True)
+    assert py_file.read_bytes() == cli_file.read_bytes()
+    with pytest.raises(vmap.Error, match="sampling"):
+        vmap.build_file(SCENE, points=500, sampling="poisson", **OPTS)
+
+
 def test_delta_floor_matches_the_cli(small, tmp_path):
     py_file, cli_file = tmp_path / "py.vmap", tmp_path / "cli.vmap"
     vmap.build_file(SCENE, points=2000, seed=3, delta_floor=1.5, **OPTS).save(str(py_file))

@@ -55,6 +55,7 @@ void load_sampled(const InputOptions& o, Input& in) {
                    : fmt::format("mesh {} ({} triangles, area-sampled)", o.path,
                                  sc.surfaces[0].mesh.triangles.size());
     in.description += fmt::format(", {} samples", name_of(sc.pattern));
+    if (o.before_sampling) o.before_sampling(sc.points, in.octree);
     in.points = sample_scene(sc);
 }
 

@@ -39,6 +39,14 @@ CLI::Validator eps_check() {
     return checked_by(&VisibilityParams::eps,
                       fmt::format("FLOAT in [0 - {})", VisibilityParams::kEpsLimit));
 }
+CLI::Validator end_window_check() {
+    return checked_by(&VisibilityParams::end_window,
+                      fmt::format("FLOAT in [0 - {}]", VisibilityParams::kEndWindowLimit));
+}
+std::string end_window_help() {
+    return "An occluder counts only when its plane is cut farther than this many of the nearer "
+           "end's disc radii from that end (0: no such window)";
+}
 
 void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     using P = VisibilityParams;
@@ -55,6 +63,9 @@ void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     app->add_option("--parallel-tol", vp.parallel_tol,
                     "Occluder planes with |n.d| <= tol |d| are ignored")
         ->check(checked_by(&P::parallel_tol, tol))
+        ->capture_default_str();
+    app->add_option("--end-window", vp.end_window, end_window_help())
+        ->check(end_window_check())
         ->capture_default_str();
 }
 

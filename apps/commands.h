@@ -100,13 +100,16 @@ CLI::Validator checked_by(T P::*field, const std::string& range) {
         range);
 }
 // OctreeParams::check's ranges of max_height and leaf_points; VisibilityParams::check's of K
-// and eps.
+// eps and end_window; the end window's help line.
 CLI::Validator max_height_check();
 CLI::Validator leaf_points_check();
 CLI::Validator k_check();
 CLI::Validator eps_check();
+CLI::Validator end_window_check();
+std::string end_window_help();
 
-// The predicate's options (-K, --eps, --facing-tol, --parallel-tol) into `vp`, in the ranges
+// The predicate's options (-K, --eps, --facing-tol, --parallel-tol, --end-window) into `vp`, in
+// the ranges
 // VisibilityParams::check accepts.
 void add_predicate_options(CLI::App* app, VisibilityParams& vp);
 

@@ -47,9 +47,11 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
                          std::optional<Camera>& camera) {
     const auto t0 = Clock::now();
     if (has_extension(o.in.path, ".vmap") &&
-        (o.K != kGiVmapK || o.eps != kGiVmapEps || o.in.delta_floor))
+        (o.K != kGiVmapK || o.eps != kGiVmapEps || o.end_window != kGiVmapEndWindow ||
+         o.in.delta_floor))
         throw Error(fmt::format(
-            "{}: -K/--eps/--delta-floor apply when the V-map is built, not to a .vmap", o.in.path));
+            "{}: -K/--eps/--end-window/--delta-floor apply when the V-map is built, not to a .vmap",
+            o.in.path));
     Input in = load_input(o.in);
     print_notes(in.notes);
     camera = in.camera;
@@ -280,6 +282,7 @@ BuildParams gi_build_params(const OctreeParams& octree, const GiOptions& o) {
     if (o.in.delta_floor) bp.octree.delta_floor = *o.in.delta_floor;
     bp.visibility.K = o.K;
     bp.visibility.eps = o.eps;
+    bp.visibility.end_window = o.end_window;
     bp.backend = o.gi.backend;
     bp.progress = stderr_progress();
     return bp;
@@ -347,8 +350,13 @@ void add_build_options(CLI::App* gi, GiOptions* o) {
         ->capture_default_str();
     gi->add_option("--eps", o->eps,
                    "V-map built here: an occluder's plane must cut the segment at t in (eps, "
-                   "1 - eps) (the GI's default is larger than vmap build's: docs/gi.md)")
+                   "1 - eps)")
         ->check(eps_check())
+        ->capture_default_str();
+    gi->add_option("--end-window", o->end_window,
+                   "V-map built here: " + end_window_help() +
+                       " (the GI's default is 2, vmap build's 0: docs/gi.md \"The end window\")")
+        ->check(end_window_check())
         ->capture_default_str();
 }
 

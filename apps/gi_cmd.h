@@ -18,7 +18,8 @@ namespace vmap::cli {
 // The predicate for a V-map built by `vmap gi` (docs/gi.md "The V-map for the GI"): the GI weighs
 // pairs by form factor, so near pairs, which `vmap build`'s eps hides too often, count most.
 inline constexpr int kGiVmapK = 2;
-inline constexpr float kGiVmapEps = 0.05f;
+inline constexpr float kGiVmapEps = 0.01f;
+inline constexpr float kGiVmapEndWindow = 2.0f;
 // Its occluder discs' floor is vmap build's (scene_octree: by how the scene is sampled; docs/gi.md
 // "The occluder disc's floor").
 
@@ -29,6 +30,7 @@ struct GiOptions {
     std::string image, ply, pfm;
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
+    float end_window = kGiVmapEndWindow;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power

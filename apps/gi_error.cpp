@@ -300,9 +300,11 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     const auto t0 = Clock::now();
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
-        if (o.K != kGiVmapK || o.eps != kGiVmapEps || o.in.delta_floor)
+        if (o.K != kGiVmapK || o.eps != kGiVmapEps || o.end_window != kGiVmapEndWindow ||
+            o.in.delta_floor)
             throw Error(fmt::format(
-                "{}: -K/--eps/--delta-floor apply to a V-map built from a scene file", o.in.path));
+                "{}: -K/--eps/--end-window/--delta-floor apply to a V-map built from a scene file",
+                o.in.path));
         VisibilityMap vm = load_vmap(o.in.path);
         bool same = vm.points().size() == ps.size();
         for (size_t k = 0; same && k < vm.points().size(); ++k)
@@ -320,9 +322,10 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     const BuildParams bp = gi_build_params(scene_octree(sc), o);
     VisibilityMap vm = build_vmap(std::move(ps), bp, nullptr, o.in.path);
     fmt::print(
-        "scene:      {} ({}): {} points, V-map (K {}, eps {}, delta floor {}) {} links in {:.2f} s\n",
-        sc.name, o.in.path, vm.points().size(), o.K, o.eps, bp.octree.delta_floor, vm.num_links(),
-        seconds_since(t0));
+        "scene:      {} ({}): {} points, V-map (K {}, eps {}, end window {}, delta floor {}) {} "
+        "links in {:.2f} s\n",
+        sc.name, o.in.path, vm.points().size(), o.K, o.eps, o.end_window, bp.octree.delta_floor,
+        vm.num_links(), seconds_since(t0));
     return vm;
 }
 

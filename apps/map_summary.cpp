@@ -46,8 +46,8 @@ void print_params(const VisibilityMap& vm) {
         "leaves\n",
         o.max_height, o.leaf_points, o.delta_floor, vm.octree().height(), vm.octree().num_nodes(),
         vm.octree().num_leaves());
-    fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}\n", v.K, v.eps,
-               v.facing_tol, v.parallel_tol);
+    fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}, end_window {}\n", v.K,
+               v.eps, v.facing_tol, v.parallel_tol, v.end_window);
 }
 
 nlohmann::json params_json(const VisibilityMap& vm) {
@@ -62,7 +62,8 @@ nlohmann::json params_json(const VisibilityMap& vm) {
             {"K", v.K},
             {"eps", short_decimal(v.eps)},
             {"facing_tol", short_decimal(v.facing_tol)},
-            {"parallel_tol", short_decimal(v.parallel_tol)}};
+            {"parallel_tol", short_decimal(v.parallel_tol)},
+            {"end_window", short_decimal(v.end_window)}};
 }
 
 }  // namespace vmap::cli

@@ -137,7 +137,7 @@ Command add_validate_command(CLI::App& app) {
     // setting of a fixed list (scripts/validate-sweep.sh).
     for (const char* name :
          {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
-          "--parallel-tol", "--occluders", "--backend", "--predict", "--delta-scale",
+          "--parallel-tol", "--end-window", "--occluders", "--backend", "--predict", "--delta-scale",
           "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
           "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);

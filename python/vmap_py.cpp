@@ -79,7 +79,7 @@ struct BuildArgs {
     std::optional<float> delta_floor;
     int K = VisibilityParams{}.K;
     float eps = VisibilityParams{}.eps, facing_tol = VisibilityParams{}.facing_tol,
-          parallel_tol = VisibilityParams{}.parallel_tol;
+          parallel_tol = VisibilityParams{}.parallel_tol, end_window = VisibilityParams{}.end_window;
     std::string backend = "auto", occluders = "spheres";
     int threads = 0;
     uint64_t batch_pairs = BuildParams{}.max_batch_pairs;
@@ -91,7 +91,7 @@ struct BuildArgs {
         if (max_height) bp.octree.max_height = *max_height;
         if (leaf_points) bp.octree.leaf_points = *leaf_points;
         if (delta_floor) bp.octree.delta_floor = *delta_floor;
-        bp.visibility = {K, eps, facing_tol, parallel_tol};
+        bp.visibility = {K, eps, facing_tol, parallel_tol, end_window};
         bp.backend = parse<Backend>(backend, "backend");
         bp.occluders = parse<OccluderSearch>(occluders, "occluders");
         bp.threads = threads;
@@ -287,6 +287,7 @@ BuildArgs build_args(const py::kwargs& kw) {
         {"eps", [](BuildArgs& a, py::handle v) { a.eps = v.cast<float>(); }},
         {"facing_tol", [](BuildArgs& a, py::handle v) { a.facing_tol = v.cast<float>(); }},
         {"parallel_tol", [](BuildArgs& a, py::handle v) { a.parallel_tol = v.cast<float>(); }},
+        {"end_window", [](BuildArgs& a, py::handle v) { a.end_window = v.cast<float>(); }},
         {"backend", [](BuildArgs& a, py::handle v) { a.backend = v.cast<std::string>(); }},
         {"occluders", [](BuildArgs& a, py::handle v) { a.occluders = v.cast<std::string>(); }},
         {"threads", [](BuildArgs& a, py::handle v) { a.threads = v.cast<int>(); }},
@@ -322,8 +323,8 @@ void def_build(py::module_& m) {
         py::arg("colors") = py::none(), py::arg("emission") = py::none(),
         "V-map of a point set: points N x 3; normals N x 3 (estimated when None), radii N "
         "(splat radii), colors N x 3 (albedo, 0.8 grey when None), emission N x 3. Options as "
-        "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, backend "
-        "('auto', 'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
+        "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, "
+        "end_window, backend ('auto', 'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
         "(a function of a dict; returning False cancels).");
     m.def(
         "build_file",
@@ -350,6 +351,8 @@ void def_map(py::module_& m) {
         .def_property_readonly("height", [](const VisibilityMap& v) { return v.octree().height(); })
         .def_property_readonly("delta_floor",
                                [](const VisibilityMap& v) { return v.octree_params().delta_floor; })
+        .def_property_readonly(
+            "end_window", [](const VisibilityMap& v) { return v.visibility_params().end_window; })
         .def_property_readonly(
             "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
             "Positions, N x 3 float32, in input order.")

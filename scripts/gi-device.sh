@@ -6,11 +6,11 @@
 #       check   gi_gpu_test (refinement, bounces, final gather: CPU vs CUDA bit for bit), then
 #               compute-sanitizer memcheck and racecheck on it (small cases), then vmap gi on
 #               cornell-two-models twice (timing); one summary in $OUT/gi-check.txt
-#       full    vmap gi --reference on cornell-two-models and cornell-dragon at their full point
-#               counts, the V-map at each of KS (default 2), EPS (default "0.05 0.1") and
-#               FLOORS (--delta-floor, default 2),
-#               1000 + 1000 points; the
-#               summary lines appended to $OUT/gi-check.txt
+#       full    vmap gi --reference on cornell-two-models and cornell-dragon (SCENES) at their
+#               full point counts, the V-map at each of KS (default 2), EPS (default 0.01),
+#               WINDOWS (--end-window, default 2) and FLOORS (--delta-floor, default 2),
+#               REF_POINTS (default 1000) + as many model points; the summary lines appended to
+#               $OUT/gi-check.txt
 #       two     vmap gi on cornell-two-models (Fig. 12, 150,000 points; GI_ARGS: more options),
 #               PNG + log
 #       bunny   vmap gi on the default scene, PNG + log
@@ -62,20 +62,23 @@ for step in "$@"; do
                 done
             } > >(tee "$OUT/gi-check.txt") 2>&1 ;;
         full)
-            for sc in cornell-two-models cornell-dragon; do
-                for k in ${KS:-2}; do
-                    for e in ${EPS:-0.05 0.1}; do
-                      for f in ${FLOORS:-2}; do
-                        log="$OUT/full-$sc-K$k-eps$e-f$f.log"
-                        "$bin/vmap" gi "scenes/$sc.json" --reference --ref-points 1000 \
-                            --ref-samples 1024 --backend cuda --no-brute -K "$k" --eps "$e" \
-                            --delta-floor "$f" >"$log" 2>&1 || rc=1
-                        echo "$sc, K $k, eps $e, delta floor $f:"
+            for sc in ${SCENES:-cornell-two-models cornell-dragon}; do
+              for k in ${KS:-2}; do
+                for e in ${EPS:-0.01}; do
+                  for w in ${WINDOWS:-2}; do
+                    for f in ${FLOORS:-2}; do
+                        log="$OUT/full-$sc-K$k-eps$e-w$w-f$f.log"
+                        "$bin/vmap" gi "scenes/$sc.json" --reference \
+                            --ref-points "${REF_POINTS:-1000}" --ref-samples 1024 --backend cuda \
+                            --no-brute -K "$k" --eps "$e" --end-window "$w" --delta-floor "$f" \
+                            --ref-out "$OUT/full-$sc-K$k-eps$e-w$w-f$f.csv" >"$log" 2>&1 || rc=1
+                        echo "$sc, K $k, eps $e, end window $w, delta floor $f:"
                         grep -E "^(scene|vmap gi:)|converged \(|\| 1 \||V-map visibility vs|exact visibility between" \
                             "$log" | grep -v "reference noise" | cut -c1-200 || true
-                      done
                     done
+                  done
                 done
+              done
             done > >(tee -a "$OUT/gi-check.txt") 2>&1 ;;
         two)
             # shellcheck disable=SC2086 # GI_ARGS: extra options, word-split on purpose

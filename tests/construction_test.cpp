@@ -190,6 +190,9 @@ TEST_P(NodeConstruction, RandomScenesGiveTheLeafPairVmap) {
         bp.visibility.K = 1 + int(r() % 3);
         bp.visibility.eps = std::array<float, 4>{0.f, 0.001f, 0.01f, 0.05f}[r() % 4];
         bp.visibility.facing_tol = std::array<float, 3>{0.f, 0.005f, 0.05f}[r() % 3];
+        // The end windows from a stream of their own (the draws above and below stay as they were).
+        bp.visibility.end_window =
+            std::array<float, 4>{0.f, 0.f, 1.f, 2.5f}[std::mt19937_64(seed * 104729)() % 4];
         bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
         // Frontier slices of a few pairs: pairs settled across slices and levels.
         bp.max_level_pairs = std::array<uint64_t, 4>{1, 7, 64, 1u << 20}[r() % 4];

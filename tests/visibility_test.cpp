@@ -202,6 +202,43 @@ TEST_P(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
     EXPECT_TRUE(counts(x));
 }
 
+// The end windows (VisibilityParams::end_window): a crossing within end_window x Delta_end of
+// the nearer end does not count, whichever way the leaf faces; the window is in the end's own
+// disc radii. a's Delta is 0.05; x is a surface the segment goes into (it counts with no
+// window), cut about 0.059 from a.
+TEST_P(EndPlanes, AnEndWindowDropsACrossingInsideIt) {
+    const LeafDisc x = disc({0.06f, 0.01f, 0}, {-1, 0.3f, 0}, 0.05f);
+    ASSERT_TRUE(in_front_of_ends(x));
+    EXPECT_TRUE(counts(x));
+    vp.end_window = 1;  // 0.05: the crossing lies beyond it
+    EXPECT_TRUE(counts(x));
+    vp.end_window = 2;  // 0.1: inside
+    EXPECT_FALSE(counts(x));
+    a.delta = 0.02f;  // a smaller end disc, a narrower window (0.04)
+    EXPECT_TRUE(counts(x));
+}
+TEST_P(EndPlanes, AnEndWindowAtTheFarEndUsesThatEndsDisc) {
+    // The plane x = 0.94 cuts the segment about 0.06 from b (b's Delta 0.05).
+    const LeafDisc x = disc({0.94f, 0.098f, 0}, {1, 0, 0}, 0.05f);
+    ASSERT_TRUE(in_front_of_ends(x));
+    vp.end_window = 1;
+    EXPECT_TRUE(counts(x));
+    vp.end_window = 1.5f;  // 0.075
+    EXPECT_FALSE(counts(x));
+    b.delta = 0.03f;  // 0.045 at b; a's larger disc does not widen b's window
+    a.delta = 0.5f;
+    EXPECT_TRUE(counts(x));
+}
+TEST_P(EndPlanes, AnEndWindowLeavesTheMiddleOfTheSegment) {
+    const LeafDisc x = disc({0.5f, 0.05f, 0}, {1, 0.2f, 0}, 0.1f);
+    for (float w : {0.f, 2.f, 8.f}) {
+        vp.end_window = w;
+        EXPECT_TRUE(counts(x)) << w;
+    }
+    vp.end_window = 11;  // 0.55 from each end: the whole segment
+    EXPECT_FALSE(counts(x));
+}
+
 VMAP_ON_EACH_BACKEND(EndPlanes);
 
 class Facing : public OnBackend {};

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
+#include <limits>
 #include <memory>
 #include <random>
 #include <span>
@@ -66,19 +67,23 @@ size_t section_data(const std::string& bytes, const char* tag) {
     return 0;
 }
 
+// Cuts the last `bytes` bytes of the PARM section of a file image (an older version's PARM).
+void drop_parm_tail(std::string& out, size_t bytes) {
+    const size_t parm = section_data(out, "PARM");
+    uint64_t n;
+    std::memcpy(&n, out.data() + parm - 8, 8);
+    out.erase(parm + n - bytes, bytes);
+    n -= bytes;
+    std::memcpy(out.data() + parm - 8, &n, 8);
+}
+
 // A file image with its LINK section (the last one) replaced by one holding `offsets` and
-// `targets`, coded (version 5) or raw (version 4, the header's version set to match).
+// `targets`, coded (version 6) or raw (version 4, the header's version set to match).
 std::string with_links(const std::string& bytes, std::span<const uint64_t> offsets,
                        std::span<const int32_t> targets, bool raw) {
     std::string out = bytes.substr(0, section_data(bytes, "LINK") - 12);
-    if (raw) {  // version 4's PARM ends before delta_floor (the last 4 bytes of version 5's)
-        const size_t parm = section_data(out, "PARM");
-        uint64_t n;
-        std::memcpy(&n, out.data() + parm - 8, 8);
-        out.erase(parm + n - 4, 4);
-        n -= 4;
-        std::memcpy(out.data() + parm - 8, &n, 8);
-    }
+    // version 4's PARM ends before delta_floor and end_window (the last 8 bytes of version 6's)
+    if (raw) drop_parm_tail(out, 8);
     auto put = [&](const void* p, size_t n) { out.append(static_cast<const char*>(p), n); };
     std::string body;
     body.append(reinterpret_cast<const char*>(offsets.data()), offsets.size() * 8);
@@ -95,7 +100,7 @@ std::string with_links(const std::string& bytes, std::span<const uint64_t> offse
     const uint64_t len = body.size();
     put("LINK", 4), put(&len, 8);
     out += body;
-    const uint32_t version = raw ? 4 : 5;
+    const uint32_t version = raw ? 4 : 6;
     std::memcpy(out.data() + 8, &version, 4);
     return out;
 }
@@ -127,6 +132,7 @@ void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
     EXPECT_EQ(a.visibility_params().eps, b.visibility_params().eps);
     EXPECT_EQ(a.visibility_params().facing_tol, b.visibility_params().facing_tol);
     EXPECT_EQ(a.visibility_params().parallel_tol, b.visibility_params().parallel_tol);
+    EXPECT_EQ(a.visibility_params().end_window, b.visibility_params().end_window);
 
     expect_same_bytes(a.points().positions, b.points().positions, "positions");
     expect_same_bytes(a.points().normals, b.points().normals, "normals");
@@ -178,6 +184,7 @@ class VmapFile : public ::testing::Test {
         bp.octree.leaf_points = 4;
         bp.visibility.K = 3;  // not the default, so a lost parameter shows
         bp.octree.delta_floor = 2.25f;
+        bp.visibility.end_window = 1.5f;
         map_ = std::make_unique<VisibilityMap>(build_vmap(sample_scene(sc), bp, nullptr, "test"));
     }
     static void TearDownTestSuite() { map_.reset(); }
@@ -327,7 +334,7 @@ TEST_F(VmapFile, BadMagicIsRejected) {
 TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
-    for (uint32_t version : {0u, 1u, 2u, 3u, 6u, 0xffffffffu}) {
+    for (uint32_t version : {0u, 1u, 2u, 3u, 7u, 0xffffffffu}) {
         SCOPED_TRACE(version);
         std::string bytes = whole;
         std::memcpy(bytes.data() + 8, &version, 4);
@@ -443,6 +450,31 @@ TEST_F(VmapFile, AVersion4FileWithRawLinksStillLoads) {
     // Version 4 had no delta_floor: its maps were built with the default.
     EXPECT_EQ(back.octree_params().delta_floor, OctreeParams::kDefaultDeltaFloor);
     EXPECT_EQ(back.octree_params().leaf_points, map().octree_params().leaf_points);
+}
+
+TEST_F(VmapFile, AVersion5FileLoadsWithoutEndWindows) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    drop_parm_tail(bytes, 4);  // version 5's PARM ends with delta_floor
+    const uint32_t version = 5;
+    std::memcpy(bytes.data() + 8, &version, 4);
+    const VisibilityMap back = load_vmap(write_resealed(dir, "v5.vmap", bytes));
+    EXPECT_EQ(back.visibility_params().end_window, 0.f);
+    EXPECT_EQ(back.octree_params().delta_floor, map().octree_params().delta_floor);
+    EXPECT_EQ(back.link_offsets(), map().link_offsets());
+}
+
+TEST_F(VmapFile, AnEndWindowOutOfRangeIsRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    const size_t parm = section_data(bytes, "PARM");
+    uint64_t n;
+    std::memcpy(&n, bytes.data() + parm - 8, 8);
+    for (float bad : {-1.f, 1e6f, std::numeric_limits<float>::quiet_NaN()}) {
+        SCOPED_TRACE(bad);
+        std::memcpy(bytes.data() + parm + n - 4, &bad, 4);
+        EXPECT_LOAD_ERROR(write_resealed(dir, "window.vmap", bytes), "PARM", "end_window");
+    }
 }
 
 TEST_F(VmapFile, LinksAreStoredInUnderHalfTheirRawSize) {

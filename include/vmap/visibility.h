@@ -10,13 +10,18 @@ struct VisibilityParams {
     static constexpr int kKLimit = 1000;       // K in 1..kKLimit
     static constexpr float kEpsLimit = 0.5f;   // eps in [0, kEpsLimit)
     static constexpr float kTolLimit = 1.0f;   // facing_tol, parallel_tol in [0, kTolLimit)
+    static constexpr float kEndWindowLimit = 100.0f;  // end_window in [0, kEndWindowLimit]
     int K = 2;                   // actual occluders that make a pair invisible (>= 1)
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
     float facing_tol = 0.001f;   // facing: n_a . d > facing_tol |d| (a rounding guard)
     float parallel_tol = 1e-3f;  // a plane with |n . d| <= parallel_tol |d| is parallel to pq
+    // An occluder counts only when its plane is cut farther than end_window x Delta_end from the
+    // nearer end, Delta_end that end's disc radius: a window at each end in the ends' own
+    // scale, beside eps's share of the length (docs/gi.md "The end window"). 0: none.
+    float end_window = 0.f;
 
     // Throws vmap::Error naming `source` and the field for a value out of range: K 1..1000,
-    // eps [0, 0.5), facing_tol and parallel_tol [0, 1).
+    // eps [0, 0.5), facing_tol and parallel_tol [0, 1), end_window [0, 100].
     void check(const std::string& source) const;
 };
 

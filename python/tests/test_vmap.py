@@ -106,6 +106,18 @@ def test_delta_floor_matches_the_cli(small, tmp_path):
     assert py_file.read_bytes() != small_file.read_bytes()
 
 
+def test_end_window_matches_the_cli(small, tmp_path):
+    py_file, cli_file = tmp_path / "py.vmap", tmp_path / "cli.vmap"
+    m = vmap.build_file(SCENE, points=2000, seed=3, end_window=3, **OPTS)
+    assert m.end_window == 3.0 and small.end_window == 0.0
+    m.save(str(py_file))
+    subprocess.run([vmap_bin(), "-q", "build", SCENE, "--points", "2000", "--seed", "3",
+                    "--max-height", "5", "--leaf-points", "4", "--backend", "cpu",
+                    "--end-window", "3", "-o", str(cli_file)], check=True)
+    assert py_file.read_bytes() == cli_file.read_bytes()
+    assert vmap.load(str(py_file)).end_window == 3.0
+
+
 def test_one_thread_gives_the_same_map(small):
     one = vmap.build_file(SCENE, points=2000, seed=3, threads=1, **OPTS)
     pairs = np.random.default_rng(5).integers(0, small.num_points, size=(2000, 2))

@@ -5,7 +5,8 @@
 //   header: "VMAPFILE" | u32 version | u32 reserved | u64 payload bytes | u64 payload checksum
 //           (payload_hash below)
 //   payload: sections, each: 4-char tag | u64 bytes | data
-//     PARM: octree and visibility parameters (version 5: the octree's delta_floor last)
+//     PARM: octree and visibility parameters (version 5: the octree's delta_floor; version 6:
+//           the predicate's end_window last)
 //     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission) | positions, normals, [colours],
 //           [radii], [emission]  (octree order)
 //     ORDR: u32 order[n] (octree position -> input index)
@@ -46,10 +47,10 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 5;  // 2: 64-bit link offsets; 3: emission in octree order and
+constexpr uint32_t kVersion = 6;  // 2: 64-bit link offsets; 3: emission in octree order and
                                   // the measured Delta rule (a version-2 file is built wrong);
                                   // 4: the octree's frame (scale); 5: coded link targets,
-                                  // the octree's delta_floor
+                                  // the octree's delta_floor; 6: the predicate's end_window
 constexpr uint32_t kOldestRead = 4;  // version 4 lacks PARM's delta_floor and codes no links
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
@@ -248,6 +249,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.put(vm.visibility_params().facing_tol);
     w.put(vm.visibility_params().parallel_tol);
     w.put(vm.octree_params().delta_floor);
+    w.put(vm.visibility_params().end_window);
     w.end(s);
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
@@ -426,6 +428,11 @@ uint64_t read_points(Reader& r, detail::MapData& d, uint32_t version) {
     if (!(d.octree_params.delta_floor >= 0 &&
           d.octree_params.delta_floor <= OctreeParams::kDeltaFloorLimit))
         r.fail(fmt::format("delta_floor {} out of range", d.octree_params.delta_floor));
+    // Versions 4 and 5 predate the end windows: their maps were built without (0).
+    d.visibility_params.end_window = version >= 6 ? r.get<float>() : 0.f;
+    if (!(d.visibility_params.end_window >= 0 &&
+          d.visibility_params.end_window <= VisibilityParams::kEndWindowLimit))
+        r.fail(fmt::format("end_window {} out of range", d.visibility_params.end_window));
     r.end_section(e);
 
     e = r.begin_section("PNTS");

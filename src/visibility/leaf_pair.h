@@ -130,10 +130,11 @@ struct PairSegment {
     SlabRay ray;
     // The ends' tangent planes (in_front_of_ends): b's centroid q, the normals, and whether
     // each end has a plane at all (a flagged leaf has none); the ends' disc radii
-    // (exits_at_an_end).
+    // (exits_at_an_end) and their end windows, end_window x Delta (beyond_the_end_windows).
     Vec3 q, na, nb;
     bool plane_a, plane_b;
     float delta_a, delta_b;
+    float window_a, window_b;
 };
 // The facing part alone (the CPU's packet walk sets up only the pairs that face).
 VMAP_HD bool pair_faces(const LeafDisc& la, const LeafDisc& lb, const VisibilityParams& vp) {
@@ -158,6 +159,8 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.plane_b = !(lb.flags & kLeafNormalDegenerate);
     s.delta_a = la.delta;
     s.delta_b = lb.delta;
+    s.window_a = vp.end_window * la.delta;
+    s.window_b = vp.end_window * lb.delta;
     return s;
 }
 VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
@@ -202,13 +205,29 @@ VMAP_HD bool exits_at_an_end(const PairSegment& s, const LeafDisc& x, float t) {
     return dot(x.normal, (near_a ? s.p : s.q) - x.centroid) < 0.f;
 }
 
+// The end windows (VisibilityParams::end_window, docs/gi.md "The end window"): a crossing at t
+// counts only when it lies at least end_window x Delta_end from the nearer end. The eps window
+// is a share of the segment's length, so it is wide at the far end of a long segment (on a
+// segment from a model to a ceiling light, eps 0.05 is centimetres: the model's own overhangs
+// within it cast no shadow) and a hair wide on a short one, where the discs of the end's
+// neighbours, on a curve, cut the segment leaving it (the near pairs the GI weighs most). The
+// neighbours that do that lie within a disc or two of the end, so a window in units of the end's
+// own disc takes them out at any length and at any density, and no more. Like the rules above it
+// only drops occluders that the eps window and the disc test let count (node_pair.h (e5)).
+VMAP_HD bool beyond_the_end_windows(const PairSegment& s, float t) {
+    const bool near_a = t < 0.5f;
+    const float from_end = (near_a ? t : 1.f - t) * s.len;
+    return !(from_end < (near_a ? s.window_a : s.window_b));
+}
+
 // Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that
-// stands in front of both ends and is not crossed from behind right at an end.
+// stands in front of both ends, is not crossed from behind right at an end, and is cut outside
+// the end windows.
 VMAP_HD bool counts_as_occluder(const PairSegment& s, const LeafDisc& x,
                                 const VisibilityParams& vp) {
     float t = 0.f;
     return in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp, &t) &&
-           !exits_at_an_end(s, x, t);
+           !exits_at_an_end(s, x, t) && beyond_the_end_windows(s, t);
 }
 
 // A node reached by the walk (its box meets the segment): when it is a leaf other than a and b,

@@ -37,8 +37,9 @@
 //       Delta + 3u Delta + 10uM of c means within E of the disc).
 //  (e5) What counts is narrower than what (e3)/(e4) bound: counts_as_occluder also asks that x
 //       stand in front of both ends (in_front_of_ends) and not be crossed from behind within
-//       half an end's disc radius of that end (exits_at_an_end). Both only drop occluders that
-//       pass the eps window and the disc test; neither makes a leaf count that (e3) would reject.
+//       half an end's disc radius of that end (exits_at_an_end), nor cut within the end windows
+//       (beyond_the_end_windows). All three only drop occluders that pass the eps window and the
+//       disc test; none makes a leaf count that (e3) would reject.
 //       So every bound here, an upper bound on the leaves with eps < t < 1 - eps whose disc the
 //       segment meets, bounds the leaves that count, and "fewer than K may occlude" stays a
 //       proof. (A rule that let a leaf count at t <= eps, or t >= 1 - eps, would need flat_end

@@ -29,6 +29,9 @@ void VisibilityParams::check(const std::string& source) const {
     if (!(parallel_tol >= 0 && parallel_tol < kTolLimit))
         throw Error(fmt::format("{}: parallel_tol {} out of range [0, {})", source, parallel_tol,
                                 kTolLimit));
+    if (!(end_window >= 0 && end_window <= kEndWindowLimit))
+        throw Error(fmt::format("{}: end_window {} out of range [0, {}]", source, end_window,
+                                kEndWindowLimit));
 }
 
 void BuildParams::check(const std::string& source) const {

@@ -306,17 +306,29 @@ std::vector<std::pair<int32_t, int32_t>> random_pairs(int32_t num_leaves, int n,
     return pairs;
 }
 
-class TraversalOracle : public test::OnEachBackendWith<std::tuple<const char*, int, int>> {};
+class TraversalOracle : public test::OnEachBackendWith<std::tuple<const char*, int, int>> {
+  protected:
+    void check_against_no_pruning(float window) const;
+};
 
 // The backend's walk (on the GPU: the default kernel) and the host's leaf_pair_visible against
-// testing every leaf.
+// testing every leaf; without end windows and with (the walk's sub-segment then narrower).
 TEST_P(TraversalOracle, SpherePruningNeverDropsAnOccluder) {
+    for (float window : {0.f, 2.f}) {
+        SCOPED_TRACE(window);
+        check_against_no_pruning(window);
+        if (HasFatalFailure()) return;
+    }
+}
+
+void TraversalOracle::check_against_no_pruning(float window) const {
     const auto [scene, height, k] = param();
     PointSet ps = test::sample(test::scene_path(scene), 3000, 5);
     std::vector<uint32_t> order;
     Octree t = Octree::build(ps, {height, 3}, order);
     VisibilityParams vp;
     vp.K = k;
+    vp.end_window = window;
     const OctreeView v = octree_view(t);
     const auto pairs = random_pairs(v.num_leaves, 4000, 9);
     WorkCounters wc;

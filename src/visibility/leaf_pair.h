@@ -117,7 +117,7 @@ VMAP_HD WalkNode load_walk(const WalkNode* w) {
 // centroid of the first leaf), the facing test, and the sub-segment the walk tests boxes with.
 // An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside the
 // node's content box; so only the part of pq with t in [t0, t1] (a little wider than
-// (eps, 1 - eps), for rounding) needs to meet the boxes. This skips the dense surface around
+// (eps, 1 - eps), for rounding, and narrowed by the end windows) needs to meet the boxes. This skips the dense surface around
 // both ends. DEVIATION from paper §5.2: the walk prunes with each node's tight box of its points
 // and discs, not its sphere. Both bound every occluder disc, so the same occluders are found
 // (tests/visibility_test.cpp checks against no pruning at all); the box of a planar wall patch
@@ -151,7 +151,17 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.d = lb.centroid - s.p;
     s.len = sqrtf(length2(s.d));
     s.faces = faces;
-    s.ray = slab_ray(s.p, s.d, vp.eps * 0.999f, 1.f - vp.eps * 0.999f);
+    s.window_a = vp.end_window * la.delta;
+    s.window_b = vp.end_window * lb.delta;
+    // The walk's sub-segment: past eps, and past the end windows (beyond_the_end_windows),
+    // each of which applies on its own half of the segment only, so neither reaches past 0.5.
+    // With no windows (or no length) this is (eps, 1 - eps), the same floats as ever.
+    float ta = vp.eps, tb = vp.eps;
+    if (s.len > 0.f) {
+        ta = min_f(max_f(ta, s.window_a / s.len), 0.5f);
+        tb = min_f(max_f(tb, s.window_b / s.len), 0.5f);
+    }
+    s.ray = slab_ray(s.p, s.d, ta * 0.999f, 1.f - tb * 0.999f);
     s.q = lb.centroid;
     s.na = la.normal;
     s.nb = lb.normal;
@@ -159,8 +169,6 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.plane_b = !(lb.flags & kLeafNormalDegenerate);
     s.delta_a = la.delta;
     s.delta_b = lb.delta;
-    s.window_a = vp.end_window * la.delta;
-    s.window_b = vp.end_window * lb.delta;
     return s;
 }
 VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,

@@ -50,6 +50,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         (o.K != kGiVmapK || o.eps != kGiVmapEps || o.in.delta_floor))
         throw Error(fmt::format(
             "{}: -K/--eps/--delta-floor apply when the V-map is built, not to a .vmap", o.in.path));
+    o.in.progress = sampling_progress();
     Input in = load_input(o.in);
     print_notes(in.notes);
     camera = in.camera;

@@ -163,6 +163,7 @@ void check_build(BuildOptions& o) {
     if (!o.count_links) check_output(o.output, "-o", {in.path});
     in.cloud = cloud_options(o);
     o.params.progress = stderr_progress();
+    in.progress = sampling_progress();
     o.params.keep_links = !o.count_links;
 }
 

@@ -313,4 +313,9 @@ ProgressCallback stderr_progress() {
     };
 }
 
+ProgressCallback sampling_progress() {
+    constexpr uint64_t kFrom = 500'000;
+    return [cb = stderr_progress()](const ProgressInfo& p) { return p.total < kFrom || cb(p); };
+}
+
 }  // namespace vmap::cli

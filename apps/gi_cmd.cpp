@@ -52,6 +52,7 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         throw Error(fmt::format(
             "{}: -K/--eps/--end-window/--delta-floor apply when the V-map is built, not to a .vmap",
             o.in.path));
+    o.in.progress = sampling_progress();
     Input in = load_input(o.in);
     print_notes(in.notes);
     camera = in.camera;

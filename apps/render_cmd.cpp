@@ -51,7 +51,9 @@ struct Source {
 };
 
 Source load_source(const RenderArgs& a) {
-    Input in = load_input(a.in);
+    InputOptions io = a.in;
+    io.progress = sampling_progress();
+    Input in = load_input(io);
     print_notes(in.notes);
     Source s;
     s.octree = in.octree;

@@ -44,7 +44,9 @@ VisibilityMap input_map(const ViewArgs& a, view::ServerConfig& cfg) {
         cfg.camera = sc.camera;
         cfg.name = sc.name;
     }
-    Input in = load_input(a.in);
+    InputOptions io = a.in;
+    io.progress = sampling_progress();
+    Input in = load_input(io);
     print_notes(in.notes);
     if (!cfg.camera) cfg.camera = in.camera;
     if (cfg.name.empty()) cfg.name = in.name;

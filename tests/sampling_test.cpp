@@ -1,6 +1,14 @@
 // Seeded area-weighted sampling of a scene (src/scene/sampling.cpp).
 #include "scene_test_util.h"
 
+#include <tbb/task_arena.h>
+
+#include <numeric>
+#include <random>
+#include <set>
+
+#include "scene/elimination.h"
+
 namespace vmap {
 namespace {
 
@@ -244,6 +252,209 @@ TEST(SceneSampling, UniformAndBlueNoiseAreBothDeterministic) {
         }
         expect_bits_equal(one, sample_scene(sc));
     }
+}
+
+// ---- the elimination against a serial oracle --------------------------------------------------
+
+// The rule of detail::eliminate done the plain way, one candidate at a time: W of a slot is the
+// sum, in list order and in double, of the weights of its list's present members; the present
+// slot of largest (W, id) goes, and every present slot whose list holds it is summed again.
+std::vector<uint64_t> serial_elimination(const detail::NeighbourLists& L, uint64_t keep) {
+    const uint64_t M = L.size();
+    std::vector<std::vector<uint32_t>> listed_by(M);
+    for (uint64_t j = 0; j < M; ++j)
+        for (uint64_t e = L.start[j]; e < L.start[j + 1]; ++e) listed_by[L.nb[e]].push_back(j);
+    std::vector<uint8_t> gone(M, 0);
+    auto crowding = [&](uint64_t i) {
+        double sum = 0;
+        for (uint64_t e = L.start[i]; e < L.start[i + 1]; ++e)
+            if (!gone[L.nb[e]]) sum += L.weight[e];
+        return sum;
+    };
+    std::vector<double> W(M);
+    std::vector<uint32_t> slot_of(M);
+    std::set<std::pair<double, uint32_t>> by_key;  // (W, id)
+    for (uint64_t i = 0; i < M; ++i) {
+        W[i] = crowding(i);
+        slot_of[L.id[i]] = uint32_t(i);
+        by_key.insert({W[i], L.id[i]});
+    }
+    while (by_key.size() > keep) {
+        const uint32_t i = slot_of[std::prev(by_key.end())->second];
+        by_key.erase(std::prev(by_key.end()));
+        gone[i] = 1;
+        for (uint32_t j : listed_by[i]) {
+            if (gone[j]) continue;
+            by_key.erase({W[j], L.id[j]});
+            W[j] = crowding(j);
+            by_key.insert({W[j], L.id[j]});
+        }
+    }
+    std::vector<uint64_t> kept;
+    for (const auto& [w, id] : by_key) kept.push_back(id);
+    std::sort(kept.begin(), kept.end());
+    return kept;
+}
+
+// detail::eliminate in an arena of `threads` threads.
+std::vector<uint64_t> eliminate_with(const detail::NeighbourLists& L, uint64_t keep,
+                                     int threads) {
+    tbb::task_arena arena(threads);
+    std::vector<uint64_t> kept;
+    arena.execute([&] { kept = detail::eliminate(L, keep); });
+    return kept;
+}
+
+// How many of `want` a differs in (either way), for the failure message.
+size_t differ(const std::vector<uint64_t>& a, const std::vector<uint64_t>& want) {
+    std::vector<uint64_t> d;
+    std::set_symmetric_difference(a.begin(), a.end(), want.begin(), want.end(),
+                                  std::back_inserter(d));
+    return d.size();
+}
+
+void expect_oracle_result(const detail::NeighbourLists& L, const std::string& what) {
+    const uint64_t M = L.size();
+    for (uint64_t keep : {M / 4, M / 2, M - M / 20, M - 3, uint64_t(1)}) {
+        SCOPED_TRACE(what + ", keep " + std::to_string(keep) + " of " + std::to_string(M));
+        const std::vector<uint64_t> want = serial_elimination(L, keep);
+        ASSERT_EQ(want.size(), keep);
+        for (int threads : {1, 2, 4}) {
+            const std::vector<uint64_t> got = eliminate_with(L, keep, threads);
+            ASSERT_EQ(got.size(), keep) << threads << " threads";
+            ASSERT_TRUE(got == want) << threads << " threads: " << differ(got, want)
+                                     << " candidates differ from the serial greedy";
+        }
+    }
+}
+
+// Points on planes, a sphere, two sheets 0.1 reach apart facing away from each other,
+// clusters of duplicates (exact ties in W, lists saturated at 32, one-sided lists) and a
+// lattice (exact distance ties); their lists from detail::same_side_neighbours as the sampler
+// builds them.
+TEST(SampleElimination, EqualsTheSerialGreedyOnPointSets) {
+    for (uint64_t seed = 1; seed <= 6; ++seed) {
+        std::mt19937_64 rng(seed);
+        std::uniform_real_distribution<float> u(0, 1);
+        const Vec3 up{0, 0, 1}, down{0, 0, -1};
+        for (int shape = 0; shape < 5; ++shape) {
+            const uint64_t M = 1500 + rng() % 2500;
+            std::vector<Vec3> pos, nrm;
+            for (uint64_t i = 0; i < M; ++i) {
+                Vec3 p, n;
+                if (shape == 0) {  // a square
+                    p = {u(rng), u(rng), 0};
+                    n = up;
+                } else if (shape == 1) {  // a unit sphere, normals outward
+                    Vec3 d;
+                    do d = {2 * u(rng) - 1, 2 * u(rng) - 1, 2 * u(rng) - 1};
+                    while (!(length(d) > 0.1f && length(d) <= 1));
+                    n = d / length(d);
+                    p = n;
+                } else if (shape == 2) {  // two sheets, facing away
+                    const bool top = rng() & 1;
+                    p = {u(rng), u(rng), top ? 0.005f : 0.0f};
+                    n = top ? up : down;
+                } else if (shape == 3) {  // clusters: duplicates and tight jitter, and a plane
+                    const uint64_t c = rng() % 12;
+                    const Vec3 centre{float(c % 4) * 0.3f, float(c / 4) * 0.3f, 0};
+                    const uint64_t kind = rng() % 3;
+                    p = kind == 0   ? centre
+                        : kind == 1 ? centre + Vec3{0.002f * u(rng), 0.002f * u(rng), 0}
+                                    : Vec3{u(rng), u(rng), 0};
+                    n = up;
+                } else {  // a lattice with some points doubled
+                    const uint64_t k = rng() % 900;
+                    p = {float(k % 30) / 30, float(k / 30) / 30, 0};
+                    n = (rng() % 8) ? up : down;
+                }
+                pos.push_back(p);
+                nrm.push_back(n);
+            }
+            const double reach = shape == 1 ? 0.25 : shape == 4 ? 0.1 : 0.08;
+            const double floor_d = (shape == 3 ? 0.3 : 0.6) * reach / 2;
+            const detail::NeighbourLists L = detail::same_side_neighbours(pos, nrm, reach, floor_d);
+            ASSERT_EQ(L.size(), M);
+            if (shape == 3) {
+                uint64_t full = 0;
+                for (uint64_t i = 0; i < M; ++i)
+                    full += L.start[i + 1] - L.start[i] == detail::NeighbourLists::kMax;
+                ASSERT_GT(full, M / 4) << "the clusters fill their lists";
+            }
+            expect_oracle_result(L, "seed " + std::to_string(seed) + ", shape " +
+                                        std::to_string(shape));
+        }
+    }
+}
+
+// Random lists: one-sided, of any length up to 32, with weights from a few values (many exact
+// ties in W, broken by id) and candidate indices in random slots.
+TEST(SampleElimination, EqualsTheSerialGreedyOnRandomLists) {
+    for (uint64_t seed = 1; seed <= 40; ++seed) {
+        std::mt19937_64 rng(seed);
+        const uint64_t M = 50 + rng() % 3000;
+        const uint64_t span = 2 + rng() % 60;  // neighbours among the `span` slots around
+        detail::NeighbourLists L;
+        L.id.resize(M);
+        std::iota(L.id.begin(), L.id.end(), 0u);
+        std::shuffle(L.id.begin(), L.id.end(), rng);
+        L.start.assign(1, 0);
+        const float values[] = {0.0f, 0.125f, 0.25f, 0.5f, 1.0f, 0.3f};
+        const int distinct = 2 + int(rng() % 5);
+        for (uint64_t i = 0; i < M; ++i) {
+            std::vector<uint32_t> nb;
+            const int want = int(rng() % (detail::NeighbourLists::kMax + 1));
+            for (int tries = 0; tries < 4 * want && int(nb.size()) < want; ++tries) {
+                const uint64_t j = (i + M + rng() % (2 * span + 1) - span) % M;
+                if (j != i && std::find(nb.begin(), nb.end(), uint32_t(j)) == nb.end())
+                    nb.push_back(uint32_t(j));
+            }
+            for (uint32_t j : nb) {
+                L.nb.push_back(j);
+                L.weight.push_back(values[rng() % distinct]);
+            }
+            L.start.push_back(L.nb.size());
+        }
+        expect_oracle_result(L, "seed " + std::to_string(seed));
+    }
+}
+
+TEST(SampleElimination, KeepsAllOrNone) {
+    detail::NeighbourLists L;
+    L.id = {2, 0, 1};
+    L.start = {0, 1, 2, 3};
+    L.nb = {1, 2, 0};
+    L.weight = {0.5f, 0.5f, 0.5f};
+    EXPECT_EQ(detail::eliminate(L, 3), (std::vector<uint64_t>{0, 1, 2}));
+    EXPECT_EQ(detail::eliminate(L, 5), (std::vector<uint64_t>{0, 1, 2}));
+    EXPECT_TRUE(detail::eliminate(L, 0).empty());
+    // All W equal at first: ties go to the larger id.
+    EXPECT_EQ(detail::eliminate(L, 2), serial_elimination(L, 2));
+    EXPECT_EQ(detail::eliminate(L, 1), serial_elimination(L, 1));
+}
+
+// The sampler reports the elimination as a stage (its size first) and stops when asked to.
+TEST(SceneSampling, BlueNoiseReportsProgressAndCancels) {
+    Scene sc = load_scene(kScenes + "cornell-empty.json");
+    sc.points = 3000;
+    std::vector<ProgressInfo> seen;
+    const ProgressCallback record = [&](const ProgressInfo& p) {
+        seen.push_back(p);
+        return true;
+    };
+    const PointSet with = sample_scene(sc, nullptr, record);
+    ASSERT_GE(seen.size(), 2u);
+    EXPECT_STREQ(seen.front().stage, "sampling (candidates removed)");
+    EXPECT_EQ(seen.front().done, 0u);
+    EXPECT_EQ(seen.front().total, 3 * sc.points);  // 4 candidates a sample
+    EXPECT_EQ(seen.back().done, seen.back().total);
+    expect_bits_equal(with, sample_scene(sc));
+    const ProgressCallback stop = [](const ProgressInfo&) { return false; };
+    EXPECT_THROW((void)sample_scene(sc, nullptr, stop), Cancelled);
+    sc.pattern = SamplePattern::kUniform;
+    seen.clear();
+    (void)sample_scene(sc, nullptr, record);
+    EXPECT_TRUE(seen.empty()) << "uniform samples have no stage";
 }
 
 TEST(SceneSampling, ThePatternAndTheFloorComeFromTheFile) {

@@ -11,6 +11,7 @@
 
 #include "vmap/camera.h"
 #include "vmap/octree.h"
+#include "vmap/progress.h"
 #include "vmap/scene.h"
 #include "vmap/vmap.h"
 
@@ -28,6 +29,8 @@ struct InputOptions {
     // the sampling starts (which takes seconds for millions of points), e.g. to warn that the
     // build will be long before any work.
     std::function<void(uint64_t points, const OctreeParams&)> before_sampling;
+    // Scene and mesh files: the blue-noise sampling's progress (sample_scene), when set.
+    ProgressCallback progress;
 };
 
 enum class InputKind { kScene, kMesh, kCloud, kVmap };

@@ -43,6 +43,7 @@
 #include "vmap/mesh.h"
 #include "vmap/octree.h"
 #include "vmap/options.h"
+#include "vmap/progress.h"
 
 namespace vmap {
 
@@ -96,9 +97,12 @@ bool is_scene_input(const std::string& path, bool as_points = false);
 // every machine and thread count. The points of an emitting surface emit exactly its power (the
 // binomial count of its points would miss it by a few percent, so their emission is scaled by
 // the surface's area over their discs'). `surface_of`, when given, receives each point's index
-// into scene.surfaces (kNoSurface for a cloud's points).
+// into scene.surfaces (kNoSurface for a cloud's points). `progress`, when set, reports the
+// blue-noise elimination (stage "sampling (candidates removed)", seconds for millions of
+// points) and can cancel it (vmap::Cancelled).
 inline constexpr uint32_t kNoSurface = 0xffffffffu;
-PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr);
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of = nullptr,
+                      const ProgressCallback& progress = {});
 
 // The octree parameters a V-map of the scene's samples is built with by default: the file's
 // max_height and leaf_points (else OctreeParams'), and its delta_floor, else the floor for how

@@ -56,7 +56,7 @@ void load_sampled(const InputOptions& o, Input& in) {
                                  sc.surfaces[0].mesh.triangles.size());
     in.description += fmt::format(", {} samples", name_of(sc.pattern));
     if (o.before_sampling) o.before_sampling(sc.points, in.octree);
-    in.points = sample_scene(sc);
+    in.points = sample_scene(sc, nullptr, o.progress);
 }
 
 }  // namespace

@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "scene/elimination.h"
+#include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
@@ -127,180 +129,36 @@ void resize_points(PointSet& ps, std::vector<uint32_t>& surf, uint64_t n) {
 
 // Blue noise by sample elimination (after Yuksel, "Sample Elimination for Generating Poisson
 // Disk Sample Sets", 2015): of the candidates (uniform over the area), the one most crowded by
-// its neighbours is removed, one at a time, until `keep` remain. (Removing every candidate more
-// crowded than all its neighbours at once, in parallel rounds, was tried: 10% of the samples
-// then keep a neighbour closer than 0.6 splat radii, against under 1% one at a time.) Crowding is the sum over the
-// neighbours within 2 r_max of (1 - d / 2 r_max)^8, where r_max = sqrt(area / (2 sqrt(3) keep))
-// is the disc radius of the densest packing of `keep` discs on the area, and d is clamped below
-// at 2 r_min (Yuksel's weight limit, r_min = 0.65 r_max (1 - (keep / candidates)^1.5)) so that
-// a tight cluster does not outweigh everything else. Only neighbours on the same side of a
-// surface count (normals less than 90 degrees apart): the two faces of a thin plate, or an
-// object and the wall it touches, are thinned each on its own. Returns the kept candidates'
-// indices, ascending. Deterministic: the neighbour lists do not depend on the thread count, and
-// the elimination runs in one thread (ties to the larger index).
+// its neighbours is removed, one at a time, until `keep` remain. detail::eliminate runs this in
+// parallel rounds that give exactly the one-at-a-time result (an earlier try, which removed at
+// once every candidate more crowded than all its neighbours and so was not that result, left
+// 10% of the samples a neighbour closer than 0.6 splat radii, against under 1% one at a time).
+// Crowding is the sum over the neighbours within 2 r_max of (1 - d / 2 r_max)^8, where r_max =
+// sqrt(area / (2 sqrt(3) keep)) is the disc radius of the densest packing of `keep` discs on
+// the area, and d is clamped below at 2 r_min (Yuksel's weight limit, r_min = 0.65 r_max (1 -
+// (keep / candidates)^1.5)) so that a tight cluster does not outweigh everything else. Only
+// neighbours on the same side of a surface count (normals less than 90 degrees apart): the two
+// faces of a thin plate, or an object and the wall it touches, are thinned each on its own.
+// Returns the kept candidates' indices, ascending. Deterministic: neither the neighbour lists
+// nor the elimination depend on the thread count.
 std::vector<uint64_t> eliminate(const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
-                                uint64_t keep, double area) {
+                                uint64_t keep, double area, const ProgressCallback& callback) {
     const uint64_t M = pos.size();
     if (keep >= M) {
         std::vector<uint64_t> all(M);
         for (uint64_t i = 0; i < M; ++i) all[i] = i;
         return all;
     }
+    // The stage counts the candidates removed; the neighbour lists come first, at 0.
+    detail::Progress progress("sampling (candidates removed)", M - keep, &callback,
+                              "cpu (" + cpu_threads() + ")");
     const double rmax = std::sqrt(area / (2 * std::sqrt(3.0) * double(keep)));
     const double rmin = 0.65 * rmax * (1 - std::pow(double(keep) / double(M), 1.5));
-    const double reach = 2 * rmax, reach2 = reach * reach, floor_d = 2 * rmin;
-    constexpr int kNb = 32;  // about 14.5 same-side candidates lie within reach at 4x
-    // Neighbours from a grid of cells `reach` wide: a candidate's lie in the 27 cells around it.
-    // Cells are keyed by their integer coordinates; the candidates sorted by key (then index).
-    Vec3 lo = pos[0], hi = pos[0];
-    for (const Vec3& p : pos) {
-        lo = {std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z)};
-        hi = {std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z)};
-    }
-    // At least `reach` wide, and at most 2^20 cells an axis (21-bit coordinates in the key).
-    const double extent = std::max({double(hi.x - lo.x), double(hi.y - lo.y), double(hi.z - lo.z)});
-    const double cell = std::max(reach, extent / double(1 << 20));
-    auto cell_of = [&](Vec3 p, int axis) {
-        const float v = axis == 0 ? p.x - lo.x : axis == 1 ? p.y - lo.y : p.z - lo.z;
-        return int64_t(std::floor(double(v) / cell));
-    };
-    auto key_of = [](int64_t x, int64_t y, int64_t z) {
-        return (uint64_t(x) << 42) | (uint64_t(y) << 21) | uint64_t(z);
-    };
-    std::vector<std::pair<uint64_t, uint32_t>> by_cell(M);
-    parallel_for(M, [&](uint64_t i) {
-        by_cell[i] = {key_of(cell_of(pos[i], 0), cell_of(pos[i], 1), cell_of(pos[i], 2)),
-                      uint32_t(i)};
-    });
-    parallel_sort(by_cell.begin(), by_cell.end(), std::less<>());
-    std::vector<uint64_t> cell_start;
-    // The cells in an open-addressing table (key -> cell), and the candidates' positions and
-    // normals in cell order, so that a cell's are read in one run.
-    std::vector<Vec3> cpos(M), cnrm(M);
-    parallel_for(M, [&](uint64_t k) {
-        cpos[k] = pos[by_cell[k].second];
-        cnrm[k] = nrm[by_cell[k].second];
-    });
-    for (uint64_t k = 0; k < M; ++k)
-        if (k == 0 || by_cell[k].first != by_cell[k - 1].first) cell_start.push_back(k);
-    const size_t cells = cell_start.size();
-    cell_start.push_back(M);
-    size_t cap = 16;
-    while (cap < 2 * cells) cap <<= 1;
-    constexpr uint64_t kEmpty = ~0ull;  // no key reaches it (63 bits at most)
-    std::vector<uint64_t> table_key(cap, kEmpty);
-    std::vector<uint32_t> table_cell(cap);
-    for (size_t c = 0; c < cells; ++c) {
-        const uint64_t key = by_cell[cell_start[c]].first;
-        size_t at = mix(key) & (cap - 1);
-        while (table_key[at] != kEmpty) at = (at + 1) & (cap - 1);
-        table_key[at] = key;
-        table_cell[at] = uint32_t(c);
-    }
-    auto find_cell = [&](uint64_t key) -> int64_t {
-        for (size_t at = mix(key) & (cap - 1); table_key[at] != kEmpty; at = (at + 1) & (cap - 1))
-            if (table_key[at] == key) return table_cell[at];
-        return -1;
-    };
-    std::vector<uint32_t> nb(M * kNb);
-    std::vector<float> nw(M * kNb);
-    std::vector<uint8_t> count(M, 0);
-    std::vector<double> W(M, 0.0);
-    // A cell at a time: its 27 neighbouring cells are looked up once for all its candidates.
-    parallel_for_range<size_t>(cells, 256, [&](size_t cb, size_t ce) {
-        std::vector<std::pair<double, uint32_t>> found;
-        std::vector<std::pair<uint64_t, uint64_t>> ranges;
-        for (size_t cell_index = cb; cell_index < ce; ++cell_index) {
-            const uint64_t first = cell_start[cell_index];
-            const Vec3 p0 = cpos[first];
-            const int64_t cx = cell_of(p0, 0), cy = cell_of(p0, 1), cz = cell_of(p0, 2);
-            ranges.clear();
-            for (int64_t dx = -1; dx <= 1; ++dx)
-                for (int64_t dy = -1; dy <= 1; ++dy)
-                    for (int64_t dz = -1; dz <= 1; ++dz) {
-                        if (cx + dx < 0 || cy + dy < 0 || cz + dz < 0) continue;
-                        const int64_t c = find_cell(key_of(cx + dx, cy + dy, cz + dz));
-                        if (c >= 0) ranges.push_back({cell_start[c], cell_start[c + 1]});
-                    }
-            for (uint64_t q = first; q < cell_start[cell_index + 1]; ++q) {
-                const uint32_t i = by_cell[q].second;
-                const Vec3 pi = cpos[q], ni = cnrm[q];
-                found.clear();
-                for (const auto& [kb, ke] : ranges)
-                    for (uint64_t k = kb; k < ke; ++k) {
-                        if (k == q || !(dot(ni, cnrm[k]) > 0)) continue;
-                        const Vec3 d = cpos[k] - pi;
-                        const double d2 =
-                            double(d.x) * d.x + double(d.y) * d.y + double(d.z) * d.z;
-                        if (d2 < reach2) found.push_back({std::sqrt(d2), by_cell[k].second});
-                    }
-                // The nearest kNb (ties by index), in that order.
-                std::sort(found.begin(), found.end());
-                const int n = int(std::min<size_t>(found.size(), kNb));
-                double sum = 0;
-                for (int c = 0; c < n; ++c) {
-                    const double t = 1 - std::max(found[c].first, floor_d) / reach;
-                    const double t2 = t * t, t4 = t2 * t2;
-                    const float w = float(t4 * t4);
-                    nb[uint64_t(i) * kNb + c] = found[c].second;
-                    nw[uint64_t(i) * kNb + c] = w;
-                    sum += w;
-                }
-                count[i] = uint8_t(n);
-                W[i] = sum;
-            }
-        }
-    });
-    // Removing i lowers each neighbour j's crowding by the weight j's own list holds for i (a
-    // list cut at kNb may lack it).
-    auto weight_in = [&](uint64_t j, uint64_t i) -> double {
-        for (int c = 0; c < count[j]; ++c)
-            if (nb[j * kNb + c] == i) return nw[j * kNb + c];
-        return 0.0;
-    };
-    // An indexed binary max-heap on (W, index): removing a candidate lowers its neighbours'
-    // crowding, and each moves down in place (no stale entries).
-    std::vector<uint32_t> heap(M), where(M);
-    for (uint64_t i = 0; i < M; ++i) heap[i] = uint32_t(i);
-    auto above = [&](uint32_t a, uint32_t b) { return W[a] > W[b] || (W[a] == W[b] && a > b); };
-    auto place = [&](uint64_t at, uint32_t item) {
-        heap[at] = item;
-        where[item] = uint32_t(at);
-    };
-    uint64_t size = M;
-    auto sift_down = [&](uint64_t at) {
-        const uint32_t item = heap[at];
-        for (;;) {
-            uint64_t c = 2 * at + 1;
-            if (c >= size) break;
-            if (c + 1 < size && above(heap[c + 1], heap[c])) ++c;
-            if (!above(heap[c], item)) break;
-            place(at, heap[c]);
-            at = c;
-        }
-        place(at, item);
-    };
-    for (uint64_t i = 0; i < M; ++i) where[i] = uint32_t(i);
-    for (uint64_t at = M / 2; at-- > 0;) sift_down(at);
-    std::vector<uint8_t> gone(M, 0);
-    while (size > keep) {
-        const uint32_t i = heap[0];
-        gone[i] = 1;
-        place(0, heap[--size]);
-        if (size > 0) sift_down(0);
-        for (int c = 0; c < count[i]; ++c) {
-            const uint64_t j = nb[uint64_t(i) * kNb + c];
-            if (gone[j]) continue;
-            const double wj = weight_in(j, i);
-            if (wj == 0) continue;
-            W[j] -= wj;
-            sift_down(where[j]);
-        }
-    }
-    std::vector<uint64_t> kept;
-    kept.reserve(keep);
-    for (uint64_t i = 0; i < M; ++i)
-        if (!gone[i]) kept.push_back(i);
+    const detail::NeighbourLists lists =
+        detail::same_side_neighbours(pos, nrm, 2 * rmax, 2 * rmin);
+    progress.throw_if_cancelled();
+    std::vector<uint64_t> kept = detail::eliminate(lists, keep, &progress);
+    progress.finish();
     return kept;
 }
 
@@ -309,7 +167,8 @@ constexpr uint64_t kBlueNoiseCandidates = 4;
 
 }  // namespace
 
-PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
+PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of,
+                      const ProgressCallback& progress) {
     const SurfaceDraw draw(scene);
     PointSet ps;
     if (draw.tris.empty() && !scene.clouds.empty()) {
@@ -332,7 +191,8 @@ PointSet sample_scene(const Scene& scene, std::vector<uint32_t>* surface_of) {
         std::vector<uint32_t> cand_surf;
         resize_points(cand, cand_surf, m);
         parallel_for(m, [&](uint64_t i) { draw.draw(seed, i, i, cand, cand_surf); });
-        const std::vector<uint64_t> kept = eliminate(cand.positions, cand.normals, n, draw.area);
+        const std::vector<uint64_t> kept =
+            eliminate(cand.positions, cand.normals, n, draw.area, progress);
         resize_points(ps, surf, n);
         parallel_for(n, [&](uint64_t k) {
             const uint64_t i = kept[k];

@@ -9,6 +9,7 @@
 #include <numbers>
 
 #include "util/progress.h"
+#include "util/splitmix.h"
 #include "vmap/error.h"
 #include "vmap/gi_reference.h"
 #include "vmap/parallel.h"
@@ -26,13 +27,9 @@ constexpr int kMaxDepth = 1000;
 // SplitMix64 as a stream: the state advances by the golden ratio, each output is mixed.
 struct Rng {
     uint64_t state;
-    static uint64_t mix(uint64_t x) {
-        x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-        x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-        return x ^ (x >> 31);
-    }
+    static uint64_t mix(uint64_t x) { return detail::splitmix64_finalize(x); }
     float next() {
-        state += 0x9e3779b97f4a7c15ULL;
+        state += detail::kSplitMixGamma;
         return float(mix(state) >> 40) * (1.0f / 16777216.0f);  // [0, 1), 24 bits
     }
 };

@@ -8,19 +8,15 @@
 #include <tuple>
 #include <utility>
 
+#include "util/splitmix.h"
 #include "vmap/parallel.h"
 
 namespace vmap::detail {
 namespace {
 
-// A cell key's slot in the hash table (SplitMix64's finalizer: any good mix will do; the lists
-// do not depend on it).
-uint64_t cell_hash(uint64_t x) {
-    x += 0x9e3779b97f4a7c15ULL;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
+// A cell key's slot in the hash table (SplitMix64: any good mix will do; the lists do not
+// depend on it).
+uint64_t cell_hash(uint64_t x) { return splitmix64(x); }
 
 }  // namespace
 

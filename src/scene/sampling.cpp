@@ -6,6 +6,7 @@
 
 #include "scene/elimination.h"
 #include "util/progress.h"
+#include "util/splitmix.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/normals.h"
@@ -17,12 +18,7 @@ namespace {
 
 // SplitMix64: a counter-based generator, so sample i depends only on (seed, i) and the result
 // is the same for any thread count and standard library.
-uint64_t mix(uint64_t x) {
-    x += 0x9e3779b97f4a7c15ULL;
-    x = (x ^ (x >> 30)) * 0xbf58476d1ce4e5b9ULL;
-    x = (x ^ (x >> 27)) * 0x94d049bb133111ebULL;
-    return x ^ (x >> 31);
-}
+uint64_t mix(uint64_t x) { return detail::splitmix64(x); }
 double u01(uint64_t bits) { return double(bits >> 11) * (1.0 / 9007199254740992.0); }
 
 struct Tri {

@@ -117,9 +117,9 @@ VMAP_HD WalkNode load_walk(const WalkNode* w) {
 // centroid of the first leaf), the facing test, and the sub-segment the walk tests boxes with.
 // An actual occluder's crossing p + t d has eps < t < 1 - eps and lies on its disc, inside the
 // node's content box; so only the part of pq with t in [t0, t1] (a little wider than
-// (eps, 1 - eps), for rounding, and narrowed by the end windows) needs to meet the boxes. This skips the dense surface around
-// both ends. DEVIATION from paper §5.2: the walk prunes with each node's tight box of its points
-// and discs, not its sphere. Both bound every occluder disc, so the same occluders are found
+// (eps, 1 - eps), for rounding, and narrowed by the end windows) needs to meet the boxes. This
+// skips the dense surface around both ends. DEVIATION from paper §5.2: the walk prunes with
+// each node's tight box of its points and discs, not its sphere. Both bound every occluder disc, so the same occluders are found
 // (tests/visibility_test.cpp checks against no pruning at all); the box of a planar wall patch
 // is flat, its sphere is not, and after the box test the sphere test rejected almost nothing
 // (docs/gpu-notes.md).
@@ -190,6 +190,11 @@ VMAP_HD bool in_front_of_ends(const PairSegment& s, const LeafDisc& x) {
     return fa && fb;
 }
 
+// How far along the segment the crossing at t lies from the nearer end (t < 0.5: a).
+VMAP_HD float from_nearer_end(const PairSegment& s, float t) {
+    return (t < 0.5f ? t : 1.f - t) * s.len;
+}
+
 // Near an end, the mirror of in_front_of_ends (docs/validation.md "The predicate near the
 // ends"). A leaf x whose plane is cut within half the end's own disc radius of that end
 // (t |d| < Delta_end / 2, t measured from the nearer end), with that end's centroid behind x's
@@ -208,7 +213,7 @@ VMAP_HD bool exits_at_an_end(const PairSegment& s, const LeafDisc& x, float t) {
     if (x.flags & kLeafNormalDegenerate) return false;
     const bool near_a = t < 0.5f;
     if (!(near_a ? s.plane_a : s.plane_b)) return false;
-    const float from_end = (near_a ? t : 1.f - t) * s.len;
+    const float from_end = from_nearer_end(s, t);
     if (!(from_end < 0.5f * (near_a ? s.delta_a : s.delta_b))) return false;
     return dot(x.normal, (near_a ? s.p : s.q) - x.centroid) < 0.f;
 }
@@ -223,9 +228,7 @@ VMAP_HD bool exits_at_an_end(const PairSegment& s, const LeafDisc& x, float t) {
 // own disc takes them out at any length and at any density, and no more. Like the rules above it
 // only drops occluders that the eps window and the disc test let count (node_pair.h (e5)).
 VMAP_HD bool beyond_the_end_windows(const PairSegment& s, float t) {
-    const bool near_a = t < 0.5f;
-    const float from_end = (near_a ? t : 1.f - t) * s.len;
-    return !(from_end < (near_a ? s.window_a : s.window_b));
+    return !(from_nearer_end(s, t) < (t < 0.5f ? s.window_a : s.window_b));
 }
 
 // Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that

@@ -2,6 +2,7 @@
 #include "vmap/gi.h"
 
 #include <fmt/format.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/info.h>
 #include <tbb/task_arena.h>
 
@@ -9,13 +10,16 @@
 #include <atomic>
 #include <chrono>
 #include <cmath>
+#include <memory>
 #include <mutex>
 #include <numbers>
+#include <span>
 
 #include "gi/gi_device.h"
 #include "gi/gi_hier.h"
 #include "gi/gi_kernels.h"
 #include "util/device.h"
+#include "util/huge_array.h"
 #include "util/progress.h"
 #include "vmap/error.h"
 #include "vmap/parallel.h"
@@ -159,8 +163,9 @@ struct Refiner {
 // order (link order, then the walk's order), then the per-x sums of a key are added in x order;
 // the GPU (gi_cuda.cu) sums in exactly this order, so both give the same doubles.
 struct Blocks {
-    std::vector<uint64_t> key;
-    std::vector<double> w;
+    size_t n = 0;
+    detail::HugeArray<uint64_t> key;
+    detail::HugeArray<double> w;
 };
 
 struct Part {
@@ -168,67 +173,124 @@ struct Part {
     double w;
 };
 
-// One link end's parts, reduced by key.
-std::vector<Part> parts_of_node(const detail::GiTree& tree, float theta, int32_t x) {
-    std::vector<Part> out;
+// Where one thread keeps the reduced parts of the nodes it did: chunks of huge pages, each node's
+// parts contiguous in one chunk.
+class PartArena {
+  public:
+    Part* take(size_t n) {
+        if (n == 0) return nullptr;
+        if (n > cap_ - used_) {
+            cap_ = std::max(n, kChunk), used_ = 0;
+            chunks_.push_back(detail::make_huge_array<Part>(cap_));
+        }
+        used_ += n;
+        return chunks_.back().get() + (used_ - n);
+    }
+
+  private:
+    static constexpr size_t kChunk = size_t(1) << 20;  // 16 MiB
+    std::vector<detail::HugeArray<Part>> chunks_;
+    size_t cap_ = 0, used_ = 0;
+};
+
+// One link end's parts, reduced by key: the walk fills a buffer kept per thread, the sums go to
+// the thread's arena.
+std::span<const Part> parts_of_node(const detail::GiTree& tree, float theta, int32_t x,
+                                    PartArena& arena) {
+    thread_local std::vector<Part> buf;
+    buf.clear();
     for (uint64_t k = tree.link_offsets[x]; k < tree.link_offsets[x + 1]; ++k) {
         const int32_t y = tree.links[k];
         if (y > x)
             detail::gi_link_blocks(tree, theta, x, y, [&](uint64_t key, double w) {
-                out.push_back({key, w});
+                buf.push_back({key, w});
             });
     }
-    std::stable_sort(out.begin(), out.end(),
+    std::stable_sort(buf.begin(), buf.end(),
                      [](const Part& p, const Part& q) { return p.key < q.key; });
-    std::vector<Part> r;
-    for (const Part& e : out)
-        if (!r.empty() && r.back().key == e.key)
-            r.back().w += e.w;
+    size_t n = 0;  // reduce in place: buf[0, n) holds the sums so far
+    for (size_t k = 0; k < buf.size(); ++k)
+        if (n > 0 && buf[n - 1].key == buf[k].key)
+            buf[n - 1].w += buf[k].w;
         else
-            r.push_back(e);
-    return r;
+            buf[n++] = buf[k];
+    Part* out = arena.take(n);
+    std::copy_n(buf.begin(), n, out);
+    return {out, n};
 }
 
-// The per-node sums of every key, added in node order.
-Blocks merge_node_parts(std::vector<std::vector<Part>>& per) {
+// The per-node sums of every key, added in node order. A bucket sort by the key's first element
+// (the parts placed at atomic cursors, in any order), then each bucket sorted by (second element,
+// node), which is a total order, so the sums run in node order whatever the threads did.
+Blocks merge_node_parts(const std::vector<std::span<const Part>>& per) {
     struct Tagged {
-        uint64_t key;
+        uint32_t e2;
         int32_t node;
         double w;
     };
     const int32_t N = int32_t(per.size());
-    std::vector<uint64_t> first(size_t(N) + 1, 0);
-    for (int32_t x = 0; x < N; ++x) first[x + 1] = first[x] + per[x].size();
-    std::vector<Tagged> all(first[N]);
+    uint32_t max_e1 = 0;
+    for (const auto& parts : per)
+        for (const Part& p : parts) max_e1 = std::max(max_e1, uint32_t(p.key >> 32));
+    const size_t num_buckets = size_t(max_e1) + 1;
+    std::unique_ptr<std::atomic<uint64_t>[]> cursor(new std::atomic<uint64_t>[num_buckets]);
+    for (size_t e = 0; e < num_buckets; ++e) cursor[e].store(0, std::memory_order_relaxed);
     parallel_for(0, N, [&](int32_t x) {
-        for (size_t k = 0; k < per[x].size(); ++k)
-            all[first[x] + k] = {per[x][k].key, x, per[x][k].w};
-        std::vector<Part>().swap(per[x]);
+        for (const Part& p : per[x]) cursor[p.key >> 32].fetch_add(1, std::memory_order_relaxed);
     });
-    parallel_sort(all.begin(), all.end(), [](const Tagged& p, const Tagged& q) {
-        return p.key != q.key ? p.key < q.key : p.node < q.node;
-    });
-    Blocks b;
-    for (const Tagged& e : all)
-        if (!b.key.empty() && b.key.back() == e.key) {
-            b.w.back() += e.w;
-        } else {
-            b.key.push_back(e.key);
-            b.w.push_back(e.w);
+    std::vector<uint64_t> start(num_buckets + 1, 0);
+    for (size_t e = 0; e < num_buckets; ++e) {
+        start[e + 1] = start[e] + cursor[e].load(std::memory_order_relaxed);
+        cursor[e].store(start[e], std::memory_order_relaxed);
+    }
+    const detail::HugeArray<Tagged> all = detail::make_huge_array<Tagged>(start[num_buckets]);
+    parallel_for(0, N, [&](int32_t x) {
+        for (const Part& p : per[x]) {
+            const uint64_t at = cursor[p.key >> 32].fetch_add(1, std::memory_order_relaxed);
+            all[at] = {uint32_t(p.key), x, p.w};
         }
+    });
+    // Sort each bucket and count its distinct keys; then the sums, each key's in node order.
+    std::vector<uint64_t> distinct(num_buckets + 1, 0);
+    parallel_for(size_t(0), num_buckets, [&](size_t e) {
+        Tagged* const first = all.get() + start[e];
+        Tagged* const last = all.get() + start[e + 1];
+        std::sort(first, last, [](const Tagged& p, const Tagged& q) {
+            return p.e2 != q.e2 ? p.e2 < q.e2 : p.node < q.node;
+        });
+        uint64_t n = 0;
+        for (const Tagged* it = first; it != last; ++it) n += (it == first || it[-1].e2 != it->e2);
+        distinct[e + 1] = n;
+    });
+    for (size_t e = 0; e < num_buckets; ++e) distinct[e + 1] += distinct[e];
+    Blocks b;
+    b.n = distinct[num_buckets];
+    b.key = detail::make_huge_array<uint64_t>(b.n);
+    b.w = detail::make_huge_array<double>(b.n);
+    parallel_for(size_t(0), num_buckets, [&](size_t e) {
+        uint64_t out = distinct[e];
+        for (uint64_t k = start[e]; k < start[e + 1]; ++k)
+            if (k > start[e] && all[k - 1].e2 == all[k].e2) {
+                b.w[out - 1] += all[k].w;
+            } else {
+                b.key[out] = (uint64_t(e) << 32) | all[k].e2;
+                b.w[out++] = all[k].w;
+            }
+    });
     return b;
 }
 
 Blocks cpu_blocks(const detail::GiTree& tree, float theta, const ProgressCallback& progress) {
     const int32_t N = tree.num_nodes;
-    std::vector<std::vector<Part>> per(N);
+    std::vector<std::span<const Part>> per(N);
+    tbb::enumerable_thread_specific<PartArena> arenas;
     detail::Progress bar("gi refinement", uint64_t(N), &progress);
     std::mutex bar_mutex;
     std::atomic<uint64_t> done{0};
     parallel_for(0, N, [&](int32_t x) {
         const uint64_t finished = ++done;
         if (std::unique_lock lock(bar_mutex, std::try_to_lock); lock) bar.set(finished);
-        per[x] = parts_of_node(tree, theta, x);
+        per[x] = parts_of_node(tree, theta, x, arenas.local());
     });
     bar.finish();
     return merge_node_parts(per);
@@ -342,7 +404,7 @@ void RadiositySolver::Impl::refine_on_host() {
     auto run_refinement = [&](auto&& make_emit) {
         if (by_links) return Refiner{vm, geom, params.theta}.run(make_emit);
         parallel_for_range<size_t>(
-            blocks.key.size(), 4096, [&](size_t chunk_begin, size_t chunk_end) {
+            blocks.n, 4096, [&](size_t chunk_begin, size_t chunk_end) {
                 auto emit = make_emit();
                 for (size_t k = chunk_begin; k < chunk_end; ++k) {
                     const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);

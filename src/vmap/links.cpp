@@ -3,7 +3,6 @@
 #include "vmap/map_access.h"
 
 #include <fmt/format.h>
-#include <sys/mman.h>
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
@@ -14,6 +13,7 @@
 #include <memory>
 #include <new>
 
+#include "util/huge_array.h"
 #include "vmap/error.h"
 
 namespace vmap {
@@ -289,22 +289,10 @@ void LinkArrays::finish(VisibilityMap& vm, const Spans& pieces) {
     sort_buckets(bk, off, keys);
 }
 
-// 2 MiB aligned and advised as huge pages when large: the arrays' writers scatter over
-// gigabytes, where 4 KiB pages would cost a TLB miss and soon a page fault every few writes.
-// Only advice: without transparent huge pages the pages stay small, the bytes the same.
+// Huge pages when large (util/huge_array.h): the arrays' writers scatter over gigabytes, where
+// 4 KiB pages would cost a TLB miss and soon a page fault every few writes.
 int32_t* allocate_link_targets(MapData& d, size_t n) {
-    constexpr size_t kHuge = size_t(2) << 20;
-    const size_t bytes = n * sizeof(int32_t);
-    if (bytes < 4 * kHuge) {
-        d.link_targets = std::shared_ptr<int32_t[]>(new int32_t[n]);
-    } else {
-        const size_t size = (bytes + kHuge - 1) / kHuge * kHuge;
-        void* p = std::aligned_alloc(kHuge, size);
-        if (!p) throw std::bad_alloc();
-        madvise(p, size, MADV_HUGEPAGE);
-        d.link_targets =
-            std::shared_ptr<int32_t[]>(static_cast<int32_t*>(p), [](int32_t* q) { std::free(q); });
-    }
+    d.link_targets = std::shared_ptr<int32_t[]>(make_huge_array<int32_t>(n));
     d.num_link_targets = n;
     return d.link_targets.get();
 }

@@ -13,6 +13,7 @@
 #include <random>
 
 #include "backend_fixture.h"
+#include "gi/gi_hier.h"
 #include "test_util.h"
 #include "vmap/error.h"
 
@@ -363,6 +364,100 @@ TEST(Gi, BlockInteractionsGrowSlowerThanLinks) {
     EXPECT_LT(gb, 6.0);
     EXPECT_LT(gb, 0.7 * gl);
     EXPECT_LT(blocks[1], links[1]);
+}
+
+// The block walk started where the last link's descent from the root left off
+// (detail::GiLinkPath, the CPU refinement) against the walk from the root (the GPU's): the same
+// parts in the same order with the same bits, for the V-map's links in order and for every
+// disjoint node pair walked in increasing and in decreasing order (ancestors and descendants of
+// the last pair's b among them), at several theta.
+TEST(Gi, LinkWalkFromTheKeptPathEqualsTheWalkFromTheRoot) {
+    const VisibilityMap vm = room_vmap("cornell-bunny", 3000, 8);
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
+    const int32_t N = t.num_nodes();
+    std::vector<detail::NodeGeom> geom(N);
+    std::vector<float> area(ps.size());
+    std::vector<int32_t> point_leaf(ps.size());
+    for (size_t i = 0; i < ps.size(); ++i) area[i] = kPi * ps.radii[i] * ps.radii[i];
+    for (int32_t n = 0; n < N; ++n) {  // area-weighted means, as the solver's node_geometry
+        double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
+            const Vec3 p = ps.positions[k], q = ps.normals[k];
+            a += area[k];
+            c[0] += area[k] * p.x, c[1] += area[k] * p.y, c[2] += area[k] * p.z;
+            m[0] += area[k] * q.x, m[1] += area[k] * q.y, m[2] += area[k] * q.z;
+            if (t.is_leaf(n)) point_leaf[k] = n;
+        }
+        detail::NodeGeom& g = geom[n];
+        g.area = float(a);
+        g.point_area = float(a / std::max<uint32_t>(1, t.point_end()[n] - t.point_begin()[n]));
+        g.center = Vec3{float(c[0] / a), float(c[1] / a), float(c[2] / a)};
+        g.normal = Vec3{float(m[0] / a), float(m[1] / a), float(m[2] / a)};
+        g.size = 0.5f * length(t.boxes()[n].hi - t.boxes()[n].lo);
+    }
+    const detail::GiTree tree{N,
+                              uint32_t(ps.size()),
+                              t.skip().data(),
+                              t.node_leaf().data(),
+                              t.parent().data(),
+                              t.point_begin().data(),
+                              t.point_end().data(),
+                              geom.data(),
+                              ps.positions.data(),
+                              ps.normals.data(),
+                              area.data(),
+                              point_leaf.data(),
+                              vm.link_offsets().data(),
+                              vm.link_targets().data()};
+    struct Part {
+        uint64_t key;
+        double w;
+        bool operator==(const Part&) const = default;
+    };
+    auto walk = [&](float theta, int32_t x, int32_t y, int32_t a0, int32_t b0) {
+        std::vector<Part> parts;
+        const uint32_t n = detail::gi_link_blocks(
+            tree, theta, x, y, [&](uint64_t key, double w) { parts.push_back({key, w}); }, a0,
+            b0);
+        EXPECT_EQ(n, parts.size());
+        return parts;
+    };
+    uint64_t walks = 0, parts = 0, deep_starts = 0;
+    auto check = [&](float theta, int32_t x, const std::vector<int32_t>& ys) {
+        detail::GiLinkPath path;
+        for (int32_t y : ys) {
+            path.seek(tree, theta, x, y);
+            const auto kept = walk(theta, x, y, path.a(), path.b());
+            ASSERT_EQ(kept, walk(theta, x, y, 0, 0)) << "theta " << theta << " link " << x
+                                                     << " " << y << " from " << path.a() << " "
+                                                     << path.b();
+            ++walks, parts += kept.size(), deep_starts += path.m >= 4;
+        }
+    };
+    const auto disjoint = [&](int32_t x, int32_t y) {
+        return !(x <= y && y < t.skip()[x]) && !(y <= x && x < t.skip()[y]);
+    };
+    for (float theta : {0.5f, 1.0f, 2.0f, 4.0f}) {
+        for (int32_t x = 0; x < N; ++x) {
+            std::vector<int32_t> ys;
+            for (int32_t y : vm.links(x))
+                if (y > x) ys.push_back(y);
+            check(theta, x, ys);
+        }
+        for (int32_t x = 0; x < N; x += 37) {
+            std::vector<int32_t> ys;
+            for (int32_t y = 0; y < N; ++y)
+                if (disjoint(x, y)) ys.push_back(y);
+            check(theta, x, ys);
+            std::reverse(ys.begin(), ys.end());
+            check(theta, x, ys);
+        }
+    }
+    std::cout << walks << " walks, " << parts << " parts, " << deep_starts
+              << " started 4 or more steps below the root\n";
+    EXPECT_GT(parts, walks);
+    EXPECT_GT(deep_starts, walks / 2);  // most walks start 4 or more steps below the root
 }
 
 TEST(Gi, EmissionStaysWithItsPointInOctreeOrder) {

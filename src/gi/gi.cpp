@@ -199,12 +199,15 @@ std::span<const Part> parts_of_node(const detail::GiTree& tree, float theta, int
                                     PartArena& arena) {
     thread_local std::vector<Part> buf;
     buf.clear();
+    detail::GiLinkPath path;  // x's links in order: each walk skips the descent it shares with
+                              // the one before
     for (uint64_t k = tree.link_offsets[x]; k < tree.link_offsets[x + 1]; ++k) {
         const int32_t y = tree.links[k];
-        if (y > x)
-            detail::gi_link_blocks(tree, theta, x, y, [&](uint64_t key, double w) {
-                buf.push_back({key, w});
-            });
+        if (y <= x) continue;
+        path.seek(tree, theta, x, y);
+        detail::gi_link_blocks(
+            tree, theta, x, y, [&](uint64_t key, double w) { buf.push_back({key, w}); }, path.a(),
+            path.b());
     }
     std::stable_sort(buf.begin(), buf.end(),
                      [](const Part& p, const Part& q) { return p.key < q.key; });

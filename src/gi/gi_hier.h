@@ -90,37 +90,61 @@ VMAP_HD int32_t gi_child_toward(const GiTree& t, int32_t a, int32_t x) {
     return -1;
 }
 
+// What the walk of link (x, y) does with the pair (a, b) on its stack (gi_link_blocks).
+enum class GiStep : uint8_t {
+    kBlock,       // disjoint, flat and far enough apart: one part (if its kernel is positive)
+    kPoints,      // two leaves that are not a block: their point pairs
+    kOpenAll,     // open the node that lies within its link end: all its children
+    kOpenToward,  // open an ancestor of its link end: its child toward that end only
+};
+struct GiDecision {
+    GiStep step;
+    bool open_a;  // for the opening steps: a is opened (else b)
+};
+VMAP_HD GiDecision gi_decide(const GiTree& t, float theta, int32_t x, int32_t y, int32_t a,
+                             int32_t b) {
+    const NodeGeom &ga = t.geom[a], &gb = t.geom[b];
+    const bool fa = gi_flat(t, a, theta), fb = gi_flat(t, b, theta);
+    if (!gi_within(t, a, b) && !gi_within(t, b, a) && fa && fb &&
+        length(gb.center - ga.center) > theta * (ga.size + gb.size))
+        return {GiStep::kBlock, false};
+    const bool la = gi_leaf(t, a), lb = gi_leaf(t, b);
+    if (la && lb) return {GiStep::kPoints, false};  // both inside their link ends
+    const bool open_a = lb || (!la && (fa == fb ? ga.size >= gb.size : !fa));
+    const bool within = open_a ? gi_within(t, a, x) : gi_within(t, b, y);
+    return {within ? GiStep::kOpenAll : GiStep::kOpenToward, open_a};
+}
+
 // The block refinement of the V-map link (x, y): the link descends from (root, root) along the
 // partition of the leaf-pair matrix (a pair of disjoint flat nodes farther apart than theta
 // times their sizes is a block; otherwise the node not flat enough, else the larger, is opened)
 // and every part (x', y') it holds in block (A, B) gives out(key(A, B), A_x' A_y' K(x', y')),
 // x', y' the finer of block node and link end on each side (docs/gi.md). Two leaves that are not
 // a block give their point pairs (elements num_nodes + point). Returns the number of parts.
+//
+// The walk starts with the single pair (a0, b0) on its stack: (0, 0), or a pair that the walk
+// from (0, 0) reaches through kOpenToward steps alone (gi_link_path), which give no part and
+// leave one pair on the stack, so the parts and their order are the same.
 template <class Out>
-VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t y, Out&& out) {
+VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t y, Out&& out,
+                                int32_t a0 = 0, int32_t b0 = 0) {
     int32_t sa[kGiStack], sb[kGiStack];
     int top = 1;
-    sa[0] = 0, sb[0] = 0;
+    sa[0] = a0, sb[0] = b0;
     uint32_t parts = 0;
     const uint32_t base = uint32_t(t.num_nodes);
     while (top > 0) {
         --top;
         const int32_t a = sa[top], b = sb[top];
-        const bool ax = gi_within(t, a, x), by = gi_within(t, b, y);
-        const NodeGeom &ga = t.geom[a], &gb = t.geom[b];
-        const bool fa = gi_flat(t, a, theta), fb = gi_flat(t, b, theta);
-        if (!gi_within(t, a, b) && !gi_within(t, b, a) && fa && fb &&
-            length(gb.center - ga.center) > theta * (ga.size + gb.size)) {
-            const NodeGeom& pa = t.geom[ax ? a : x];
-            const NodeGeom& pb = t.geom[by ? b : y];
+        const GiDecision d = gi_decide(t, theta, x, y, a, b);
+        if (d.step == GiStep::kBlock) {
+            const NodeGeom& pa = t.geom[gi_within(t, a, x) ? a : x];
+            const NodeGeom& pb = t.geom[gi_within(t, b, y) ? b : y];
             const float k = gi_kernel_hd(pa.center, pa.normal, pa.point_area, pb.center, pb.normal,
                                          pb.point_area);
             if (k > 0) out(gi_pair_key(uint32_t(a), uint32_t(b)), double(pa.area) * pb.area * k);
             parts += k > 0;
-            continue;
-        }
-        const bool la = gi_leaf(t, a), lb = gi_leaf(t, b);
-        if (la && lb) {  // both inside their link ends: every point pair is visible
+        } else if (d.step == GiStep::kPoints) {  // every point pair is visible
             for (uint32_t i = t.point_begin[a]; i < t.point_end[a]; ++i)
                 for (uint32_t j = t.point_begin[b]; j < t.point_end[b]; ++j) {
                     const float ai = t.area[i], aj = t.area[j];
@@ -129,20 +153,53 @@ VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t
                     if (k > 0) out(gi_pair_key(base + i, base + j), double(ai) * aj * k);
                     parts += k > 0;
                 }
-            continue;
-        }
-        const bool open_a = lb || (!la && (fa == fb ? ga.size >= gb.size : !fa));
-        const int32_t n = open_a ? a : b, other = open_a ? b : a;
-        if (open_a ? ax : by) {
-            gi_push_children(t, n, other, open_a, sa, sb, top);
         } else {
-            const int32_t c = gi_child_toward(t, n, open_a ? x : y);
-            sa[top] = open_a ? c : other, sb[top] = open_a ? other : c;
-            ++top;
+            const int32_t n = d.open_a ? a : b, other = d.open_a ? b : a;
+            if (d.step == GiStep::kOpenAll) {
+                gi_push_children(t, n, other, d.open_a, sa, sb, top);
+            } else {
+                const int32_t c = gi_child_toward(t, n, d.open_a ? x : y);
+                sa[top] = d.open_a ? c : other, sb[top] = d.open_a ? other : c;
+                ++top;
+            }
         }
     }
     return parts;
 }
+
+// The start of the walks of x's links, kept from one link to the next (the CPU walks a node's
+// links in order, and links to nearby nodes share most of the descent from the root). pa/pb
+// hold the pairs the last walk passed through by kOpenToward steps, from (0, 0) to the pair
+// where those steps ended. For the next link (x, y), every pair up to the deepest one whose b
+// holds y is also on y's walk: the steps before it opened a toward x or b toward that pair's b,
+// which holds y, and they are decided the same (a step's decision depends on y only through
+// whether the opened b lies within y, and no strict ancestor of y does).
+struct GiLinkPath {
+    static constexpr int kMax = 2 * 22 + 1;  // one step a level on each side, max_height 21
+    int32_t pa[kMax], pb[kMax];
+    int m = -1;  // pa[m], pb[m]: where the last walk's kOpenToward steps ended
+
+    // Moves to link (x, y) of the same x: a(), b() are then the pair its walk starts from.
+    VMAP_HD void seek(const GiTree& t, float theta, int32_t x, int32_t y) {
+        int i = 0;
+        if (m < 0) {
+            pa[0] = 0, pb[0] = 0;
+        } else {
+            i = m;
+            while (i > 0 && !gi_within(t, y, pb[i])) --i;
+        }
+        for (;;) {
+            const GiDecision d = gi_decide(t, theta, x, y, pa[i], pb[i]);
+            if (d.step != GiStep::kOpenToward || i + 1 >= kMax) break;
+            pa[i + 1] = d.open_a ? gi_child_toward(t, pa[i], x) : pa[i];
+            pb[i + 1] = d.open_a ? pb[i] : gi_child_toward(t, pb[i], y);
+            ++i;
+        }
+        m = i;
+    }
+    VMAP_HD int32_t a() const { return pa[m]; }
+    VMAP_HD int32_t b() const { return pb[m]; }
+};
 
 // What the final gather reads besides the tree: the hierarchical solution B (per element: nodes,
 // then points), which nodes hold an emitter, and the points' emission and albedo.

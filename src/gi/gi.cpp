@@ -315,9 +315,9 @@ struct RadiositySolver::Impl {
     GiStats stats;
     int done = 0;
     // Host arrays behind the views.
-    std::vector<uint64_t> row;
-    std::vector<uint32_t> src;
-    std::vector<float> coef;
+    detail::HugeVector<uint64_t> row;  // huge pages, and src, coef filled without a zero fill
+    detail::HugeVector<uint32_t> src;
+    detail::HugeVector<float> coef;
     std::vector<Vec3> emission, albedo;
     std::vector<float> area, inv_area;
     std::vector<double> node_area;  // for interaction_list()
@@ -632,7 +632,9 @@ std::vector<Vec3> RadiositySolver::final_gather(float theta,
 
 void RadiositySolver::interaction_list(std::vector<uint64_t>& row, std::vector<uint32_t>& src,
                                        std::vector<float>& coef, std::vector<double>& area) const {
-    row = impl_->row, src = impl_->src, coef = impl_->coef;
+    row.assign(impl_->row.begin(), impl_->row.end());
+    src.assign(impl_->src.begin(), impl_->src.end());
+    coef.assign(impl_->coef.begin(), impl_->coef.end());
     const int32_t N = impl_->view.num_nodes;
     area.resize(impl_->row.size() - 1);
     for (int32_t n = 0; n < N; ++n) area[n] = impl_->node_area[n];

@@ -10,6 +10,7 @@
 
 #include "gi/gi_hier.h"
 #include "gi/gi_kernels.h"
+#include "util/huge_array.h"
 
 namespace vmap::detail {
 
@@ -25,8 +26,8 @@ class GiDevice {
     // row/src/coef. check_total(n) is called with the number of interactions before the list is
     // made (it throws to refuse it).
     virtual void refine_blocks(float theta, const std::function<void(uint64_t)>& check_total,
-                               std::vector<uint64_t>& row, std::vector<uint32_t>& src,
-                               std::vector<float>& coef) = 0;
+                               HugeVector<uint64_t>& row, HugeVector<uint32_t>& src,
+                               HugeVector<float>& coef) = 0;
     // Copies `host` (pointers into host arrays, B holding the starting radiosity) to the device;
     // the interaction list only when refine_blocks did not make it there.
     virtual void upload(const GiView& host, uint64_t num_interactions) = 0;

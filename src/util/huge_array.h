@@ -8,6 +8,8 @@
 #include <cstdlib>
 #include <memory>
 #include <type_traits>
+#include <utility>
+#include <vector>
 
 namespace vmap::detail {
 
@@ -28,5 +30,33 @@ HugeArray<T> make_huge_array(size_t n) {
     static_assert(std::is_trivially_default_constructible_v<T> && std::is_trivially_destructible_v<T>);
     return HugeArray<T>(static_cast<T*>(allocate_huge(n * sizeof(T))));
 }
+
+// An allocator over allocate_huge for std::vector, whose resize leaves the new elements
+// uninitialised (default-initialised: nothing for trivial types), for arrays the caller fills
+// completely; construction with a value (assign(n, 0), push_back) is as usual.
+template <class T>
+struct HugeAllocator {
+    using value_type = T;
+    HugeAllocator() = default;
+    template <class U>
+    HugeAllocator(const HugeAllocator<U>&) noexcept {}
+    T* allocate(size_t n) { return static_cast<T*>(allocate_huge(n * sizeof(T))); }
+    void deallocate(T* p, size_t) noexcept { std::free(p); }
+    template <class U>
+    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
+        ::new (static_cast<void*>(p)) U;
+    }
+    template <class U, class... Args>
+    void construct(U* p, Args&&... args) {
+        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+    }
+    template <class U>
+    bool operator==(const HugeAllocator<U>&) const noexcept {
+        return true;
+    }
+};
+
+template <class T>
+using HugeVector = std::vector<T, HugeAllocator<T>>;
 
 }  // namespace vmap::detail

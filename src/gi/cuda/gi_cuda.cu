@@ -245,8 +245,8 @@ class CudaGi final : public GiDevice {
 
     void upload_tree(const GiTree& h, const uint8_t* emits) override;
     void refine_blocks(float theta, const std::function<void(uint64_t)>& check_total,
-                       std::vector<uint64_t>& row, std::vector<uint32_t>& src,
-                       std::vector<float>& coef) override;
+                       HugeVector<uint64_t>& row, HugeVector<uint32_t>& src,
+                       HugeVector<float>& coef) override;
     void upload(const GiView& h, uint64_t num_interactions) override;
     void set_radiosity(const Vec3* B) override {
         B_.from(B, elements_);
@@ -341,8 +341,8 @@ void CudaGi::make_blocks(float theta, DevBuf<uint64_t>& key, DevBuf<double>& w) 
 }
 
 void CudaGi::refine_blocks(float theta, const std::function<void(uint64_t)>& check_total,
-                           std::vector<uint64_t>& row, std::vector<uint32_t>& src,
-                           std::vector<float>& coef) {
+                           HugeVector<uint64_t>& row, HugeVector<uint32_t>& src,
+                           HugeVector<float>& coef) {
     DevBuf<uint64_t> key;
     DevBuf<double> w;
     make_blocks(theta, key, w);

@@ -275,7 +275,8 @@ if [[ "$cmd" == run ]]; then
                 mrun() {  # label P T backend schedule [more build args]
                     local label=$1 np=$2 th=$3 be=$4 sc=$5; shift 5
                     local out=/tmp/mpi-$label.vmap t0; t0=$(date +%s.%N)
-                    mpirun -np "$np" --oversubscribe --bind-to none "$bin/vmap" --threads "$th" build "${scene[@]}" \
+                    # shellcheck disable=SC2086  # MAP: mpirun's placement options, split on purpose
+                    mpirun -np "$np" --oversubscribe ${MAP:---bind-to none} "$bin/vmap" --threads "$th" build "${scene[@]}" \
                         --backend "$be" --schedule "$sc" -o "$out" "$@" > "$OUT/mpi-$label.log" 2>&1 ||
                         { rc=1; echo "FAILED $label"; tail -5 "$OUT/mpi-$label.log"; }
                     local wall; wall=$(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{printf "%.2f", b - a}')
@@ -293,6 +294,12 @@ if [[ "$cmd" == run ]]; then
                 }
                 th=${MPI_THREADS:-2}
                 for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                # The same with each rank bound to T cores of its own (MPI_BOUND=0: skipped).
+                if [[ "${MPI_BOUND:-1}" != 0 ]]; then
+                    for np in 1 2 4 8; do
+                        MAP="--map-by slot:PE=$th --bind-to core" mrun "bound-$np" "$np" "$th" cpu dynamic
+                    done
+                fi
                 for per in 32 64; do mrun "cpu-8-c$per" 8 "$th" cpu dynamic --chunks-per-rank "$per"; done
                 mrun cpu-8-static 8 "$th" cpu static
                 mrun cpu-4-static 4 "$th" cpu static
@@ -303,11 +310,13 @@ if [[ "$cmd" == run ]]; then
                 "$bin/gpu_test" --gtest_filter='GpuDevice.*' > "$OUT/mpi-gpu-device.log" 2>&1 || rc=1
                 echo "--device test: $(grep -E 'PASSED|FAILED|SKIPPED \]' "$OUT/mpi-gpu-device.log" | tail -1)" >> "$sum"
                 # Strong scaling at T threads a rank: speedup and efficiency against P = 1.
-                awk -F'|' '$2 ~ /cpu-[1248] / {w[$3+0] = $7; c[$3+0] = $8}
-                    END {print "\n| P | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";
-                         print "|---:|---:|---:|---:|---:|";
-                         for (p = 1; p <= 8; p *= 2) if (w[p] > 0)
-                             printf "| %d | %.2f | %.2f | %.2f | %.2f |\n", p, w[1] / w[p], w[1] / w[p] / p, c[1] / c[p], c[1] / c[p] / p}' \
+                awk -F'|' '$2 ~ /(cpu|bound)-[1248] / {split($2, l, "-"); k = l[1]; gsub(/ /, "", k);
+                                                         w[k, $3+0] = $7; c[k, $3+0] = $8; ks[k] = 1}
+                    END {print "\n| runs | P | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";
+                         print "|---|---:|---:|---:|---:|---:|";
+                         for (k in ks) for (p = 1; p <= 8; p *= 2) if (w[k, p] > 0)
+                             printf "| %s | %d | %.2f | %.2f | %.2f | %.2f |\n", k, p, w[k, 1] / w[k, p], w[k, 1] / w[k, p] / p,
+                                    c[k, 1] / c[k, p], c[k, 1] / c[k, p] / p}' \
                     "$sum" >> "$sum.tail" && cat "$sum.tail" >> "$sum" && rm -f "$sum.tail"
                 { echo; echo "Phases, the slowest rank's seconds (src/mpi/mpi_build.cpp):"
                   cat "$sum.phases"; } >> "$sum" && rm -f "$sum.phases"

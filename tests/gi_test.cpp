@@ -13,7 +13,7 @@
 #include <random>
 
 #include "backend_fixture.h"
-#include "gi/gi_hier.h"
+#include "gi/gi_host.h"
 #include "test_util.h"
 #include "vmap/error.h"
 
@@ -152,7 +152,8 @@ TEST(Gi, BruteForceMatchesAPointPairOracle) {
     EXPECT_LT(relative_rms(brute, oracle), 1e-5);
     // And the light did reach the other points.
     size_t lit = 0;
-    for (size_t i = 0; i < brute.size(); ++i) lit += vm.points().emission[i].x == 0 && brute[i].x > 0;
+    for (size_t i = 0; i < brute.size(); ++i)
+        lit += vm.points().emission[i].x == 0 && brute[i].x > 0;
     EXPECT_GT(lit, brute.size() / 2);
 }
 
@@ -376,40 +377,16 @@ TEST(Gi, LinkWalkFromTheKeptPathEqualsTheWalkFromTheRoot) {
     const Octree& t = vm.octree();
     const PointSet& ps = vm.points();
     const int32_t N = t.num_nodes();
-    std::vector<detail::NodeGeom> geom(N);
+    const std::vector<detail::NodeGeom> geom = detail::gi_node_geometry(vm);
     std::vector<float> area(ps.size());
     std::vector<int32_t> point_leaf(ps.size());
     for (size_t i = 0; i < ps.size(); ++i) area[i] = kPi * ps.radii[i] * ps.radii[i];
-    for (int32_t n = 0; n < N; ++n) {  // area-weighted means, as the solver's node_geometry
-        double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
-        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
-            const Vec3 p = ps.positions[k], q = ps.normals[k];
-            a += area[k];
-            c[0] += area[k] * p.x, c[1] += area[k] * p.y, c[2] += area[k] * p.z;
-            m[0] += area[k] * q.x, m[1] += area[k] * q.y, m[2] += area[k] * q.z;
-            if (t.is_leaf(n)) point_leaf[k] = n;
-        }
-        detail::NodeGeom& g = geom[n];
-        g.area = float(a);
-        g.point_area = float(a / std::max<uint32_t>(1, t.point_end()[n] - t.point_begin()[n]));
-        g.center = Vec3{float(c[0] / a), float(c[1] / a), float(c[2] / a)};
-        g.normal = Vec3{float(m[0] / a), float(m[1] / a), float(m[2] / a)};
-        g.size = 0.5f * length(t.boxes()[n].hi - t.boxes()[n].lo);
-    }
-    const detail::GiTree tree{N,
-                              uint32_t(ps.size()),
-                              t.skip().data(),
-                              t.node_leaf().data(),
-                              t.parent().data(),
-                              t.point_begin().data(),
-                              t.point_end().data(),
-                              geom.data(),
-                              ps.positions.data(),
-                              ps.normals.data(),
-                              area.data(),
-                              point_leaf.data(),
-                              vm.link_offsets().data(),
-                              vm.link_targets().data()};
+    for (int32_t l = 0; l < t.num_leaves(); ++l)
+        for (uint32_t k = t.point_begin()[t.leaf_node()[l]]; k < t.point_end()[t.leaf_node()[l]];
+             ++k)
+            point_leaf[k] = t.leaf_node()[l];
+    const detail::GiTree tree =
+        detail::gi_tree_view(vm, geom.data(), area.data(), point_leaf.data());
     struct Part {
         uint64_t key;
         double w;
@@ -418,8 +395,11 @@ TEST(Gi, LinkWalkFromTheKeptPathEqualsTheWalkFromTheRoot) {
     auto walk = [&](float theta, int32_t x, int32_t y, int32_t a0, int32_t b0) {
         std::vector<Part> parts;
         const uint32_t n = detail::gi_link_blocks(
-            tree, theta, x, y, [&](uint64_t key, double w) { parts.push_back({key, w}); }, a0,
-            b0);
+            tree, theta, x, y,
+            [&](uint64_t key, double w) {
+                parts.push_back({key, w});
+            },
+            a0, b0);
         EXPECT_EQ(n, parts.size());
         return parts;
     };
@@ -429,9 +409,9 @@ TEST(Gi, LinkWalkFromTheKeptPathEqualsTheWalkFromTheRoot) {
         for (int32_t y : ys) {
             path.seek(tree, theta, x, y);
             const auto kept = walk(theta, x, y, path.a(), path.b());
-            ASSERT_EQ(kept, walk(theta, x, y, 0, 0)) << "theta " << theta << " link " << x
-                                                     << " " << y << " from " << path.a() << " "
-                                                     << path.b();
+            ASSERT_EQ(kept, walk(theta, x, y, 0, 0))
+                << "theta " << theta << " link " << x << " " << y << " from " << path.a() << " "
+                << path.b();
             ++walks, parts += kept.size(), deep_starts += path.m >= 4;
         }
     };

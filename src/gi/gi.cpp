@@ -17,6 +17,7 @@
 
 #include "gi/gi_device.h"
 #include "gi/gi_hier.h"
+#include "gi/gi_host.h"
 #include "gi/gi_kernels.h"
 #include "util/device.h"
 #include "util/huge_array.h"
@@ -46,7 +47,8 @@ void check_points(const VisibilityMap& vm, const char* who) {
     if (!ps.emission.empty() && ps.emission.size() != ps.size())
         throw Error(fmt::format("{}: points: {} emission values for {} points", who,
                                 ps.emission.size(), ps.size()));
-    if (vm.octree().num_nodes() == 0 || vm.link_offsets().size() != size_t(vm.octree().num_nodes()) + 1)
+    if (vm.octree().num_nodes() == 0 ||
+        vm.link_offsets().size() != size_t(vm.octree().num_nodes()) + 1)
         throw Error(fmt::format("{}: the V-map has no octree or links", who));
 }
 
@@ -74,33 +76,6 @@ void for_point_pairs(const VisibilityMap& vm, int32_t a, int32_t b, F&& f) {
 }
 
 using detail::NodeGeom;
-
-std::vector<NodeGeom> node_geometry(const VisibilityMap& vm) {
-    const Octree& t = vm.octree();
-    const PointSet& ps = vm.points();
-    std::vector<NodeGeom> g(t.num_nodes());
-    parallel_for(0, t.num_nodes(), [&](int32_t n) {
-        double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
-        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
-            const double ak = area_of(ps, k);
-            const Vec3 p = ps.positions[k], q = ps.normals[k];
-            a += ak;
-            c[0] += ak * p.x, c[1] += ak * p.y, c[2] += ak * p.z;
-            m[0] += ak * q.x, m[1] += ak * q.y, m[2] += ak * q.z;
-        }
-        NodeGeom& o = g[n];
-        o.area = float(a);
-        o.point_area = float(a / std::max<uint32_t>(1, t.point_end()[n] - t.point_begin()[n]));
-        if (a > 0) {
-            o.center = Vec3{float(c[0] / a), float(c[1] / a), float(c[2] / a)};
-            o.normal = Vec3{float(m[0] / a), float(m[1] / a), float(m[2] / a)};
-        } else {
-            o.center = (t.boxes()[n].lo + t.boxes()[n].hi) * 0.5f;
-        }
-        o.size = 0.5f * length(t.boxes()[n].hi - t.boxes()[n].lo);
-    });
-    return g;
-}
 
 // `--refine links`: refines every V-map link into receiver/source interactions; calls
 // emit(recv, src, F, point_level) for each (both directions). Elements: nodes, then points at
@@ -206,8 +181,11 @@ std::span<const Part> parts_of_node(const detail::GiTree& tree, float theta, int
         if (y <= x) continue;
         path.seek(tree, theta, x, y);
         detail::gi_link_blocks(
-            tree, theta, x, y, [&](uint64_t key, double w) { buf.push_back({key, w}); }, path.a(),
-            path.b());
+            tree, theta, x, y,
+            [&](uint64_t key, double w) {
+                buf.push_back({key, w});
+            },
+            path.a(), path.b());
     }
     std::stable_sort(buf.begin(), buf.end(),
                      [](const Part& p, const Part& q) { return p.key < q.key; });
@@ -299,11 +277,56 @@ Blocks cpu_blocks(const detail::GiTree& tree, float theta, const ProgressCallbac
     return merge_node_parts(per);
 }
 
-std::string cpu_name() {
-    return "cpu (" + cpu_threads() + ")";
-}
+std::string cpu_name() { return "cpu (" + cpu_threads() + ")"; }
 
 }  // namespace
+
+std::vector<NodeGeom> detail::gi_node_geometry(const VisibilityMap& vm) {
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
+    std::vector<NodeGeom> g(t.num_nodes());
+    parallel_for(0, t.num_nodes(), [&](int32_t n) {
+        double a = 0, c[3] = {0, 0, 0}, m[3] = {0, 0, 0};
+        for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n]; ++k) {
+            const double ak = area_of(ps, k);
+            const Vec3 p = ps.positions[k], q = ps.normals[k];
+            a += ak;
+            c[0] += ak * p.x, c[1] += ak * p.y, c[2] += ak * p.z;
+            m[0] += ak * q.x, m[1] += ak * q.y, m[2] += ak * q.z;
+        }
+        NodeGeom& o = g[n];
+        o.area = float(a);
+        o.point_area = float(a / std::max<uint32_t>(1, t.point_end()[n] - t.point_begin()[n]));
+        if (a > 0) {
+            o.center = Vec3{float(c[0] / a), float(c[1] / a), float(c[2] / a)};
+            o.normal = Vec3{float(m[0] / a), float(m[1] / a), float(m[2] / a)};
+        } else {
+            o.center = (t.boxes()[n].lo + t.boxes()[n].hi) * 0.5f;
+        }
+        o.size = 0.5f * length(t.boxes()[n].hi - t.boxes()[n].lo);
+    });
+    return g;
+}
+
+detail::GiTree detail::gi_tree_view(const VisibilityMap& vm, const NodeGeom* geom,
+                                    const float* area, const int32_t* point_leaf) {
+    const Octree& t = vm.octree();
+    const PointSet& ps = vm.points();
+    return GiTree{t.num_nodes(),
+                  uint32_t(ps.size()),
+                  t.skip().data(),
+                  t.node_leaf().data(),
+                  t.parent().data(),
+                  t.point_begin().data(),
+                  t.point_end().data(),
+                  geom,
+                  ps.positions.data(),
+                  ps.normals.data(),
+                  area,
+                  point_leaf,
+                  vm.link_offsets().data(),
+                  vm.link_targets().data()};
+}
 
 float gi_kernel(Vec3 pr, Vec3 nr, float ar, Vec3 ps, Vec3 ns, float as) {
     return detail::gi_kernel_hd(pr, nr, ar, ps, ns, as);
@@ -351,7 +374,7 @@ void RadiositySolver::Impl::prepare_arrays() {
     const PointSet& ps = vm.points();
     const int32_t N = t.num_nodes();
     const uint32_t P = uint32_t(ps.size());
-    geom = node_geometry(vm);
+    geom = detail::gi_node_geometry(vm);
     emission.resize(P), albedo.resize(P), area.resize(P), point_leaf.resize(P);
     parallel_for(uint32_t(0), P, [&](uint32_t i) {
         emission[i] = emission_of(ps, i);
@@ -369,20 +392,7 @@ void RadiositySolver::Impl::prepare_arrays() {
         for (uint32_t k = t.point_begin()[n]; k < t.point_end()[n] && !emits[n]; ++k)
             emits[n] = !(emission[k] == Vec3{});
     });
-    tree = detail::GiTree{N,
-                          P,
-                          t.skip().data(),
-                          t.node_leaf().data(),
-                          t.parent().data(),
-                          t.point_begin().data(),
-                          t.point_end().data(),
-                          geom.data(),
-                          ps.positions.data(),
-                          ps.normals.data(),
-                          area.data(),
-                          point_leaf.data(),
-                          vm.link_offsets().data(),
-                          vm.link_targets().data()};
+    tree = detail::gi_tree_view(vm, geom.data(), area.data(), point_leaf.data());
 }
 
 void RadiositySolver::Impl::check_total(uint64_t total) const {
@@ -406,18 +416,17 @@ void RadiositySolver::Impl::refine_on_host() {
     };
     auto run_refinement = [&](auto&& make_emit) {
         if (by_links) return Refiner{vm, geom, params.theta}.run(make_emit);
-        parallel_for_range<size_t>(
-            blocks.n, 4096, [&](size_t chunk_begin, size_t chunk_end) {
-                auto emit = make_emit();
-                for (size_t k = chunk_begin; k < chunk_end; ++k) {
-                    const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);
-                    const double a1 = element_area(e1), a2 = element_area(e2);
-                    if (!(a1 > 0) || !(a2 > 0)) continue;
-                    const double kw = blocks.w[k];  // sum of A_x A_y K(x, y) over the visible parts
-                    emit(e1, e2, float(std::min(1.0, kw / a1)));
-                    emit(e2, e1, float(std::min(1.0, kw / a2)));
-                }
-            });
+        parallel_for_range<size_t>(blocks.n, 4096, [&](size_t chunk_begin, size_t chunk_end) {
+            auto emit = make_emit();
+            for (size_t k = chunk_begin; k < chunk_end; ++k) {
+                const uint32_t e1 = uint32_t(blocks.key[k] >> 32), e2 = uint32_t(blocks.key[k]);
+                const double a1 = element_area(e1), a2 = element_area(e2);
+                if (!(a1 > 0) || !(a2 > 0)) continue;
+                const double kw = blocks.w[k];  // sum of A_x A_y K(x, y) over the visible parts
+                emit(e1, e2, float(std::min(1.0, kw / a1)));
+                emit(e2, e1, float(std::min(1.0, kw / a2)));
+            }
+        });
     };
     std::unique_ptr<std::atomic<uint64_t>[]> count(new std::atomic<uint64_t>[num_el + 1]);
     for (uint64_t e = 0; e <= num_el; ++e) count[e].store(0, std::memory_order_relaxed);

@@ -27,7 +27,8 @@ using HugeArray = std::unique_ptr<T[], FreeDeleter>;
 
 template <class T>
 HugeArray<T> make_huge_array(size_t n) {
-    static_assert(std::is_trivially_default_constructible_v<T> && std::is_trivially_destructible_v<T>);
+    static_assert(std::is_trivially_default_constructible_v<T> &&
+                  std::is_trivially_destructible_v<T>);
     return HugeArray<T>(static_cast<T*>(allocate_huge(n * sizeof(T))));
 }
 

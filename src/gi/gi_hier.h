@@ -123,7 +123,7 @@ VMAP_HD GiDecision gi_decide(const GiTree& t, float theta, int32_t x, int32_t y,
 // a block give their point pairs (elements num_nodes + point). Returns the number of parts.
 //
 // The walk starts with the single pair (a0, b0) on its stack: (0, 0), or a pair that the walk
-// from (0, 0) reaches through kOpenToward steps alone (gi_link_path), which give no part and
+// from (0, 0) reaches through kOpenToward steps alone (GiLinkPath), which give no part and
 // leave one pair on the stack, so the parts and their order are the same.
 template <class Out>
 VMAP_HD uint32_t gi_link_blocks(const GiTree& t, float theta, int32_t x, int32_t y, Out&& out,

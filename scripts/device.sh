@@ -119,7 +119,9 @@ if [[ "$cmd" == bundle ]]; then
         grep -E 'lib(tbb|fmt|gtest|gmock|benchmark|embree|nlohmann|cpp-httplib|brotli|ssl|crypto)' |
         while read -r so; do cp -L "$so" .device/lib/; done
     strip --strip-unneeded .device/bin/* 2>/dev/null || true
-    # Every model a scene or a test names (the test scenes' libcgal-demo meshes too).
+    # Every model a scene or a test names (the test scenes' libcgal-demo meshes too), fetched
+    # first where this checkout has none yet (a fresh clone: cached, idempotent).
+    "$root/scripts/fetch-models.sh"
     for f in models/dragon.ply models/*.off; do
         gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
     done

@@ -59,6 +59,8 @@ struct Options {
     uint64_t points = 0;
     Orientation orientation = Orientation::kAuto;
     std::string write_dir;
+    std::string mix_dir;   // --mix DIR: clouds that mix estimated and true normals (below)
+    bool uniform = false;  // --uniform: uniform samples (a scanner or an area sampler's)
     std::vector<std::string> scenes;
 };
 
@@ -239,6 +241,32 @@ void write_signed(const std::string& stem, const PointSet& est, const std::vecto
     write_ply(stem + "-smooth.ply", out);
 }
 
+// For `vmap validate --cloud`, to tell where a bare cloud's misses come from: the estimated
+// normals as `vmap build` orients them (-est), the same signed like the truth (-estsign), the
+// true normals on the objects and the estimated ones on the room (-objtrue), the reverse
+// (-roomtrue), and the true normals everywhere (-true). Positions only: radii estimated.
+void write_mixed(const std::string& stem, const Scene& sc, const PointSet& truth,
+                 const PointSet& est, const std::vector<uint32_t>& surf) {
+    auto write = [&](const char* tag, auto pick) {
+        PointSet out;
+        out.positions = truth.positions;
+        out.normals.resize(truth.size());
+        for (size_t i = 0; i < truth.size(); ++i) {
+            const bool model = !is_room(sc.surfaces[surf[i]].name);
+            out.normals[i] = pick(i, model);
+        }
+        write_ply(stem + tag, out);
+    };
+    const auto& t = truth.normals;
+    const auto& e = est.normals;
+    auto signed_est = [&](size_t i) { return dot(e[i], t[i]) < 0 ? -e[i] : e[i]; };
+    write("-est.ply", [&](size_t i, bool) { return e[i]; });
+    write("-estsign.ply", [&](size_t i, bool) { return signed_est(i); });
+    write("-objtrue.ply", [&](size_t i, bool m) { return m ? t[i] : e[i]; });
+    write("-roomtrue.ply", [&](size_t i, bool m) { return m ? e[i] : t[i]; });
+    write("-true.ply", [&](size_t i, bool) { return t[i]; });
+}
+
 // Per surface (mesh or wall): points, signs right, and where the wrong ones lie: hidden in any
 // case (buried), on a thin part, near another surface (not thin), or elsewhere.
 void print_per_surface(const Scene& sc, const PointSet& truth, const PointSet& est,
@@ -294,6 +322,7 @@ void run_scene(const std::string& path, const Options& o) {
     if (o.objects_only)
         std::erase_if(sc.surfaces, [](const SceneSurface& s) { return is_room(s.name); });
     if (o.points) sc.points = o.points;
+    if (o.uniform) sc.pattern = SamplePattern::kUniform;
     const PointSet truth = sample_scene(sc);
     const std::vector<uint32_t> surf = surface_of(sc);
     if (o.angles) return run_angles(path, sc, truth, surf, o);
@@ -310,6 +339,11 @@ void run_scene(const std::string& path, const Options& o) {
     OrientationReport rep;
     estimate_normals(raw, np, path.c_str(), &rep);
     const auto t1 = std::chrono::steady_clock::now();
+    fmt::print(
+        stderr,
+        "{}: close-neighbour share {:.4f} (true normals), {:.4f} (estimated); floor {:.3f}\n",
+        sc.name, close_neighbour_share(truth), close_neighbour_share(raw), cloud_delta_floor(raw));
+    if (!o.mix_dir.empty()) write_mixed(o.mix_dir + "/" + sc.name, sc, truth, raw, surf);
     estimate_radii(raw);
     const auto t2 = std::chrono::steady_clock::now();
     const std::vector<float> old = old_radii(raw.positions);
@@ -371,6 +405,10 @@ int main(int argc, char** argv) {
             o.noise = std::stod(argv[++i]);
         } else if (a == "--points" && more) {
             o.points = std::stoull(argv[++i]);
+        } else if (a == "--mix" && more) {
+            o.mix_dir = argv[++i];
+        } else if (a == "--uniform") {
+            o.uniform = true;
         } else if (a == "--write-ply" && more) {
             o.write_dir = argv[++i];
         } else if (a == "--orientation" && more) {

@@ -139,7 +139,10 @@ VisibilityMap build_file(const std::string& path, std::optional<uint64_t> points
     if (!scene) {
         if (points || seed || sampling)
             throw Error(path + ": points/seed/sampling apply to scene files, not clouds");
-        return build_points(load_point_cloud(path), a, path, std::nullopt);
+        PointSet ps = load_point_cloud(path);
+        OctreeParams op = BuildParams{}.octree;
+        op.delta_floor = cloud_delta_floor(ps);  // as `vmap build` chooses it for a cloud
+        return build_points(std::move(ps), a, path, op);
     }
     Scene sc = load_scene(path);
     if (points) sc.points = *points;

@@ -1,13 +1,16 @@
 // vmap::load_input (include/vmap/input.h, src/scene/input.cpp): each kind of input, the
 // overrides, and the overrides that do not apply.
+#include "vmap/input.h"
+
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
+#include <random>
 
 #include "test_files.h"
 #include "test_util.h"
 #include "vmap/error.h"
-#include "vmap/input.h"
 
 namespace vmap {
 namespace {
@@ -52,7 +55,23 @@ TEST(Input, ACloudIsReadAndSamplingOverridesAreAnErrorNamingTheFile) {
     EXPECT_EQ(in.points.size(), 50u);
     EXPECT_EQ(in.octree.leaf_points, 3);
     EXPECT_EQ(in.name, "c.xyzn");
-    EXPECT_EQ(in.octree.delta_floor, OctreeParams::kDefaultDeltaFloor);  // no sampling known
+    // No sampling known: the floor from how evenly the cloud was sampled (a grid: evenly),
+    // and the build's report says so; a given floor is kept.
+    EXPECT_EQ(in.octree.delta_floor, OctreeParams::kEvenDeltaFloor);
+    EXPECT_TRUE(std::any_of(in.done.begin(), in.done.end(), [](const std::string& l) {
+        return l.find("occluder disc floor: 2.00 splat radii") != std::string::npos &&
+               l.find("sampled evenly") != std::string::npos;
+    }));
+    o.delta_floor = 3.f;
+    EXPECT_EQ(load_input(o).octree.delta_floor, 3.f);
+    o.delta_floor.reset();
+    {
+        std::ofstream f(o.path);
+        std::mt19937 rng(9);
+        std::uniform_real_distribution<float> u(0.f, 1.f);
+        for (int i = 0; i < 20000; ++i) f << u(rng) << " " << u(rng) << " 0 0 0 1\n";
+    }
+    EXPECT_NEAR(load_input(o).octree.delta_floor, OctreeParams::kDefaultDeltaFloor, 0.06f);
     o.seed = 1;
     EXPECT_TRUE(throws_naming(o, "c.xyzn: points, seed and sampling (--points, --seed"));
     o.seed.reset();

@@ -253,6 +253,14 @@ TEST(Validate, SamplesAsARawCloudScoreTheirNormals) {
     EXPECT_LT(bare.normal_agreement, 1.0);  // estimated: some edge points go wrong
     EXPECT_GT(bare.normal_agreement, 0.9);
     EXPECT_GT(bare.rows[0].all.agreement(), 0.8);
+    // The cloud's disc floor is measured from its spacing (cloud_delta_floor): the scene's
+    // blue-noise samples are even (2.0), its uniform ones independent (about 2.5); a given
+    // floor is kept.
+    EXPECT_NEAR(bare.delta_floor, OctreeParams::kEvenDeltaFloor, 0.1);  // 2.06: 3000 points
+    p.sampling = "uniform";
+    EXPECT_NEAR(validate_scene(kBlock, p).delta_floor, OctreeParams::kDefaultDeltaFloor, 0.12);
+    p.splat_floor = 3.f;
+    EXPECT_EQ(validate_scene(kBlock, p).delta_floor, 3.f);
     p.as_cloud = "guess";
     EXPECT_THROW(validate_scene(kBlock, p), Error);
 }

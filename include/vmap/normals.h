@@ -29,6 +29,10 @@ struct NormalEstimationParams {
     // face of a thin part or an edge and a surface a few millimetres away. 0: one weighted fit.
     size_t fit_neighbours = 24;
     int refits = 2;
+    // Then a second-order height function (a jet) is fitted on the same sheet's candidates and
+    // its normal at the point taken (src/scene/normals.cpp jet_pass): closer on curved parts and
+    // on noisy samples than the plane (docs/validation.md "Jet fits"). false: the plane's.
+    bool jet = true;
     Orientation orientation = Orientation::kAuto;
     Vec3 viewpoint{};  // for Orientation::kViewpoint
 };
@@ -81,6 +85,27 @@ struct RadiusEstimationParams {
 // missing normals or fewer than 2 points.
 void estimate_radii(PointSet& points, const RadiusEstimationParams& params = {},
                     const char* source = "point cloud");
+
+// How clumped a cloud's sampling is: the share of points whose nearest neighbour on their own
+// sheet lies within half the radius r of the disc of area 1 / density (r from the 8 nearest on
+// that sheet, as estimate_radii reads it; duplicates left out; at most 100,000 points probed, at
+// a fixed stride). Independent uniform samples (a Poisson process on the surface) give about
+// kPoissonCloseShare: measured on 120,000 of them on a plane (tests/normals_test.cpp CloudFloor;
+// 0.156-0.167 on the shipped scenes' uniform samples). With the true density it would be
+// 1 - exp(-1/4) = 0.221; the radius read from 8 neighbours scatters and grows with the nearest
+// one's distance, which lowers it. Blue-noise samples, a scanner's grid or a voxel-filtered
+// cloud give near 0 (0.002-0.004 on the blue-noise scenes). Needs normals (their signs do not
+// matter); clouds of fewer than 10 points, or without normals, count as Poisson.
+inline constexpr double kPoissonCloseShare = 0.161;
+double close_neighbour_share(const PointSet& points);
+
+// The occluder disc floor (OctreeParams::delta_floor) for a cloud of unknown sampling: the
+// floor exists to close the holes that independent samples leave between their discs, so a
+// Poisson-like cloud gets OctreeParams::kDefaultDeltaFloor (2.5), an evenly sampled one
+// kEvenDeltaFloor (2.0, as the blue-noise samples of scene files), and one in between the
+// linear mix by close_neighbour_share / kPoissonCloseShare (docs/validation.md "Raw clouds:
+// the disc floor from the sampling").
+float cloud_delta_floor(const PointSet& points);
 
 // The fraction of neighbouring point pairs on one smooth surface (near each other's tangent
 // plane, normals within ~35 degrees of one axis) whose normals point to opposite sides: about 0

@@ -7,6 +7,7 @@
 
 #include "vmap/error.h"
 #include "vmap/io.h"
+#include "vmap/normals.h"
 #include "vmap/visibility_map.h"
 
 namespace vmap {
@@ -34,6 +35,18 @@ void load_cloud(const InputOptions& o, Input& in) {
     in.kind = InputKind::kCloud;
     in.points = load_point_cloud(o.path, o.cloud, &in.done);
     in.octree = BuildParams{}.octree;
+    if (!o.delta_floor) {
+        // Nothing says how the cloud was sampled: the disc floor from how evenly it was.
+        const double share = close_neighbour_share(in.points);
+        in.octree.delta_floor = cloud_delta_floor(in.points);
+        in.done.push_back(fmt::format(
+            "occluder disc floor: {:.2f} splat radii ({:.1f}% of points with a close neighbour; "
+            "independent uniform samples have {:.1f}%: {})",
+            in.octree.delta_floor, 100.0 * share, 100.0 * kPoissonCloseShare,
+            share < 0.25 * kPoissonCloseShare   ? "sampled evenly"
+            : share > 0.75 * kPoissonCloseShare ? "sampled independently"
+                                                : "in between"));
+    }
     apply_octree_overrides(o, in.octree);
     in.description = fmt::format("point cloud {}", o.path);
 }

@@ -274,6 +274,93 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
     });
 }
 
+// Solves the 6 x 6 system a x = b in place (Gaussian elimination, partial pivoting); false when
+// a pivot is negligible against the matrix's scale.
+bool solve6(double a[6][6], double b[6]) {
+    double big = 0;
+    for (int r = 0; r < 6; ++r)
+        for (int k = 0; k < 6; ++k) big = std::max(big, std::fabs(a[r][k]));
+    if (!(big > 0)) return false;
+    for (int col = 0; col < 6; ++col) {
+        int piv = col;
+        for (int r = col + 1; r < 6; ++r)
+            if (std::fabs(a[r][col]) > std::fabs(a[piv][col])) piv = r;
+        if (std::fabs(a[piv][col]) <= 1e-12 * big) return false;
+        if (piv != col) {
+            for (int k = 0; k < 6; ++k) std::swap(a[col][k], a[piv][k]);
+            std::swap(b[col], b[piv]);
+        }
+        for (int r = col + 1; r < 6; ++r) {
+            const double f = a[r][col] / a[col][col];
+            for (int k = col; k < 6; ++k) a[r][k] -= f * a[col][k];
+            b[r] -= f * b[col];
+        }
+    }
+    for (int col = 5; col >= 0; --col) {
+        double v = b[col];
+        for (int k = col + 1; k < 6; ++k) v -= a[col][k] * b[k];
+        b[col] = v / a[col][col];
+    }
+    return true;
+}
+
+// Jet fits (a second-order height function over the tangent plane, Cazals and Pouget 2005): in
+// the frame of the point's sheet normal, z = a x^2 + b xy + c y^2 + d x + e y + f by weighted
+// least squares over the candidates on its sheet, and the normal is the surface's at the point,
+// (-d, -e, 1). A plane fit leans toward the side with more neighbours on a curve (a rim, a
+// thin leg or horn sampled by a few points across, a neighbourhood cut by a crease), where a
+// quadric follows the curve. Weights as the plane fit's with the bandwidth of the
+// kJetBandwidthNeighbour-th nearest (six unknowns need more points in reach than a plane's
+// three); a point with fewer than kJetMinNeighbours on its sheet, a singular system or a
+// surface steeper than 45 degrees in that frame keeps its plane normal.
+constexpr size_t kJetBandwidthNeighbour = 12;
+constexpr size_t kJetMinNeighbours = 10;
+
+void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
+              const std::vector<float>& d2, size_t c, LocalFits& fits) {
+    const size_t n = pts.size(), band = std::min(c - 1, kJetBandwidthNeighbour);
+    std::vector<Vec3> out(n);
+    parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
+            const Vec3 nz = fits.sheet_normals[i];
+            out[i] = nz;
+            const float h2 = d2[i * c + band];
+            if (fits.degenerate[i] || !(h2 > 0)) continue;
+            // A frame (u, v, nz): u across the normal's smallest component.
+            const Vec3 ax = std::fabs(nz.x) <= std::fabs(nz.y) && std::fabs(nz.x) <= std::fabs(nz.z)
+                                ? Vec3{1, 0, 0}
+                            : std::fabs(nz.y) <= std::fabs(nz.z) ? Vec3{0, 1, 0}
+                                                                 : Vec3{0, 0, 1};
+            Vec3 u = ax - nz * dot(ax, nz);
+            u = u / length(u);
+            const Vec3 v{nz.y * u.z - nz.z * u.y, nz.z * u.x - nz.x * u.z, nz.x * u.y - nz.y * u.x};
+            const double s = 1.0 / std::sqrt(double(h2));  // coordinates in bandwidths
+            double a[6][6] = {}, b[6] = {};
+            size_t kept = 0;
+            const uint32_t* nb = &cand[i * c];
+            for (size_t j = 0; j < c; ++j) {
+                if (nb[j] != i && !on_sheet(pts[i], nz, pts[nb[j]], fits.sheet_normals[nb[j]]))
+                    continue;
+                const double w = std::exp(-double(d2[i * c + j]) / double(h2));
+                const Vec3 d = pts[nb[j]] - pts[i];
+                const double x = s * dot(d, u), y = s * dot(d, v), z = s * dot(d, nz);
+                const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
+                for (int r = 0; r < 6; ++r) {
+                    b[r] += w * phi[r] * z;
+                    for (int k = 0; k < 6; ++k) a[r][k] += w * phi[r] * phi[k];
+                }
+                kept += nb[j] != i;
+            }
+            if (kept < kJetMinNeighbours || !solve6(a, b)) continue;
+            const double gx = b[3], gy = b[4];
+            if (gx * gx + gy * gy > 1.0) continue;
+            const Vec3 m = nz - u * float(gx) - v * float(gy);
+            out[i] = m / length(m);
+        }
+    });
+    fits.sheet_normals.swap(out);
+}
+
 // The k nearest neighbours of every point (fits.neighbours: the graph orientation runs on)
 // and, when `fit` is set, each point's normal: a weighted plane fit of its params.fit_neighbours
 // nearest, re-fitted params.refits times on the neighbours of its own sheet (otherwise
@@ -310,6 +397,7 @@ LocalFits fit_local_planes(const std::vector<Vec3>& pts, const NormalEstimationP
         fit_pass(pts, cand, d2, c, &fits.sheet_normals, fits, next);
         fits.sheet_normals.swap(next);
     }
+    if (params.jet) jet_pass(pts, cand, d2, c, fits);
     return fits;
 }
 

@@ -11,6 +11,7 @@
 #include "scene/cloud_knn.h"
 #include "vmap/error.h"
 #include "vmap/normals.h"
+#include "vmap/octree.h"
 #include "vmap/parallel.h"
 
 namespace vmap {
@@ -143,6 +144,55 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
                                 src, params.smoothing_passes));
     const std::vector<uint32_t> same = raw_radii(points, params);
     smooth_radii(points.radii, same, params.k, params.smoothing_passes);
+}
+
+double close_neighbour_share(const PointSet& points) {
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    if (n < 10 || points.normals.size() != n) return kPoissonCloseShare;
+    constexpr size_t kSame = 8, kCandidates = 32, kMostProbes = 100000;
+    const detail::CloudAdaptor adaptor{pts};
+    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    const size_t want = std::min(kCandidates + 1, n);
+    // A fixed stride over the points: the same probes whatever the thread count.
+    const size_t stride = (n + kMostProbes - 1) / kMostProbes;
+    const size_t probes = (n + stride - 1) / stride;
+    struct Count {
+        uint64_t probes = 0, close = 0;
+    };
+    const Count c = parallel_reduce_range<size_t>(
+        probes, 1024, Count{},
+        [&](size_t chunk_begin, size_t chunk_end, Count acc) {
+            std::vector<uint32_t> idx(want);
+            std::vector<float> d2(want), kept;
+            for (size_t s = chunk_begin; s < chunk_end; ++s) {
+                const size_t i = s * stride;
+                const Vec3 p = pts[i], np = points.normals[i];
+                const float q[3] = {p.x, p.y, p.z};
+                const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
+                kept.clear();
+                for (size_t j = 0; j < got && kept.size() < kSame; ++j) {
+                    if (idx[j] == i || d2[j] == 0.f) continue;  // itself, or a duplicate
+                    if (other_sheet(p, np, pts[idx[j]], points.normals[idx[j]])) continue;
+                    kept.push_back(d2[j]);
+                }
+                if (kept.size() < kSame) continue;  // a speck or a sliver: no density to read
+                const float r = radius_from(kept, kSame);
+                ++acc.probes;
+                acc.close += kept[0] < 0.25f * r * r;
+            }
+            return acc;
+        },
+        [](Count a, Count b) {
+            return Count{a.probes + b.probes, a.close + b.close};
+        });
+    return c.probes ? double(c.close) / double(c.probes) : kPoissonCloseShare;
+}
+
+float cloud_delta_floor(const PointSet& points) {
+    const double clumped = std::clamp(close_neighbour_share(points) / kPoissonCloseShare, 0.0, 1.0);
+    return float(OctreeParams::kEvenDeltaFloor +
+                 clumped * (OctreeParams::kDefaultDeltaFloor - OctreeParams::kEvenDeltaFloor));
 }
 
 double normal_inconsistency(const PointSet& points, size_t k) {

@@ -246,10 +246,13 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
         orient_toward(ps, sensors, path.c_str());
         rep.method = "toward the file's per-point sensor positions";
     }
-    std::string line =
-        fmt::format("normals: {} ({}), oriented {}",
-                    estimate ? "estimated from 12 nearest neighbours" : "the file's axes",
-                    estimate && had ? "the file's replaced" : "plane fits", rep.method);
+    std::string line = fmt::format(
+        "normals: {} ({}), oriented {}",
+        estimate ? "estimated from the 24 nearest on each point's own sheet" : "the file's axes",
+        estimate && had ? "the file's replaced; plane, then jet fits"
+        : estimate      ? "plane, then jet fits"
+                        : "as given",
+        rep.method);
     if (!sensed && rep.by_space + rep.by_rays > 0)
         line += fmt::format(
             "; {} points by free space, {} by rays ({} of those then turned by their "

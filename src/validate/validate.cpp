@@ -1,6 +1,5 @@
 // `vmap validate` (include/vmap/validate.h): V-map answers against exact visibility from the
 // scene's triangles, per octree height; and Embree rays timed against the leaf-pair kernel.
-#include "octree/records.h"
 #include "vmap/validate.h"
 
 #include <fmt/format.h>
@@ -18,12 +17,14 @@
 #include <random>
 
 #include "octree/delta_rule.h"
+#include "octree/records.h"
 #include "util/progress.h"
 #include "validate/npz.h"
 #include "visibility/grid_walk.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
+#include "vmap/normals.h"
 #include "vmap/octree.h"
 #include "vmap/visibility_map.h"
 
@@ -598,7 +599,7 @@ ValidationReport validate_scene(const std::string& path, const ValidateParams& p
     ValidationReport r = report_header(sc, sp, path, params);
     const bool raw = !params.as_cloud.empty() || !params.cloud.empty();
     r.delta_floor = params.splat_floor >= 0.f ? params.splat_floor
-                    : raw                     ? OctreeParams::kDefaultDeltaFloor
+                    : raw                     ? cloud_delta_floor(sp.pred)
                                               : scene_octree(sc).delta_floor;
     r.dropped_points = dropped;
     r.offset = offset;

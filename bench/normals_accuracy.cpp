@@ -244,7 +244,8 @@ void write_signed(const std::string& stem, const PointSet& est, const std::vecto
 // For `vmap validate --cloud`, to tell where a bare cloud's misses come from: the estimated
 // normals as `vmap build` orients them (-est), the same signed like the truth (-estsign), the
 // true normals on the objects and the estimated ones on the room (-objtrue), the reverse
-// (-roomtrue), and the true normals everywhere (-true). Positions only: radii estimated.
+// (-roomtrue), the true normals everywhere (-true), and the signed estimates with the truth
+// wherever they are more than 30 degrees off (-fixbad). Positions only: radii estimated.
 void write_mixed(const std::string& stem, const Scene& sc, const PointSet& truth,
                  const PointSet& est, const std::vector<uint32_t>& surf) {
     auto write = [&](const char* tag, auto pick) {
@@ -265,6 +266,12 @@ void write_mixed(const std::string& stem, const Scene& sc, const PointSet& truth
     write("-objtrue.ply", [&](size_t i, bool m) { return m ? t[i] : e[i]; });
     write("-roomtrue.ply", [&](size_t i, bool m) { return m ? e[i] : t[i]; });
     write("-true.ply", [&](size_t i, bool) { return t[i]; });
+    // Signed like the truth, and the truth where the estimate's axis is more than 30 degrees
+    // off (what fixing the worst directions alone could gain).
+    write("-fixbad.ply", [&](size_t i, bool) {
+        const Vec3 v = signed_est(i);
+        return dot(v, t[i]) < 0.866f * length(v) * length(t[i]) ? t[i] : v;
+    });
 }
 
 // Per surface (mesh or wall): points, signs right, and where the wrong ones lie: hidden in any

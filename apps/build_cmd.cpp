@@ -68,7 +68,7 @@ CloudOptions cloud_options(const BuildOptions& o) {
 }
 
 nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const BuildStats& st,
-                          size_t npts, double save_s) {
+                          double input_s, size_t npts, double save_s) {
     const auto& w = st.work;
     nlohmann::json j = params_json(vm);
     j["input"] = o.input.path;
@@ -86,7 +86,8 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
     j["links"] = st.links;
     j["links_kept"] = !o.count_links;
     j["batches"] = st.batches;
-    j["seconds"] = {{"total", st.seconds_total},
+    j["seconds"] = {{"input", input_s},
+                    {"total", st.seconds_total},
                     {"octree", st.seconds_octree},
                     {"visibility", st.seconds_visibility},
                     {"plan", st.seconds_plan},
@@ -101,15 +102,18 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
     return j;
 }
 
-void print_build_details(const VisibilityMap& vm, const BuildStats& st, double save_s) {
+void print_build_details(const VisibilityMap& vm, const BuildStats& st, double input_s,
+                         double save_s) {
     const auto& w = st.work;
     const int cores = tbb::this_task_arena::max_concurrency();
     fmt::print(
         "work:       {:.1f} node tests per facing pair, {:.2f} occluder tests per facing pair\n",
         double(w.node_tests) / std::max<uint64_t>(1, w.facing_pairs),
         double(w.occluder_tests) / std::max<uint64_t>(1, w.facing_pairs));
-    fmt::print("time:       octree {:.3f} s, visibility + links {:.3f} s in {} batches\n",
-               st.seconds_octree, st.seconds_visibility, st.batches);
+    fmt::print(
+        "time:       input (read, sampled, completed) {:.3f} s, octree {:.3f} s, visibility + "
+        "links {:.3f} s in {} batches\n",
+        input_s, st.seconds_octree, st.seconds_visibility, st.batches);
     fmt::print(
         "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction "
         "{:.3f} s, "
@@ -126,7 +130,7 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double s
 }
 
 void print_build_summary(const BuildOptions& o, const std::string& what, const VisibilityMap& vm,
-                         const BuildStats& st, size_t npts, double save_s) {
+                         const BuildStats& st, size_t npts, double input_s, double save_s) {
     const bool verbose = verbosity() == Verbosity::kVerbose;
     const auto& w = st.work;
     fmt::print("input:      {}\n", what);
@@ -145,7 +149,7 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
         fmt::print("links:      {} ({} bytes as link ends)\n", st.links, st.links * 8);
     fmt::print("time:       {:.3f} s total{}\n", st.seconds_total,
                verbose ? "" : " (-v for the breakdown and the links per level)");
-    if (verbose) print_build_details(vm, st, save_s);
+    if (verbose) print_build_details(vm, st, input_s, save_s);
     if (!o.count_links) fmt::print("wrote:      {}\n", o.output);
 }
 
@@ -191,11 +195,13 @@ int run_build(BuildOptions& o) {
     BuildStats st;
     size_t npts = 0;
     VisibilityMap vm;
-    double save_s = 0;
+    double save_s = 0, input_s = 0;
     std::vector<std::string> ranks;
     if (mpi::launched()) {  // mpirun -np N vmap build: the ranks share the work, rank 0 reports
         auto read = [&](BuildParams& bp) {
+            const auto ti = std::chrono::steady_clock::now();
             PointSet pts = read_build_input(o, bp, what);
+            input_s = seconds_since(ti);
             npts = pts.size();
             return pts;
         };
@@ -207,7 +213,9 @@ int run_build(BuildOptions& o) {
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
         ranks = std::move(r.summary);
     } else {
+        const auto ti = std::chrono::steady_clock::now();
         PointSet pts = read_build_input(o, o.params, what);
+        input_s = seconds_since(ti);
         npts = pts.size();
         vm = build_vmap(std::move(pts), o.params, &st, o.input.path);
         const auto ts = std::chrono::steady_clock::now();
@@ -216,9 +224,9 @@ int run_build(BuildOptions& o) {
     }
     for (const std::string& w : st.warnings) fmt::print(stderr, "vmap build: warning: {}\n", w);
     if (o.json)
-        fmt::print("{}\n", build_json(o, vm, st, npts, save_s).dump(2));
+        fmt::print("{}\n", build_json(o, vm, st, input_s, npts, save_s).dump(2));
     else if (verbosity() != Verbosity::kQuiet)
-        print_build_summary(o, what, vm, st, npts, save_s);
+        print_build_summary(o, what, vm, st, npts, input_s, save_s);
     if (!o.json && verbosity() != Verbosity::kQuiet)
         for (const std::string& line : ranks) fmt::print("{}\n", line);
     return 0;

@@ -18,10 +18,13 @@ std::vector<uint64_t> links_per_level(const VisibilityMap& vm) {
     const Octree& t = vm.octree();
     int h = 0;  // deepest node (not only leaf), so every level below indexes in range
     for (int32_t n = 0; n < t.num_nodes(); ++n) h = std::max(h, int(t.level()[n]));
+    // Each link once, at its first end's level: a node's targets are sorted, so those after it
+    // are the tail past upper_bound (a scan of every target took 1-2 s at 4.6e8 links).
     std::vector<uint64_t> links(h + 1);
-    for (int32_t n = 0; n < t.num_nodes(); ++n)
-        for (int32_t m : vm.links(n))
-            if (m > n) links[t.level()[n]]++;  // each link once, at its first end's level
+    for (int32_t n = 0; n < t.num_nodes(); ++n) {
+        const std::span<const int32_t> to = vm.links(n);
+        links[t.level()[n]] += uint64_t(to.end() - std::upper_bound(to.begin(), to.end(), n));
+    }
     return links;
 }
 

@@ -74,6 +74,12 @@ struct RadiusEstimationParams {
     // Then r^2 diffuses over the same-surface neighbour graph for this many passes, keeping
     // its sum (src/scene/radii.cpp: the density varies slowly, one estimate scatters). 0: raw.
     int smoothing_passes = 8;
+    // The radius from neighbour distances assumes independent samples (E d_j^2 = j / (pi rho));
+    // evenly spaced ones (blue noise, a scanner's grid) put the nearest neighbours farther, and
+    // the radius reads about 12% large. With this set (and k 8, candidates >= 32: the
+    // close-neighbour test's own), the radii are scaled by even_sampling_radius_scale of the
+    // cloud's close-neighbour share.
+    bool sampling_correction = true;
 };
 
 // Fills points.radii with splat radii (scene units): the radius of the disc of area 1 / density,
@@ -81,6 +87,7 @@ struct RadiusEstimationParams {
 // off its tangent plane with a normal of the same axis (the other face of a thin plate or part),
 // then r^2 diffused over those neighbours for RadiusEstimationParams::smoothing_passes passes.
 // A curved part's neighbours count (its normals turn), the other face of a plate does not.
+// Then scaled for how evenly the cloud is sampled (RadiusEstimationParams::sampling_correction).
 // Needs points.normals (their signs do not matter). Throws vmap::Error naming `source` for
 // missing normals or fewer than 2 points.
 void estimate_radii(PointSet& points, const RadiusEstimationParams& params = {},
@@ -106,6 +113,14 @@ double close_neighbour_share(const PointSet& points);
 // linear mix by close_neighbour_share / kPoissonCloseShare (docs/validation.md "Raw clouds:
 // the disc floor from the sampling").
 float cloud_delta_floor(const PointSet& points);
+
+// What estimate_radii multiplies its radii by for a cloud of this close-neighbour share:
+// kEvenRadiusScale for evenly spaced samples (share 0), 1 for independent ones (share >=
+// kPoissonCloseShare), linear in between. kEvenRadiusScale: the true radius over the estimate's
+// median on blue-noise samples (1 / 1.118 on the shipped and test scenes' clouds; tests/
+// normals_test.cpp Radii.EvenSamplesGetTheirTrueRadius).
+inline constexpr double kEvenRadiusScale = 0.8945;
+float even_sampling_radius_scale(double close_share);
 
 // The fraction of neighbouring point pairs on one smooth surface (near each other's tangent
 // plane, normals within ~35 degrees of one axis) whose normals point to opposite sides: about 0

@@ -748,6 +748,7 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 // and the smoothing's averaging would shrink (docs/validation.md).
                 RadiusEstimationParams rp;
                 rp.smoothing_passes = 0;
+                rp.sampling_correction = false;  // the grid's cell as measured for these rules
                 estimate_radii(tmp, rp);
                 radii = std::move(tmp.radii);
             }

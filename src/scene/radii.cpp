@@ -27,6 +27,14 @@ float radius_from(const std::vector<float>& d2, size_t m) {
     return float(std::sqrt(sum / double(m)));
 }
 
+// Whether a point's nearest same-sheet neighbour (kept: the sorted squared distances of its
+// same-sheet neighbours, duplicates left out) lies within half the radius read from them:
+// the close_neighbour_share test (vmap/normals.h).
+bool has_close_neighbour(const std::vector<float>& kept, size_t m) {
+    const float r = radius_from(kept, m);
+    return kept[0] < 0.25f * r * r;
+}
+
 // Whether q lies on another sheet than p for the density: a surface parallel to p's (normal
 // axes within 37 degrees) and off p's tangent plane (more than 14 degrees): the other face of a
 // thin plate or a thin part, a surface a few millimetres away. A neighbour whose normal turns
@@ -41,8 +49,11 @@ bool other_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq) {
 // The radius of every point from its k nearest same-sheet neighbours (radius_from), and those
 // neighbours (up to k a point, kNone-padded) for the smoothing passes.
 constexpr uint32_t kNone = 0xffffffffu;
+// The same-sheet neighbours close_neighbour_share reads the radius from.
+constexpr size_t kCloseNeighbours = 8;
 
-std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& params) {
+std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& params,
+                                double* close_share) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size(), k = params.k;
     const detail::CloudAdaptor adaptor{pts};
@@ -50,9 +61,10 @@ std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& 
     const size_t want = std::min(params.candidates + 1, n);
     points.radii.resize(n);
     std::vector<uint32_t> same(n * k, kNone);
+    std::vector<uint8_t> probed(n, 0), close(n, 0);
     parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
         std::vector<uint32_t> idx(want);
-        std::vector<float> d2(want), kept, all;
+        std::vector<float> d2(want), kept, all, distinct;
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const Vec3 p = pts[i], np = points.normals[i];
             const float q[3] = {p.x, p.y, p.z};
@@ -72,8 +84,20 @@ std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& 
             const std::vector<float>& use = kept.size() >= std::min<size_t>(3, k) ? kept : all;
             const size_t m = std::min(use.size(), k);
             points.radii[i] = m > 0 ? radius_from(use, m) : 0.0f;
+            distinct.clear();
+            for (float v : kept)
+                if (v > 0.f) distinct.push_back(v);
+            if (distinct.size() >= kCloseNeighbours) {
+                probed[i] = 1;
+                close[i] = has_close_neighbour(distinct, kCloseNeighbours);
+            }
         }
     });
+    if (close_share) {
+        const size_t p = size_t(std::count(probed.begin(), probed.end(), uint8_t(1)));
+        *close_share = p ? double(std::count(close.begin(), close.end(), uint8_t(1))) / double(p)
+                         : kPoissonCloseShare;
+    }
     return same;
 }
 
@@ -142,15 +166,26 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
     if (params.smoothing_passes < 0 || params.smoothing_passes > 1000)
         throw Error(fmt::format("{}: radius estimation: smoothing_passes {} out of range (0..1000)",
                                 src, params.smoothing_passes));
-    const std::vector<uint32_t> same = raw_radii(points, params);
+    double share = kPoissonCloseShare;
+    const bool correct =
+        params.sampling_correction && params.k == kCloseNeighbours && params.candidates >= 32;
+    const std::vector<uint32_t> same = raw_radii(points, params, correct ? &share : nullptr);
     smooth_radii(points.radii, same, params.k, params.smoothing_passes);
+    if (!correct) return;
+    const float scale = even_sampling_radius_scale(share);
+    for (float& r : points.radii) r *= scale;
+}
+
+float even_sampling_radius_scale(double close_share) {
+    const double clumped = std::clamp(close_share / kPoissonCloseShare, 0.0, 1.0);
+    return float(kEvenRadiusScale + clumped * (1.0 - kEvenRadiusScale));
 }
 
 double close_neighbour_share(const PointSet& points) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
     if (n < 10 || points.normals.size() != n) return kPoissonCloseShare;
-    constexpr size_t kSame = 8, kCandidates = 32, kMostProbes = 100000;
+    constexpr size_t kCandidates = 32, kMostProbes = 100000;
     const detail::CloudAdaptor adaptor{pts};
     const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
     const size_t want = std::min(kCandidates + 1, n);
@@ -171,15 +206,14 @@ double close_neighbour_share(const PointSet& points) {
                 const float q[3] = {p.x, p.y, p.z};
                 const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
                 kept.clear();
-                for (size_t j = 0; j < got && kept.size() < kSame; ++j) {
+                for (size_t j = 0; j < got && kept.size() < kCloseNeighbours; ++j) {
                     if (idx[j] == i || d2[j] == 0.f) continue;  // itself, or a duplicate
                     if (other_sheet(p, np, pts[idx[j]], points.normals[idx[j]])) continue;
                     kept.push_back(d2[j]);
                 }
-                if (kept.size() < kSame) continue;  // a speck or a sliver: no density to read
-                const float r = radius_from(kept, kSame);
+                if (kept.size() < kCloseNeighbours) continue;  // a speck or a sliver
                 ++acc.probes;
-                acc.close += kept[0] < 0.25f * r * r;
+                acc.close += has_close_neighbour(kept, kCloseNeighbours);
             }
             return acc;
         },

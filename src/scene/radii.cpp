@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numeric>
 #include <vector>
@@ -30,9 +31,39 @@ float radius_from(const std::vector<float>& d2, size_t m) {
 // Whether a point's nearest same-sheet neighbour (kept: the sorted squared distances of its
 // same-sheet neighbours, duplicates left out) lies within half the radius read from them:
 // the close_neighbour_share test (vmap/normals.h).
-bool has_close_neighbour(const std::vector<float>& kept, size_t m) {
-    const float r = radius_from(kept, m);
+bool has_close_neighbour(const float* kept, size_t m) {
+    double sum = 0;
+    for (size_t j = 0; j < m; ++j) sum += double(kept[j]) / double(j + 1);
+    const float r = float(std::sqrt(sum / double(m)));  // radius_from's
     return kept[0] < 0.25f * r * r;
+}
+
+// Two counts summed over the points s * stride, s < steps, each from the point's `want` nearest
+// (sorted squared distances): count(i, idx, d2, got, tally) adds to the tally.
+struct Tally {
+    uint64_t total = 0, hits = 0;
+};
+template <class Count>
+Tally tally_neighbours(const std::vector<Vec3>& pts, size_t want, size_t steps, size_t stride,
+                       Count count) {
+    const detail::CloudAdaptor adaptor{pts};
+    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    return parallel_reduce_range<size_t>(
+        steps, 1024, Tally{},
+        [&](size_t chunk_begin, size_t chunk_end, Tally acc) {
+            std::vector<uint32_t> idx(want);
+            std::vector<float> d2(want);
+            for (size_t s = chunk_begin; s < chunk_end; ++s) {
+                const size_t i = s * stride;
+                const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
+                const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
+                count(i, idx.data(), d2.data(), got, acc);
+            }
+            return acc;
+        },
+        [](Tally a, Tally b) {
+            return Tally{a.total + b.total, a.hits + b.hits};
+        });
 }
 
 // Whether q lies on another sheet than p for the density: a surface parallel to p's (normal
@@ -89,7 +120,7 @@ std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& 
                 if (v > 0.f) distinct.push_back(v);
             if (distinct.size() >= kCloseNeighbours) {
                 probed[i] = 1;
-                close[i] = has_close_neighbour(distinct, kCloseNeighbours);
+                close[i] = has_close_neighbour(distinct.data(), kCloseNeighbours);
             }
         }
     });
@@ -186,41 +217,24 @@ double close_neighbour_share(const PointSet& points) {
     const size_t n = pts.size();
     if (n < 10 || points.normals.size() != n) return kPoissonCloseShare;
     constexpr size_t kCandidates = 32, kMostProbes = 100000;
-    const detail::CloudAdaptor adaptor{pts};
-    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    const size_t want = std::min(kCandidates + 1, n);
     // A fixed stride over the points: the same probes whatever the thread count.
     const size_t stride = (n + kMostProbes - 1) / kMostProbes;
-    const size_t probes = (n + stride - 1) / stride;
-    struct Count {
-        uint64_t probes = 0, close = 0;
-    };
-    const Count c = parallel_reduce_range<size_t>(
-        probes, 1024, Count{},
-        [&](size_t chunk_begin, size_t chunk_end, Count acc) {
-            std::vector<uint32_t> idx(want);
-            std::vector<float> d2(want), kept;
-            for (size_t s = chunk_begin; s < chunk_end; ++s) {
-                const size_t i = s * stride;
-                const Vec3 p = pts[i], np = points.normals[i];
-                const float q[3] = {p.x, p.y, p.z};
-                const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
-                kept.clear();
-                for (size_t j = 0; j < got && kept.size() < kCloseNeighbours; ++j) {
-                    if (idx[j] == i || d2[j] == 0.f) continue;  // itself, or a duplicate
-                    if (other_sheet(p, np, pts[idx[j]], points.normals[idx[j]])) continue;
-                    kept.push_back(d2[j]);
-                }
-                if (kept.size() < kCloseNeighbours) continue;  // a speck or a sliver
-                ++acc.probes;
-                acc.close += has_close_neighbour(kept, kCloseNeighbours);
+    const Tally c = tally_neighbours(
+        pts, std::min(kCandidates + 1, n), (n + stride - 1) / stride, stride,
+        [&](size_t i, const uint32_t* idx, const float* d2, size_t got, Tally& acc) {
+            std::array<float, kCloseNeighbours> kept;
+            size_t m = 0;
+            for (size_t j = 0; j < got && m < kCloseNeighbours; ++j) {
+                if (idx[j] == i || d2[j] == 0.f) continue;  // itself, or a duplicate
+                if (other_sheet(pts[i], points.normals[i], pts[idx[j]], points.normals[idx[j]]))
+                    continue;
+                kept[m++] = d2[j];
             }
-            return acc;
-        },
-        [](Count a, Count b) {
-            return Count{a.probes + b.probes, a.close + b.close};
+            if (m < kCloseNeighbours) return;  // a speck or a sliver: no density to read
+            ++acc.total;
+            acc.hits += has_close_neighbour(kept.data(), kCloseNeighbours);
         });
-    return c.probes ? double(c.close) / double(c.probes) : kPoissonCloseShare;
+    return c.total ? double(c.hits) / double(c.total) : kPoissonCloseShare;
 }
 
 float cloud_delta_floor(const PointSet& points) {
@@ -233,35 +247,19 @@ double normal_inconsistency(const PointSet& points, size_t k) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
     if (n < 2 || points.normals.size() != n) return 0.0;
-    const detail::CloudAdaptor adaptor{pts};
-    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
-    const size_t want = std::min(k + 1, n);
-    struct Count {
-        uint64_t pairs = 0, opposed = 0;
-    };
-    const Count c = parallel_reduce_range<size_t>(
-        n, 1024, Count{},
-        [&](size_t chunk_begin, size_t chunk_end, Count acc) {
-            std::vector<uint32_t> idx(want);
-            std::vector<float> d2(want);
-            for (size_t i = chunk_begin; i < chunk_end; ++i) {
-                const float q[3] = {pts[i].x, pts[i].y, pts[i].z};
-                const size_t got = tree.knnSearch(q, want, idx.data(), d2.data());
-                for (size_t j = 0; j < got; ++j) {
-                    const uint32_t o = idx[j];
-                    if (o == i ||
-                        !detail::same_surface(pts[i], points.normals[i], pts[o], points.normals[o]))
-                        continue;
-                    ++acc.pairs;
-                    acc.opposed += dot(points.normals[i], points.normals[o]) < 0;
-                }
-            }
-            return acc;
-        },
-        [](Count a, Count b) {
-            return Count{a.pairs + b.pairs, a.opposed + b.opposed};
-        });
-    return c.pairs ? double(c.opposed) / double(c.pairs) : 0.0;
+    const Tally c =
+        tally_neighbours(pts, std::min(k + 1, n), n, 1,
+                         [&](size_t i, const uint32_t* idx, const float*, size_t got, Tally& acc) {
+                             for (size_t j = 0; j < got; ++j) {
+                                 const uint32_t o = idx[j];
+                                 if (o == i || !detail::same_surface(pts[i], points.normals[i],
+                                                                     pts[o], points.normals[o]))
+                                     continue;
+                                 ++acc.total;
+                                 acc.hits += dot(points.normals[i], points.normals[o]) < 0;
+                             }
+                         });
+    return c.total ? double(c.hits) / double(c.total) : 0.0;
 }
 
 }  // namespace vmap

@@ -1202,6 +1202,25 @@ TEST(CloudFloor, AMixIsInBetweenAndAThinPlatesOtherFaceIsNoNeighbour) {
     EXPECT_LT(close_neighbour_share(plate), 0.01);
 }
 
+// Clouds with no density to read (too few points, no normals, all copies of one point, a
+// line) count as independent samples: the default floor, never a NaN or a throw.
+TEST(CloudFloor, CloudsWithNoDensityToReadGetTheDefaultFloor) {
+    PointSet few = plane_cloud({{0.f, 0.f}, {1.f, 0.f}, {0.f, 1.f}});
+    EXPECT_EQ(close_neighbour_share(few), kPoissonCloseShare);
+    PointSet copies = plane_cloud(std::vector<std::pair<float, float>>(5000, {0.3f, 0.4f}));
+    EXPECT_EQ(cloud_delta_floor(copies), OctreeParams::kDefaultDeltaFloor);
+    PointSet bare = plane_cloud(std::vector<std::pair<float, float>>(100, {0.f, 0.f}));
+    bare.normals.clear();
+    EXPECT_EQ(close_neighbour_share(bare), kPoissonCloseShare);
+    std::vector<std::pair<float, float>> line;
+    for (int i = 0; i < 1000; ++i) line.push_back({0.001f * float(i), 0.f});
+    const float f = cloud_delta_floor(plane_cloud(line));
+    EXPECT_TRUE(f >= OctreeParams::kEvenDeltaFloor && f <= OctreeParams::kDefaultDeltaFloor);
+    EXPECT_EQ(even_sampling_radius_scale(0.0), float(kEvenRadiusScale));
+    EXPECT_EQ(even_sampling_radius_scale(1.0), 1.0f);
+    EXPECT_EQ(even_sampling_radius_scale(std::nan("")), 1.0f);  // no number: no correction
+}
+
 // distances, for k below, at and above the number of points.
 TEST(NearestPoints, MatchesBruteForce) {
     std::mt19937 rng(7);

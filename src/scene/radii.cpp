@@ -38,6 +38,13 @@ bool has_close_neighbour(const float* kept, size_t m) {
     return kept[0] < 0.25f * r * r;
 }
 
+// How far a close-neighbour share is from even (0) toward independent samples (1); a share that
+// is no number counts as independent (no correction).
+double clumped_share(double close_share) {
+    return std::isfinite(close_share) ? std::clamp(close_share / kPoissonCloseShare, 0.0, 1.0)
+                                      : 1.0;
+}
+
 // Two counts summed over the points s * stride, s < steps, each from the point's `want` nearest
 // (sorted squared distances): count(i, idx, d2, got, tally) adds to the tally.
 struct Tally {
@@ -208,8 +215,7 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
 }
 
 float even_sampling_radius_scale(double close_share) {
-    const double clumped = std::clamp(close_share / kPoissonCloseShare, 0.0, 1.0);
-    return float(kEvenRadiusScale + clumped * (1.0 - kEvenRadiusScale));
+    return float(kEvenRadiusScale + clumped_share(close_share) * (1.0 - kEvenRadiusScale));
 }
 
 double close_neighbour_share(const PointSet& points) {
@@ -238,9 +244,9 @@ double close_neighbour_share(const PointSet& points) {
 }
 
 float cloud_delta_floor(const PointSet& points) {
-    const double clumped = std::clamp(close_neighbour_share(points) / kPoissonCloseShare, 0.0, 1.0);
     return float(OctreeParams::kEvenDeltaFloor +
-                 clumped * (OctreeParams::kDefaultDeltaFloor - OctreeParams::kEvenDeltaFloor));
+                 clumped_share(close_neighbour_share(points)) *
+                     (OctreeParams::kDefaultDeltaFloor - OctreeParams::kEvenDeltaFloor));
 }
 
 double normal_inconsistency(const PointSet& points, size_t k) {

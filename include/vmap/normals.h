@@ -113,6 +113,8 @@ double close_neighbour_share(const PointSet& points);
 // linear mix by close_neighbour_share / kPoissonCloseShare (docs/validation.md "Raw clouds:
 // the disc floor from the sampling").
 float cloud_delta_floor(const PointSet& points);
+// The same from a close_neighbour_share already measured.
+float delta_floor_of_share(double close_share);
 
 // What estimate_radii multiplies its radii by for a cloud of this close-neighbour share:
 // kEvenRadiusScale for evenly spaced samples (share 0), 1 for independent ones (share >=

@@ -38,7 +38,7 @@ void load_cloud(const InputOptions& o, Input& in) {
     if (!o.delta_floor) {
         // Nothing says how the cloud was sampled: the disc floor from how evenly it was.
         const double share = close_neighbour_share(in.points);
-        in.octree.delta_floor = cloud_delta_floor(in.points);
+        in.octree.delta_floor = delta_floor_of_share(share);
         in.done.push_back(fmt::format(
             "occluder disc floor: {:.2f} splat radii ({:.1f}% of points with a close neighbour; "
             "independent uniform samples have {:.1f}%: {})",

@@ -243,10 +243,14 @@ double close_neighbour_share(const PointSet& points) {
     return c.total ? double(c.hits) / double(c.total) : kPoissonCloseShare;
 }
 
-float cloud_delta_floor(const PointSet& points) {
+float delta_floor_of_share(double close_share) {
     return float(OctreeParams::kEvenDeltaFloor +
-                 clumped_share(close_neighbour_share(points)) *
+                 clumped_share(close_share) *
                      (OctreeParams::kDefaultDeltaFloor - OctreeParams::kEvenDeltaFloor));
+}
+
+float cloud_delta_floor(const PointSet& points) {
+    return delta_floor_of_share(close_neighbour_share(points));
 }
 
 double normal_inconsistency(const PointSet& points, size_t k) {

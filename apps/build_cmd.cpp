@@ -48,7 +48,7 @@ struct BuildOptions {
     std::vector<float> viewpoint;
     bool count_links = false;
     bool json = false;
-    bool shards = false;                // under mpirun: vmap/mpi.h
+    bool shards = false;  // under mpirun: vmap/mpi.h
     std::string schedule = "dynamic";
     int chunks_per_rank = mpi::Options{}.chunks_per_rank;
     BuildParams params;
@@ -160,8 +160,8 @@ void check_build(BuildOptions& o) {
     if (o.output.empty()) o.output = fs::path(in.path).stem().string() + ".vmap";
     io::check_input_path(in.path);
     if (has_extension(in.path, ".vmap"))
-        throw Error(fmt::format("{}: a .vmap is built already (info, query, render take it)",
-                                in.path));
+        throw Error(
+            fmt::format("{}: a .vmap is built already (info, query, render take it)", in.path));
     if (o.shards && !mpi::launched())
         throw UsageError("--shards: one file per rank, under mpirun only");
     if (!o.count_links) check_output(o.output, "-o", {in.path});
@@ -189,6 +189,27 @@ PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
     return std::move(input.points);
 }
 
+// What names the input under mpirun, where rank 0 alone reads it: the file and each option that
+// changes the points read (those given), e.g. "scenes/a.json, points 3000, seed 7".
+std::string input_key(const BuildOptions& o) {
+    const InputOptions& in = o.input;
+    std::string key = in.path;
+    auto add = [&](const char* name, const auto& v) {
+        if (v) key += fmt::format(", {} {}", name, *v);
+    };
+    add("points", in.points);
+    add("seed", in.seed);
+    if (in.pattern) key += fmt::format(", sampling {}", name_of(*in.pattern));
+    add("max-height", in.max_height);
+    add("leaf-points", in.leaf_points);
+    add("delta-floor", in.delta_floor);
+    if (in.as_points) key += ", as points";
+    if (o.normals != "keep") key += fmt::format(", normals {}", o.normals);
+    if (const auto& v = in.cloud.viewpoint)
+        key += fmt::format(", viewpoint {} {} {}", v->x, v->y, v->z);
+    return key;
+}
+
 int run_build(BuildOptions& o) {
     std::string what;
     check_build(o);
@@ -207,7 +228,7 @@ int run_build(BuildOptions& o) {
         };
         mpi::Result r = mpi::build(read, o.params,
                                    {o.output, o.shards, o.count_links, o.schedule, threads(),
-                                    o.chunks_per_rank},
+                                    o.chunks_per_rank, input_key(o)},
                                    o.input.path);
         if (!r.root) return r.exit_code;
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
@@ -246,8 +267,8 @@ Command add_build_command(CLI::App& app) {
     add_predicate_options(build, bo->params.visibility);
     add_choice(build, "--backend", bo->params.backend, "auto (GPU when present), cpu or cuda");
     add_choice(build, "--occluders", bo->params.occluders,
-                    "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "
-                    "grid (grid walk of [7], CPU only); spheres and bresenham are old names");
+               "Potential occluders: boxes (walk of the octree, pruned by node boxes) or "
+               "grid (grid walk of [7], CPU only); spheres and bresenham are old names");
     build
         ->add_option("--batch-pairs", bo->params.max_batch_pairs,
                      "Leaf pairs evaluated per batch (bounds memory)")
@@ -267,9 +288,9 @@ Command add_build_command(CLI::App& app) {
         ->delimiter(',')
         ->expected(3);
     add_choice(build, "--construction", bo->params.construction,
-                    "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
-                    "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
-                    "leaf pair: the oracle; the same V-map)");
+               "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
+               "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
+               "leaf pair: the oracle; the same V-map)");
     build
         ->add_option("--walk-pairs", bo->params.walk_pairs,
                      "Undecided node pairs of at most this many leaf pairs are walked, not split "
@@ -280,27 +301,31 @@ Command add_build_command(CLI::App& app) {
                     "too large for memory");
 
     build->add_flag("--json", bo->json, "Print the summary as one JSON object (for scripts)");
-    build->add_option("--device", bo->params.device,
-                      "CUDA device (of those CUDA_VISIBLE_DEVICES leaves); default 0, under "
-                      "mpirun the rank's local rank")
+    build
+        ->add_option("--device", bo->params.device,
+                     "CUDA device (of those CUDA_VISIBLE_DEVICES leaves); default 0, under "
+                     "mpirun the rank's local rank")
         ->check(CLI::Range(0, 1023));
     build->add_flag("--shards", bo->shards,
                     "Under mpirun: one file of links per rank and -o an index of them (for maps "
                     "beyond one host's memory; load and the queries read it as one map)");
-    build->add_option("--schedule", bo->schedule,
-                      "Under mpirun: dynamic (rank 0 hands out small chunks of jobs to whichever "
-                      "rank asks: balanced better, docs/scaling.md) or static (a share each by a "
-                      "work estimate)")
+    build
+        ->add_option("--schedule", bo->schedule,
+                     "Under mpirun: dynamic (rank 0 hands out small chunks of jobs to whichever "
+                     "rank asks: balanced better, docs/scaling.md) or static (a share each by a "
+                     "work estimate)")
         ->check(CLI::IsMember({"static", "dynamic"}))
         ->capture_default_str();
-    build->add_option("--chunks-per-rank", bo->chunks_per_rank,
-                      "Under mpirun, dynamic schedule: chunks of jobs per rank (more balance "
-                      "better, each costs a message and a round; the same map at any number)")
+    build
+        ->add_option("--chunks-per-rank", bo->chunks_per_rank,
+                     "Under mpirun, dynamic schedule: chunks of jobs per rank (more balance "
+                     "better, each costs a message and a round; the same map at any number)")
         ->check(CLI::Range(1, 4096))
         ->capture_default_str();
     return {
         build, [bo]() {
-            const bool sampled = bo->input.path.empty() || sampled_input(bo->input.path, bo->input.as_points);
+            const bool sampled =
+                bo->input.path.empty() || sampled_input(bo->input.path, bo->input.as_points);
             if (sampled && (bo->normals != "keep" || !bo->viewpoint.empty())) {
                 fmt::print(
                     stderr,

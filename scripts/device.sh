@@ -22,7 +22,9 @@
 #                  MPI_THREADS threads (default 2: strong scaling), the 16 cores as 1x16, 2x8,
 #                  4x4, 8x2, static against dynamic, shards, and 2 ranks sharing the GPU; every
 #                  .vmap compared with the single-process build; one table in mpi-summary.md
-#                  (MPI_SCENE, default cornell-bunny at 30000 points)
+#                  (MPI_SCENE, default cornell-bunny at 30000 points; MPI_REPEAT=R runs the
+#                  1/2/4/8-rank sweep R times and takes medians; MPI_EXTRA=0 skips the 8-rank
+#                  variants and the 1x16..4x4 runs; MPI_BOUND=0 the bound runs)
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #        gi-throughput  vmap bench-gi on the GPU for .device/bin/vmap-before (bundled with
 #                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
@@ -295,30 +297,44 @@ if [[ "$cmd" == run ]]; then
                     rm -f "$out"
                 }
                 th=${MPI_THREADS:-2}
-                for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                # MPI_REPEAT=R: the strong-scaling sweep R times, alternating (the table below
+                # takes each P's median).
+                for _ in $(seq "${MPI_REPEAT:-1}"); do
+                    for np in 1 2 4 8; do mrun "cpu-$np" "$np" "$th" cpu dynamic; done
+                done
                 # The same with each rank bound to T cores of its own (MPI_BOUND=0: skipped).
                 if [[ "${MPI_BOUND:-1}" != 0 ]]; then
                     for np in 1 2 4 8; do
                         MAP="--map-by slot:PE=$th --bind-to core" mrun "bound-$np" "$np" "$th" cpu dynamic
                     done
                 fi
-                for per in 32 64; do mrun "cpu-8-c$per" 8 "$th" cpu dynamic --chunks-per-rank "$per"; done
-                mrun cpu-8-static 8 "$th" cpu static
-                mrun cpu-4-static 4 "$th" cpu static
-                for np in 1 2 4; do mrun "cores-$np" "$np" $((16 / np)) cpu dynamic; done
+                if [[ "${MPI_EXTRA:-1}" != 0 ]]; then  # MPI_EXTRA=0: the scaling runs only
+                    for per in 32 64; do mrun "cpu-8-c$per" 8 "$th" cpu dynamic --chunks-per-rank "$per"; done
+                    mrun cpu-8-static 8 "$th" cpu static
+                    mrun cpu-4-static 4 "$th" cpu static
+                    for np in 1 2 4; do mrun "cores-$np" "$np" $((16 / np)) cpu dynamic; done
+                fi
                 mrun shards-4 4 4 cpu dynamic --shards
                 mrun gpu-1 1 16 cuda dynamic
                 mrun gpu-2-shared 2 8 cuda dynamic
                 "$bin/gpu_test" --gtest_filter='GpuDevice.*' > "$OUT/mpi-gpu-device.log" 2>&1 || rc=1
                 echo "--device test: $(grep -E 'PASSED|FAILED|SKIPPED \]' "$OUT/mpi-gpu-device.log" | tail -1)" >> "$sum"
                 # Strong scaling at T threads a rank: speedup and efficiency against P = 1.
-                awk -F'|' '$2 ~ /(cpu|bound)-[1248] / {split($2, l, "-"); k = l[1]; gsub(/ /, "", k);
-                                                         w[k, $3+0] = $7; c[k, $3+0] = $8; ks[k] = 1}
-                    END {print "\n| runs | P | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";
-                         print "|---|---:|---:|---:|---:|---:|";
+                # With repeats, each P's median wall and median slowest rank (and their ranges).
+                awk -F'|' 'function med(a, n,   i, j, t) {for (i = 2; i <= n; i++) for (j = i; j > 1 && a[j - 1] > a[j]; j--) {t = a[j]; a[j] = a[j - 1]; a[j - 1] = t}
+                                                    return n % 2 ? a[(n + 1) / 2] : (a[n / 2] + a[n / 2 + 1]) / 2}
+                    $2 ~ /(cpu|bound)-[1248] / {split($2, l, "-"); k = l[1]; gsub(/ /, "", k); p = $3 + 0;
+                                                n[k, p]++; W[k, p, n[k, p]] = $7 + 0; C[k, p, n[k, p]] = $8 + 0; ks[k] = 1}
+                    END {for (k in ks) for (p = 1; p <= 8; p *= 2) if (n[k, p] > 0) {
+                             m = n[k, p]; split("", a); split("", b)
+                             for (i = 1; i <= m; i++) {a[i] = W[k, p, i]; b[i] = C[k, p, i]}
+                             w[k, p] = med(a, m); c[k, p] = med(b, m); runs[k, p] = m
+                             range[k, p] = m > 1 ? sprintf(" (%.2f-%.2f)", a[1], a[m]) : ""}
+                         print "\n| runs | P | runs of each | wall s, median (range) | speedup (wall) | efficiency (wall) | speedup (slowest rank) | efficiency (slowest rank) |";
+                         print "|---|---:|---:|---|---:|---:|---:|---:|";
                          for (k in ks) for (p = 1; p <= 8; p *= 2) if (w[k, p] > 0)
-                             printf "| %s | %d | %.2f | %.2f | %.2f | %.2f |\n", k, p, w[k, 1] / w[k, p], w[k, 1] / w[k, p] / p,
-                                    c[k, 1] / c[k, p], c[k, 1] / c[k, p] / p}' \
+                             printf "| %s | %d | %d | %.2f%s | %.2f | %.2f | %.2f | %.2f |\n", k, p, runs[k, p], w[k, p], range[k, p],
+                                    w[k, 1] / w[k, p], w[k, 1] / w[k, p] / p, c[k, 1] / c[k, p], c[k, 1] / c[k, p] / p}' \
                     "$sum" >> "$sum.tail" && cat "$sum.tail" >> "$sum" && rm -f "$sum.tail"
                 { echo; echo "Phases, the slowest rank's seconds (src/mpi/mpi_build.cpp):"
                   cat "$sum.phases"; } >> "$sum" && rm -f "$sum.phases"

@@ -1,6 +1,7 @@
 // The MPI build's cutting and merging (src/mpi/top_pairs.h, share.h, shard_file.h), with the
 // ranks simulated in one process: no MPI needed. The oracle is the single-process build_vmap.
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <filesystem>
 #include <fstream>
@@ -228,8 +229,29 @@ TEST(MpiSplit, NodeRangesConcatenateToTheLinkArrays) {
             tg.insert(tg.end(), r.targets.begin(), r.targets.end());
         }
         EXPECT_EQ(off, want.link_offsets());
-        EXPECT_TRUE(
-            std::equal(tg.begin(), tg.end(), want.link_targets().begin(), want.link_targets().end()));
+        EXPECT_TRUE(std::equal(tg.begin(), tg.end(), want.link_targets().begin(),
+                               want.link_targets().end()));
+        // The links cut by owner, in parallel blocks: the serial loop's lists, in its order.
+        std::vector<std::vector<NodePair>> serial(static_cast<size_t>(parts));
+        auto owner = [&](int32_t n) {
+            return size_t(std::upper_bound(b.begin(), b.end(), n) - b.begin()) - 1;
+        };
+        for (const NodePair& l : links) {
+            serial[owner(l.first)].push_back(l);
+            if (owner(l.second) != owner(l.first)) serial[owner(l.second)].push_back(l);
+        }
+        EXPECT_EQ(mpi::by_owner(links, b), serial);
+    }
+    // More threads than the machine's cores, and one: the same ranges (the threads split the
+    // nodes among them).
+    for (int threads : {1, 5}) {
+        tbb::task_arena arena(threads);
+        arena.execute([&] {
+            const mpi::LinkRange r = mpi::link_range(links, 0, want.octree().num_nodes());
+            EXPECT_EQ(r.offsets, want.link_offsets());
+            EXPECT_TRUE(std::equal(r.targets.begin(), r.targets.end(), want.link_targets().begin(),
+                                   want.link_targets().end()));
+        });
     }
 }
 
@@ -351,8 +373,8 @@ TEST_F(DamagedShards, BadFieldsOfTheIndexAreNamed) {
     };
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["checksum"] = "zz"; }),
                     "shard 0: \"checksum\": \"zz\" is not 16 hex digits"));
-    EXPECT_TRUE(has(error_after([](auto& k) { k["nodes"] = 1e300; }),
-                    "\"nodes\": an integer expected"));
+    EXPECT_TRUE(
+        has(error_after([](auto& k) { k["nodes"] = 1e300; }), "\"nodes\": an integer expected"));
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][1]["nodes"][1] = 1 << 30; }),
                     "shard 1: \"nodes\": 1073741824 is outside"));
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["nodes"][0] = -1; }),
@@ -371,8 +393,9 @@ TEST_F(DamagedShards, TargetCountsThatOverflowTheLengthCheckAreRefused) {
         f.seekp(24);
         f.write(reinterpret_cast<const char*>(&ends), 8);
     }
-    EXPECT_NE(error_after([&](auto& k) { k["shards"][0]["ends"] = ends; })
-                  .find("shard-0-of-2: length does not match its header"),
+    EXPECT_NE(error_after([&](auto& k) {
+                  k["shards"][0]["ends"] = ends;
+              }).find("shard-0-of-2: length does not match its header"),
               std::string::npos);
 }
 

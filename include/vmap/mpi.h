@@ -3,12 +3,15 @@
 // that of a single-process build (or left as shards: src/mpi/shard_file.h).
 //
 // How the work is cut and put back together: src/mpi/top_pairs.h (no MPI) and src/mpi/share.h.
-// Every rank reads the input and builds the same octree; ranks whose inputs differ stop the job.
+// Rank 0 reads the input (on the host's cores, while MPI starts) and sends the points to the
+// others; every rank builds the same octree from them. Ranks whose input options (Options::
+// input_key) or build parameters differ stop the job.
 // Schedules: "dynamic" (the default: rank 0 hands out chunks of jobs to whichever rank asks; a
 // thread of rank 0 answers while rank 0 builds too; each rank resolves its chunks over one
-// octree) or "static" (each rank its share of the jobs by a work estimate, fixed in advance). A failure on one rank (bad input, out of memory,
-// a write error) ends every rank with that rank's message; nothing is written unless every
-// rank got that far, and the output appears whole (io::AtomicFile) or not at all.
+// octree) or "static" (each rank its share of the jobs by a work estimate, fixed in advance). A
+// failure on one rank (bad input, out of memory, a write error) ends every rank with that rank's
+// message; nothing is written unless every rank got that far, and the output appears whole
+// (io::AtomicFile) or not at all.
 //
 // A vmap built without MPI (VMAP_HAVE_MPI unset) has launched() false: mpirun then starts N
 // independent single-process builds, as before.
@@ -27,12 +30,16 @@ namespace vmap::mpi {
 bool launched();
 
 struct Options {
-    std::string output;               // .vmap (or the index, with shards)
-    bool shards = false;              // one file of links per rank and an index (shard_file.h)
-    bool count_links = false;         // count, write nothing (BuildParams::keep_links false)
-    std::string schedule = "dynamic";  // dynamic | static (docs/scaling.md: dynamic balanced better)
-    int threads = 0;  // CPU threads per rank; 0: the host's cores / the ranks on the host
+    std::string output;        // .vmap (or the index, with shards)
+    bool shards = false;       // one file of links per rank and an index (shard_file.h)
+    bool count_links = false;  // count, write nothing (BuildParams::keep_links false)
+    std::string schedule =
+        "dynamic";             // dynamic | static (docs/scaling.md: dynamic balanced better)
+    int threads = 0;           // CPU threads per rank; 0: the host's cores / the ranks on the host
     int chunks_per_rank = 16;  // dynamic: chunks of jobs handed out, per rank (top_pairs.h)
+    // What names the input (its path and the options that change the points read): only rank
+    // 0 reads it, so every rank's must be rank 0's.
+    std::string input_key;
 };
 
 struct Result {
@@ -49,11 +56,11 @@ struct Result {
     std::vector<std::pair<std::string, double>> phases;
 };
 
-// A rank's reading of the input: the points, with the build parameters completed (the
-// octree's). Run after MPI starts: its failure on one rank ends the job like any other.
+// Rank 0's reading of the input: the points, with the build parameters completed (the
+// octree's). Run on a thread while MPI starts: its failure ends the job like any other.
 using ReadInput = std::function<PointSet(BuildParams&)>;
 
-// The shared build: every rank calls it, each reading the same input itself. Rank 0 throws
+// The shared build: every rank calls it; rank 0 reads the input and shares it. Rank 0 throws
 // vmap::Error with the failing rank's message; the others return exit_code 1.
 Result build(const ReadInput& read, BuildParams params, const Options& opt,
              const std::string& source);

@@ -1,10 +1,9 @@
 // The V-map build across MPI processes (vmap/mpi.h).
-#include "vmap/mpi.h"
-
 #include <cstdlib>
 
 #include "vmap/error.h"
 #include "vmap/map_access.h"
+#include "vmap/mpi.h"
 
 #ifndef VMAP_HAVE_MPI
 
@@ -20,10 +19,10 @@ Result build(const ReadInput&, BuildParams, const Options&, const std::string&) 
 #include <fmt/format.h>
 #include <mpi.h>
 #include <sched.h>
-#include <time.h>
-#include <unistd.h>
 #include <tbb/global_control.h>
 #include <tbb/task_arena.h>
+#include <time.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -31,9 +30,9 @@ Result build(const ReadInput&, BuildParams, const Options&, const std::string&) 
 #include <cstring>
 #include <filesystem>
 #include <fstream>
-#include <sstream>
 #include <memory>
 #include <numeric>
+#include <sstream>
 #include <thread>
 
 #include "io/vmap_file.h"
@@ -129,25 +128,20 @@ void exchange_bytes(const void* send, size_t ns, int to, void* recv, size_t nr, 
 // link once per owner; returns the links this rank owns an end of.
 std::vector<NodePair> redistribute(const Comm& c, const std::vector<NodePair>& links,
                                    const std::vector<int32_t>& bounds, uint64_t& moved) {
-    auto owner = [&](int32_t n) {
-        return int(std::upper_bound(bounds.begin(), bounds.end(), n) - bounds.begin()) - 1;
-    };
-    std::vector<std::vector<NodePair> > out(size_t(c.size));
-    for (const NodePair& l : links) {
-        const int oa = owner(l.first), ob = owner(l.second);
-        out[oa].push_back(l);
-        if (ob != oa) out[ob].push_back(l);
-    }
-    std::vector<NodePair> mine = std::move(out[c.rank]);
+    std::vector<std::vector<NodePair> > out = by_owner(links, bounds);
+    std::vector<uint64_t> ns(size_t(c.size)), nr(size_t(c.size));
+    for (size_t k = 0; k < out.size(); ++k) ns[k] = out[k].size();
+    MPI_Alltoall(ns.data(), 1, MPI_UINT64_T, nr.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD);
+    // Everything this rank gets, in one allocation: its own first, then from each rank.
+    std::vector<NodePair> mine(std::accumulate(nr.begin(), nr.end(), uint64_t(0)));
+    std::copy(out[c.rank].begin(), out[c.rank].end(), mine.begin());
+    std::vector<NodePair>().swap(out[c.rank]);
+    size_t at = ns[c.rank];
     for (int s = 1; s < c.size; ++s) {
         const int to = (c.rank + s) % c.size, from = (c.rank - s + c.size) % c.size;
-        uint64_t ns = out[to].size(), nr = 0;
-        MPI_Sendrecv(&ns, 1, MPI_UINT64_T, to, kTagData, &nr, 1, MPI_UINT64_T, from, kTagData,
-                     MPI_COMM_WORLD, MPI_STATUS_IGNORE);
-        const size_t at = mine.size();
-        mine.resize(at + nr);
-        exchange_bytes(out[to].data(), ns * sizeof(NodePair), to, mine.data() + at,
-                       nr * sizeof(NodePair), from, moved);
+        exchange_bytes(out[to].data(), ns[to] * sizeof(NodePair), to, mine.data() + at,
+                       nr[from] * sizeof(NodePair), from, moved);
+        at += nr[from];
         std::vector<NodePair>().swap(out[to]);
     }
     return mine;
@@ -167,8 +161,8 @@ void gather_ranges(const Comm& c, const LinkRange& r, VisibilityMap& vm, uint64_
     }
     detail::MapData& d = detail::MapAccess::data(vm);
     d.link_offsets.assign(size_t(vm.octree().num_nodes()) + 1, 0);
-    int32_t* out = detail::allocate_link_targets(
-        d, std::accumulate(sizes.begin(), sizes.end(), uint64_t(0)));
+    int32_t* out =
+        detail::allocate_link_targets(d, std::accumulate(sizes.begin(), sizes.end(), uint64_t(0)));
     std::copy(r.targets.begin(), r.targets.end(), out);
     uint64_t base = 0;
     for (int k = 0; k < c.size; ++k) {
@@ -201,7 +195,7 @@ struct Run {
     uint64_t links = 0, moved = 0, gathered = 0;  // bytes sent: the exchange, the gather
     int threads = 0, chunks = 0;
     std::string schedule, note;
-    std::vector<std::vector<uint32_t>> parts;  // static: a share per rank; dynamic: the chunks
+    std::vector<std::vector<uint32_t> > parts;  // static: a share per rank; dynamic: the chunks
     Run(const Comm& comm, const Options& o, BuildParams p, std::string src)
         : c(comm), opt(o), params(std::move(p)), source(std::move(src)) {}
 };
@@ -209,11 +203,22 @@ struct Run {
 // This rank's seconds in each phase of the build, in order; Result::phases gets the slowest
 // rank's of each. Input and octree run on a thread during start (Early); probe is what is left
 // of them after MPI_Init, with the agreement and the input check.
-enum PhaseId { kStart, kInput, kOctree, kProbe, kJobs, kConstruction, kSettle, kExchange,
-               kGather, kSave, kPhases };
-constexpr const char* kPhaseNames[kPhases] = {
-    "start",        "input",  "octree",   "probe",  "job list",
-    "construction", "settle", "exchange", "gather", "save"};
+enum PhaseId {
+    kStart,
+    kInput,
+    kOctree,
+    kProbe,
+    kJobs,
+    kConstruction,
+    kSettle,
+    kExchange,
+    kGather,
+    kSave,
+    kPhases
+};
+constexpr const char* kPhaseNames[kPhases] = {"start",    "input",        "octree", "probe",
+                                              "job list", "construction", "settle", "exchange",
+                                              "gather",   "save"};
 struct Phases {
     double s[kPhases] = {};
     Clock::time_point at = Clock::now();
@@ -280,24 +285,27 @@ uint64_t input_hash(const VisibilityMap& vm) {
     return x ^ uint64_t(vm.octree().num_nodes()) * 0x9e3779b97f4a7c15ULL;
 }
 
-std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
-    const uint64_t mine = input_hash(vm);
+// "" when every rank's value equals rank 0's; else what each differing rank says, agreed.
+std::string check_same(const Comm& c, uint64_t mine, const std::string& differs) {
     uint64_t lo = 0, hi = 0;
     MPI_Allreduce(&mine, &lo, 1, MPI_UINT64_T, MPI_MIN, MPI_COMM_WORLD);
     MPI_Allreduce(&mine, &hi, 1, MPI_UINT64_T, MPI_MAX, MPI_COMM_WORLD);
     if (lo == hi) return "";
     uint64_t first = mine;
     MPI_Bcast(&first, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
-    return c.agree(mine == first ? ""
-                                 : "its input (points, octree or parameters) differs from "
-                                   "rank 0's: every rank must read the same scene with the "
-                                   "same options");
+    return c.agree(mine == first ? "" : differs);
+}
+
+std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
+    return check_same(c, input_hash(vm),
+                      "its input (points, octree or parameters) differs from rank 0's: every "
+                      "rank must read the same scene with the same options");
 }
 
 std::string run_static(Run& r) {
     return attempt([&] {
-        build_round(r.vm, r.params, r.tp, r.parts[size_t(r.c.rank)], !r.opt.count_links,
-                    r.source, r.share);
+        build_round(r.vm, r.params, r.tp, r.parts[size_t(r.c.rank)], !r.opt.count_links, r.source,
+                    r.share);
     });
 }
 
@@ -477,17 +485,17 @@ std::string write_shards(Run& r, const LinkRange& range) {
 }
 
 // The slowest rank's seconds of each phase, on rank 0 (named as in kPhaseNames).
-std::vector<std::pair<std::string, double>> slowest_phases(const Comm& c, const Phases& ph) {
+std::vector<std::pair<std::string, double> > slowest_phases(const Comm& c, const Phases& ph) {
     double hi[kPhases] = {};
     MPI_Reduce(ph.s, hi, kPhases, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
-    std::vector<std::pair<std::string, double>> out;
+    std::vector<std::pair<std::string, double> > out;
     if (c.rank == 0)
         for (int k = 0; k < kPhases; ++k) out.emplace_back(kPhaseNames[k], hi[k]);
     return out;
 }
 
 // The phases line of the summary: the slowest rank's seconds, bytes where bytes move.
-std::string phases_line(const Run& r, const std::vector<std::pair<std::string, double>>& ph) {
+std::string phases_line(const Run& r, const std::vector<std::pair<std::string, double> >& ph) {
     std::string line = "phases:     slowest rank's s:";
     for (size_t k = 0; k < ph.size(); ++k) {
         if (k == kInput || k == kOctree) continue;
@@ -503,10 +511,10 @@ std::string phases_line(const Run& r, const std::vector<std::pair<std::string, d
 
 // Per-rank construction times and rounds, gathered into lines for rank 0's summary.
 std::vector<std::string> summary(Run& r, double output_s,
-                                 const std::vector<std::pair<std::string, double>>& ph) {
+                                 const std::vector<std::pair<std::string, double> >& ph) {
     constexpr int kN = 5;
-    const double mine[kN] = {r.share.seconds, double(r.share.rounds),
-                             double(r.c.local_rank == 0), double(r.moved), double(r.gathered)};
+    const double mine[kN] = {r.share.seconds, double(r.share.rounds), double(r.c.local_rank == 0),
+                             double(r.moved), double(r.gathered)};
     std::vector<double> all(size_t(r.c.size) * kN);
     MPI_Gather(mine, kN, MPI_DOUBLE, all.data(), kN, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     if (r.c.rank != 0) return {};
@@ -523,7 +531,8 @@ std::vector<std::string> summary(Run& r, double output_s,
         fmt::format("mpi:        {} ranks on {} host(s), {} threads each{}, schedule {} ({} "
                     "chunks of {} jobs)",
                     r.c.size, int(hosts), r.threads,
-                    r.params.backend == Backend::kCpu ? std::string() : fmt::format(", device {}", r.params.device),
+                    r.params.backend == Backend::kCpu ? std::string()
+                                                      : fmt::format(", device {}", r.params.device),
                     r.schedule, r.chunks, r.tp.jobs.size()),
         fmt::format("            construction per rank {:.3f}-{:.3f} s (mean {:.3f}, slowest / "
                     "mean {:.3f}), {}-{} rounds",
@@ -577,15 +586,25 @@ void configure(Run& r) {
     }
 }
 
-// What a rank does before it needs the others, on a thread of its own while MPI starts
-// (MPI_Init waits on every rank): it reads the input and builds the octree. Its failure is
-// agreed once MPI is up (prepare).
+// The host's cores less one for each other rank of the host: what rank 0 may take while the
+// others only wait on it (for the input before MPI starts, for the save at the end).
+int root_cores(int threads, int local_size) {
+    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+    return std::max(threads, hw - (std::max(1, local_size) - 1));
+}
+
+// What rank 0 does before it needs the others, on a thread of its own while MPI starts
+// (MPI_Init waits on every rank): it reads the input, on the host's cores (the other ranks of
+// the host have nothing to do until they get the points: share_input), and builds the octree.
+// Its failure is agreed once MPI is up (prepare). The other ranks read nothing.
 struct Early {
     BuildParams params;
     VisibilityMap vm;
     BuildStats stats;
     std::string err;
+    PointSet raw;  // the points as read, before the octree orders them: for the other ranks
     double input_s = 0, octree_s = 0;
+    bool reader = false;
     std::thread thread;
     Early(const ReadInput& read, BuildParams p, const Options& opt, const std::string& source)
         : params(std::move(p)) {
@@ -594,15 +613,24 @@ struct Early {
             return v ? std::atoi(v) : 0;
         };
         std::string note;  // configure() gives it, with MPI's figures
-        params.threads = threads_for(env("OMPI_COMM_WORLD_RANK"),
-                                     env("OMPI_COMM_WORLD_LOCAL_SIZE"), opt.threads, note);
-        thread = std::thread([this, &read, &source] {
+        const int rank =
+            std::getenv("OMPI_COMM_WORLD_RANK") ? env("OMPI_COMM_WORLD_RANK") : env("PMIX_RANK");
+        const int local_size = env("OMPI_COMM_WORLD_LOCAL_SIZE");
+        const bool alone = env("OMPI_COMM_WORLD_SIZE") == 1;
+        params.threads = threads_for(rank, local_size, opt.threads, note);
+        reader = rank == 0;
+        if (!reader) return;
+        thread = std::thread([this, &read, &source, local_size, alone] {
             err = attempt([&] {
+                const int cores = root_cores(params.threads, local_size);
                 auto t = Clock::now();
-                PointSet points = in_arena(params.threads, [&] { return read(params); });
+                PointSet points = in_arena(cores, [&] { return read(params); });
                 input_s = seconds_since(t);
+                if (!alone) raw = points;
                 t = Clock::now();
-                vm = detail::build_octree(std::move(points), params, stats, source);
+                BuildParams wide = params;
+                wide.threads = cores;
+                vm = detail::build_octree(std::move(points), wide, stats, source);
                 octree_s = seconds_since(t);
             });
         });
@@ -612,10 +640,54 @@ struct Early {
     }
 };
 
+// Rank 0's vector to every rank, in messages of at most kChunkBytes.
+template <class T>
+void share_vector(std::vector<T>& v) {
+    uint64_t n = v.size();
+    MPI_Bcast(&n, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    v.resize(size_t(n));
+    auto* p = reinterpret_cast<uint8_t*>(v.data());
+    for (size_t at = 0, bytes = size_t(n) * sizeof(T); at < bytes; at += kChunkBytes)
+        MPI_Bcast(p + at, int(std::min(kChunkBytes, bytes - at)), MPI_BYTE, 0, MPI_COMM_WORLD);
+}
+
+// Rank 0's points and octree parameters to the other ranks, which build the octree from them
+// (the same octree: check_same_input checks it with the rest).
+void share_input(Run& r, Early& e) {
+    static_assert(std::is_trivially_copyable_v<OctreeParams>);
+    PointSet& p = e.raw;
+    MPI_Bcast(&e.params.octree, int(sizeof(OctreeParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
+    share_vector(p.positions);
+    share_vector(p.normals);
+    share_vector(p.colors);
+    share_vector(p.radii);
+    share_vector(p.emission);
+    if (r.c.rank == 0) {
+        e.raw = PointSet{};
+        return;
+    }
+    e.vm = detail::build_octree(std::move(p), e.params, e.stats, r.source);  // in probe's time
+}
+
 // The input and octree (every rank the same; checked) and the job list, each phase agreed.
 std::string prepare(Run& r, Early& e, Phases& ph) {
-    e.thread.join();
-    std::string err = r.c.agree(e.err);
+    if (e.thread.joinable()) e.thread.join();
+    std::string err =
+        r.c.agree(e.reader == (r.c.rank == 0)
+                      ? e.err
+                      : "its rank could not be told before MPI started (OMPI_COMM_WORLD_RANK or "
+                        "PMIX_RANK)");
+    // Only rank 0 read the input: the others' options must name the same.
+    if (err.empty()) {
+        const std::string& key = r.opt.input_key;
+        err = check_same(
+            r.c, detail::payload_hash(reinterpret_cast<const uint8_t*>(key.data()), key.size()),
+            fmt::format("its input ({}) differs from rank 0's: every rank must read the same "
+                        "scene with the same options",
+                        key));
+    }
+    if (err.empty())
+        err = r.c.agree(attempt([&] { in_arena(e.params.threads, [&] { share_input(r, e); }); }));
     if (err.empty()) {
         r.params = std::move(e.params);
         r.vm = std::move(e.vm);

@@ -1,6 +1,8 @@
 // One process's part of a shared build (src/mpi/share.h).
 #include "mpi/share.h"
 
+#include <tbb/task_arena.h>
+
 #include <algorithm>
 #include <chrono>
 #include <functional>
@@ -73,9 +75,9 @@ void build_round(VisibilityMap& base, const BuildParams& params, const TopPairs&
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out) {
     bool given = false;
-    build_rounds(base, params, tp,
-                 [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep, source,
-                 out);
+    build_rounds(
+        base, params, tp, [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep,
+        source, out);
 }
 
 void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
@@ -83,7 +85,7 @@ void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs
                   const std::string& source, ShareResult& out) {
     const auto t0 = std::chrono::steady_clock::now();
     BuildParams p = params;
-    p.keep_links = true;  // a job's own link says whether it came back fully visible
+    p.keep_links = true;         // a job's own link says whether it came back fully visible
     std::vector<uint32_t> done;  // every job of every chunk taken
     int chunks = 0;
     p.top_pairs = [&](const Octree&) {
@@ -173,27 +175,75 @@ void add_counters(BuildStats& st, const std::vector<uint64_t>& c, size_t levels,
 
 LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1) {
     // Each end in range counted per node, placed at its node's cursor, then each node's
-    // targets sorted: the arrays' order, as a sort of (node, target) keys gives it.
+    // targets sorted: the arrays' order, as a sort of (node, target) keys gives it. The threads
+    // share the nodes: each scans every link for the ends of its own nodes, so no count or
+    // cursor is shared (the scan is a sequential read; the writes are what cost).
     LinkRange r;
     r.n0 = n0, r.n1 = n1;
-    r.offsets.assign(size_t(n1 - n0) + 1, 0);
-    auto in = [&](int32_t n) { return n >= n0 && n < n1; };
-    for (const auto& [a, b] : links) {
-        if (in(a)) r.offsets[size_t(a - n0) + 1]++;
-        if (in(b)) r.offsets[size_t(b - n0) + 1]++;
-    }
+    const size_t nodes = size_t(n1 - n0);
+    r.offsets.assign(nodes + 1, 0);
+    const size_t parts = std::clamp<size_t>(size_t(tbb::this_task_arena::max_concurrency()), 1,
+                                            std::max<size_t>(1, nodes));
+    // Part p holds nodes [cut[p], cut[p + 1]) (relative to n0).
+    auto by_part = [&](const std::vector<size_t>& cut, auto&& f) {
+        parallel_for(parts, [&](size_t p) {
+            const int32_t lo = n0 + int32_t(cut[p]), hi = n0 + int32_t(cut[p + 1]);
+            for (const auto& [a, b] : links) {
+                if (a >= lo && a < hi) f(a, b);
+                if (b >= lo && b < hi) f(b, a);
+            }
+        });
+    };
+    std::vector<size_t> cut(parts + 1);
+    for (size_t p = 0; p <= parts; ++p) cut[p] = nodes * p / parts;
+    by_part(cut, [&](int32_t a, int32_t) { r.offsets[size_t(a - n0) + 1]++; });
     for (size_t i = 1; i < r.offsets.size(); ++i) r.offsets[i] += r.offsets[i - 1];
+    // The placing's parts: about equal ends each.
+    for (size_t p = 1, n = 0; p < parts; ++p) {
+        const uint64_t want = r.offsets.back() * p / parts;
+        while (n < nodes && r.offsets[n] < want) ++n;
+        cut[p] = std::max(n, cut[p - 1]);
+    }
     r.targets.resize(r.offsets.back());
     std::vector<uint64_t> at(r.offsets.begin(), r.offsets.end() - 1);
-    for (const auto& [a, b] : links) {
-        if (in(a)) r.targets[at[size_t(a - n0)]++] = b;
-        if (in(b)) r.targets[at[size_t(b - n0)]++] = a;
-    }
-    parallel_for(size_t(0), size_t(n1 - n0), [&](size_t i) {
+    by_part(cut, [&](int32_t a, int32_t b) { r.targets[at[size_t(a - n0)]++] = b; });
+    parallel_for(size_t(0), nodes, [&](size_t i) {
         std::sort(r.targets.begin() + ptrdiff_t(r.offsets[i]),
                   r.targets.begin() + ptrdiff_t(r.offsets[i + 1]));
     });
     return r;
+}
+
+std::vector<std::vector<NodePair>> by_owner(const std::vector<NodePair>& links,
+                                            const std::vector<int32_t>& bounds) {
+    const size_t parts = bounds.size() - 1;
+    auto owner = [&](int32_t n) {
+        return size_t(std::upper_bound(bounds.begin(), bounds.end(), n) - bounds.begin()) - 1;
+    };
+    // Blocks of links counted per owner, each block's place in each owner's list from the
+    // counts before it, then the blocks copied in parallel: the serial loop's order.
+    constexpr size_t kBlock = size_t(1) << 16;
+    const size_t blocks = (links.size() + kBlock - 1) / kBlock;
+    std::vector<uint64_t> at(blocks * parts, 0);
+    auto each = [&](size_t k, auto&& f) {
+        for (size_t i = k * kBlock, end = std::min(links.size(), i + kBlock); i < end; ++i) {
+            const size_t oa = owner(links[i].first), ob = owner(links[i].second);
+            f(oa, links[i]);
+            if (ob != oa) f(ob, links[i]);
+        }
+    };
+    parallel_for(blocks,
+                 [&](size_t k) { each(k, [&](size_t o, NodePair) { at[k * parts + o]++; }); });
+    std::vector<std::vector<NodePair>> out(parts);
+    for (size_t o = 0; o < parts; ++o) {
+        uint64_t run = 0;
+        for (size_t k = 0; k < blocks; ++k) run += std::exchange(at[k * parts + o], run);
+        out[o].resize(run);
+    }
+    parallel_for(blocks, [&](size_t k) {
+        each(k, [&](size_t o, NodePair l) { out[o][at[k * parts + o]++] = l; });
+    });
+    return out;
 }
 
 std::vector<int32_t> split_nodes(const std::vector<uint32_t>& degree, int parts) {

@@ -60,6 +60,11 @@ struct LinkRange {
 };
 LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1);
 
+// `links` cut by the owners of their ends (rank k owns nodes [bounds[k], bounds[k + 1])): each
+// link in the list of each owner of an end (once when one owns both), in the order of `links`.
+std::vector<std::vector<NodePair>> by_owner(const std::vector<NodePair>& links,
+                                            const std::vector<int32_t>& bounds);
+
 // Bounds b[0] = 0 < ... < b[parts] = nodes cutting the nodes into ranges of about equal link
 // ends (degree[n]: node n's), each at least one node when there are enough.
 std::vector<int32_t> split_nodes(const std::vector<uint32_t>& degree, int parts);

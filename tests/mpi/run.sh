@@ -3,7 +3,7 @@
 # loopback, CPU backend. Each scene's .vmap is byte-identical to the single-process build's
 # (2 ranks dynamic, 3 static), the sharded output reads back as the same map, and a rank
 # with bad input, a rank whose input differs and a killed rank each end the whole job with a
-# clear error and leave no output. Exit 77 (ctest: skipped) when mpirun or MPI support is absent.
+# clear error and leave no output (rank 0 alone reads the input and sends the points). Exit 77 (ctest: skipped) when mpirun or MPI support is absent.
 # Usage: run.sh VMAP SOURCE_DIR VMAP_EQUAL HAVE_MPI(ON|OFF) [BUILD_TYPE]
 # A Debug build (the ASan preset, 10-30x slower) runs the first scene only: the MPI glue under
 # the sanitizers; mpi_split_test covers the cutting and merging there on three scenes.
@@ -89,18 +89,26 @@ rm -f "$tmp/sh-0.vmap.shard-1-of-3"
 check "missing shard named" bash -c "! '$vmap' info '$tmp/sh-0.vmap' 2> '$tmp/err' &&
     grep -q 'sh-0.vmap.shard-1-of-3' '$tmp/err'"
 
-# Bad input on one rank (MPMD: rank 1 reads another file): the job ends, the file is named.
 bunny=("$src/scenes/cornell-bunny.json" --points 3000 --max-height 6 --backend cpu -q)
+# Bad input: rank 0 alone reads it (and sends the points); the job ends, the file and field named.
 printf '{"name": "bad", "meshes": [{"file": 3}]}' > "$tmp/bad.json"
 out="$tmp/bad.vmap"
-check "bad input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build ${bunny[*]} \
-    -o '$out' : -np 1 '$vmap' build '$tmp/bad.json' -q -o '$out' 2> '$tmp/err' &&
-    grep -q 'rank 1 of 2: .*bad.json: meshes\[0\].file' '$tmp/err'"
+check "bad input fails the job" bash -c "! ${mpi[*]} -np 2 '$vmap' build '$tmp/bad.json' -q \
+    -o '$out' 2> '$tmp/err' && grep -q 'rank 0 of 2: .*bad.json: meshes\[0\].file' '$tmp/err'"
+check "bad input: no output" no_output "$out"
+# A rank that names another input (MPMD: rank 1 reads another file) ends the job, naming it.
+check "another input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build \
+    ${bunny[*]} -o '$out' : -np 1 '$vmap' build '$tmp/bad.json' -q -o '$out' 2> '$tmp/err' &&
+    grep -q 'rank 1 of 2: its input (.*bad.json.*) differs from rank 0' '$tmp/err'"
 check "bad input: no output" no_output "$out"
 check "differing input on rank 1 fails the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build \
     ${bunny[*]} -o '$out' : -np 1 '$vmap' build ${bunny[*]} --seed 7 -o '$out' 2> '$tmp/err' &&
     grep -q 'rank 1 of 2: its input .* differs from rank 0' '$tmp/err'"
 check "differing input: no output" no_output "$out"
+check "differing parameters on rank 1 fail the job" bash -c "! ${mpi[*]} -np 1 '$vmap' build \
+    ${bunny[*]} -o '$out' : -np 1 '$vmap' build ${bunny[*]} --eps 0.02 -o '$out' 2> '$tmp/err' &&
+    grep -q 'rank 1 of 2: its input (points, octree or parameters) differs from rank 0' '$tmp/err'"
+check "differing parameters: no output" no_output "$out"
 
 # A rank killed during the construction: mpirun ends the job, nothing is written.
 "${mpi[@]}" -np 2 "$vmap" build "$src/scenes/cornell-bunny.json" --points 20000 --max-height 8 \

@@ -441,11 +441,10 @@ void add_rect(PointSet& ps, std::vector<Vec3>& truth, Vec3 corner, Vec3 a, Vec3 
 }
 
 // A unit-cube room seen from inside: floor, ceiling, four walls (the front z = 0 left open
-// when `open`), true normals facing into the room. About 1500 points a square metre.
-PointSet room(bool open, std::vector<Vec3>& truth, uint32_t seed) {
+// when `open`), true normals facing into the room. About n points a square metre.
+PointSet room(bool open, std::vector<Vec3>& truth, uint32_t seed, size_t n = 1500) {
     std::mt19937 rng(seed);
     PointSet ps;
-    const size_t n = 1500;
     add_rect(ps, truth, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}, n, rng);   // floor
     add_rect(ps, truth, {0, 1, 0}, {1, 0, 0}, {0, 0, 1}, {0, -1, 0}, n, rng);  // ceiling
     add_rect(ps, truth, {0, 0, 0}, {0, 1, 0}, {0, 0, 1}, {1, 0, 0}, n, rng);   // x = 0
@@ -636,6 +635,81 @@ TEST(Orientation, TwoBallsTouchingOnTheFloorFaceOutwardNearTheContacts) {
         all += s.ps.size() - s.near_wall;
     }
     EXPECT_GT(double(right) / double(all), 0.972) << right << " of " << all;
+}
+
+// An open box (a 0.25 m cube without its lid) standing on the floor of an open room, 0.125 m
+// from the x = 0 wall, sampled as densely as the room (4000 points a square metre); with
+// `thickness` > 0 each wall is a closed plate of that thickness (an outer and an inner face).
+// The walls' true normals are the modeller's: away from the box's centre, and for the inner
+// faces of thick walls into the box. [walls_begin, walls_end): the box's walls, bottom left
+// out (it lies on the floor, hidden either way).
+struct OpenBox {
+    PointSet ps;
+    std::vector<Vec3> truth;
+    size_t walls_begin = 0, walls_end = 0;
+    size_t inner_begin = 0;  // the inner faces, when thick: [inner_begin, walls_end)
+};
+
+OpenBox open_box_in_room(uint32_t seed, float thickness = 0) {
+    OpenBox b;
+    b.ps = room(true, b.truth, seed, 4000);
+    b.walls_begin = b.ps.size();
+    std::mt19937 rng(seed + 1);
+    auto walls = [&](Vec3 lo, float a, float sign) {
+        const size_t n = size_t(4000 * a * a);
+        add_rect(b.ps, b.truth, lo, {a, 0, 0}, {0, a, 0}, {0, 0, -sign}, n, rng);
+        add_rect(b.ps, b.truth, lo + Vec3{0, 0, a}, {a, 0, 0}, {0, a, 0}, {0, 0, sign}, n, rng);
+        add_rect(b.ps, b.truth, lo, {0, 0, a}, {0, a, 0}, {-sign, 0, 0}, n, rng);
+        add_rect(b.ps, b.truth, lo + Vec3{a, 0, 0}, {0, 0, a}, {0, a, 0}, {sign, 0, 0}, n, rng);
+    };
+    const float a = 0.25f;
+    walls({0.125f, 0, 0.375f}, a, 1);
+    b.inner_begin = b.ps.size();
+    if (thickness > 0) walls({0.125f + thickness, 0, 0.375f + thickness}, a - 2 * thickness, -1);
+    b.walls_end = b.ps.size();
+    add_rect(b.ps, b.truth, {0.125f, 0, 0.375f}, {a, 0, 0}, {0, 0, a}, {0, -1, 0},
+             size_t(4000 * a * a), rng);
+    return b;
+}
+
+TEST(Orientation, AnOpenBoxNearAWallFacesAwayFromItsCentre) {
+    // Both sides of each wall are free space (the room's air reaches inside over the walls),
+    // so the voxels cannot decide; the rays did, and wrongly for the walls facing -x and +z:
+    // inside, rays escape through the open top and count as travelling far, outside they meet
+    // the room's wall. The walls now form one sheet that wraps around its centre, and face
+    // away from it. The result does not depend on the number of threads.
+    for (const uint32_t seed : {50u, 51u}) {
+        OpenBox b = open_box_in_room(seed);
+        std::vector<Vec3> first;
+        for (const int threads : {1, 8}) {
+            tbb::global_control limit(tbb::global_control::max_allowed_parallelism, threads);
+            tbb::task_arena arena(threads);
+            PointSet ps = b.ps;
+            arena.execute([&] { estimate_normals(ps); });
+            if (first.empty()) {
+                first = ps.normals;
+                EXPECT_GT(share_right(ps, b.truth, 0, b.walls_begin), 0.99) << "seed " << seed;
+                // Was 47-50%. What stays wrong is the strip within a spacing of the floor, where
+                // the walls meet the floor's (and the bottom's) points: the crease, decided as
+                // before.
+                EXPECT_GT(share_right(ps, b.truth, b.walls_begin, b.walls_end), 0.93)
+                    << "seed " << seed;
+                continue;
+            }
+            for (size_t i = 0; i < ps.size(); ++i) ASSERT_EQ(ps.normals[i], first[i]) << i;
+        }
+    }
+}
+
+TEST(Orientation, AThinWalledOpenBoxKeepsItsInnerFacesFacingIn) {
+    // Walls 1 cm thick (closed plates, thinner than the voxel probe's reach): both sides of
+    // each face are free by the voxels too, but the other face lies right behind every point,
+    // so the sheet is a thin part and not an open sheet: the rays keep deciding, and the inner
+    // faces face into the box, against the direction away from its centre.
+    OpenBox b = open_box_in_room(52, 0.01f);
+    estimate_normals(b.ps);
+    EXPECT_GT(share_right(b.ps, b.truth, b.walls_begin, b.inner_begin), 0.9);
+    EXPECT_GT(share_right(b.ps, b.truth, b.inner_begin, b.walls_end), 0.9);
 }
 
 TEST(Orientation, ViewpointOrientsEveryNormalTowardIt) {

@@ -42,6 +42,8 @@ struct OrientationReport {
     std::string method;        // in words, e.g. "free space (room: walls face inward)"
     size_t by_space = 0;       // points whose side the voxel topology decided
     size_t by_rays = 0;        // points decided by casting rays (both sides free or unknown)
+    size_t by_shape = 0;       // points of open sheets decided by the sheet's shape (both sides
+                               // free: the side away from what the sheet wraps around)
     size_t by_neighbours = 0;  // voted points turned to agree with their surface (the
                                // neighbour check of ray votes, then the votes' spread)
 };

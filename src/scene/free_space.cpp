@@ -297,6 +297,9 @@ class DiscCaster {
         return out;
     }
 
+    // Distance from point i along d to the first disc beyond tmin, or -1 if it meets none.
+    float first_hit(uint32_t i, Vec3 d, float tmin) const { return travel(i, d, tmin); }
+
     // Distance from o along d to the cloud's bounding box.
     float box_exit(Vec3 o, Vec3 d) const {
         float t = std::numeric_limits<float>::max();
@@ -571,6 +574,7 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     v.sign.assign(n, 1);
     v.cue.assign(n, SideCue::kNone);
     v.weight.assign(n, 0.0f);
+    v.open.assign(n, 0);
     const float r_med = median_radius(radii);
     const Bounds b = bounds_of(pts);
     if (n < 3 || !(r_med > 0) || !(max_extent(b) > 0)) {
@@ -590,6 +594,20 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             float side =
                 float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
             SideCue cue = SideCue::kSpace;
+            // An open sheet inside the scene: free on both sides, neither of them the bounding
+            // box's face (a room's walls lie on it). 2 where a surface lies within the probe's
+            // reach along the normal on either side: the probe may have walked through a part
+            // thinner than that reach (or the point sits at a crease).
+            if (plus == 1 && minus == 1 && caster.box_exit(pts[i], normals[i]) > 0.5f * r_med &&
+                caster.box_exit(pts[i], -normals[i]) > 0.5f * r_med) {
+                const float reach = 0.5f * g.h * float(kProbeSteps);
+                const float tmin = 0.5f * std::max(radii[i], 0.25f * r_med);
+                v.open[i] = 1;
+                for (const Vec3 d : {normals[i], -normals[i]}) {
+                    const float t = caster.first_hit(uint32_t(i), d, tmin);
+                    if (t >= 0 && t <= reach) v.open[i] = 2;
+                }
+            }
             if (side == 0) {
                 side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);
                 cue = SideCue::kRays;

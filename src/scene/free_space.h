@@ -14,14 +14,24 @@ enum class SideCue : uint8_t {
     kNone,   // no preference found: the sign comes from the neighbours
     kSpace,  // one side lies in free space, the other in solid (voxel topology)
     kRays,   // both sides free (or unknown): the side that sees surface farther away
+    kShape,  // an open sheet that wraps around something: the side away from what it wraps
+             // (set by the caller: see SideVotes::open)
 };
 
 struct SideVotes {
     std::vector<int8_t> sign;  // +1: the normal as given points to the free side; -1: flip it
     std::vector<SideCue> cue;
     // How sure each vote is, for weighing votes against each other: 2 for kSpace; for kRays the
-    // depth contrast (far - near) / (far + near) of the two sides' mean ray travel, in (0, 1].
+    // depth contrast (far - near) / (far + near) of the two sides' mean ray travel, in (0, 1];
+    // for kShape how squarely the point faces away from its sheet's centroid, in [0, 1].
     std::vector<float> weight;
+    // Points of an open sheet inside the scene: both sides free by the voxels, and neither side
+    // the bounding box's face (a room's walls, floor and ceiling lie on it): 1, or 2 where the
+    // first disc along the normal on either side lies within the voxel probe's reach (the other
+    // face of a part thinner than that reach, which the probe walked through; or a crease); 0
+    // for every other point. Their votes are the rays'; the caller, which has the neighbour
+    // graph, may replace them by the sheet's shape (SideCue::kShape).
+    std::vector<uint8_t> open;
     std::string method;  // the free-space verdict, in words
 };
 

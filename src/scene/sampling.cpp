@@ -253,11 +253,12 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
         : estimate      ? "plane, then jet fits"
                         : "as given",
         rep.method);
-    if (!sensed && rep.by_space + rep.by_rays > 0)
+    const size_t voted = rep.by_space + rep.by_rays + rep.by_shape;
+    if (!sensed && voted > 0)
         line += fmt::format(
-            "; {} points by free space, {} by rays ({} of those then turned by their "
-            "neighbours' votes), {} from their neighbours",
-            rep.by_space, rep.by_rays, rep.by_neighbours, ps.size() - rep.by_space - rep.by_rays);
+            "; {} points by free space, {} by rays, {} by their open sheet's shape ({} of those "
+            "then turned by their neighbours' votes), {} from their neighbours",
+            rep.by_space, rep.by_rays, rep.by_shape, rep.by_neighbours, ps.size() - voted);
     return line;
 }
 

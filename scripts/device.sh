@@ -25,6 +25,10 @@
 #                  (MPI_SCENE, default cornell-bunny at 30000 points; MPI_REPEAT=R runs the
 #                  1/2/4/8-rank sweep R times and takes medians; MPI_EXTRA=0 skips the 8-rank
 #                  variants and the 1x16..4x4 runs; MPI_BOUND=0 the bound runs)
+#        host      what the host gives when all its cores are busy (the ceiling of any strong
+#                  scaling on it): a compute-only loop (Python, no memory traffic) alone, then 8
+#                  and 16 copies at once; and `vmap --threads 2 build` (MPI_SCENE, --count-links)
+#                  alone and 8 copies at once; the seconds of each in $OUT/host.txt
 #        profile   Nsight Compute (ncu --set full) on one batch of the kernel (VARIANTS, PROFILE_SCENE)
 #        gi-throughput  vmap bench-gi on the GPU for .device/bin/vmap-before (bundled with
 #                  BEFORE=/path/to/vmap) and vmap, interleaved; the side-by-side table of setup
@@ -341,6 +345,31 @@ if [[ "$cmd" == run ]]; then
                 grep -h "^mpi:\|^note:" "$OUT"/mpi-cpu-8.log "$OUT"/mpi-gpu-2-shared.log >> "$sum" || true
                 rm -f "$ref"
                 cat "$sum" ;;
+            host)
+                read -r -a scene <<< "${MPI_SCENE:-scenes/cornell-bunny.json --points 60000}"
+                h="$OUT/host.txt"
+                spin='import time
+t = time.time(); x = 0
+for i in range(30_000_000): x += i * i % 7
+print("%.2f" % (time.time() - t))'
+                at_once() {  # N, then a command: N copies at once, their seconds sorted
+                    local n=$1; shift
+                    for i in $(seq "$n"); do "$@" > "$OUT/host-$i.out" 2>&1 & done
+                    wait
+                    for i in $(seq "$n"); do tail -1 "$OUT/host-$i.out"; done | sort -n | tr '\n' ' '
+                    rm -f "$OUT"/host-*.out
+                }
+                build_s() {  # the build's own total (s), from -v
+                    "$bin/vmap" --threads 2 build "${scene[@]}" --backend cpu --count-links -v 2>&1 |
+                        sed -n 's/^time: *\([0-9.]*\) s total.*/\1/p'
+                }
+                { echo "# the host with its cores busy, $(nproc) cores, $(date -u +%F), commit $VMAP_COMMIT"
+                  echo "compute loop, alone: $(at_once 1 python3 -c "$spin")"
+                  echo "compute loop, 8 at once: $(at_once 8 python3 -c "$spin")"
+                  echo "compute loop, 16 at once: $(at_once 16 python3 -c "$spin")"
+                  echo "vmap --threads 2 build ${scene[*]} --count-links, alone: $(at_once 1 build_s)"
+                  echo "the same, 8 at once: $(at_once 8 build_s)"; } > "$h"
+                cat "$h" ;;
             links)
                 lp=${LINKS_LEAF_POINTS:-1}
                 "$bin/vmap" -v build scenes/cornell-dragon.json --backend cuda --max-height 10 \

@@ -640,33 +640,39 @@ struct Early {
     }
 };
 
-// Rank 0's vector to every rank, in messages of at most kChunkBytes.
-template <class T>
-void share_vector(std::vector<T>& v) {
-    uint64_t n = v.size();
-    MPI_Bcast(&n, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
-    v.resize(size_t(n));
-    auto* p = reinterpret_cast<uint8_t*>(v.data());
-    for (size_t at = 0, bytes = size_t(n) * sizeof(T); at < bytes; at += kChunkBytes)
+// Rank 0's bytes to every rank, in messages of at most kChunkBytes.
+void share_bytes(void* data, size_t bytes) {
+    auto* p = static_cast<uint8_t*>(data);
+    for (size_t at = 0; at < bytes; at += kChunkBytes)
         MPI_Bcast(p + at, int(std::min(kChunkBytes, bytes - at)), MPI_BYTE, 0, MPI_COMM_WORLD);
 }
 
-// Rank 0's points and octree parameters to the other ranks, which build the octree from them
-// (the same octree: check_same_input checks it with the rest).
-void share_input(Run& r, Early& e) {
+// Rank 0's points (as read) and octree parameters to the other ranks, which build the octree
+// from them (the same octree: check_same_input checks it with the rest). The sizes go first and
+// every rank makes room for all of it before any data moves, agreed: a rank that cannot (out of
+// memory) ends the job instead of leaving the others in a broadcast it never joins.
+std::string share_input(Run& r, Early& e) {
     static_assert(std::is_trivially_copyable_v<OctreeParams>);
     PointSet& p = e.raw;
+    uint64_t n[5] = {p.positions.size(), p.normals.size(), p.colors.size(), p.radii.size(),
+                     p.emission.size()};
+    MPI_Bcast(n, 5, MPI_UINT64_T, 0, MPI_COMM_WORLD);
     MPI_Bcast(&e.params.octree, int(sizeof(OctreeParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
-    share_vector(p.positions);
-    share_vector(p.normals);
-    share_vector(p.colors);
-    share_vector(p.radii);
-    share_vector(p.emission);
-    if (r.c.rank == 0) {
-        e.raw = PointSet{};
-        return;
-    }
-    e.vm = detail::build_octree(std::move(p), e.params, e.stats, r.source);  // in probe's time
+    std::string err = r.c.agree(attempt([&] {
+        p.positions.resize(n[0]), p.normals.resize(n[1]), p.colors.resize(n[2]);
+        p.radii.resize(n[3]), p.emission.resize(n[4]);
+    }));
+    if (!err.empty()) return err;
+    share_bytes(p.positions.data(), n[0] * sizeof(Vec3));
+    share_bytes(p.normals.data(), n[1] * sizeof(Vec3));
+    share_bytes(p.colors.data(), n[2] * sizeof(Vec3));
+    share_bytes(p.radii.data(), n[3] * sizeof(float));
+    share_bytes(p.emission.data(), n[4] * sizeof(Vec3));
+    if (r.c.rank == 0) e.raw = PointSet{};               // its octree is built (Early)
+    return r.c.agree(r.c.rank == 0 ? "" : attempt([&] {  // its time is the probe's
+        in_arena(e.params.threads,
+                 [&] { e.vm = detail::build_octree(std::move(p), e.params, e.stats, r.source); });
+    }));
 }
 
 // The input and octree (every rank the same; checked) and the job list, each phase agreed.
@@ -686,8 +692,7 @@ std::string prepare(Run& r, Early& e, Phases& ph) {
                         "scene with the same options",
                         key));
     }
-    if (err.empty())
-        err = r.c.agree(attempt([&] { in_arena(e.params.threads, [&] { share_input(r, e); }); }));
+    if (err.empty()) err = share_input(r, e);
     if (err.empty()) {
         r.params = std::move(e.params);
         r.vm = std::move(e.vm);

@@ -126,14 +126,22 @@ void exchange_bytes(const void* send, size_t ns, int to, void* recv, size_t nr, 
 
 // Every rank's links to the ranks that own either end (bounds: node ranges per rank), each
 // link once per owner; returns the links this rank owns an end of.
-std::vector<NodePair> redistribute(const Comm& c, const std::vector<NodePair>& links,
-                                   const std::vector<int32_t>& bounds, uint64_t& moved) {
-    std::vector<std::vector<NodePair> > out = by_owner(links, bounds);
+std::string redistribute(const Comm& c, std::vector<NodePair>& links,
+                         const std::vector<int32_t>& bounds, uint64_t& moved,
+                         std::vector<NodePair>& mine) {
+    // Every allocation is agreed before the data moves: a rank out of memory ends the job
+    // instead of leaving the others in an exchange it never joins.
+    std::vector<std::vector<NodePair> > out;
+    std::string err = c.agree(attempt([&] { out = by_owner(links, bounds); }));
+    if (!err.empty()) return err;
+    std::vector<NodePair>().swap(links);  // all of it is in `out` now
     std::vector<uint64_t> ns(size_t(c.size)), nr(size_t(c.size));
     for (size_t k = 0; k < out.size(); ++k) ns[k] = out[k].size();
     MPI_Alltoall(ns.data(), 1, MPI_UINT64_T, nr.data(), 1, MPI_UINT64_T, MPI_COMM_WORLD);
     // Everything this rank gets, in one allocation: its own first, then from each rank.
-    std::vector<NodePair> mine(std::accumulate(nr.begin(), nr.end(), uint64_t(0)));
+    err =
+        c.agree(attempt([&] { mine.resize(std::accumulate(nr.begin(), nr.end(), uint64_t(0))); }));
+    if (!err.empty()) return err;
     std::copy(out[c.rank].begin(), out[c.rank].end(), mine.begin());
     std::vector<NodePair>().swap(out[c.rank]);
     size_t at = ns[c.rank];
@@ -144,25 +152,31 @@ std::vector<NodePair> redistribute(const Comm& c, const std::vector<NodePair>& l
         at += nr[from];
         std::vector<NodePair>().swap(out[to]);
     }
-    return mine;
+    return "";
 }
 
 // Rank 0 receives every rank's range into vm's link arrays (in rank order, which is node order).
-void gather_ranges(const Comm& c, const LinkRange& r, VisibilityMap& vm, uint64_t& moved) {
+std::string gather_ranges(const Comm& c, const LinkRange& r, VisibilityMap& vm, uint64_t& moved) {
     uint64_t n = r.targets.size();
     std::vector<uint64_t> sizes(size_t(c.size));
     MPI_Gather(&n, 1, MPI_UINT64_T, sizes.data(), 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+    // Rank 0 makes room for the whole map first, agreed (as in redistribute).
+    detail::MapData& d = detail::MapAccess::data(vm);
+    int32_t* out = nullptr;
+    const std::string err = c.agree(attempt([&] {
+        if (c.rank != 0) return;
+        d.link_offsets.assign(size_t(vm.octree().num_nodes()) + 1, 0);
+        out = detail::allocate_link_targets(
+            d, std::accumulate(sizes.begin(), sizes.end(), uint64_t(0)));
+    }));
+    if (!err.empty()) return err;
     if (c.rank != 0) {
         const int32_t range[2] = {r.n0, r.n1};
         MPI_Send(range, 2, MPI_INT32_T, 0, kTagData, MPI_COMM_WORLD);
         exchange_bytes(r.offsets.data(), r.offsets.size() * 8, 0, nullptr, 0, 0, moved);
         exchange_bytes(r.targets.data(), n * 4, 0, nullptr, 0, 0, moved);
-        return;
+        return "";
     }
-    detail::MapData& d = detail::MapAccess::data(vm);
-    d.link_offsets.assign(size_t(vm.octree().num_nodes()) + 1, 0);
-    int32_t* out =
-        detail::allocate_link_targets(d, std::accumulate(sizes.begin(), sizes.end(), uint64_t(0)));
     std::copy(r.targets.begin(), r.targets.end(), out);
     uint64_t base = 0;
     for (int k = 0; k < c.size; ++k) {
@@ -180,6 +194,7 @@ void gather_ranges(const Comm& c, const LinkRange& r, VisibilityMap& vm, uint64_
             d.link_offsets[size_t(g.n0) + i] = base + g.offsets[i];
         base += sizes[k];
     }
+    return "";
 }
 
 // One rank's state through the build.
@@ -266,6 +281,16 @@ int threads_for(int rank, int local_size, int requested, std::string& note) {
 }
 
 // A fingerprint of the input as the probe read it: every rank must build the same map.
+// The host's cores less one for each other rank of the host: what rank 0 may take while the
+// others only wait on it (for the input before MPI starts, for the save at the end).
+int root_cores(int threads, int local_size) {
+    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+    cpu_set_t set;
+    const int bound = sched_getaffinity(0, sizeof set, &set) == 0 ? CPU_COUNT(&set) : hw;
+    // Within the cores mpirun bound the rank to (Open MPI binds to a core for up to 2 ranks).
+    return std::max(threads, std::min(bound, hw - (std::max(1, local_size) - 1)));
+}
+
 uint64_t input_hash(const VisibilityMap& vm) {
     auto h = [](const auto& v) {
         return detail::payload_hash(reinterpret_cast<const uint8_t*>(v.data()),
@@ -425,19 +450,20 @@ std::string own_range(Run& r, LinkRange& range, std::vector<int32_t>& bounds) {
     for (const auto& [a, b] : r.share.links) deg[a]++, deg[b]++;
     MPI_Allreduce(deg.data(), all.data(), nodes, MPI_UINT32_T, MPI_SUM, MPI_COMM_WORLD);
     bounds = split_nodes(all, r.c.size);
-    std::vector<NodePair> got = redistribute(r.c, r.share.links, bounds, r.moved);
-    std::vector<NodePair>().swap(r.share.links);
+    std::vector<NodePair> got;
+    const std::string err = redistribute(r.c, r.share.links, bounds, r.moved, got);
+    if (!err.empty()) return err;
     return r.c.agree(
         attempt([&] { range = link_range(got, bounds[r.c.rank], bounds[r.c.rank + 1]); }));
 }
 
 std::string write_single(Run& r, LinkRange& range, Phases& ph) {
-    gather_ranges(r.c, range, r.vm, r.gathered);
+    const std::string err = gather_ranges(r.c, range, r.vm, r.gathered);
     range = LinkRange{};
     ph.lap(kGather);
+    if (!err.empty()) return err;
     // The other ranks of this host only wait now (a core each, polling): rank 0 takes the rest.
-    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
-    const int cores = std::max(r.threads, hw - (r.c.local_size - 1));
+    const int cores = root_cores(r.threads, r.c.local_size);
     return r.c.agree(attempt([&] {
         if (r.c.rank == 0) in_arena(cores, [&] { save_vmap(r.opt.output, r.vm); });
     }));
@@ -584,13 +610,6 @@ void configure(Run& r) {
         r.schedule = "static";
         r.note = "this MPI gives no thread support: the static schedule instead of dynamic";
     }
-}
-
-// The host's cores less one for each other rank of the host: what rank 0 may take while the
-// others only wait on it (for the input before MPI starts, for the save at the end).
-int root_cores(int threads, int local_size) {
-    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
-    return std::max(threads, hw - (std::max(1, local_size) - 1));
 }
 
 // What rank 0 does before it needs the others, on a thread of its own while MPI starts

@@ -182,8 +182,11 @@ LinkRange link_range(const std::vector<NodePair>& links, int32_t n0, int32_t n1)
     r.n0 = n0, r.n1 = n1;
     const size_t nodes = size_t(n1 - n0);
     r.offsets.assign(nodes + 1, 0);
+    // At most kMaxParts: each part reads every link, so more would cost more reading than
+    // their writes save.
+    constexpr size_t kMaxParts = 8;
     const size_t parts = std::clamp<size_t>(size_t(tbb::this_task_arena::max_concurrency()), 1,
-                                            std::max<size_t>(1, nodes));
+                                            std::min(kMaxParts, std::max<size_t>(1, nodes)));
     // Part p holds nodes [cut[p], cut[p + 1]) (relative to n0).
     auto by_part = [&](const std::vector<size_t>& cut, auto&& f) {
         parallel_for(parts, [&](size_t p) {

@@ -686,7 +686,8 @@ size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radi
 // over same-surface links, and a sheet that wraps around its centroid votes each point's side
 // away from it, weighted by how squarely the point faces it, |(p - c) . n| / rms |p - c|, in
 // place of its rays. Left to the rays:
-// - sheets too flat for their centroid to say anything: the mean weight ("wrap") below
+// - sheets too flat for their centroid to say anything: the "wrap", mean |(p - c) . n| / rms
+//   (the weight before its cap at 1), below
 //   kMinWrap (a plate's face or a table's top, 0.03-0.06 on the test scenes, where the open
 //   meshes give 0.45-0.84; a sphere gives 1);
 // - sheets whose points mostly have a surface within the voxel probe's reach behind them

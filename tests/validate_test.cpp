@@ -254,7 +254,7 @@ TEST(Validate, SamplesAsARawCloudScoreTheirNormals) {
     EXPECT_GT(bare.normal_agreement, 0.9);
     EXPECT_GT(bare.rows[0].all.agreement(), 0.8);
     // The cloud's disc floor is measured from its spacing (cloud_delta_floor): the scene's
-    // blue-noise samples are even (2.0), its uniform ones independent (about 2.5); a given
+    // blue-noise samples are even (2.0), its uniform ones independent (about 2.25); a given
     // floor is kept.
     EXPECT_NEAR(bare.delta_floor, OctreeParams::kEvenDeltaFloor, 0.1);  // 2.06: 3000 points
     p.sampling = "uniform";

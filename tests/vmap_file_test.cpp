@@ -447,8 +447,9 @@ TEST_F(VmapFile, AVersion4FileWithRawLinksStillLoads) {
     const VisibilityMap back = load_vmap(p);
     EXPECT_EQ(back.link_offsets(), off);
     expect_same_bytes(back.link_targets(), t, "link targets");
-    // Version 4 had no delta_floor: its maps were built with the default.
-    EXPECT_EQ(back.octree_params().delta_floor, OctreeParams::kDefaultDeltaFloor);
+    // Version 4 had no delta_floor: its maps were built with the default of the time, 2.5
+    // (today's kDefaultDeltaFloor is 2.25).
+    EXPECT_EQ(back.octree_params().delta_floor, 2.5f);
     EXPECT_EQ(back.octree_params().leaf_points, map().octree_params().leaf_points);
 }
 

@@ -110,7 +110,7 @@ double close_neighbour_share(const PointSet& points);
 
 // The occluder disc floor (OctreeParams::delta_floor) for a cloud of unknown sampling: the
 // floor exists to close the holes that independent samples leave between their discs, so a
-// Poisson-like cloud gets OctreeParams::kDefaultDeltaFloor (2.5), an evenly sampled one
+// Poisson-like cloud gets OctreeParams::kDefaultDeltaFloor (2.25), an evenly sampled one
 // kEvenDeltaFloor (2.0, as the blue-noise samples of scene files), and one in between the
 // linear mix by close_neighbour_share / kPoissonCloseShare (docs/validation.md "Raw clouds:
 // the disc floor from the sampling").

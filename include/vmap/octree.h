@@ -25,11 +25,12 @@ struct OctreeParams {
     // A leaf's occluder disc radius Delta is the distance from its centroid to its farthest
     // point, but never below delta_floor times its largest splat radius: discs wide enough to
     // close the gaps between samples. Independent uniform samples leave holes, so a point cloud
-    // gets kDefaultDeltaFloor (docs/validation.md chose 2.5 for pair agreement); a scene sampled
-    // as blue noise has no holes wider than about the spacing and gets kEvenDeltaFloor
-    // (scene_octree in vmap/scene.h; docs/validation.md "Blue-noise samples"). In
-    // [0, kDeltaFloorLimit].
-    static constexpr float kDefaultDeltaFloor = 2.5f;
+    // of them gets kDefaultDeltaFloor (2.25: docs/validation.md "5. The floor of independent
+    // samples, re-measured" counts the scenes meeting the accuracy targets; 2.5 until then,
+    // and in files before version 5); a scene sampled as blue noise has no holes wider than
+    // about the spacing and gets kEvenDeltaFloor (scene_octree in vmap/scene.h; docs/
+    // validation.md "Blue-noise samples"). In [0, kDeltaFloorLimit].
+    static constexpr float kDefaultDeltaFloor = 2.25f;
     static constexpr float kEvenDeltaFloor = 2.0f;
     static constexpr float kDeltaFloorLimit = 10.f;
     float delta_floor = kDefaultDeltaFloor;

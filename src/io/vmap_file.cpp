@@ -422,9 +422,9 @@ uint64_t read_points(Reader& r, detail::MapData& d, uint32_t version) {
     d.visibility_params.eps = r.get<float>();
     d.visibility_params.facing_tol = r.get<float>();
     d.visibility_params.parallel_tol = r.get<float>();
-    // Version 4 predates the field: its maps were built with the default floor.
-    d.octree_params.delta_floor =
-        version >= 5 ? r.get<float>() : OctreeParams::kDefaultDeltaFloor;
+    // Version 4 predates the field: its maps were built with the default floor of the time.
+    constexpr float kVersion4DeltaFloor = 2.5f;
+    d.octree_params.delta_floor = version >= 5 ? r.get<float>() : kVersion4DeltaFloor;
     if (!(d.octree_params.delta_floor >= 0 &&
           d.octree_params.delta_floor <= OctreeParams::kDeltaFloorLimit))
         r.fail(fmt::format("delta_floor {} out of range", d.octree_params.delta_floor));

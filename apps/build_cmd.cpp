@@ -190,10 +190,13 @@ PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
 }
 
 // What names the input under mpirun, where rank 0 alone reads it: the file and each option that
-// changes the points read (those given), e.g. "scenes/a.json, points 3000, seed 7".
+// changes the points read (those given), e.g. "/data/scenes/a.json, points 3000, seed 7".
 std::string input_key(const BuildOptions& o) {
     const InputOptions& in = o.input;
-    std::string key = in.path;
+    // The file as an absolute path: ranks started from other folders name the same file alike.
+    std::error_code ec;
+    const fs::path full = fs::weakly_canonical(fs::path(in.path), ec);
+    std::string key = ec ? in.path : full.string();
     auto add = [&](const char* name, const auto& v) {
         if (v) key += fmt::format(", {} {}", name, *v);
     };

@@ -109,6 +109,11 @@ check "differing parameters on rank 1 fail the job" bash -c "! ${mpi[*]} -np 1 '
     ${bunny[*]} -o '$out' : -np 1 '$vmap' build ${bunny[*]} --eps 0.02 -o '$out' 2> '$tmp/err' &&
     grep -q 'rank 1 of 2: its input (points, octree or parameters) differs from rank 0' '$tmp/err'"
 check "differing parameters: no output" no_output "$out"
+# The same file named from another folder is the same input.
+check "the same file by another path" bash -c "cd '$tmp' && ${mpi[*]} -np 1 '$vmap' build \
+    ${bunny[*]} -o '$tmp/path.vmap' : -np 1 '$vmap' build \
+    \$(realpath --relative-to='$tmp' '$src/scenes/cornell-bunny.json') ${bunny[*]:1} -o '$tmp/path.vmap'"
+rm -f "$tmp/path.vmap"
 
 # A rank killed during the construction: mpirun ends the job, nothing is written.
 "${mpi[@]}" -np 2 "$vmap" build "$src/scenes/cornell-bunny.json" --points 20000 --max-height 8 \

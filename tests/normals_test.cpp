@@ -478,6 +478,25 @@ TEST(Orientation, OpenRoomScannedFromInsideFacesInward) {
     EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
 }
 
+TEST(Orientation, AFewPointsOutsideTheRoomDoNotTurnItsWalls) {
+    // A small speck of points beyond a corner of an open room (a stray return past a window, a
+    // registration outlier) pushes the cloud's bounds out on three sides. The walls there no
+    // longer lay on the bounds, their outer sides' rays travelled to the far bounds and won,
+    // and they turned outward (ceiling, back and side wall 1-3% right). The room's box now
+    // stops at its outermost walls when only a few points lie beyond them (wall_box).
+    std::vector<Vec3> truth;
+    PointSet ps = room(true, truth, 23);
+    const size_t walls = ps.size();
+    std::mt19937 rng(5);
+    std::uniform_real_distribution<float> u(1.2f, 1.23f);
+    for (int i = 0; i < 40; ++i) {  // 0.5% of the points, 20 cm past the corner (1, 1, 1)
+        ps.positions.push_back({u(rng), u(rng), u(rng)});
+        truth.push_back({1, 0, 0});
+    }
+    estimate_normals(ps);
+    EXPECT_GT(share_right(ps, truth, 0, walls), 0.99);
+}
+
 TEST(Orientation, TurnedRoomStillFacesInward) {
     // A scan is not aligned with the axes: the rays' bounding box follows the walls' normals.
     std::vector<Vec3> truth;

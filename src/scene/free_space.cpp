@@ -254,9 +254,16 @@ int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>&
 // Splat discs in a uniform grid of cells, for first-hit rays.
 class DiscCaster {
   public:
+    // b: every point's bounds (the cell grid); walls: the box whose faces count as the scene's
+    // bounds for escaping rays (wall_box).
     DiscCaster(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-               const std::vector<float>& radii, const Bounds& b, float r_med, float immediate)
-        : pts_(pts), normals_(normals), box_(b), immediate_(immediate), far_(8 * max_extent(b)) {
+               const std::vector<float>& radii, const Bounds& b, const Bounds& walls, float r_med,
+               float immediate)
+        : pts_(pts),
+          normals_(normals),
+          box_(walls),
+          immediate_(immediate),
+          far_(8 * max_extent(b)) {
         // Discs twice the splat radius: samples' discs of one radius cover a surface only once
         // on average (gaps where rays would slip through); doubled, gaps are about 2%.
         const float cap = 4 * r_med;
@@ -452,6 +459,85 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
 // A frame whose axes follow the two most common normal directions: a room's floor and walls. In
 // it the cloud's bounding box hugs a room's walls however the scan was turned, which the rays'
 // "leaves the box at once" relies on. Any frame does for clouds without such directions.
+// The box of a room's walls: each face of the cloud's bounds moved in to the outermost wall
+// plane when only a few stray points lie beyond it. A room's walls are told by their outer side
+// leaving the box at once (room_wall_faces, the rays' escape); a few points outside the room (a
+// speck seen past a corner, a registration outlier) would push the box out and turn the walls
+// on that side outward. From each face inward, over slabs two splat radii thick: the first slab
+// whose points facing along the axis (|n| component over 0.9) number at least kWallPoints and
+// span at least half the cloud's core extent (2nd-98th percentile) in both other axes is a
+// wall; the face moves to it if at most kStrayShare of the points lie beyond it. A face with no
+// wall near it (an open side, a lone object) keeps its place. In the room's frame (vote_sides),
+// where walls are perpendicular to the axes.
+constexpr double kStrayShare = 0.02;
+constexpr size_t kWallPoints = 64;
+
+Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, const Bounds& full,
+                float r_med) {
+    auto at = [](const Vec3& v, int a) { return a == 0 ? v.x : a == 1 ? v.y : v.z; };
+    auto set = [](Vec3& v, int a, float x) { (a == 0 ? v.x : a == 1 ? v.y : v.z) = x; };
+    const size_t n = pts.size();
+    const size_t stray = size_t(kStrayShare * double(n));
+    float core[3];
+    for (int a = 0; a < 3; ++a) {
+        std::vector<float> c(n);
+        for (size_t i = 0; i < n; ++i) c[i] = at(pts[i], a);
+        std::nth_element(c.begin(), c.begin() + ptrdiff_t(n / 50), c.end());
+        const float lo = c[n / 50];
+        std::nth_element(c.begin(), c.begin() + ptrdiff_t(n - 1 - n / 50), c.end());
+        core[a] = c[n - 1 - n / 50] - lo;
+    }
+    Bounds b = full;
+    const float slab = 2 * r_med;
+    for (int a = 0; a < 3; ++a) {
+        const int u = (a + 1) % 3, w = (a + 2) % 3;
+        const float lo = at(full.lo, a), ext = at(full.hi, a) - lo;
+        if (!(ext > 0) || !(slab > 0)) continue;
+        const size_t slabs = size_t(std::min(ext / slab, float(1 << 22))) + 1;
+        std::vector<uint32_t> all(slabs, 0), wall(slabs, 0);
+        // Of the wall points in each slab: u min, u max, w min, w max, a min, a max.
+        constexpr float kBig = std::numeric_limits<float>::max();
+        std::vector<float> span(6 * slabs);
+        for (size_t k = 0; k < slabs; ++k)
+            for (int j = 0; j < 6; ++j) span[6 * k + size_t(j)] = j % 2 ? -kBig : kBig;
+        for (size_t i = 0; i < n; ++i) {
+            const size_t k =
+                std::min(slabs - 1, size_t((at(pts[i], a) - lo) / ext * float(slabs - 1) + 0.5f));
+            ++all[k];
+            if (!(std::fabs(at(normals[i], a)) > 0.9f)) continue;
+            ++wall[k];
+            float* sp = &span[6 * k];
+            sp[0] = std::min(sp[0], at(pts[i], u)), sp[1] = std::max(sp[1], at(pts[i], u));
+            sp[2] = std::min(sp[2], at(pts[i], w)), sp[3] = std::max(sp[3], at(pts[i], w));
+            sp[4] = std::min(sp[4], at(pts[i], a)), sp[5] = std::max(sp[5], at(pts[i], a));
+        }
+        auto is_wall = [&](size_t k) {
+            const float* sp = &span[6 * k];
+            return wall[k] >= kWallPoints && sp[1] - sp[0] >= 0.5f * core[u] &&
+                   sp[3] - sp[2] >= 0.5f * core[w];
+        };
+        // From the high face down, then from the low face up; the face moves to the wall's
+        // outermost point.
+        size_t beyond = 0;
+        for (size_t k = slabs; k-- > 0 && beyond <= stray;) {
+            if (is_wall(k)) {
+                if (beyond > 0) set(b.hi, a, span[6 * k + 5]);
+                break;
+            }
+            beyond += all[k];
+        }
+        beyond = 0;
+        for (size_t k = 0; k < slabs && beyond <= stray; ++k) {
+            if (is_wall(k)) {
+                if (beyond > 0) set(b.lo, a, span[6 * k + 4]);
+                break;
+            }
+            beyond += all[k];
+        }
+    }
+    return b;
+}
+
 std::array<Vec3, 3> room_frame(const std::vector<Vec3>& normals) {
     const std::optional<Vec3> a = dominant_axis(normals, [](Vec3) { return true; });
     if (!a) return {Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}};
@@ -584,13 +670,14 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     const Grid g = make_grid(b, std::max(kSpacing * r_med, max_extent(b) / kMaxCells), kPad);
     const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
     v.method = fs.method;
-    const DiscCaster caster(pts, normals, radii, b, r_med, 2 * g.h);
-    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, b, r_med);
+    const Bounds walls = wall_box(pts, normals, b, r_med);
+    const DiscCaster caster(pts, normals, radii, b, walls, r_med, 2 * g.h);
+    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, r_med);
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
-            const bool wall = room_wall[size_t(DiscCaster::exit_face(b, pts[i], free_n))];
+            const bool wall = room_wall[size_t(DiscCaster::exit_face(walls, pts[i], free_n))];
             float side =
                 float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
             SideCue cue = SideCue::kSpace;

@@ -373,8 +373,8 @@ TEST_F(DamagedShards, BadFieldsOfTheIndexAreNamed) {
     };
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["checksum"] = "zz"; }),
                     "shard 0: \"checksum\": \"zz\" is not 16 hex digits"));
-    EXPECT_TRUE(
-        has(error_after([](auto& k) { k["nodes"] = 1e300; }), "\"nodes\": an integer expected"));
+    EXPECT_TRUE(has(error_after([](auto& k) { k["nodes"] = 1e300; }),
+                    "\"nodes\": an integer expected"));
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][1]["nodes"][1] = 1 << 30; }),
                     "shard 1: \"nodes\": 1073741824 is outside"));
     EXPECT_TRUE(has(error_after([](auto& k) { k["shards"][0]["nodes"][0] = -1; }),
@@ -393,9 +393,8 @@ TEST_F(DamagedShards, TargetCountsThatOverflowTheLengthCheckAreRefused) {
         f.seekp(24);
         f.write(reinterpret_cast<const char*>(&ends), 8);
     }
-    EXPECT_NE(error_after([&](auto& k) {
-                  k["shards"][0]["ends"] = ends;
-              }).find("shard-0-of-2: length does not match its header"),
+    EXPECT_NE(error_after([&](auto& k) { k["shards"][0]["ends"] = ends; })
+                  .find("shard-0-of-2: length does not match its header"),
               std::string::npos);
 }
 

@@ -1,9 +1,10 @@
 // The V-map build across MPI processes (vmap/mpi.h).
+#include "vmap/mpi.h"
+
 #include <cstdlib>
 
 #include "vmap/error.h"
 #include "vmap/map_access.h"
-#include "vmap/mpi.h"
 
 #ifndef VMAP_HAVE_MPI
 
@@ -19,10 +20,10 @@ Result build(const ReadInput&, BuildParams, const Options&, const std::string&) 
 #include <fmt/format.h>
 #include <mpi.h>
 #include <sched.h>
-#include <tbb/global_control.h>
-#include <tbb/task_arena.h>
 #include <time.h>
 #include <unistd.h>
+#include <tbb/global_control.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
@@ -30,9 +31,9 @@ Result build(const ReadInput&, BuildParams, const Options&, const std::string&) 
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <memory>
 #include <numeric>
-#include <sstream>
 #include <thread>
 
 #include "io/vmap_file.h"
@@ -125,13 +126,14 @@ void exchange_bytes(const void* send, size_t ns, int to, void* recv, size_t nr, 
 }
 
 // Every rank's links to the ranks that own either end (bounds: node ranges per rank), each
-// link once per owner; returns the links this rank owns an end of.
+// link once per owner: `mine` gets the links this rank owns an end of, `links` is emptied.
+// Returns the agreed error ("" when every rank succeeded).
 std::string redistribute(const Comm& c, std::vector<NodePair>& links,
                          const std::vector<int32_t>& bounds, uint64_t& moved,
                          std::vector<NodePair>& mine) {
     // Every allocation is agreed before the data moves: a rank out of memory ends the job
     // instead of leaving the others in an exchange it never joins.
-    std::vector<std::vector<NodePair> > out;
+    std::vector<std::vector<NodePair>> out;
     std::string err = c.agree(attempt([&] { out = by_owner(links, bounds); }));
     if (!err.empty()) return err;
     std::vector<NodePair>().swap(links);  // all of it is in `out` now
@@ -210,7 +212,7 @@ struct Run {
     uint64_t links = 0, moved = 0, gathered = 0;  // bytes sent: the exchange, the gather
     int threads = 0, chunks = 0;
     std::string schedule, note;
-    std::vector<std::vector<uint32_t> > parts;  // static: a share per rank; dynamic: the chunks
+    std::vector<std::vector<uint32_t>> parts;  // static: a share per rank; dynamic: the chunks
     Run(const Comm& comm, const Options& o, BuildParams p, std::string src)
         : c(comm), opt(o), params(std::move(p)), source(std::move(src)) {}
 };
@@ -218,22 +220,11 @@ struct Run {
 // This rank's seconds in each phase of the build, in order; Result::phases gets the slowest
 // rank's of each. Input and octree run on a thread during start (Early); probe is what is left
 // of them after MPI_Init, with the agreement and the input check.
-enum PhaseId {
-    kStart,
-    kInput,
-    kOctree,
-    kProbe,
-    kJobs,
-    kConstruction,
-    kSettle,
-    kExchange,
-    kGather,
-    kSave,
-    kPhases
-};
-constexpr const char* kPhaseNames[kPhases] = {"start",    "input",        "octree", "probe",
-                                              "job list", "construction", "settle", "exchange",
-                                              "gather",   "save"};
+enum PhaseId { kStart, kInput, kOctree, kProbe, kJobs, kConstruction, kSettle, kExchange,
+               kGather, kSave, kPhases };
+constexpr const char* kPhaseNames[kPhases] = {
+    "start",        "input",  "octree",   "probe",  "job list",
+    "construction", "settle", "exchange", "gather", "save"};
 struct Phases {
     double s[kPhases] = {};
     Clock::time_point at = Clock::now();
@@ -280,7 +271,6 @@ int threads_for(int rank, int local_size, int requested, std::string& note) {
     return std::min(share, bound);
 }
 
-// A fingerprint of the input as the probe read it: every rank must build the same map.
 // The host's cores less one for each other rank of the host: what rank 0 may take while the
 // others only wait on it (for the input before MPI starts, for the save at the end).
 int root_cores(int threads, int local_size) {
@@ -291,6 +281,7 @@ int root_cores(int threads, int local_size) {
     return std::max(threads, std::min(bound, hw - (std::max(1, local_size) - 1)));
 }
 
+// A fingerprint of the input as the probe read it: every rank must build the same map.
 uint64_t input_hash(const VisibilityMap& vm) {
     auto h = [](const auto& v) {
         return detail::payload_hash(reinterpret_cast<const uint8_t*>(v.data()),
@@ -329,8 +320,8 @@ std::string check_same_input(const Comm& c, const VisibilityMap& vm) {
 
 std::string run_static(Run& r) {
     return attempt([&] {
-        build_round(r.vm, r.params, r.tp, r.parts[size_t(r.c.rank)], !r.opt.count_links, r.source,
-                    r.share);
+        build_round(r.vm, r.params, r.tp, r.parts[size_t(r.c.rank)], !r.opt.count_links,
+                    r.source, r.share);
     });
 }
 
@@ -511,17 +502,17 @@ std::string write_shards(Run& r, const LinkRange& range) {
 }
 
 // The slowest rank's seconds of each phase, on rank 0 (named as in kPhaseNames).
-std::vector<std::pair<std::string, double> > slowest_phases(const Comm& c, const Phases& ph) {
+std::vector<std::pair<std::string, double>> slowest_phases(const Comm& c, const Phases& ph) {
     double hi[kPhases] = {};
     MPI_Reduce(ph.s, hi, kPhases, MPI_DOUBLE, MPI_MAX, 0, MPI_COMM_WORLD);
-    std::vector<std::pair<std::string, double> > out;
+    std::vector<std::pair<std::string, double>> out;
     if (c.rank == 0)
         for (int k = 0; k < kPhases; ++k) out.emplace_back(kPhaseNames[k], hi[k]);
     return out;
 }
 
 // The phases line of the summary: the slowest rank's seconds, bytes where bytes move.
-std::string phases_line(const Run& r, const std::vector<std::pair<std::string, double> >& ph) {
+std::string phases_line(const Run& r, const std::vector<std::pair<std::string, double>>& ph) {
     std::string line = "phases:     slowest rank's s:";
     for (size_t k = 0; k < ph.size(); ++k) {
         if (k == kInput || k == kOctree) continue;
@@ -537,10 +528,10 @@ std::string phases_line(const Run& r, const std::vector<std::pair<std::string, d
 
 // Per-rank construction times and rounds, gathered into lines for rank 0's summary.
 std::vector<std::string> summary(Run& r, double output_s,
-                                 const std::vector<std::pair<std::string, double> >& ph) {
+                                 const std::vector<std::pair<std::string, double>>& ph) {
     constexpr int kN = 5;
-    const double mine[kN] = {r.share.seconds, double(r.share.rounds), double(r.c.local_rank == 0),
-                             double(r.moved), double(r.gathered)};
+    const double mine[kN] = {r.share.seconds, double(r.share.rounds),
+                             double(r.c.local_rank == 0), double(r.moved), double(r.gathered)};
     std::vector<double> all(size_t(r.c.size) * kN);
     MPI_Gather(mine, kN, MPI_DOUBLE, all.data(), kN, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     if (r.c.rank != 0) return {};

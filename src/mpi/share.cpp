@@ -75,9 +75,9 @@ void build_round(VisibilityMap& base, const BuildParams& params, const TopPairs&
                  const std::vector<uint32_t>& jobs, bool keep, const std::string& source,
                  ShareResult& out) {
     bool given = false;
-    build_rounds(
-        base, params, tp, [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep,
-        source, out);
+    build_rounds(base, params, tp,
+                 [&]() { return std::exchange(given, true) ? nullptr : &jobs; }, keep, source,
+                 out);
 }
 
 void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs& tp,
@@ -85,7 +85,7 @@ void build_rounds(VisibilityMap& base, const BuildParams& params, const TopPairs
                   const std::string& source, ShareResult& out) {
     const auto t0 = std::chrono::steady_clock::now();
     BuildParams p = params;
-    p.keep_links = true;         // a job's own link says whether it came back fully visible
+    p.keep_links = true;  // a job's own link says whether it came back fully visible
     std::vector<uint32_t> done;  // every job of every chunk taken
     int chunks = 0;
     p.top_pairs = [&](const Octree&) {

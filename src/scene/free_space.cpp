@@ -259,10 +259,7 @@ class DiscCaster {
     DiscCaster(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
                const std::vector<float>& radii, const Bounds& b, const Bounds& walls, float r_med,
                float immediate)
-        : pts_(pts),
-          normals_(normals),
-          box_(walls),
-          immediate_(immediate),
+        : pts_(pts), normals_(normals), box_(walls), immediate_(immediate),
           far_(8 * max_extent(b)) {
         // Discs twice the splat radius: samples' discs of one radius cover a surface only once
         // on average (gaps where rays would slip through); doubled, gaps are about 2%.
@@ -456,9 +453,6 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
     return sum / length(sum);
 }
 
-// A frame whose axes follow the two most common normal directions: a room's floor and walls. In
-// it the cloud's bounding box hugs a room's walls however the scan was turned, which the rays'
-// "leaves the box at once" relies on. Any frame does for clouds without such directions.
 // The box of a room's walls: each face of the cloud's bounds moved in to the outermost wall
 // plane when only a few stray points lie beyond it. A room's walls are told by their outer side
 // leaving the box at once (room_wall_faces, the rays' escape); a few points outside the room (a
@@ -538,6 +532,9 @@ Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, 
     return b;
 }
 
+// A frame whose axes follow the two most common normal directions: a room's floor and walls. In
+// it the cloud's bounding box hugs a room's walls however the scan was turned, which the rays'
+// "leaves the box at once" relies on. Any frame does for clouds without such directions.
 std::array<Vec3, 3> room_frame(const std::vector<Vec3>& normals) {
     const std::optional<Vec3> a = dominant_axis(normals, [](Vec3) { return true; });
     if (!a) return {Vec3{1, 0, 0}, Vec3{0, 1, 0}, Vec3{0, 0, 1}};

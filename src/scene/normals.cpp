@@ -681,21 +681,21 @@ size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radi
 // nothing to decide by, and the rays go wrong wherever the sheet's concave side sees out
 // through its opening while its convex side meets a wall nearby. What a modeller's winding
 // says there is the convention "outward": away from what the sheet wraps around (the share of
-// the area facing away from the mesh's own centroid: 1.000 for the open box, 0.95 for the
-// helmet, 0.89 for the mushroom and the lion mask). So the open points are joined into sheets
+// the area facing away from the mesh's own centroid, scripts/mesh-winding.py: 1.000 for the
+// open box, 0.95 for the helmet, 0.89 for the mushroom and the lion mask). So the open points are joined into sheets
 // over same-surface links, and a sheet that wraps around its centroid votes each point's side
 // away from it, weighted by how squarely the point faces it, |(p - c) . n| / rms |p - c|, in
 // place of its rays. Left to the rays:
 // - sheets too flat for their centroid to say anything: the "wrap", mean |(p - c) . n| / rms
-//   (the weight before its cap at 1), below
-//   kMinWrap (a plate's face or a table's top, 0.03-0.06 on the test scenes, where the open
-//   meshes give 0.45-0.84; a sphere gives 1);
+//   (the weight before its cap at 1), below kMinWrap (a plate's face or a table's top wraps an
+//   order of magnitude less on the test scenes, the open meshes about twice as much or more; a
+//   sphere gives 1);
 // - sheets whose points mostly have a surface within the voxel probe's reach behind them
 //   (SideVotes::open == 2): both sides are free only because the probe walked through a part
 //   thinner than its reach (an animal's leg or ear, a plate, a thin-walled bowl), whose inner
 //   faces face toward the centroid, not away; the rays see the other face there and decide
-//   right. The open meshes have 13-38% such points (at creases and rims), the thin parts and
-//   plates of the test scenes 83-100%;
+//   right. The open meshes have a minority of such points (at creases and rims), the thin
+//   parts and plates of the test scenes most (docs/validation.md "4. Open sheets");
 // - sheets of fewer than kMinSheet points (kVoteRounds squared): a patch the spread of the
 //   neighbours' votes reaches across anyway, whose centroid is noise.
 // Serial (the sheets are found in index order and summed in it), so the result does not

@@ -233,7 +233,7 @@ int run_build(BuildOptions& o) {
                                    {o.output, o.shards, o.count_links, o.schedule, threads(),
                                     o.chunks_per_rank, input_key(o)},
                                    o.input.path);
-        if (!r.root) return r.exit_code;
+        if (!r.root) return 0;  // rank 0 reports the job's result
         vm = std::move(r.vm), st = std::move(r.stats), save_s = r.save_seconds;
         ranks = std::move(r.summary);
     } else {

@@ -44,7 +44,6 @@ struct Options {
 
 struct Result {
     bool root = true;   // rank 0: vm, stats and summary are its, and it printed nothing yet
-    int exit_code = 0;  // other ranks: what to exit with (rank 0 throws instead)
     VisibilityMap vm;   // the points and octree; the links unless shards or count_links
     BuildStats stats;   // summed over the ranks (times: the slowest rank's)
     double save_seconds = 0;
@@ -61,7 +60,8 @@ struct Result {
 using ReadInput = std::function<PointSet(BuildParams&)>;
 
 // The shared build: every rank calls it; rank 0 reads the input and shares it. Rank 0 throws
-// vmap::Error with the failing rank's message; the others return exit_code 1.
+// vmap::Error with the failing rank's message (the job's exit status is rank 0's); the others
+// return normally, so that mpirun does not end rank 0 before it has printed.
 Result build(const ReadInput& read, BuildParams params, const Options& opt,
              const std::string& source);
 

@@ -749,9 +749,11 @@ Result build(const ReadInput& read, BuildParams params, const Options& opt,
     Run r(c, opt, BuildParams{}, source);
     Result res;
     res.root = c.rank == 0;
+    // Rank 0 reports an agreed failure and exits non-zero, which makes mpirun's status; the
+    // others return normally: a rank exiting non-zero makes mpirun end the job at once, which
+    // could kill rank 0 before it has printed the error (seen under load).
     auto fail = [&](const std::string& e) {
         if (c.rank == 0) throw Error(e);
-        res.exit_code = 1;
         return std::move(res);
     };
     std::string err = prepare(r, e, ph);

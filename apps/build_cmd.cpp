@@ -45,7 +45,7 @@ struct BuildOptions {
     InputOptions input;  // the file and its overrides (vmap/input.h)
     std::string output;
     std::string normals = "keep";
-    std::vector<float> viewpoint;
+    std::vector<double> viewpoint;
     bool count_links = false;
     bool json = false;
     bool shards = false;  // under mpirun: vmap/mpi.h
@@ -63,7 +63,8 @@ CloudOptions cloud_options(const BuildOptions& o) {
                                                          {"estimate", NormalsMode::kEstimate}};
     for (const auto& [name, mode] : modes)
         if (o.normals == name) c.normals = mode;
-    if (o.viewpoint.size() == 3) c.viewpoint = Vec3{o.viewpoint[0], o.viewpoint[1], o.viewpoint[2]};
+    if (o.viewpoint.size() == 3)
+        c.viewpoint = std::array<double, 3>{o.viewpoint[0], o.viewpoint[1], o.viewpoint[2]};
     return c;
 }
 
@@ -209,7 +210,7 @@ std::string input_key(const BuildOptions& o) {
     if (in.as_points) key += ", as points";
     if (o.normals != "keep") key += fmt::format(", normals {}", o.normals);
     if (const auto& v = in.cloud.viewpoint)
-        key += fmt::format(", viewpoint {} {} {}", v->x, v->y, v->z);
+        key += fmt::format(", viewpoint {} {} {}", (*v)[0], (*v)[1], (*v)[2]);
     return key;
 }
 

@@ -116,9 +116,9 @@ void add_camera_options(CLI::App* app, CameraOptions& c) {
     app->add_option("--size", c.size, "Image size WxH")->capture_default_str();
 }
 
-Camera apply_camera(const CameraOptions& c, Camera base) {
-    if (!c.eye.empty()) base.eye = parse_vec3(c.eye, "--eye");
-    if (!c.target.empty()) base.target = parse_vec3(c.target, "--target");
+Camera apply_camera(const CameraOptions& c, Camera base, const std::array<double, 3>& origin) {
+    if (!c.eye.empty()) base.eye = parse_position(c.eye, "--eye", origin);
+    if (!c.target.empty()) base.target = parse_position(c.target, "--target", origin);
     if (!c.up.empty()) base.up = parse_vec3(c.up, "--up");
     if (c.fov) base.fov_y_deg = *c.fov;
     return base;
@@ -161,8 +161,19 @@ std::array<double, 3> parse_triple(const std::string& text, const std::string& o
 
 }  // namespace
 
+std::string position_text(Vec3 q, const std::array<double, 3>& origin) {
+    if (origin == std::array<double, 3>{0, 0, 0}) return fmt::format("{}, {}, {}", q.x, q.y, q.z);
+    return fmt::format("{}, {}, {}", q.x + origin[0], q.y + origin[1], q.z + origin[2]);
+}
+
 Vec3 parse_vec3(const std::string& text, const std::string& option) {
-    const std::array<double, 3> v = parse_triple(text, option);
+    return parse_position(text, option, {});
+}
+
+Vec3 parse_position(const std::string& text, const std::string& option,
+                    const std::array<double, 3>& origin) {
+    std::array<double, 3> v = parse_triple(text, option);
+    for (int a = 0; a < 3; ++a) v[a] -= origin[a];
     for (double c : v)
         if (std::fabs(c) > std::numeric_limits<float>::max())
             throw UsageError(

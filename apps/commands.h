@@ -63,6 +63,10 @@ nlohmann::json params_json(const VisibilityMap& vm);
 // Option values (usage errors, exit 2, for a malformed one):
 // "x,y,z" -> Vec3; throws UsageError naming `option` for anything else (or non-finite values).
 Vec3 parse_vec3(const std::string& text, const std::string& option);
+// A position "x,y,z" in the input's coordinates, relative to `origin` (PointSet::origin),
+// subtracted in double.
+Vec3 parse_position(const std::string& text, const std::string& option,
+                    const std::array<double, 3>& origin);
 // "WxH" -> (W, H), each 1..16384; throws UsageError naming `option`.
 // "dx,dy,dz" -> the unit vector along it (normalised in double, so tiny and huge components
 // work); throws UsageError naming `option` for a zero or non-finite direction.
@@ -126,7 +130,12 @@ struct CameraOptions {
     std::optional<float> fov;
 };
 void add_camera_options(CLI::App* app, CameraOptions& c);
-Camera apply_camera(const CameraOptions& c, Camera base);
+// "x, y, z" of a position relative to `origin`, in the input's coordinates (floats as such
+// when the origin is zero, else the doubles).
+std::string position_text(Vec3 q, const std::array<double, 3>& origin);
+// --eye and --target are positions in the input's coordinates (relative to `origin`).
+Camera apply_camera(const CameraOptions& c, Camera base,
+                    const std::array<double, 3>& origin = {});
 
 // Adds to every numeric option of `app` and its subcommands: floating-point values must be
 // finite (NaN and infinities refused), unsigned ones must not be negative (no "-1" wrapping to

@@ -190,18 +190,26 @@ void write_pfm(const std::string& path, const Image& img, float exposure) {
 // properties radiosity_r/g/b (W/m^2), binary little-endian, written atomically.
 void write_lit_ply(const std::string& path, const PointSet& pts, const std::vector<Vec3>& B,
                    float exposure) {
+    // Positions in the input's coordinates: double when the input had its zero elsewhere.
+    const std::array<double, 3>& o = pts.origin;
+    const bool shifted = o != std::array<double, 3>{0, 0, 0};
+    const char* xyz = shifted ? "double" : "float";
     std::string out = fmt::format(
         "ply\nformat binary_little_endian 1.0\ncomment vmap gi: display = sRGB(clamp({} x "
-        "radiosity))\nelement vertex {}\nproperty float x\nproperty float y\nproperty "
-        "float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar "
+        "radiosity))\nelement vertex {}\nproperty {} x\nproperty {} y\nproperty "
+        "{} z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar "
         "red\nproperty uchar green\nproperty uchar blue\nproperty float radius\nproperty "
         "float radiosity_r\nproperty float radiosity_g\nproperty float radiosity_b\n"
         "end_header\n",
-        exposure, pts.size());
+        exposure, pts.size(), xyz, xyz, xyz);
     out.reserve(out.size() + size_t(43) * pts.size());
     for (size_t i = 0; i < pts.size(); ++i) {
         const Vec3 p = pts.positions[i], n = pts.normals[i], b = B[i];
-        for (float v : {p.x, p.y, p.z, n.x, n.y, n.z}) put(out, v);
+        if (shifted)
+            for (double v : {p.x + o[0], p.y + o[1], p.z + o[2]}) put(out, v);
+        else
+            for (float v : {p.x, p.y, p.z}) put(out, v);
+        for (float v : {n.x, n.y, n.z}) put(out, v);
         for (float c : {b.x, b.y, b.z}) put(out, linear_to_srgb8(c * exposure));
         for (float v : {pts.radii[i], b.x, b.y, b.z}) put(out, v);
     }
@@ -252,7 +260,7 @@ int run_gi(GiOptions& o) {
     PointSet out = points_in_input_order(vm);  // input order and units, for the outputs
     // The camera (the default one frames the points' box, which the order does not change),
     // checked before the solve.
-    Camera cam = apply_camera(o.cam, scene_camera ? *scene_camera : default_camera(out));
+    Camera cam = apply_camera(o.cam, scene_camera ? *scene_camera : default_camera(out), out.origin);
     if (!o.image.empty() || !o.pfm.empty())
         check_camera(cam, "camera (--eye/--target/--up/--fov or the scene's camera)");
     const size_t emitters = count_emitters(ps, o.in.path);

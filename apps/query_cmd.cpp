@@ -51,12 +51,13 @@ uint32_t checked_id(const VisibilityMap& vm, const std::string& path, const char
 
 // The point a position option names; says which on stderr.
 uint32_t resolve_pos(const VisibilityMap& vm, const char* pos_option, const std::string& pos) {
-    const Vec3 p = parse_vec3(pos, pos_option);
+    const std::array<double, 3>& o = vm.points().origin;  // positions are the input's
+    const Vec3 p = parse_position(pos, pos_option, o);
     const uint32_t k = nearest_point(vm, p);
     const Vec3 q = vm.octree().to_world(vm.points().positions[vm.inverse()[k]]);
     if (verbosity() != Verbosity::kQuiet)
-        fmt::print(stderr, "{} {},{},{}: nearest point {} at ({}, {}, {}), {:.3g} away\n",
-                   pos_option, p.x, p.y, p.z, k, q.x, q.y, q.z,
+        fmt::print(stderr, "{} {}: nearest point {} at ({}), {:.3g} away\n", pos_option, pos, k,
+                   position_text(q, o),
                    std::hypot(double(q.x) - p.x, double(q.y) - p.y, double(q.z) - p.z));
     return k;
 }
@@ -157,14 +158,17 @@ void run_ray(const QueryArgs& a, const VisibilityMap& vm, Vec3 dir, json& js) {
                      {"hit", h.hit},
                      {"id", h.hit ? json(h.id) : json(nullptr)},
                      {"distance", h.hit ? json(h.distance) : json(nullptr)},
-                     {"position", h.hit ? json({q.x, q.y, q.z}) : json(nullptr)},
+                     {"position", h.hit ? json({q.x + vm.points().origin[0],
+                                                 q.y + vm.points().origin[1],
+                                                 q.z + vm.points().origin[2]})
+                                        : json(nullptr)},
                      {"node_tests", st.node_tests},
                      {"disc_tests", st.disc_tests}};
         return;
     }
     if (h.hit)
-        fmt::print("ray from {}: hits point {} at distance {} ({}, {}, {})\n", i, h.id, h.distance,
-                   q.x, q.y, q.z);
+        fmt::print("ray from {}: hits point {} at distance {} ({})\n", i, h.id, h.distance,
+                   position_text(q, vm.points().origin));
     else
         fmt::print("ray from {}: no hit\n", i);
     if (verbosity() != Verbosity::kQuiet)

@@ -69,7 +69,7 @@ Source load_source(const RenderArgs& a) {
 }
 
 Camera make_camera(const RenderArgs& a, const Source& s) {
-    return apply_camera(a.cam, s.camera ? *s.camera : default_camera(s.points));
+    return apply_camera(a.cam, s.camera ? *s.camera : default_camera(s.points), s.points.origin);
 }
 
 VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> height,
@@ -109,7 +109,7 @@ uint32_t pick_eye(const RenderArgs& a, const Source& s) {
                                     *a.eye_id, s.points.size()));
         return *a.eye_id;
     }
-    const Vec3 p = parse_vec3(a.eye_pos, "--eye-pos");
+    const Vec3 p = parse_position(a.eye_pos, "--eye-pos", s.points.origin);
     return nearest_point(s.points, p);
 }
 
@@ -193,9 +193,10 @@ Image render_mode(RenderArgs& a, Source& s, const Camera& cam) {
         if (!s.vm) s.vm = build_at(a, s, std::nullopt);
         img = render_visible(*s.vm, eye, cam, a.opt);
         const auto set = s.vm->visible_set(eye);
+        const Vec3 e = s.points.positions[eye];
+        const std::array<double, 3>& o = s.points.origin;
         fmt::print("eye:        point {} at ({:.4f}, {:.4f}, {:.4f}): {} of {} points visible\n",
-                   eye, s.points.positions[eye].x, s.points.positions[eye].y,
-                   s.points.positions[eye].z, set.size(), s.points.size());
+                   eye, e.x + o[0], e.y + o[1], e.z + o[2], set.size(), s.points.size());
         if (!a.ply.empty()) write_colored_ply(a.ply, s.points, visible_colors(*s.vm, eye));
     } else if (a.mode == "decided") {
         BuildStats st;

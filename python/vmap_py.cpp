@@ -358,7 +358,15 @@ void def_map(py::module_& m) {
             "end_window", [](const VisibilityMap& v) { return v.visibility_params().end_window; })
         .def_property_readonly(
             "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
-            "Positions, N x 3 float32, in input order.")
+            "Positions, N x 3 float32, in input order, relative to origin.")
+        .def_property_readonly(
+            "origin",
+            [](const VisibilityMap& v) {
+                const std::array<double, 3>& o = v.points().origin;
+                return py::make_tuple(o[0], o[1], o[2]);
+            },
+            "(x, y, z): where the input file's coordinates have the points' zero (points + origin "
+            "are the file's); (0, 0, 0) unless the cloud lay far from its file's zero.")
         .def_property_readonly(
             "normals", [](const VisibilityMap& v) { return input_order(v, v.points().normals); },
             "Normals, N x 3 float32, in input order.")

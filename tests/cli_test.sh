@@ -306,6 +306,30 @@ if expect_ok "build a cloud with --viewpoint" \
         show build sphere.ply --viewpoint 0,0,0
     fi
 fi
+# The same sphere 4 million units from the file's zero (a georeferenced scan; a float there is
+# 0.5 apart): read around itself, and positions given and printed are the file's.
+awk 'data { printf "%.6f %.6f %.6f\n", $1 + 512345, $2 + 4123456, $3 + 210; next }
+     { sub(/property float/, "property double"); print }
+     /^end_header/ { data = 1 }' sphere.ply >far.ply
+if expect_ok "build a cloud far from its file's zero" \
+    build far.ply --viewpoint 512345,4123456,210 --max-height 4 -o far.vmap --backend cpu; then
+    if grep -q 'coordinates: relative to (512345, 4123456, 210)' err.txt &&
+        grep -q 'toward the viewpoint (512345, 4123456, 210)' err.txt && ! grep -q 'warning' err.txt
+    then
+        ok "a far cloud is read around itself, and --viewpoint is in the file's coordinates"
+    else
+        fail "a far cloud: no note of its origin, the viewpoint not the file's, or a warning"
+        show build far.ply --viewpoint 512345,4123456,210
+    fi
+    if expect_ok "query a far map by a position in the file's coordinates" \
+        query far.vmap --from-pos 512345.1,4123456,210 &&
+        grep -Eq 'nearest point [0-9]+ at \(512345\.(09|1)' err.txt; then
+        ok "the far map's positions are the file's"
+    else
+        fail "the far map's nearest point is not printed in the file's coordinates"
+        show query far.vmap --from-pos 512345.1,4123456,210
+    fi
+fi
 expect_input_error "--normals flip on a cloud without normals" sphere.ply \
     build sphere.ply --normals flip --max-height 4 -o flip.vmap
 expect_no_file "a failed --normals flip writes nothing" flip.vmap

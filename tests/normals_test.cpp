@@ -1130,10 +1130,11 @@ TEST(RawCloud, EstimateInwardAndOutwardReplaceTheSigns) {
     o.normals = NormalsMode::kInward;
     EXPECT_GT(share_right(load_point_cloud(path, o), truth, 0, truth.size()), 0.99);
     o.normals = NormalsMode::kKeep;
-    o.viewpoint = Vec3{0.5f, 0.5f, -2.0f};  // outside the open side: everything faces out
+    o.viewpoint = std::array<double, 3>{0.5, 0.5, -2.0};  // outside the open side: all face out
     const PointSet seen = load_point_cloud(path, o);
+    const Vec3 view{0.5f, 0.5f, -2.0f};
     for (size_t i = 0; i < truth.size(); ++i)
-        ASSERT_GT(dot(seen.normals[i], *o.viewpoint - seen.positions[i]), 0) << i;
+        ASSERT_GT(dot(seen.normals[i], view - seen.positions[i]), 0) << i;
 }
 
 TEST(RawCloud, WithoutNormalsTheyAreEstimatedAndFlipIsAnError) {

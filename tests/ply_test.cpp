@@ -672,7 +672,8 @@ TEST(Ply, DamagedFilesOnlyEverThrowVmapErrors) {
     };
     for (const char* format : kPlyFormats) {
         SCOPED_TRACE(format);
-        expect_damage_only_throws_vmap_errors(dir, make_ply(format, elements), ".ply", read_ply,
+        expect_damage_only_throws_vmap_errors(dir, make_ply(format, elements), ".ply",
+                                              [](const std::string& f) { return read_ply(f); },
                                               rng);
     }
 }

@@ -1,7 +1,10 @@
 // Scale-free geometry (Octree::build_in_unit_frame): the same cloud written in any unit gives the
 // same V-map, and queries, outputs and the .vmap stay in the input's units.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <limits>
@@ -12,6 +15,7 @@
 #include "test_util.h"
 #include "vmap/error.h"
 #include "vmap/gi.h"
+#include "vmap/io.h"
 #include "vmap/query.h"
 #include "vmap/render.h"
 
@@ -120,6 +124,91 @@ TEST_F(UnitFrame, RadiosityIsTheSameInAnyUnitAndPowerScalesWithArea) {
         const Vec3 pa = total_power(*unit_, a), pb = total_power(vm, b);
         EXPECT_NEAR(pb.x / (s * s), pa.x, 1e-4 * pa.x) << s;
     }
+}
+
+// A georeferenced scan: the cornell room 4 million units from its file's zero, where a float
+// is 0.25-0.5 apart. The file holds doubles.
+constexpr std::array<double, 3> kFar = {512345.0, 4123456.0, 210.0};
+
+TEST_F(UnitFrame, ACloudFarFromItsFilesZeroIsReadAroundItself) {
+    ScratchDir dir;
+    // The room on a grid of 2^-24 (every coordinate then exact in double 4e6 out, so the file
+    // holds exactly the room moved).
+    PointSet home = *cloud_;
+    for (Vec3& v : home.positions)
+        v = {std::ldexp(std::round(std::ldexp(v.x, 24)), -24),
+             std::ldexp(std::round(std::ldexp(v.y, 24)), -24),
+             std::ldexp(std::round(std::ldexp(v.z, 24)), -24)};
+    PointSet far = home;
+    far.origin = kFar;  // write_ply adds it back, in double
+    const std::string path = dir.path("far.ply");
+    write_ply(path, far);
+    // Read as floats, the room collapses onto a few float steps.
+    const ModelData raw = read_model(path);
+    float worst = 0;
+    for (size_t i = 0; i < raw.points.size(); ++i)
+        worst = std::max(worst, std::fabs(float(double(raw.points.positions[i].y) - kFar[1]) -
+                                          home.positions[i].y));
+    EXPECT_GT(worst, 0.05f);
+    ASSERT_TRUE(far_origin(raw.points.positions).has_value());
+    // Read around itself: the room's own floats (its points are exact in double out there), and
+    // the V-map of the room read at home.
+    std::vector<std::string> done;
+    const PointSet back = load_point_cloud(path, {}, &done);
+    EXPECT_EQ(back.origin, kFar);  // the centre to a whole unit (the room is 0.55 wide)
+    ASSERT_EQ(back.size(), home.size());
+    for (size_t i = 0; i < back.size(); ++i) ASSERT_EQ(back.positions[i], home.positions[i]) << i;
+    ASSERT_FALSE(done.empty());
+    EXPECT_NE(done[0].find("coordinates: relative to (512345, 4123456, 210)"), std::string::npos)
+        << done[0];
+    const VisibilityMap vm = build_vmap(back, cpu_params(5, 4));
+    ASSERT_GT(vm.num_links(), 100u);
+    expect_same_links(build_vmap(home, cpu_params(5, 4)), vm);
+    // The .vmap keeps the origin, and outputs go back to the file's coordinates.
+    save_vmap(dir.path("far.vmap"), vm);
+    const VisibilityMap loaded = load_vmap(dir.path("far.vmap"));
+    EXPECT_EQ(loaded.points().origin, kFar);
+    const PointSet out = points_in_input_order(loaded);
+    EXPECT_EQ(out.origin, kFar);
+    write_ply(dir.path("out.ply"), out);
+    EXPECT_EQ(slurp(dir.path("out.ply")), slurp(path));
+    // A map without one writes the file it always did: no origin field.
+    save_vmap(dir.path("home.vmap"), *unit_);
+    EXPECT_EQ(load_vmap(dir.path("home.vmap")).points().origin, (std::array<double, 3>{0, 0, 0}));
+}
+
+TEST_F(UnitFrame, FarPointListsAndViewpointsAreTheFilesCoordinates) {
+    ScratchDir dir;
+    std::string text;
+    for (const Vec3& p : cloud_->positions)
+        text += fmt::format("{:.9f} {:.9f} {:.9f}\n", p.x + kFar[0], p.y + kFar[1], p.z + kFar[2]);
+    const std::string path = dir.write("far.xyz", text);
+    CloudOptions o;
+    o.viewpoint = std::array<double, 3>{kFar[0] + 0.27, kFar[1] + 0.27, kFar[2] + 0.27};
+    const PointSet back = load_point_cloud(path, o);
+    EXPECT_EQ(back.origin, kFar);
+    ASSERT_EQ(back.size(), cloud_->size());
+    const Vec3 inside{0.27f, 0.27f, 0.27f};
+    for (size_t i = 0; i < back.size(); ++i) {
+        ASSERT_NEAR(back.positions[i].x, cloud_->positions[i].x, 1e-6) << i;
+        ASSERT_NEAR(back.positions[i].z, cloud_->positions[i].z, 1e-6) << i;
+        // Toward the viewpoint in the room's middle, which the file's coordinates name.
+        ASSERT_GT(dot(back.normals[i], inside - back.positions[i]), 0) << i;
+    }
+}
+
+TEST(UnitFrameLimits, OnlyCloudsFarForTheirSizeAreMoved) {
+    const PointSet p = sample(scene_path("cornell-empty"), 300);
+    EXPECT_FALSE(far_origin(p.positions).has_value());  // at home
+    PointSet near = p;
+    for (Vec3& v : near.positions) v = v + Vec3{100, 0, 0};  // 180 room widths out: still exact enough
+    EXPECT_FALSE(far_origin(near.positions).has_value());
+    PointSet out = p;
+    for (Vec3& v : out.positions) v = v + Vec3{0, 0, -1000};
+    const auto o = far_origin(out.positions);
+    ASSERT_TRUE(o.has_value());
+    EXPECT_EQ(*o, (std::array<double, 3>{0, 0, -1000}));
+    EXPECT_FALSE(far_origin({}).has_value());
 }
 
 TEST(UnitFrameLimits, OnlyWhatCannotBeRepresentedIsRefused) {

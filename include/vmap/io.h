@@ -45,7 +45,7 @@ struct ModelData {
 // (emitted radiosity, W/m^2 per channel, for `vmap gi`) and sensor_x/y/z (or vp_x/y/z,
 // viewpoint_x/y/z); element "face" with a list property "vertex_indices" (or "vertex_index");
 // other elements and properties are skipped (and noted).
-ModelData read_ply(const std::string& path);
+ModelData read_ply(const std::string& path, const std::array<double, 3>& origin = {});
 
 // OFF (and COFF/NOFF headers): vertex count, face count, edge count; polygons fan-triangulated.
 ModelData read_off(const std::string& path);
@@ -55,14 +55,14 @@ ModelData read_off(const std::string& path);
 // comments. An optional first line names the columns ("//X,Y,Z,R,G,B,Nx,Ny,Nz" or "x y z nx ny
 // nz"); without it the column count and the extension say what they hold (src/io/xyz.cpp). A
 // .pts file may start with its point count. Colours are 0..1 floats or 0..255 integers.
-ModelData read_xyz(const std::string& path);
+ModelData read_xyz(const std::string& path, const std::array<double, 3>& origin = {});
 
 // PCD (PCL's point cloud format, v0.5-0.7): DATA ascii, binary or binary_compressed (LZF);
 // fields in any order: x y z, normal_x normal_y normal_z, rgb/rgba (packed), emission_r/g/b;
 // others (curvature, intensity, padding "_") skipped and noted. Points with NaN coordinates
 // (PCL's "no measurement" in organised clouds) are left out, with a note. The VIEWPOINT line is
 // kept in ModelData::viewpoint.
-ModelData read_pcd(const std::string& path);
+ModelData read_pcd(const std::string& path, const std::array<double, 3>& origin = {});
 
 // Wavefront OBJ: "v x y z [w] [r g b]", "vn", "f" with polygons of any size in the forms i,
 // i/t, i//n and i/t/n, negative (relative) indices; "vt", "l", "p", groups, materials and
@@ -76,7 +76,20 @@ ModelData read_stl(const std::string& path);
 
 // Dispatches on the extension (case-insensitive): .ply, .off, .xyz/.xyzn/.xyzrgb/.pts/.asc/.csv,
 // .pcd, .obj, .stl; throws for anything else.
-ModelData read_model(const std::string& path);
+//
+// `origin`: positions and sensor positions come back relative to this point of the file's
+// coordinates (points.origin says so), subtracted in double before the float conversion, so a
+// cloud millions of units from its file's zero keeps its precision. The PLY, point-list and PCD
+// readers take the file's values in double; OFF, OBJ and STL store floats and are shifted after
+// reading (their precision is the file's float).
+ModelData read_model(const std::string& path, const std::array<double, 3>& origin = {});
+
+// A point far from where positions are best read: the centre of `points`' bounding box, rounded
+// to a multiple of the power of two at or above the box's extent, when the box lies farther from
+// zero than 256 extents (float positions out there lose more than 3e-5 of the extent: a
+// millimetre in a 30 m room), else nullopt. load_point_cloud reads such a cloud again relative to
+// it.
+std::optional<std::array<double, 3>> far_origin(const std::vector<Vec3>& positions);
 
 // Whether `path` ends with `suffix`, ignoring ASCII case (has_extension("A.PLY", ".ply")).
 bool has_extension(std::string_view path, std::string_view suffix);

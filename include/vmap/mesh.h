@@ -24,6 +24,11 @@ struct PointSet {
     std::vector<Vec3> colors;
     std::vector<float> radii;
     std::vector<Vec3> emission;  // emitted radiosity (W/m^2 per channel) for lights; optional
+    // Where the positions' zero lies in the coordinates they were read in: a cloud far from its
+    // file's origin (a georeferenced scan, millions of units out) is read relative to a point
+    // near its centre, since float positions out there would lose the millimetres
+    // (load_point_cloud). Zero for everything else; write_ply adds it back.
+    std::array<double, 3> origin{0, 0, 0};
 
     size_t size() const { return positions.size(); }
     bool has_normals() const { return !normals.empty(); }

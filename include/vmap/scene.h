@@ -121,7 +121,9 @@ enum class NormalsMode {
 
 struct CloudOptions {
     NormalsMode normals = NormalsMode::kKeep;
-    std::optional<Vec3> viewpoint;  // orient every normal toward it (the scanner's position)
+    // Orient every normal toward it (the scanner's position), in the file's coordinates (double:
+    // a georeferenced scan's millions of units; PointSet::origin is subtracted).
+    std::optional<std::array<double, 3>> viewpoint;
 };
 
 // Reads a raw point cloud (PLY or OFF; faces ignored) and completes it: normals per

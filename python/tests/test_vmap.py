@@ -198,3 +198,20 @@ def test_bad_input_raises_the_library_message(small, tmp_path):
 def test_cuda_without_a_device_is_an_error():
     with pytest.raises(vmap.Error, match="backend cuda"):
         vmap.build_file(SCENE, points=500, max_height=4, backend="cuda")
+
+
+def test_a_cloud_far_from_its_files_zero_keeps_its_coordinates(small, tmp_path):
+    # The small room 4 million units out, as a georeferenced scan's file holds it (doubles).
+    far = np.array([512345.0, 4123456.0, 210.0])
+    pts = small.points.astype(np.float64) + far
+    path = tmp_path / "far.ply"
+    with open(path, "w") as f:
+        f.write("ply\nformat ascii 1.0\nelement vertex %d\n" % len(pts))
+        f.write("property double x\nproperty double y\nproperty double z\n")
+        f.write("property float nx\nproperty float ny\nproperty float nz\nend_header\n")
+        for p, n in zip(pts, small.normals):
+            f.write("%.9f %.9f %.9f %g %g %g\n" % (*p, *n))
+    vm = vmap.build_file(str(path), **OPTS)
+    assert vm.origin == (512345.0, 4123456.0, 210.0)
+    np.testing.assert_allclose(vm.points + np.array(vm.origin), pts, rtol=0, atol=1e-6)
+    assert small.origin == (0.0, 0.0, 0.0)

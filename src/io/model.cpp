@@ -6,6 +6,7 @@
 // clang-format on
 
 #include <algorithm>
+#include <cmath>
 #include <cctype>
 #include <filesystem>
 #include <string>
@@ -81,23 +82,61 @@ bool obj_has_faces(InputFile& in) {
 
 }  // namespace
 
-ModelData read_model(const std::string& path) {
+namespace {
+
+// OFF, OBJ and STL hold floats (or are read as such): their positions move to `origin` after
+// reading, in double.
+ModelData shifted(ModelData md, const std::array<double, 3>& origin) {
+    if (origin == std::array<double, 3>{0, 0, 0}) return md;
+    for (Vec3& p : md.points.positions) {
+        p = {float(double(p.x) - origin[0]), float(double(p.y) - origin[1]),
+             float(double(p.z) - origin[2])};
+    }
+    md.points.origin = origin;
+    return md;
+}
+
+}  // namespace
+
+ModelData read_model(const std::string& path, const std::array<double, 3>& origin) {
     io::check_input_path(path);  // a FIFO would block the reader, a folder fail obscurely
     switch (kind_of(path)) {
         case Kind::kPly:
-            return read_ply(path);
+            return read_ply(path, origin);
         case Kind::kOff:
-            return read_off(path);
+            return shifted(read_off(path), origin);
         case Kind::kXyz:
-            return read_xyz(path);
+            return read_xyz(path, origin);
         case Kind::kPcd:
-            return read_pcd(path);
+            return read_pcd(path, origin);
         case Kind::kObj:
-            return read_obj(path);
+            return shifted(read_obj(path), origin);
         case Kind::kStl:
-            return read_stl(path);
+            return shifted(read_stl(path), origin);
     }
     return {};
+}
+
+std::optional<std::array<double, 3>> far_origin(const std::vector<Vec3>& positions) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (const Vec3& p : positions) {
+        const double c[3] = {p.x, p.y, p.z};
+        for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], c[a]), hi[a] = std::max(hi[a], c[a]);
+    }
+    double extent = 0, far = 0;
+    for (int a = 0; a < 3; ++a) {
+        extent = std::max(extent, hi[a] - lo[a]);
+        far = std::max({far, std::fabs(lo[a]), std::fabs(hi[a])});
+    }
+    // All at one float: the file's points may differ by less than a float step out there.
+    if (extent == 0) extent = far * 0x1p-23;
+    if (!(extent > 0) || !std::isfinite(far) || far <= 256 * extent) return std::nullopt;
+    // A round number: the centre to a multiple of 2^k >= extent (exact in double; the cloud then
+    // lies within 1.5 extents of it).
+    const double step = std::ldexp(1.0, std::ilogb(extent) + 1);
+    std::array<double, 3> o;
+    for (int a = 0; a < 3; ++a) o[a] = std::round(0.5 * (lo[a] + hi[a]) / step) * step;
+    return o;
 }
 
 // A malformed header is the reader's to report: here it only decides which path to take.

@@ -277,7 +277,8 @@ struct Sink {
             ++nan_points;
             return;
         }
-        const Vec3 p{float(x), float(y), float(z)};
+        const std::array<double, 3>& o = out.points.origin;  // read_pcd's origin
+        const Vec3 p{float(x - o[0]), float(y - o[1]), float(z - o[2])};
         if (!is_finite(p)) fail(in.path(), where(), ": non-finite coordinate");
         PointSet& ps = out.points;
         ps.positions.push_back(p);
@@ -469,12 +470,18 @@ void add_notes(const std::string& path, const Header& h, const Sink& sink, Model
 
 }  // namespace
 
-ModelData read_pcd(const std::string& path) try {
+ModelData read_pcd(const std::string& path, const std::array<double, 3>& origin) try {
     InputFile in(path);
     if (in.size() == 0) fail(path, "empty file");
     const Header h = parse_header(in);
     ModelData out;
+    out.points.origin = origin;
     out.viewpoint = h.viewpoint;
+    if (out.viewpoint) {
+        Vec3& v = out.viewpoint->origin;
+        v = {float(double(v.x) - origin[0]), float(double(v.y) - origin[1]),
+             float(double(v.z) - origin[2])};
+    }
     Sink sink(h, out);
     if (h.data == Data::kAscii) {
         read_ascii(in, h, sink);

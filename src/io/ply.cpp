@@ -719,7 +719,9 @@ void read_values(Source& source, const Element& element, uint64_t i, double* v,
 template <class Source>
 void add_vertex(const std::string& path, const Source& source, const VertexLayout& lay,
                 const double* v, ModelData& out) {
-    const Vec3 pos{static_cast<float>(v[kX]), static_cast<float>(v[kY]), static_cast<float>(v[kZ])};
+    const std::array<double, 3>& o = out.points.origin;  // read_ply's origin
+    const Vec3 pos{static_cast<float>(v[kX] - o[0]), static_cast<float>(v[kY] - o[1]),
+                   static_cast<float>(v[kZ] - o[2])};
     if (!is_finite(pos)) {
         fail(path, source.where(), ": non-finite coordinate (", v[kX], ", ", v[kY], ", ", v[kZ],
              ")");
@@ -745,8 +747,8 @@ void add_vertex(const std::string& path, const Source& source, const VertexLayou
         out.points.colors.push_back(c);
     }
     if (lay.has_sensors) {
-        const Vec3 q{static_cast<float>(v[kSensorX]), static_cast<float>(v[kSensorY]),
-                     static_cast<float>(v[kSensorZ])};
+        const Vec3 q{static_cast<float>(v[kSensorX] - o[0]), static_cast<float>(v[kSensorY] - o[1]),
+                     static_cast<float>(v[kSensorZ] - o[2])};
         if (!is_finite(q)) {
             fail(path, source.where(), ": non-finite sensor position (", v[kSensorX], ", ",
                  v[kSensorY], ", ", v[kSensorZ], ")");
@@ -825,9 +827,10 @@ void put_le(std::string& out, T v) {
     out.append(bytes, sizeof(T));
 }
 
-void put_text(std::string& out, float v) {
+// Shortest representation that reads back to the same float (double).
+template <class T>
+void put_text(std::string& out, T v) {
     char buffer[32];
-    // Shortest representation that reads back to the same float.
     const auto result = std::to_chars(buffer, buffer + sizeof(buffer), v);
     out.append(buffer, result.ptr);
 }
@@ -840,11 +843,12 @@ uint8_t colour_byte(float c) {
 
 }  // namespace
 
-ModelData read_ply(const std::string& path) try {
+ModelData read_ply(const std::string& path, const std::array<double, 3>& origin) try {
     const FileBuffer file = load_file(path);
     if (file.size == 0) fail(path, "empty file");
     const Header header = parse_header(path, file);
     ModelData out;
+    out.points.origin = origin;
     const char* data = file.begin() + header.data_offset;
     if (header.format == Format::kAscii) {
         AsciiSource source(path, data, file.end(), header.data_line);
@@ -896,12 +900,17 @@ bool check_writable(const std::string& path, const PointSet& points) {
     return emits;
 }
 
+bool shifted(const PointSet& points) { return points.origin != std::array<double, 3>{0, 0, 0}; }
+
 std::string ply_header(const PointSet& points, bool binary, bool emits) {
     const size_t n = points.size();
     std::string header = "ply\nformat ";
     header += binary ? "binary_little_endian" : "ascii";
     header += " 1.0\ncomment written by vmap\nelement vertex " + std::to_string(n) + "\n";
-    header += "property float x\nproperty float y\nproperty float z\n";
+    // Positions with an origin go back to the input's coordinates, in double (float would lose
+    // what the origin kept).
+    header += shifted(points) ? "property double x\nproperty double y\nproperty double z\n"
+                              : "property float x\nproperty float y\nproperty float z\n";
     if (points.has_normals()) header += "property float nx\nproperty float ny\nproperty float nz\n";
     if (points.has_colors()) {
         header += "property uchar red\nproperty uchar green\nproperty uchar blue\n";
@@ -919,9 +928,16 @@ std::string ply_header(const PointSet& points, bool binary, bool emits) {
 // Point i's columns in the binary (little-endian) encoding.
 void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
     const Vec3 p = points.positions[i];
-    put_le(chunk, p.x);
-    put_le(chunk, p.y);
-    put_le(chunk, p.z);
+    if (shifted(points)) {
+        const std::array<double, 3>& o = points.origin;
+        put_le(chunk, double(p.x) + o[0]);
+        put_le(chunk, double(p.y) + o[1]);
+        put_le(chunk, double(p.z) + o[2]);
+    } else {
+        put_le(chunk, p.x);
+        put_le(chunk, p.y);
+        put_le(chunk, p.z);
+    }
     if (points.has_normals()) {
         const Vec3 q = points.normals[i];
         put_le(chunk, q.x);
@@ -945,11 +961,20 @@ void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool
 // Point i's line in the ASCII encoding.
 void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
     const Vec3 p = points.positions[i];
-    put_text(chunk, p.x);
-    chunk += ' ';
-    put_text(chunk, p.y);
-    chunk += ' ';
-    put_text(chunk, p.z);
+    if (shifted(points)) {
+        const std::array<double, 3>& o = points.origin;
+        put_text(chunk, double(p.x) + o[0]);
+        chunk += ' ';
+        put_text(chunk, double(p.y) + o[1]);
+        chunk += ' ';
+        put_text(chunk, double(p.z) + o[2]);
+    } else {
+        put_text(chunk, p.x);
+        chunk += ' ';
+        put_text(chunk, p.y);
+        chunk += ' ';
+        put_text(chunk, p.z);
+    }
     if (points.has_normals()) {
         const Vec3 q = points.normals[i];
         for (float f : {q.x, q.y, q.z}) {

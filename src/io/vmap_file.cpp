@@ -7,8 +7,9 @@
 //   payload: sections, each: 4-char tag | u64 bytes | data
 //     PARM: octree and visibility parameters (version 5: the octree's delta_floor; version 6:
 //           the predicate's end_window last)
-//     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission) | positions, normals, [colours],
-//           [radii], [emission]  (octree order)
+//     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission, 8 origin) | positions, normals,
+//           [colours], [radii], [emission]  (octree order), [f64 origin[3]: where the input's
+//           coordinates had the positions' zero, PointSet::origin; files without it are as before)
 //     ORDR: u32 order[n] (octree position -> input index)
 //     TREE: node and leaf counts, root cube, then the octree's arrays in the order of
 //           include/vmap/octree.h (spheres, boxes, half_size, skip, ...), then f64 scale (input
@@ -254,14 +255,16 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
     w.put(n);
-    const uint8_t mask =
-        (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) | (ps.emission.empty() ? 0 : 4);
+    const bool shifted = ps.origin != std::array<double, 3>{0, 0, 0};
+    const uint8_t mask = (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) |
+                         (ps.emission.empty() ? 0 : 4) | (shifted ? 8 : 0);
     w.put(mask);
     w.vec(ps.positions);
     w.vec(ps.normals);
     if (mask & 1) w.vec(ps.colors);
     if (mask & 2) w.vec(ps.radii);
     if (mask & 4) w.vec(ps.emission);
+    if (mask & 8) w.put(ps.origin);
     w.end(s);
     s = w.begin("ORDR");
     w.vec(vm.order());
@@ -444,6 +447,12 @@ uint64_t read_points(Reader& r, detail::MapData& d, uint32_t version) {
     if (mask & 1) r.vec(ps.colors, n);
     if (mask & 2) r.vec(ps.radii, n);
     if (mask & 4) r.vec(ps.emission, n);
+    if (mask & 8) {
+        ps.origin = r.get<std::array<double, 3>>();
+        for (double c : ps.origin)
+            if (!std::isfinite(c)) r.fail("the points' origin is not finite");
+    }
+    if (mask & ~15) r.fail(fmt::format("unknown point fields (mask {})", int(mask)));
     r.end_section(e);
 
     e = r.begin_section("ORDR");

@@ -186,9 +186,11 @@ struct Reader {
     ModelData out;
     bool colours_all_integers = true;
     float max_colour = 0;
+    bool shift = false;  // out.points.origin is not zero
 
-    float value(const std::vector<std::string_view>& w, int column, const char* what) {
-        float v = 0;
+    template <class T = float>
+    T value(const std::vector<std::string_view>& w, int column, const char* what) {
+        T v = 0;
         if (!parse_real(w[column], v)) {
             fail(in.path(), "line ", in.line(), ": ", what, ": invalid number ", quoted(w[column]));
         }
@@ -209,7 +211,17 @@ struct Reader {
                  w.size());
         }
         PointSet& p = out.points;
-        p.positions.push_back(triple(w, layout.xyz, "coordinate"));
+        if (shift) {  // in double, relative to read_xyz's origin (a survey's millions of units)
+            const int(&xyz)[3] = layout.xyz;
+            const std::array<double, 3>& o = p.origin;
+            const Vec3 pos{float(value<double>(w, xyz[0], "coordinate") - o[0]),
+                           float(value<double>(w, xyz[1], "coordinate") - o[1]),
+                           float(value<double>(w, xyz[2], "coordinate") - o[2])};
+            if (!is_finite(pos)) fail(in.path(), "line ", in.line(), ": coordinate: out of range");
+            p.positions.push_back(pos);
+        } else {
+            p.positions.push_back(triple(w, layout.xyz, "coordinate"));
+        }
         if (layout.normal[0] >= 0) {
             p.normals.push_back(triple(w, layout.normal, "normal"));
             if (layout.guessed_at != 0 && std::fabs(norm3(p.normals.back()) - 1) >= 0.01) {
@@ -258,11 +270,13 @@ struct Reader {
 
 }  // namespace
 
-ModelData read_xyz(const std::string& path) try {
+ModelData read_xyz(const std::string& path, const std::array<double, 3>& origin) try {
     InputFile in(path);
     if (in.size() == 0) fail(path, "empty file");
     const std::string ext = detail::lower(std::filesystem::path(path).extension().string());
     Reader r(in);
+    r.out.points.origin = origin;
+    r.shift = origin != std::array<double, 3>{0, 0, 0};
     std::string_view line;
     std::vector<std::string_view> words;
     bool have_layout = false, first = true;

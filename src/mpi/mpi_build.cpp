@@ -668,6 +668,7 @@ std::string share_input(Run& r, Early& e) {
                      p.emission.size()};
     MPI_Bcast(n, 5, MPI_UINT64_T, 0, MPI_COMM_WORLD);
     MPI_Bcast(&e.params.octree, int(sizeof(OctreeParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
+    MPI_Bcast(p.origin.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     std::string err = r.c.agree(attempt([&] {
         p.positions.resize(n[0]), p.normals.resize(n[1]), p.colors.resize(n[2]);
         p.radii.resize(n[3]), p.emission.resize(n[4]);

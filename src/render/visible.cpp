@@ -26,6 +26,7 @@ PointSet points_in_input_order(const VisibilityMap& vm) {
     const Octree& t = vm.octree();  // from the octree's frame back to input units (exact)
     for (Vec3& q : out.positions) q = t.to_world(q);
     for (float& r : out.radii) r = float(r * t.scale());
+    out.origin = p.origin;  // where the input had the positions' zero
     return out;
 }
 
@@ -52,6 +53,7 @@ void write_colored_ply(const std::string& path, const PointSet& points,
             fmt::format("{}: {} colours for {} points", path, colors.size(), points.size()));
     PointSet out;
     out.positions = points.positions;
+    out.origin = points.origin;
     out.normals = points.normals;
     out.radii = points.radii;
     out.colors.resize(colors.size());

@@ -216,11 +216,17 @@ namespace {
 std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, const CloudOptions& o,
                              const std::string& path) {
     const bool had = ps.has_normals();
+    std::optional<Vec3> view;  // o.viewpoint relative to the points' origin
+    if (o.viewpoint) {
+        const std::array<double, 3>& v = *o.viewpoint;
+        view = Vec3{float(v[0] - ps.origin[0]), float(v[1] - ps.origin[1]),
+                    float(v[2] - ps.origin[2])};
+    }
     if (o.normals == NormalsMode::kFlip) {
         if (!had)
             throw Error(fmt::format("{}: --normals flip: the file has no normals to flip", path));
         for (Vec3& n : ps.normals) n = -n;
-        if (o.viewpoint) orient_toward(ps, *o.viewpoint);
+        if (view) orient_toward(ps, *view);
         return o.viewpoint ? "normals: the file's, flipped, then toward the viewpoint"
                            : "normals: the file's, flipped";
     }
@@ -229,7 +235,7 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
     if (o.normals == NormalsMode::kOutward) np.orientation = Orientation::kOutward;
     if (o.viewpoint) {
         np.orientation = Orientation::kViewpoint;
-        np.viewpoint = *o.viewpoint;
+        np.viewpoint = *view;
     }
     const bool estimate = !had || o.normals == NormalsMode::kEstimate;
     const bool sensed =
@@ -241,6 +247,10 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
         estimate_normals(ps, np, path.c_str(), &rep);
     } else {
         orient_normals(ps, np, path.c_str(), &rep);
+    }
+    if (o.viewpoint && ps.origin != std::array<double, 3>{0, 0, 0}) {  // the file's coordinates
+        const std::array<double, 3>& v = *o.viewpoint;
+        rep.method = fmt::format("toward the viewpoint ({}, {}, {})", v[0], v[1], v[2]);
     }
     if (sensed) {
         orient_toward(ps, sensors, path.c_str());
@@ -267,10 +277,19 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
 PointSet load_point_cloud(const std::string& path, const CloudOptions& options,
                           std::vector<std::string>* done) {
     ModelData md = read_model(path);
+    std::vector<std::string> lines;
+    // Far from the file's zero, float positions lose what the file holds: read it again
+    // relative to a point near the cloud (PointSet::origin).
+    if (const auto origin = far_origin(md.points.positions)) {
+        md = read_model(path, *origin);
+        lines.push_back(fmt::format(
+            "coordinates: relative to ({}, {}, {}), the cloud being far from the file's zero "
+            "for its size; positions given and written are the file's",
+            (*origin)[0], (*origin)[1], (*origin)[2]));
+    }
     for (const std::string& note : md.notes) fmt::print(stderr, "note:       {}\n", note);
     PointSet ps = std::move(md.points);
     if (ps.size() == 0) throw Error(fmt::format("{}: the point cloud is empty", path));
-    std::vector<std::string> lines;
     const std::string normals = complete_normals(ps, md.sensors, options, path);
     if (!normals.empty()) lines.push_back(normals);
     if (!ps.has_colors()) ps.colors.assign(ps.size(), Vec3{0.8f, 0.8f, 0.8f});

@@ -24,11 +24,17 @@ int run_info(const std::string& path, bool json) {
         j["points"] = vm.points().size();
         j["links"] = vm.num_links();
         j["links_per_level"] = links_per_level(vm);
+        const std::array<double, 3>& o = vm.points().origin;
+        if (o != std::array<double, 3>{0, 0, 0}) j["origin"] = o;
         fmt::print("{}\n", j.dump(2));
         return 0;
     }
     fmt::print("file:       {} ({} bytes)\n", path, fs::file_size(path));
     fmt::print("points:     {}\n", vm.points().size());
+    const std::array<double, 3>& o = vm.points().origin;
+    if (o != std::array<double, 3>{0, 0, 0})
+        fmt::print("origin:     ({}, {}, {}): the input's coordinates are the points' plus this\n",
+                   o[0], o[1], o[2]);
     print_params(vm);
     fmt::print("links:      {}\n", vm.num_links());
     print_tree_summary(vm);

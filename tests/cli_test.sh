@@ -329,6 +329,13 @@ if expect_ok "build a cloud far from its file's zero" \
         fail "the far map's nearest point is not printed in the file's coordinates"
         show query far.vmap --from-pos 512345.1,4123456,210
     fi
+    if expect_ok "info on a far map" info far.vmap &&
+        grep -q '^origin: *(512345, 4123456, 210)' out.txt; then
+        ok "info says where the far map's points have their zero"
+    else
+        fail "info does not print the far map's origin"
+        show info far.vmap
+    fi
 fi
 expect_input_error "--normals flip on a cloud without normals" sphere.ply \
     build sphere.ply --normals flip --max-height 4 -o flip.vmap

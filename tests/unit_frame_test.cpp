@@ -18,6 +18,7 @@
 #include "vmap/io.h"
 #include "vmap/query.h"
 #include "vmap/render.h"
+#include "vmap/scene.h"
 
 namespace vmap {
 namespace {
@@ -175,6 +176,22 @@ TEST_F(UnitFrame, ACloudFarFromItsFilesZeroIsReadAroundItself) {
     // A map without one writes the file it always did: no origin field.
     save_vmap(dir.path("home.vmap"), *unit_);
     EXPECT_EQ(load_vmap(dir.path("home.vmap")).points().origin, (std::array<double, 3>{0, 0, 0}));
+}
+
+// A scene file's frame is the file's: a far cloud in it goes back there (in float, as before),
+// so that its clouds and meshes stay together.
+TEST_F(UnitFrame, AFarCloudInASceneFileStaysInTheFilesFrame) {
+    ScratchDir dir;
+    PointSet far = *cloud_;
+    far.origin = kFar;
+    write_ply(dir.path("far.ply"), far);
+    const Scene sc = load_scene(dir.write("s.json", R"({"room": null, "clouds": [{"file": "far.ply"}]})"));
+    ASSERT_EQ(sc.clouds.size(), 1u);
+    const PointSet& c = sc.clouds[0];
+    EXPECT_EQ(c.origin, (std::array<double, 3>{0, 0, 0}));
+    ASSERT_EQ(c.size(), cloud_->size());
+    for (size_t i = 0; i < c.size(); ++i)
+        ASSERT_NEAR(c.positions[i].y, cloud_->positions[i].y + kFar[1], 0.5) << i;
 }
 
 TEST_F(UnitFrame, FarPointListsAndViewpointsAreTheFilesCoordinates) {

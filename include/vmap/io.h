@@ -90,6 +90,10 @@ ModelData read_model(const std::string& path, const std::array<double, 3>& origi
 // millimetre in a 30 m room), else nullopt. load_point_cloud reads such a cloud again relative to
 // it.
 std::optional<std::array<double, 3>> far_origin(const std::vector<Vec3>& positions);
+// Moves `points` back to the file's coordinates (positions + origin, in float; origin zero):
+// for a cloud that shares a frame with other input (a scene file's clouds and meshes, the
+// triangles `vmap validate --cloud` scores it against).
+void to_file_frame(PointSet& points);
 
 // Whether `path` ends with `suffix`, ignoring ASCII case (has_extension("A.PLY", ".ply")).
 bool has_extension(std::string_view path, std::string_view suffix);

@@ -117,6 +117,13 @@ ModelData read_model(const std::string& path, const std::array<double, 3>& origi
     return {};
 }
 
+void to_file_frame(PointSet& points) {
+    const std::array<double, 3> o = points.origin;
+    if (o == std::array<double, 3>{0, 0, 0}) return;
+    for (Vec3& p : points.positions) p = {float(p.x + o[0]), float(p.y + o[1]), float(p.z + o[2])};
+    points.origin = {0, 0, 0};
+}
+
 std::optional<std::array<double, 3>> far_origin(const std::vector<Vec3>& positions) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (const Vec3& p : positions) {

@@ -300,6 +300,9 @@ void add_cloud(const Ctx& cx, const json& c, const std::string& f, const fs::pat
     } catch (const Error& e) {
         cx.fail(f + ".file", e.what());
     }
+    // The scene's frame is the file's: a cloud read around a far origin goes back to it (its
+    // placement below may move it, and other clouds and meshes share the frame).
+    to_file_frame(ps);
     if (c.contains("scale") && c["scale"].is_array())
         cx.fail(f + ".scale", "a per-axis scale applies to meshes, not clouds (give one factor)");
     const Placement pl = placement(cx, c, f, file.string(), ps.positions, sc);

@@ -179,6 +179,7 @@ struct CloudAdaptor3 {
 ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
     ScoredPoints sp;
     sp.pred = load_point_cloud(cloud);
+    to_file_frame(sp.pred);  // the scene's triangles are in the file's coordinates
     Scene dense = scene;
     dense.points = std::clamp<uint64_t>(8 * sp.pred.size(), 200000, 4000000);
     dense.pattern = SamplePattern::kUniform;  // a lookup table: no need to thin it

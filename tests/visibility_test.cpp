@@ -448,10 +448,16 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
         for (int32_t l = 0; l < v.num_leaves; ++l)
             flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
         SCOPED_TRACE(seed);
-        // Every lane loop this CPU runs (SSE2, AVX2, AVX-512), and a packet not a power of 2.
-        for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa)
-            packet_matches_pairs<32>(v, vp, isa, &alone);
-        packet_matches_pairs<7>(v, vp, 0, &alone);
+        // Without and with end windows (the vector occluder test of the AVX-512 loop takes
+        // every rule of counts_as_occluder); every lane loop this CPU runs (SSE2, AVX2,
+        // AVX-512), and a packet not a power of 2.
+        for (float window : {0.f, 2.f}) {
+            vp.end_window = window;
+            vp.eps = window > 0 ? 0.005f : 0.01f;
+            for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa)
+                packet_matches_pairs<32>(v, vp, isa, &alone);
+            packet_matches_pairs<7>(v, vp, 0, &alone);
+        }
     }
     EXPECT_GT(alone, 100);  // pairs with a zero direction component, which walk alone
     EXPECT_GT(flagged, 10);

@@ -15,6 +15,9 @@
 // and, to keep pairs that cannot be visible out of the packets (which then fill with pairs that
 // walk),
 //   bool may_be_visible(int32_t a, int32_t b) const;  // false: the pair is not visible.
+// or, the same for up to 8 columns of one row at once,
+//   uint32_t facing_mask(int32_t a, int32_t b0, int32_t n) const;  // bit i: (a, b0 + i)
+//                                                                  // may be visible
 #pragma once
 
 #include <tbb/blocked_range.h>
@@ -176,9 +179,13 @@ class HostBackend : public Backend {
                     for (uint64_t k = k0; k < n; k += rw) {
                         const WordPos at = word_pos(job, local + k);
                         uint32_t* w = rg.bits + job.word_offset + local + k;
-                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock);
-                             ++c)
-                            pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
+                        const int32_t cb = at.c0 + blk, ce = std::min(at.c1, at.c0 + blk + kBlock);
+                        if constexpr (requires { self.facing_mask(0, 0, 0); }) {
+                            if (cb < ce) pk.add_facing(at.a, job.col0 + cb, ce - cb, w, cb - at.c0);
+                        } else {
+                            for (int32_t c = cb; c < ce; ++c)
+                                pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
+                        }
                     }
             item += n;
             if (item >= rg.end || item >= rg.first[j + 1]) pk.flush();  // pairs of one job
@@ -208,6 +215,19 @@ class HostBackend : public Backend {
             }
             pa[count] = a, pb[count] = b, word[count] = w, bit[count] = m;
             if (++count == P) flush();
+        }
+        // Columns b0 .. b0 + n - 1 of row a (bits bit0 .. of word w): those that face
+        // (Derived::facing_mask) go into packets; the others are not visible.
+        void add_facing(int32_t a, int32_t b0, int32_t n, uint32_t* w, int32_t bit0) {
+            uint32_t m = self.facing_mask(a, b0, n);
+            const int32_t skipped = n - __builtin_popcount(m);
+            wc.pairs += uint64_t(skipped);
+            rg.pairs += uint64_t(skipped);
+            for (; m; m &= m - 1) {
+                const int i = __builtin_ctz(m);
+                pa[count] = a, pb[count] = b0 + i, word[count] = w, bit[count] = 1u << (bit0 + i);
+                if (++count == P) flush();
+            }
         }
         void flush() {
             if (count == 0) return;

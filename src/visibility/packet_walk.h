@@ -37,6 +37,76 @@
 
 namespace vmap::detail {
 
+#if VMAP_PACKET_ISA
+#define VMAP_ZMM_TARGET __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
+// Field f of the leaves at float offsets e (a leaf is 8 floats), lanes m; 0 elsewhere.
+VMAP_ZMM_TARGET inline __m512 gather_field(const float* base, __m512i e, __mmask16 m, int f) {
+    return _mm512_mask_i32gather_ps(_mm512_setzero_ps(), m, e, base + f, 4);
+}
+VMAP_ZMM_TARGET inline __mmask16 gather_flagged(const float* base, __m512i e, __mmask16 m) {
+    return _mm512_mask_test_epi32_mask(
+        m, _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), m, e, base + 7, 4),
+        _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+}
+// _mm512_sqrt_ps and _mm512_slli_epi32 through an all-lanes mask (GCC 12's unmasked forms start
+// from _mm512_undefined_*, which -Wuninitialized reports).
+VMAP_ZMM_TARGET inline __m512 sqrt_zmm(__m512 a) {
+    return _mm512_mask_sqrt_ps(a, __mmask16(0xffff), a);
+}
+VMAP_ZMM_TARGET inline __m512i times8_zmm(__m512i a) {
+    return _mm512_mask_slli_epi32(a, __mmask16(0xffff), a, 3);
+}
+// dot(a, b) as vec.h evaluates it: (a.x b.x + a.y b.y) + a.z b.z.
+VMAP_ZMM_TARGET inline __m512 dot_zmm(__m512 ax, __m512 ay, __m512 az, __m512 bx, __m512 by,
+                                      __m512 bz) {
+    return _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(ax, bx), _mm512_mul_ps(ay, by)),
+                         _mm512_mul_ps(az, bz));
+}
+// facing_mask's lanes on AVX-512: pair_faces' float operations on 16 columns at once (the same
+// order; vsqrtps is IEEE like sqrtf; FMA contraction is off), so the same answers.
+__attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"))) inline uint32_t facing_mask_zmm(
+    const OctreeView& t, int32_t a, int32_t b0, int n, const VisibilityParams& vp) {
+    static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "gathers read a leaf as 8 floats");
+    const float* base = reinterpret_cast<const float*>(t.leaves + b0);
+    const __mmask16 m = __mmask16(n >= 16 ? 0xffff : (1u << n) - 1);
+    const __m512i e =
+        times8_zmm(_mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0));
+    const LeafDisc& la = t.leaves[a];
+    const __m512 dx = _mm512_sub_ps(gather_field(base, e, m, 0), _mm512_set1_ps(la.centroid.x));
+    const __m512 dy = _mm512_sub_ps(gather_field(base, e, m, 1), _mm512_set1_ps(la.centroid.y));
+    const __m512 dz = _mm512_sub_ps(gather_field(base, e, m, 2), _mm512_set1_ps(la.centroid.z));
+    const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+    const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
+    __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
+    if (!(la.flags & kLeafNormalDegenerate)) {
+        const __m512 da = dot_zmm(_mm512_set1_ps(la.normal.x), _mm512_set1_ps(la.normal.y),
+                              _mm512_set1_ps(la.normal.z), dx, dy, dz);
+        faces &= _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
+    }
+    const __m512 db = dot_zmm(gather_field(base, e, m, 4), gather_field(base, e, m, 5), gather_field(base, e, m, 6), dx, dy, dz);
+    const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
+        _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
+    faces &= gather_flagged(base, e, m) | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
+    return faces;
+}
+#endif
+
+// The columns b0 + i, i < n <= 16, whose leaf pair (a, b0 + i) faces (pair_faces), as a mask.
+inline uint32_t facing_mask(const OctreeView& t, int32_t a, int32_t b0, int n,
+                            const VisibilityParams& vp) {
+#if VMAP_PACKET_ISA
+    static const bool zmm = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+    }();
+    if (zmm) return facing_mask_zmm(t, a, b0, n, vp);
+#endif
+    uint32_t m = 0;
+    for (int i = 0; i < n; ++i) m |= uint32_t(pair_faces(t.leaves[a], t.leaves[b0 + i], vp)) << i;
+    return m;
+}
+
 template <int W>
 class SegmentPacket {
     static_assert(W >= 1 && W <= 32, "a packet's lanes are the bits of one word");
@@ -48,7 +118,7 @@ class SegmentPacket {
     template <class Counters>
     uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
                   const VisibilityParams& vp, Counters* wc, bool faced = false) {
-        live_ = alone_ = 0;
+        live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
         int n = 0;  // the lanes to walk, packed
         for (int k = 0; k < count; ++k) {
             const LeafDisc& la = t.leaves[a[k]];
@@ -56,8 +126,8 @@ class SegmentPacket {
             if (!faced && !pair_faces(la, lb, vp)) continue;
             lane_[n] = k;
             a_[n] = a[k], b_[n] = b[k];
-            seg_[n] = pair_segment(la, lb, vp, true);
-            const SlabRay& r = seg_[n].ray;
+            const PairSegment sg = pair_segment(la, lb, vp, true);
+            const SlabRay& r = sg.ray;
             const bool small =
                 fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f || fabsf(r.d.z) < 1e-30f;
             live_ |= uint32_t(!small) << n;
@@ -67,15 +137,36 @@ class SegmentPacket {
             p_[0][n] = r.p.x, p_[1][n] = r.p.y, p_[2][n] = r.p.z;
             inv_[0][n] = r.inv.x, inv_[1][n] = r.inv.y, inv_[2][n] = r.inv.z;
             t0_[n] = r.t0, t1_[n] = r.t1;
+            d_[0][n] = sg.d.x, d_[1][n] = sg.d.y, d_[2][n] = sg.d.z;
+            q_[0][n] = sg.q.x, q_[1][n] = sg.q.y, q_[2][n] = sg.q.z;
+            na_[0][n] = sg.na.x, na_[1][n] = sg.na.y, na_[2][n] = sg.na.z;
+            nb_[0][n] = sg.nb.x, nb_[1][n] = sg.nb.y, nb_[2][n] = sg.nb.z;
+            len_[n] = sg.len;
+            delta_a_[n] = sg.delta_a, delta_b_[n] = sg.delta_b;
+            win_a_[n] = sg.window_a, win_b_[n] = sg.window_b;
+            no_plane_a_ |= uint32_t(!sg.plane_a) << n;
+            no_plane_b_ |= uint32_t(!sg.plane_b) << n;
             ++n;
         }
-        for (int i = n; i < W; ++i) {  // no pair: past every node (finite slabs, no NaN)
-            resume_[i] = INT_MAX;
-            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
-            t0_[i] = t1_[i] = 0.f;
-        }
+        pad(n);
         wc->facing_pairs += uint64_t(__builtin_popcount(live_));
         return n > 0;
+    }
+    // load(t, a, b, count, vp, wc, true) (every pair faces), for 16 lanes at a time where the
+    // CPU has AVX-512: pair_segment's float operations on every lane (vsqrtps and vdivps are
+    // IEEE like sqrtf and /, FMA contraction is off), so the same bits.
+    template <class Counters>
+    uint32_t load_faced(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+                        const VisibilityParams& vp, Counters* wc) {
+#if VMAP_PACKET_ISA
+        static const int isa = best_isa();
+        if (isa == 2 && W == 32) {
+            load_zmm(t, a, b, count, vp);
+            wc->facing_pairs += uint64_t(__builtin_popcount(live_));
+            return count > 0;
+        }
+#endif
+        return load(t, a, b, count, vp, wc, true);
     }
 
     // Walks `t` (the whole preorder array or a job's shaft list, as leaf_pair_visible would)
@@ -124,6 +215,104 @@ class SegmentPacket {
     }
 
   private:
+    // Lanes n..W-1 hold no pair: past every node (finite slabs, no NaN).
+    void pad(int n) {
+        for (int i = n; i < W; ++i) pad_lane(i);
+    }
+    // Lane i's PairSegment, from the lanes' arrays (the scalar occluder test).
+    PairSegment segment(int i) const {
+        PairSegment s;
+        s.p = {p_[0][i], p_[1][i], p_[2][i]};
+        s.d = {d_[0][i], d_[1][i], d_[2][i]};
+        s.len = len_[i];
+        s.faces = true;
+        s.ray = SlabRay{s.p, {inv_[0][i], inv_[1][i], inv_[2][i]}, s.d, t0_[i], t1_[i]};
+        s.q = {q_[0][i], q_[1][i], q_[2][i]};
+        s.na = {na_[0][i], na_[1][i], na_[2][i]};
+        s.nb = {nb_[0][i], nb_[1][i], nb_[2][i]};
+        s.plane_a = !(no_plane_a_ >> i & 1u);
+        s.plane_b = !(no_plane_b_ >> i & 1u);
+        s.delta_a = delta_a_[i], s.delta_b = delta_b_[i];
+        s.window_a = win_a_[i], s.window_b = win_b_[i];
+        return s;
+    }
+#if VMAP_PACKET_ISA
+    // load's lanes for pairs that all face, 16 at a time: the leaves' fields gathered (a
+    // LeafDisc is 8 floats), then pair_segment (faces = true, so len > 0) written out.
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), noinline)) void load_zmm(
+        const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+        const VisibilityParams& vp) {
+        static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "gathers read a leaf as 8 floats");
+        const float* base = reinterpret_cast<const float*>(t.leaves);
+        live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
+        const __m512 eps = _mm512_set1_ps(vp.eps), half = _mm512_set1_ps(0.5f),
+                     shrink = _mm512_set1_ps(0.999f), one = _mm512_set1_ps(1.f),
+                     window = _mm512_set1_ps(vp.end_window), tiny = _mm512_set1_ps(1e-30f);
+        const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
+        for (int o = 0; o < count; o += 16) {
+            const __mmask16 m = __mmask16(count - o >= 16 ? 0xffff : (1u << (count - o)) - 1);
+            const __m512i ia = _mm512_maskz_loadu_epi32(m, a + o);
+            const __m512i ib = _mm512_maskz_loadu_epi32(m, b + o);
+            _mm512_store_si512(a_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ia));
+            _mm512_store_si512(b_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ib));
+            const __m512i ea = times8_zmm(ia), eb = times8_zmm(ib);
+            const __m512 ax = gather_field(base, ea, m, 0), ay = gather_field(base, ea, m, 1), az = gather_field(base, ea, m, 2);
+            const __m512 bx = gather_field(base, eb, m, 0), by = gather_field(base, eb, m, 1), bz = gather_field(base, eb, m, 2);
+            const __m512 da = gather_field(base, ea, m, 3), db = gather_field(base, eb, m, 3);
+            const __m512 dx = _mm512_sub_ps(bx, ax), dy = _mm512_sub_ps(by, ay),
+                         dz = _mm512_sub_ps(bz, az);
+            const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+            const __m512 wa = _mm512_mul_ps(window, da), wb = _mm512_mul_ps(window, db);
+            // len > 0 for a facing pair: ta = min(max(eps, wa / len), 0.5), tb alike
+            const __m512 ta = min_zmm(max_zmm(eps, _mm512_div_ps(wa, len)), half);
+            const __m512 tb = min_zmm(max_zmm(eps, _mm512_div_ps(wb, len)), half);
+            _mm512_store_ps(t0_ + o, _mm512_mul_ps(ta, shrink));
+            _mm512_store_ps(t1_ + o, _mm512_sub_ps(one, _mm512_mul_ps(tb, shrink)));
+            const __mmask16 small =
+                m & (_mm512_cmp_ps_mask(_mm512_and_ps(dx, absmask), tiny, _CMP_LT_OQ) |
+                     _mm512_cmp_ps_mask(_mm512_and_ps(dy, absmask), tiny, _CMP_LT_OQ) |
+                     _mm512_cmp_ps_mask(_mm512_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
+            live_ |= uint32_t(m & ~small) << o;
+            alone_ |= uint32_t(small) << o;
+            _mm512_store_si512(resume_ + o, _mm512_mask_mov_epi32(_mm512_setzero_si512(),
+                                                                  __mmask16(~m | small),
+                                                                  _mm512_set1_epi32(INT_MAX)));
+            _mm512_store_si512(occluders_ + o, _mm512_setzero_si512());
+            _mm512_store_ps(p_[0] + o, ax), _mm512_store_ps(p_[1] + o, ay);
+            _mm512_store_ps(p_[2] + o, az);
+            _mm512_store_ps(inv_[0] + o, _mm512_div_ps(one, dx));
+            _mm512_store_ps(inv_[1] + o, _mm512_div_ps(one, dy));
+            _mm512_store_ps(inv_[2] + o, _mm512_div_ps(one, dz));
+            _mm512_store_ps(d_[0] + o, dx), _mm512_store_ps(d_[1] + o, dy);
+            _mm512_store_ps(d_[2] + o, dz);
+            _mm512_store_ps(q_[0] + o, bx), _mm512_store_ps(q_[1] + o, by);
+            _mm512_store_ps(q_[2] + o, bz);
+            _mm512_store_ps(na_[0] + o, gather_field(base, ea, m, 4)), _mm512_store_ps(na_[1] + o, gather_field(base, ea, m, 5));
+            _mm512_store_ps(na_[2] + o, gather_field(base, ea, m, 6));
+            _mm512_store_ps(nb_[0] + o, gather_field(base, eb, m, 4)), _mm512_store_ps(nb_[1] + o, gather_field(base, eb, m, 5));
+            _mm512_store_ps(nb_[2] + o, gather_field(base, eb, m, 6));
+            _mm512_store_ps(len_ + o, len);
+            _mm512_store_ps(delta_a_ + o, da), _mm512_store_ps(delta_b_ + o, db);
+            _mm512_store_ps(win_a_ + o, wa), _mm512_store_ps(win_b_ + o, wb);
+            no_plane_a_ |= uint32_t(gather_flagged(base, ea, m)) << o;
+            no_plane_b_ |= uint32_t(gather_flagged(base, eb, m)) << o;
+        }
+        for (int i = 0; i < count; ++i) lane_[i] = i;
+        // Lanes past count: padding as in pad() (no pair, finite slabs).
+        for (int i = count; i < ((count + 15) & ~15); ++i) {
+            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+            t0_[i] = t1_[i] = 0.f;
+        }
+        for (int i = (count + 15) & ~15; i < W; ++i) pad_lane(i);
+    }
+#endif
+    void pad_lane(int i) {
+        resume_[i] = INT_MAX;
+        p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+        t0_[i] = t1_[i] = 0.f;
+        a_[i] = b_[i] = -1;
+        occluders_[i] = 0;
+    }
     // 1 << i, as a table: the lane loop's masks then vectorise with SSE2 as well.
     static constexpr auto kBit = [] {
         std::array<uint32_t, W> b{};
@@ -227,12 +416,17 @@ class SegmentPacket {
                 n = w.skip;
                 continue;
             }
-            if (w.leaf >= 0) {  // occluders_at reads and sets resume_
-                _mm512_store_si512(resume_, resume[0]);
-                _mm512_store_si512(resume_ + 16, resume[1]);
-                live -= occluders_at(t, w.leaf, hits, vp, wc);
-                resume[0] = _mm512_load_si512(resume_);
-                resume[1] = _mm512_load_si512(resume_ + 16);
+            if (w.leaf >= 0) {
+                const LeafDisc& x = t.leaves[w.leaf];
+                if (!(x.flags & kLeafNormalDegenerate)) {
+                    live -= occluders_zmm(x, w.leaf, hits, resume, vp, wc);
+                } else {  // occluders_at reads and sets resume_
+                    _mm512_store_si512(resume_, resume[0]);
+                    _mm512_store_si512(resume_ + 16, resume[1]);
+                    live -= occluders_at(t, w.leaf, hits, vp, wc);
+                    resume[0] = _mm512_load_si512(resume_);
+                    resume[1] = _mm512_load_si512(resume_ + 16);
+                }
             }
             ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
         }
@@ -242,6 +436,98 @@ class SegmentPacket {
         int64_t sum = 0;
         for (int i = 0; i < W; ++i) sum += sums[i];
         return sum;
+    }
+    // occluders_at for a leaf x with a plane (not flagged), the lanes in 16 at a time:
+    // counts_as_occluder's float operations in the same order on every lane (in_front_of_ends,
+    // is_actual_occluder's plane branch, exits_at_an_end, beyond_the_end_windows; FMA
+    // contraction is off, vdivps and the compares are IEEE like their scalar forms), so the same
+    // bits; a lane whose own end is x is left out and not counted, as occluder_reached does.
+    // The lanes that reach their K-th occluder leave: resume to INT_MAX, out of live_.
+    template <class Counters>
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), always_inline)) inline int
+    occluders_zmm(const LeafDisc& x, int32_t leaf, uint32_t hits, __m512i resume[2],
+                  const VisibilityParams& vp, Counters* wc) {
+        const __m512 cx = _mm512_set1_ps(x.centroid.x), cy = _mm512_set1_ps(x.centroid.y),
+                     cz = _mm512_set1_ps(x.centroid.z);
+        const __m512 nx = _mm512_set1_ps(x.normal.x), ny = _mm512_set1_ps(x.normal.y),
+                     nz = _mm512_set1_ps(x.normal.z);
+        const __m512 zero = _mm512_setzero_ps(), half = _mm512_set1_ps(0.5f),
+                     one = _mm512_set1_ps(1.f);
+        const __m512 eps = _mm512_set1_ps(vp.eps), eps1 = _mm512_set1_ps(1.f - vp.eps);
+        const __m512 ptol = _mm512_set1_ps(vp.parallel_tol);
+        const __m512 dd = _mm512_set1_ps(x.delta * x.delta);
+        const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K);
+        const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
+        int left = 0;
+        for (int h = 0; h < 2; ++h) {
+            __mmask16 m = __mmask16(hits >> (16 * h));
+            if (!m) continue;
+            const int o = 16 * h;
+            m &= __mmask16(~(_mm512_cmpeq_epi32_mask(_mm512_load_si512(a_ + o), lf) |
+                             _mm512_cmpeq_epi32_mask(_mm512_load_si512(b_ + o), lf)));
+            wc->occluder_tests += uint64_t(__builtin_popcount(m));
+            if (!m) continue;
+            const __m512 px = _mm512_load_ps(p_[0] + o), py = _mm512_load_ps(p_[1] + o),
+                         pz = _mm512_load_ps(p_[2] + o);
+            const __m512 qx = _mm512_load_ps(q_[0] + o), qy = _mm512_load_ps(q_[1] + o),
+                         qz = _mm512_load_ps(q_[2] + o);
+            const __m512 dx = _mm512_load_ps(d_[0] + o), dy = _mm512_load_ps(d_[1] + o),
+                         dz = _mm512_load_ps(d_[2] + o);
+            const __m512 len = _mm512_load_ps(len_ + o);
+            // in_front_of_ends: dot(na, c - p) > 0 and dot(nb, c - q) > 0, where an end has a plane
+            const __m512 vx = _mm512_sub_ps(cx, px), vy = _mm512_sub_ps(cy, py),
+                         vz = _mm512_sub_ps(cz, pz);
+            const __m512 fa = dot_zmm(_mm512_load_ps(na_[0] + o), _mm512_load_ps(na_[1] + o),
+                                      _mm512_load_ps(na_[2] + o), vx, vy, vz);
+            const __m512 fb = dot_zmm(_mm512_load_ps(nb_[0] + o), _mm512_load_ps(nb_[1] + o),
+                                      _mm512_load_ps(nb_[2] + o), _mm512_sub_ps(cx, qx),
+                                      _mm512_sub_ps(cy, qy), _mm512_sub_ps(cz, qz));
+            m &= __mmask16(_mm512_cmp_ps_mask(fa, zero, _CMP_GT_OQ) | (no_plane_a_ >> o));
+            m &= __mmask16(_mm512_cmp_ps_mask(fb, zero, _CMP_GT_OQ) | (no_plane_b_ >> o));
+            // is_actual_occluder, x with a plane: not parallel, cut in (eps, 1 - eps), on the disc
+            const __m512 nd = dot_zmm(nx, ny, nz, dx, dy, dz);
+            m &= __mmask16(~_mm512_cmp_ps_mask(_mm512_and_ps(nd, absmask),
+                                               _mm512_mul_ps(ptol, len), _CMP_LE_OQ));
+            const __m512 tt = _mm512_div_ps(dot_zmm(nx, ny, nz, vx, vy, vz), nd);
+            m &= _mm512_cmp_ps_mask(tt, eps, _CMP_GT_OQ) & _mm512_cmp_ps_mask(tt, eps1, _CMP_LT_OQ);
+            if (!m) continue;
+            const __m512 ex = _mm512_sub_ps(_mm512_add_ps(px, _mm512_mul_ps(dx, tt)), cx);
+            const __m512 ey = _mm512_sub_ps(_mm512_add_ps(py, _mm512_mul_ps(dy, tt)), cy);
+            const __m512 ez = _mm512_sub_ps(_mm512_add_ps(pz, _mm512_mul_ps(dz, tt)), cz);
+            m &= _mm512_cmp_ps_mask(dot_zmm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ);
+            if (!m) continue;
+            // exits_at_an_end (x has a plane) and beyond_the_end_windows, by the nearer end
+            const __mmask16 near_a = _mm512_cmp_ps_mask(tt, half, _CMP_LT_OQ);
+            const __m512 from_end =
+                _mm512_mul_ps(_mm512_mask_blend_ps(near_a, _mm512_sub_ps(one, tt), tt), len);
+            const __m512 hd = _mm512_mul_ps(half, _mm512_mask_blend_ps(near_a,
+                                                                       _mm512_load_ps(delta_b_ + o),
+                                                                       _mm512_load_ps(delta_a_ + o)));
+            const __m512 ux = _mm512_mask_blend_ps(near_a, qx, px),
+                         uy = _mm512_mask_blend_ps(near_a, qy, py),
+                         uz = _mm512_mask_blend_ps(near_a, qz, pz);
+            const __m512 back = dot_zmm(nx, ny, nz, _mm512_sub_ps(ux, cx), _mm512_sub_ps(uy, cy),
+                                        _mm512_sub_ps(uz, cz));
+            const __mmask16 plane_near =
+                __mmask16(~((near_a & (no_plane_a_ >> o)) | (~near_a & (no_plane_b_ >> o))));
+            const __mmask16 exits = plane_near &
+                                    _mm512_cmp_ps_mask(from_end, hd, _CMP_LT_OQ) &
+                                    _mm512_cmp_ps_mask(back, zero, _CMP_LT_OQ);
+            const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),
+                                                    _mm512_load_ps(win_a_ + o));
+            m &= __mmask16(~exits) & _mm512_cmp_ps_mask(from_end, win, _CMP_NLT_UQ);
+            if (!m) continue;
+            // The K rule: a lane at its K-th occluder is hidden and leaves the walk.
+            __m512i occ = _mm512_load_si512(occluders_ + o);
+            occ = _mm512_mask_add_epi32(occ, m, occ, _mm512_set1_epi32(1));
+            _mm512_store_si512(occluders_ + o, occ);
+            const __mmask16 done = _mm512_mask_cmpge_epi32_mask(m, occ, kk);
+            if (!done) continue;
+            resume[h] = _mm512_mask_mov_epi32(resume[h], done, _mm512_set1_epi32(INT_MAX));
+            live_ &= ~(uint32_t(done) << o);
+            left += __builtin_popcount(done);
+        }
+        return left;
     }
     // _mm512_min_ps and _mm512_max_ps, all lanes through the mask (GCC 12's unmasked forms start
     // from _mm512_undefined_ps, which -Wuninitialized reports).
@@ -269,7 +555,7 @@ class SegmentPacket {
         int left = 0;
         for (; hits; hits &= hits - 1) {
             const int i = __builtin_ctz(hits);
-            if (!occluder_reached<true>(t, seg_[i], leaf, a_[i], b_[i], vp, occluders_[i], wc))
+            if (!occluder_reached<true>(t, segment(i), leaf, a_[i], b_[i], vp, occluders_[i], wc))
                 continue;
             live_ &= ~(1u << i);
             resume_[i] = INT_MAX;
@@ -283,9 +569,21 @@ class SegmentPacket {
     alignas(64) float t0_[W];
     alignas(64) float t1_[W];
     alignas(64) int32_t resume_[W];
-    int32_t a_[W], b_[W], occluders_[W];
+    alignas(64) int32_t a_[W];
+    alignas(64) int32_t b_[W];
+    alignas(64) int32_t occluders_[W];
+    // The rest of the lanes' segments (PairSegment), by field, for the vector occluder test.
+    alignas(64) float d_[3][W];
+    alignas(64) float q_[3][W];
+    alignas(64) float na_[3][W];
+    alignas(64) float nb_[3][W];
+    alignas(64) float len_[W];
+    alignas(64) float delta_a_[W];  // the ends' disc radii
+    alignas(64) float delta_b_[W];
+    alignas(64) float win_a_[W];  // the end windows
+    alignas(64) float win_b_[W];
+    uint32_t no_plane_a_ = 0, no_plane_b_ = 0;  // lanes whose end a (b) has no plane
     int32_t lane_[W];  // the pair's place in the packet, per lane
-    PairSegment seg_[W];
     uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
     uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)
 };

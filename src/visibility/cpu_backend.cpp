@@ -22,6 +22,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
 
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
         view_ = octree_view(tree);
+        columns_ = LeafColumns(view_);
         parent_ = tree.parent().data();
         vp_ = vp;
     }
@@ -51,7 +52,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     // Only pairs that face go into packets (leaf_pair_visible: no other is visible), found 8
     // columns at a time (packet_walk.h facing_mask).
     uint32_t facing_mask(int32_t a, int32_t b0, int32_t n) const {
-        return detail::facing_mask(view_, a, b0, n, vp_);
+        return detail::facing_mask(view_, columns_, a, b0, n, vp_);
     }
     uint32_t visible_packet(JobState& s, const int32_t* a, const int32_t* b, int count,
                             WorkCounters* wc) const {
@@ -95,6 +96,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
 
     const int32_t* parent_ = nullptr;
     OctreeView view_;
+    LeafColumns columns_;
     VisibilityParams vp_;
     const NodePairContext* ctx_ = nullptr;
 };

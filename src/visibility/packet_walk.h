@@ -21,6 +21,7 @@
 #include <array>
 #include <climits>
 #include <cstdint>
+#include <vector>
 
 #include "octree/records.h"
 #include "visibility/leaf_pair.h"
@@ -36,6 +37,24 @@
 #endif
 
 namespace vmap::detail {
+
+// The leaves' centroids, normals and flags by field (structure of arrays): the facing test
+// loads 16 consecutive leaves' fields as 16 lanes.
+struct LeafColumns {
+    std::vector<float> c[3], n[3];
+    std::vector<uint32_t> flags;
+    LeafColumns() = default;
+    explicit LeafColumns(const OctreeView& t) {
+        for (int k = 0; k < 3; ++k) c[k].resize(size_t(t.num_leaves)), n[k].resize(size_t(t.num_leaves));
+        flags.resize(size_t(t.num_leaves));
+        for (int32_t l = 0; l < t.num_leaves; ++l) {
+            const LeafDisc& d = t.leaves[l];
+            c[0][l] = d.centroid.x, c[1][l] = d.centroid.y, c[2][l] = d.centroid.z;
+            n[0][l] = d.normal.x, n[1][l] = d.normal.y, n[2][l] = d.normal.z;
+            flags[l] = d.flags;
+        }
+    }
+};
 
 #if VMAP_PACKET_ISA
 #define VMAP_ZMM_TARGET __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
@@ -64,17 +83,14 @@ VMAP_ZMM_TARGET inline __m512 dot_zmm(__m512 ax, __m512 ay, __m512 az, __m512 bx
 }
 // facing_mask's lanes on AVX-512: pair_faces' float operations on 16 columns at once (the same
 // order; vsqrtps is IEEE like sqrtf; FMA contraction is off), so the same answers.
-__attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"))) inline uint32_t facing_mask_zmm(
-    const OctreeView& t, int32_t a, int32_t b0, int n, const VisibilityParams& vp) {
-    static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "gathers read a leaf as 8 floats");
-    const float* base = reinterpret_cast<const float*>(t.leaves + b0);
+VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafColumns& lc,
+                                                int32_t a, int32_t b0, int n,
+                                                const VisibilityParams& vp) {
     const __mmask16 m = __mmask16(n >= 16 ? 0xffff : (1u << n) - 1);
-    const __m512i e =
-        times8_zmm(_mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0));
     const LeafDisc& la = t.leaves[a];
-    const __m512 dx = _mm512_sub_ps(gather_field(base, e, m, 0), _mm512_set1_ps(la.centroid.x));
-    const __m512 dy = _mm512_sub_ps(gather_field(base, e, m, 1), _mm512_set1_ps(la.centroid.y));
-    const __m512 dz = _mm512_sub_ps(gather_field(base, e, m, 2), _mm512_set1_ps(la.centroid.z));
+    const __m512 dx = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[0].data() + b0), _mm512_set1_ps(la.centroid.x));
+    const __m512 dy = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[1].data() + b0), _mm512_set1_ps(la.centroid.y));
+    const __m512 dz = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[2].data() + b0), _mm512_set1_ps(la.centroid.z));
     const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
     const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
     __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
@@ -83,24 +99,30 @@ __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"))) inline uint32_t fa
                               _mm512_set1_ps(la.normal.z), dx, dy, dz);
         faces &= _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
     }
-    const __m512 db = dot_zmm(gather_field(base, e, m, 4), gather_field(base, e, m, 5), gather_field(base, e, m, 6), dx, dy, dz);
+    const __m512 db = dot_zmm(_mm512_maskz_loadu_ps(m, lc.n[0].data() + b0), _mm512_maskz_loadu_ps(m, lc.n[1].data() + b0), _mm512_maskz_loadu_ps(m, lc.n[2].data() + b0), dx, dy, dz);
     const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
         _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
-    faces &= gather_flagged(base, e, m) | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
+    const __mmask16 flagged = _mm512_mask_test_epi32_mask(
+        m, _mm512_maskz_loadu_epi32(m, lc.flags.data() + b0),
+        _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+    faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
     return faces;
 }
 #endif
 
 // The columns b0 + i, i < n <= 16, whose leaf pair (a, b0 + i) faces (pair_faces), as a mask.
-inline uint32_t facing_mask(const OctreeView& t, int32_t a, int32_t b0, int n,
-                            const VisibilityParams& vp) {
+// `lc`: the leaves of t by field.
+inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t a, int32_t b0,
+                            int n, const VisibilityParams& vp) {
 #if VMAP_PACKET_ISA
     static const bool zmm = [] {
         __builtin_cpu_init();
         return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
                __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
     }();
-    if (zmm) return facing_mask_zmm(t, a, b0, n, vp);
+    if (zmm) return facing_mask_zmm(t, lc, a, b0, n, vp);
+#else
+    (void)lc;
 #endif
     uint32_t m = 0;
     for (int i = 0; i < n; ++i) m |= uint32_t(pair_faces(t.leaves[a], t.leaves[b0 + i], vp)) << i;

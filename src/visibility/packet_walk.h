@@ -488,7 +488,6 @@ class SegmentPacket {
             m &= __mmask16(~(_mm512_cmpeq_epi32_mask(_mm512_load_si512(a_ + o), lf) |
                              _mm512_cmpeq_epi32_mask(_mm512_load_si512(b_ + o), lf)));
             wc->occluder_tests += uint64_t(__builtin_popcount(m));
-            if (!m) continue;
             const __m512 px = _mm512_load_ps(p_[0] + o), py = _mm512_load_ps(p_[1] + o),
                          pz = _mm512_load_ps(p_[2] + o);
             const __m512 qx = _mm512_load_ps(q_[0] + o), qy = _mm512_load_ps(q_[1] + o),
@@ -512,12 +511,10 @@ class SegmentPacket {
                                                _mm512_mul_ps(ptol, len), _CMP_LE_OQ));
             const __m512 tt = _mm512_div_ps(dot_zmm(nx, ny, nz, vx, vy, vz), nd);
             m &= _mm512_cmp_ps_mask(tt, eps, _CMP_GT_OQ) & _mm512_cmp_ps_mask(tt, eps1, _CMP_LT_OQ);
-            if (!m) continue;
             const __m512 ex = _mm512_sub_ps(_mm512_add_ps(px, _mm512_mul_ps(dx, tt)), cx);
             const __m512 ey = _mm512_sub_ps(_mm512_add_ps(py, _mm512_mul_ps(dy, tt)), cy);
             const __m512 ez = _mm512_sub_ps(_mm512_add_ps(pz, _mm512_mul_ps(dz, tt)), cz);
             m &= _mm512_cmp_ps_mask(dot_zmm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ);
-            if (!m) continue;
             // exits_at_an_end (x has a plane) and beyond_the_end_windows, by the nearer end
             const __mmask16 near_a = _mm512_cmp_ps_mask(tt, half, _CMP_LT_OQ);
             const __m512 from_end =
@@ -538,7 +535,6 @@ class SegmentPacket {
             const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),
                                                     _mm512_load_ps(win_a_ + o));
             m &= __mmask16(~exits) & _mm512_cmp_ps_mask(from_end, win, _CMP_NLT_UQ);
-            if (!m) continue;
             // The K rule: a lane at its K-th occluder is hidden and leaves the walk.
             __m512i occ = _mm512_load_si512(occluders_ + o);
             occ = _mm512_mask_add_epi32(occ, m, occ, _mm512_set1_epi32(1));

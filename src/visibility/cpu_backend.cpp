@@ -73,7 +73,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     void make_list(JobState& s) const {
         const auto [oa, ob] = enclosing(s.job->a, s.job->b);
         if (s.list_a != oa || s.list_b != ob) {
-            shaft_walk_nodes(*ctx_, oa, ob, s.list, s.scratch);
+            box_walk_nodes(*ctx_, oa, ob, s.list, s.scratch);
             s.list_a = oa, s.list_b = ob;
         }
         s.view.walk = s.list.data();

@@ -25,6 +25,7 @@
 
 #include "octree/records.h"
 #include "visibility/leaf_pair.h"
+#include "visibility/node_pair.h"
 
 // The packet loop compiled for AVX2 and AVX-512 too, chosen at run time (GCC on x86-64).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
@@ -127,6 +128,53 @@ inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t 
     uint32_t m = 0;
     for (int i = 0; i < n; ++i) m |= uint32_t(pair_faces(t.leaves[a], t.leaves[b0 + i], vp)) << i;
     return m;
+}
+
+// shaft_walk_nodes' list (node_pair.h) with walk_shaft's box test and flat-end rule alone,
+// without its plane and disc tests: every node walk_shaft enters passes the tests kept here, so
+// this list holds that one (and both are ancestor-closed tops of the tree, in preorder), and
+// every leaf pair under (A, B) gets the answer of the whole walk through it as through that one
+// (node_pair.h: walk_shaft prunes only nodes that hold no actual occluder of such a pair, e4).
+// The plane and disc tests (square roots, divisions, in double) cost most of a shaft walk's
+// time and leave few nodes out of these lists. `orig` is scratch.
+inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
+                           std::vector<WalkNode>& out, std::vector<int32_t>& orig) {
+    out.clear();
+    orig.clear();
+    bool flat_a, flat_b;
+    flat_ends(c, A, B, &flat_a, &flat_b);
+    const NodeBounds na = bounds_at(c, A);
+    const NodeBounds nbb = bounds_at(c, B);
+    const Shaft s =
+        make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
+    const double E = c.margin;
+    const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
+    for (int32_t n = 0; n < c.tree.num_nodes;) {
+        const WalkNode w = c.tree.walk[n];
+        const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
+        const NodeBounds x = bounds_at(c, n);
+        if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
+            (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
+            (in_b && (b_leaf || (flat_b && x.ndeg == 0)))) {
+            n = w.skip;
+            continue;
+        }
+        out.push_back(w);
+        orig.push_back(n);
+        ++n;
+    }
+    // Skips remapped to the list, as shaft_walk_nodes does: entries come in preorder and the
+    // list is ancestor-closed, so the open nodes form a stack and an entry closes every open
+    // node whose subtree ends at or before it.
+    std::vector<int32_t>& open = orig;  // reused: orig[k] is needed only for entries after k
+    size_t top = 0;
+    for (size_t k = 0; k < out.size(); ++k) {
+        const int32_t o = orig[k];
+        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
+            out[size_t(open[--top])].skip = int32_t(k);
+        open[top++] = int32_t(k);
+    }
+    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
 }
 
 template <int W>

@@ -59,22 +59,46 @@ struct LeafColumns {
 
 #if VMAP_PACKET_ISA
 #define VMAP_ZMM_TARGET __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
-// Field f of the leaves at float offsets e (a leaf is 8 floats), lanes m; 0 elsewhere.
-VMAP_ZMM_TARGET inline __m512 gather_field(const float* base, __m512i e, __mmask16 m, int f) {
-    return _mm512_mask_i32gather_ps(_mm512_setzero_ps(), m, e, base + f, 4);
-}
-VMAP_ZMM_TARGET inline __mmask16 gather_flagged(const float* base, __m512i e, __mmask16 m) {
-    return _mm512_mask_test_epi32_mask(
-        m, _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), m, e, base + 7, 4),
-        _mm512_set1_epi32(int(kLeafNormalDegenerate)));
-}
-// _mm512_sqrt_ps and _mm512_slli_epi32 through an all-lanes mask (GCC 12's unmasked forms start
+// _mm512_sqrt_ps through an all-lanes mask (GCC 12's unmasked forms start
 // from _mm512_undefined_*, which -Wuninitialized reports).
 VMAP_ZMM_TARGET inline __m512 sqrt_zmm(__m512 a) {
     return _mm512_mask_sqrt_ps(a, __mmask16(0xffff), a);
 }
-VMAP_ZMM_TARGET inline __m512i times8_zmm(__m512i a) {
-    return _mm512_mask_slli_epi32(a, __mmask16(0xffff), a, 3);
+// The fields of the leaves idx[i], i < n <= 16 (zero past n), as 16 lanes each: f[0..2] the
+// centroid, f[3] Delta, f[4..6] the normal, f[7] the flags' bits. A leaf is 8 floats, so lanes i
+// and i + 8 are loaded into one register and the two 8 x 8 blocks transposed together (fewer
+// micro-ops than 16 gathers).
+VMAP_ZMM_TARGET inline void leaf_fields(const LeafDisc* leaves, const int32_t* idx, int n,
+                                        __m512 f[8]) {
+    static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "a leaf is read as 8 floats");
+    alignas(32) static const float zero[8] = {};
+    const float* r[16];
+    for (int i = 0; i < 16; ++i)
+        r[i] = i < n ? reinterpret_cast<const float*>(leaves + idx[i]) : zero;
+    __m512 z[8], t[8], u[8];
+    const __mmask16 all = 0xffff;
+    for (int i = 0; i < 8; ++i) {  // (masked forms: GCC 12's unmasked ones start undefined)
+        z[i] = _mm512_maskz_loadu_ps(0x00ff, r[i]);
+        const auto upper = reinterpret_cast<uintptr_t>(r[i + 8]) - 8 * sizeof(float);
+        z[i] = _mm512_mask_loadu_ps(z[i], 0xff00, reinterpret_cast<const float*>(upper));
+    }
+    for (int i = 0; i < 8; i += 2) {
+        t[i] = _mm512_mask_unpacklo_ps(z[i], all, z[i], z[i + 1]);
+        t[i + 1] = _mm512_mask_unpackhi_ps(z[i], all, z[i], z[i + 1]);
+    }
+    for (int i = 0; i < 8; i += 4) {
+        u[i] = _mm512_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 1] = _mm512_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(3, 2, 3, 2));
+        u[i + 2] = _mm512_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 3] = _mm512_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(3, 2, 3, 2));
+    }
+    const __m512i lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+    const __m512i hi =
+        _mm512_setr_epi32(4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+    for (int k = 0; k < 4; ++k) {
+        f[k] = _mm512_permutex2var_ps(u[k], lo, u[k + 4]);
+        f[k + 4] = _mm512_permutex2var_ps(u[k], hi, u[k + 4]);
+    }
 }
 // dot(a, b) as vec.h evaluates it: (a.x b.x + a.y b.y) + a.z b.z.
 VMAP_ZMM_TARGET inline __m512 dot_zmm(__m512 ax, __m512 ay, __m512 az, __m512 bx, __m512 by,
@@ -312,8 +336,6 @@ class SegmentPacket {
     __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), noinline)) void load_zmm(
         const OctreeView& t, const int32_t* a, const int32_t* b, int count,
         const VisibilityParams& vp) {
-        static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "gathers read a leaf as 8 floats");
-        const float* base = reinterpret_cast<const float*>(t.leaves);
         live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
         const __m512 eps = _mm512_set1_ps(vp.eps), half = _mm512_set1_ps(0.5f),
                      shrink = _mm512_set1_ps(0.999f), one = _mm512_set1_ps(1.f),
@@ -325,10 +347,11 @@ class SegmentPacket {
             const __m512i ib = _mm512_maskz_loadu_epi32(m, b + o);
             _mm512_store_si512(a_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ia));
             _mm512_store_si512(b_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ib));
-            const __m512i ea = times8_zmm(ia), eb = times8_zmm(ib);
-            const __m512 ax = gather_field(base, ea, m, 0), ay = gather_field(base, ea, m, 1), az = gather_field(base, ea, m, 2);
-            const __m512 bx = gather_field(base, eb, m, 0), by = gather_field(base, eb, m, 1), bz = gather_field(base, eb, m, 2);
-            const __m512 da = gather_field(base, ea, m, 3), db = gather_field(base, eb, m, 3);
+            __m512 fa[8], fb[8];
+            leaf_fields(t.leaves, a + o, count - o, fa);
+            leaf_fields(t.leaves, b + o, count - o, fb);
+            const __m512 ax = fa[0], ay = fa[1], az = fa[2], da = fa[3];
+            const __m512 bx = fb[0], by = fb[1], bz = fb[2], db = fb[3];
             const __m512 dx = _mm512_sub_ps(bx, ax), dy = _mm512_sub_ps(by, ay),
                          dz = _mm512_sub_ps(bz, az);
             const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
@@ -357,15 +380,16 @@ class SegmentPacket {
             _mm512_store_ps(d_[2] + o, dz);
             _mm512_store_ps(q_[0] + o, bx), _mm512_store_ps(q_[1] + o, by);
             _mm512_store_ps(q_[2] + o, bz);
-            _mm512_store_ps(na_[0] + o, gather_field(base, ea, m, 4)), _mm512_store_ps(na_[1] + o, gather_field(base, ea, m, 5));
-            _mm512_store_ps(na_[2] + o, gather_field(base, ea, m, 6));
-            _mm512_store_ps(nb_[0] + o, gather_field(base, eb, m, 4)), _mm512_store_ps(nb_[1] + o, gather_field(base, eb, m, 5));
-            _mm512_store_ps(nb_[2] + o, gather_field(base, eb, m, 6));
+            _mm512_store_ps(na_[0] + o, fa[4]), _mm512_store_ps(na_[1] + o, fa[5]);
+            _mm512_store_ps(na_[2] + o, fa[6]);
+            _mm512_store_ps(nb_[0] + o, fb[4]), _mm512_store_ps(nb_[1] + o, fb[5]);
+            _mm512_store_ps(nb_[2] + o, fb[6]);
             _mm512_store_ps(len_ + o, len);
             _mm512_store_ps(delta_a_ + o, da), _mm512_store_ps(delta_b_ + o, db);
             _mm512_store_ps(win_a_ + o, wa), _mm512_store_ps(win_b_ + o, wb);
-            no_plane_a_ |= uint32_t(gather_flagged(base, ea, m)) << o;
-            no_plane_b_ |= uint32_t(gather_flagged(base, eb, m)) << o;
+            const __m512i flag = _mm512_set1_epi32(int(kLeafNormalDegenerate));
+            no_plane_a_ |= uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fa[7]), flag)) << o;
+            no_plane_b_ |= uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fb[7]), flag)) << o;
         }
         for (int i = 0; i < count; ++i) lane_[i] = i;
         // Lanes past count: padding as in pad() (no pair, finite slabs).

@@ -31,7 +31,10 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     // only the part of the tree the shaft of its enclosing pair meets (make_list; the same
     // answers, less work), built when its first facing pair needs a walk.
     static constexpr uint64_t kShaftPairs = 64;
-    void set_node_context(const NodePairContext* ctx) override { ctx_ = ctx; }
+    void set_node_context(const NodePairContext* ctx) override {
+        ctx_ = ctx;
+        pads_ = ctx && ctx->margin > 0 ? node_pads(*ctx) : std::vector<NodePad>{};
+    }
     // The pairs of a job walk in packets (packet_walk.h: the answers and counts of
     // leaf_pair_visible, less time a pair).
     static constexpr int kPacketLanes = 32;
@@ -73,7 +76,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     void make_list(JobState& s) const {
         const auto [oa, ob] = enclosing(s.job->a, s.job->b);
         if (s.list_a != oa || s.list_b != ob) {
-            box_walk_nodes(*ctx_, oa, ob, s.list, s.scratch);
+            box_walk_nodes(*ctx_, oa, ob, s.list, s.scratch, pads_.data());
             s.list_a = oa, s.list_b = ob;
         }
         s.view.walk = s.list.data();
@@ -97,6 +100,7 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     const int32_t* parent_ = nullptr;
     OctreeView view_;
     LeafColumns columns_;
+    std::vector<NodePad> pads_;  // per node, for box_walk_nodes
     VisibilityParams vp_;
     const NodePairContext* ctx_ = nullptr;
 };

@@ -161,8 +161,23 @@ inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t 
 // (node_pair.h: walk_shaft prunes only nodes that hold no actual occluder of such a pair, e4).
 // The plane and disc tests (square roots, divisions, in double) cost most of a shaft walk's
 // time and leave few nodes out of these lists. `orig` is scratch.
+// `pads`, when given, holds per node its bounds' pad and whether it has a flagged leaf below
+// (node_pads), read instead of the whole bounds.
+struct NodePad {
+    float pad = 0;
+    int32_t ndeg = 0;
+};
+inline std::vector<NodePad> node_pads(const NodePairContext& c) {
+    std::vector<NodePad> p(size_t(c.tree.num_nodes));
+    for (int32_t n = 0; n < c.tree.num_nodes; ++n) {
+        const NodeBounds x = bounds_at(c, n);
+        p[size_t(n)] = {x.pad, x.ndeg};
+    }
+    return p;
+}
 inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
-                           std::vector<WalkNode>& out, std::vector<int32_t>& orig) {
+                           std::vector<WalkNode>& out, std::vector<int32_t>& orig,
+                           const NodePad* pads = nullptr) {
     out.clear();
     orig.clear();
     bool flat_a, flat_b;
@@ -176,7 +191,7 @@ inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
     for (int32_t n = 0; n < c.tree.num_nodes;) {
         const WalkNode w = c.tree.walk[n];
         const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
-        const NodeBounds x = bounds_at(c, n);
+        const NodePad x = pads ? pads[n] : NodePad{bounds_at(c, n).pad, bounds_at(c, n).ndeg};
         if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
             (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
             (in_b && (b_leaf || (flat_b && x.ndeg == 0)))) {

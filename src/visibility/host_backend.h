@@ -232,8 +232,10 @@ class HostBackend : public Backend {
         void flush() {
             if (count == 0) return;
             const uint32_t vis = self.visible_packet(st.state, pa, pb, count, &wc);
-            for (int i = 0; i < count; ++i)
-                if (vis >> i & 1u) *word[i] |= bit[i];
+            for (uint32_t m = vis; m; m &= m - 1) {  // the visible lanes only
+                const int i = __builtin_ctz(m);
+                *word[i] |= bit[i];
+            }
             wc.pairs += count;
             rg.pairs += count;
             wc.visible_pairs += __builtin_popcount(vis);

@@ -398,13 +398,12 @@ TEST(Construction, BoxListsHoldTheShaftListsAndGiveTheWholeWalksAnswers) {
                     const int n = int(std::min<size_t>(32, xs.size() - k0));
                     detail::SegmentPacket<32> pk;
                     WorkCounters wc;
-                    const uint32_t vis = pk.load_faced(lv, xs.data() + k0, ys.data() + k0, n,
-                                                       c.vp, &wc)
-                                             ? pk.walk(lv, c.vp, &wc)
-                                             : 0u;
+                    const uint32_t vis =
+                        pk.load_faced(lv, xs.data() + k0, ys.data() + k0, n, c.vp, &wc)
+                            ? pk.walk(lv, c.vp, &wc)
+                            : 0u;
                     for (int i = 0; i < n; ++i)
-                        ASSERT_EQ(bool(vis >> i & 1u),
-                                  bool(m[size_t(xs[k0 + i]) * L + ys[k0 + i]]))
+                        ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k0 + i]) * L + ys[k0 + i]]))
                             << "seed " << seed << ": packet, nodes " << a << ", " << b;
                 }
             }

@@ -486,9 +486,8 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
             int count = 0;
             uint32_t expect = 0;
             auto flush = [&] {
-                const uint32_t mask = pk.load_faced(v, pa, pb, count, vp, &got)
-                                          ? pk.walk(v, vp, &got)
-                                          : 0u;
+                const uint32_t mask =
+                    pk.load_faced(v, pa, pb, count, vp, &got) ? pk.walk(v, vp, &got) : 0u;
                 ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0];
                 count = 0, expect = 0;
             };

@@ -46,7 +46,8 @@ struct LeafColumns {
     std::vector<uint32_t> flags;
     LeafColumns() = default;
     explicit LeafColumns(const OctreeView& t) {
-        for (int k = 0; k < 3; ++k) c[k].resize(size_t(t.num_leaves)), n[k].resize(size_t(t.num_leaves));
+        for (int k = 0; k < 3; ++k)
+            c[k].resize(size_t(t.num_leaves)), n[k].resize(size_t(t.num_leaves));
         flags.resize(size_t(t.num_leaves));
         for (int32_t l = 0; l < t.num_leaves; ++l) {
             const LeafDisc& d = t.leaves[l];
@@ -113,23 +114,28 @@ VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafC
                                                 const VisibilityParams& vp) {
     const __mmask16 m = __mmask16(n >= 16 ? 0xffff : (1u << n) - 1);
     const LeafDisc& la = t.leaves[a];
-    const __m512 dx = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[0].data() + b0), _mm512_set1_ps(la.centroid.x));
-    const __m512 dy = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[1].data() + b0), _mm512_set1_ps(la.centroid.y));
-    const __m512 dz = _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[2].data() + b0), _mm512_set1_ps(la.centroid.z));
+    const __m512 dx =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[0].data() + b0), _mm512_set1_ps(la.centroid.x));
+    const __m512 dy =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[1].data() + b0), _mm512_set1_ps(la.centroid.y));
+    const __m512 dz =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[2].data() + b0), _mm512_set1_ps(la.centroid.z));
     const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
     const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
     __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
     if (!(la.flags & kLeafNormalDegenerate)) {
         const __m512 da = dot_zmm(_mm512_set1_ps(la.normal.x), _mm512_set1_ps(la.normal.y),
-                              _mm512_set1_ps(la.normal.z), dx, dy, dz);
+                                  _mm512_set1_ps(la.normal.z), dx, dy, dz);
         faces &= _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
     }
-    const __m512 db = dot_zmm(_mm512_maskz_loadu_ps(m, lc.n[0].data() + b0), _mm512_maskz_loadu_ps(m, lc.n[1].data() + b0), _mm512_maskz_loadu_ps(m, lc.n[2].data() + b0), dx, dy, dz);
+    const __m512 db = dot_zmm(_mm512_maskz_loadu_ps(m, lc.n[0].data() + b0),
+                              _mm512_maskz_loadu_ps(m, lc.n[1].data() + b0),
+                              _mm512_maskz_loadu_ps(m, lc.n[2].data() + b0), dx, dy, dz);
     const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
         _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
-    const __mmask16 flagged = _mm512_mask_test_epi32_mask(
-        m, _mm512_maskz_loadu_epi32(m, lc.flags.data() + b0),
-        _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+    const __mmask16 flagged =
+        _mm512_mask_test_epi32_mask(m, _mm512_maskz_loadu_epi32(m, lc.flags.data() + b0),
+                                    _mm512_set1_epi32(int(kLeafNormalDegenerate)));
     faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
     return faces;
 }
@@ -382,9 +388,9 @@ class SegmentPacket {
                      _mm512_cmp_ps_mask(_mm512_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
             live_ |= uint32_t(m & ~small) << o;
             alone_ |= uint32_t(small) << o;
-            _mm512_store_si512(resume_ + o, _mm512_mask_mov_epi32(_mm512_setzero_si512(),
-                                                                  __mmask16(~m | small),
-                                                                  _mm512_set1_epi32(INT_MAX)));
+            _mm512_store_si512(resume_ + o,
+                               _mm512_mask_mov_epi32(_mm512_setzero_si512(), __mmask16(~m | small),
+                                                     _mm512_set1_epi32(INT_MAX)));
             _mm512_store_si512(occluders_ + o, _mm512_setzero_si512());
             _mm512_store_ps(p_[0] + o, ax), _mm512_store_ps(p_[1] + o, ay);
             _mm512_store_ps(p_[2] + o, az);
@@ -403,8 +409,10 @@ class SegmentPacket {
             _mm512_store_ps(delta_a_ + o, da), _mm512_store_ps(delta_b_ + o, db);
             _mm512_store_ps(win_a_ + o, wa), _mm512_store_ps(win_b_ + o, wb);
             const __m512i flag = _mm512_set1_epi32(int(kLeafNormalDegenerate));
-            no_plane_a_ |= uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fa[7]), flag)) << o;
-            no_plane_b_ |= uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fb[7]), flag)) << o;
+            no_plane_a_ |=
+                uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fa[7]), flag)) << o;
+            no_plane_b_ |=
+                uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fb[7]), flag)) << o;
         }
         for (int i = 0; i < count; ++i) lane_[i] = i;
         // Lanes past count: padding as in pad() (no pair, finite slabs).
@@ -594,8 +602,8 @@ class SegmentPacket {
             m &= __mmask16(_mm512_cmp_ps_mask(fb, zero, _CMP_GT_OQ) | (no_plane_b_ >> o));
             // is_actual_occluder, x with a plane: not parallel, cut in (eps, 1 - eps), on the disc
             const __m512 nd = dot_zmm(nx, ny, nz, dx, dy, dz);
-            m &= __mmask16(~_mm512_cmp_ps_mask(_mm512_and_ps(nd, absmask),
-                                               _mm512_mul_ps(ptol, len), _CMP_LE_OQ));
+            m &= __mmask16(~_mm512_cmp_ps_mask(_mm512_and_ps(nd, absmask), _mm512_mul_ps(ptol, len),
+                                               _CMP_LE_OQ));
             const __m512 tt = _mm512_div_ps(dot_zmm(nx, ny, nz, vx, vy, vz), nd);
             m &= _mm512_cmp_ps_mask(tt, eps, _CMP_GT_OQ) & _mm512_cmp_ps_mask(tt, eps1, _CMP_LT_OQ);
             const __m512 ex = _mm512_sub_ps(_mm512_add_ps(px, _mm512_mul_ps(dx, tt)), cx);
@@ -606,9 +614,9 @@ class SegmentPacket {
             const __mmask16 near_a = _mm512_cmp_ps_mask(tt, half, _CMP_LT_OQ);
             const __m512 from_end =
                 _mm512_mul_ps(_mm512_mask_blend_ps(near_a, _mm512_sub_ps(one, tt), tt), len);
-            const __m512 hd = _mm512_mul_ps(half, _mm512_mask_blend_ps(near_a,
-                                                                       _mm512_load_ps(delta_b_ + o),
-                                                                       _mm512_load_ps(delta_a_ + o)));
+            const __m512 hd =
+                _mm512_mul_ps(half, _mm512_mask_blend_ps(near_a, _mm512_load_ps(delta_b_ + o),
+                                                         _mm512_load_ps(delta_a_ + o)));
             const __m512 ux = _mm512_mask_blend_ps(near_a, qx, px),
                          uy = _mm512_mask_blend_ps(near_a, qy, py),
                          uz = _mm512_mask_blend_ps(near_a, qz, pz);
@@ -616,8 +624,7 @@ class SegmentPacket {
                                         _mm512_sub_ps(uz, cz));
             const __mmask16 plane_near =
                 __mmask16(~((near_a & (no_plane_a_ >> o)) | (~near_a & (no_plane_b_ >> o))));
-            const __mmask16 exits = plane_near &
-                                    _mm512_cmp_ps_mask(from_end, hd, _CMP_LT_OQ) &
+            const __mmask16 exits = plane_near & _mm512_cmp_ps_mask(from_end, hd, _CMP_LT_OQ) &
                                     _mm512_cmp_ps_mask(back, zero, _CMP_LT_OQ);
             const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),
                                                     _mm512_load_ps(win_a_ + o));
@@ -688,7 +695,7 @@ class SegmentPacket {
     alignas(64) float win_a_[W];  // the end windows
     alignas(64) float win_b_[W];
     uint32_t no_plane_a_ = 0, no_plane_b_ = 0;  // lanes whose end a (b) has no plane
-    int32_t lane_[W];  // the pair's place in the packet, per lane
+    int32_t lane_[W];                           // the pair's place in the packet, per lane
     uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
     uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)
 };

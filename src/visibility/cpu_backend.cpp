@@ -68,11 +68,15 @@ class CpuBackend final : public HostBackend<CpuBackend> {
     // The shaft list of the job's enclosing pair (A', B') = enclosing(a, b), made once per thread
     // for all the jobs under that pair, which come one after another (the children of one split
     // pair). Every leaf pair under (a, b) is one under (A', B') (a lies under A', b under B'), and
-    // shaft_walk_nodes' list gives every leaf pair under its node pair the answers of the whole
-    // walk, so the answers stay those of leaf_pair_visible. Measured on the default scene
-    // (docs/results.md): one list per job from the root cost 18% of the build, a job's list
-    // filtered from (A', B')'s 11% (its walks test a sixth fewer nodes), and sharing (A', B')'s
-    // list costs almost nothing for about 20% more node tests: the least time of the three.
+    // the list (box_walk_nodes: shaft_walk_nodes' list without its plane and disc tests, which
+    // left the walks' node tests unchanged at 60% of the list's cost) gives every leaf pair
+    // under its node pair the answers of the whole walk, so the answers stay those of
+    // leaf_pair_visible. Measured on the default scene (docs/results.md): one list per job from
+    // the root cost 18% of the build, a job's list filtered from (A', B')'s 11% (its walks test a
+    // sixth fewer nodes), and sharing (A', B')'s list costs almost nothing for about 20% more
+    // node tests: the least time of the three. Lists filtered again per job or per chunk of 4-16
+    // rows (by the box test alone, from the chunk's centroid boxes) cut the node tests by 20-31%
+    // but cost more time than they saved (docs/results.md, "The CPU walk in vectors").
     void make_list(JobState& s) const {
         const auto [oa, ob] = enclosing(s.job->a, s.job->b);
         if (s.list_a != oa || s.list_b != ob) {

@@ -463,8 +463,8 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
     EXPECT_GT(flagged, 10);
 }
 
-// The CPU backend's path into the packets: facing_mask over up to 16 columns of a row (the
-// leaves by field), then packets of facing pairs only through load_faced (AVX-512 where the CPU
+// The CPU backend's path into the packets: facing_mask over up to 16 columns of a row and
+// facing_rows over 8 columns of two rows (the leaves by field), then packets of facing pairs only through load_faced (AVX-512 where the CPU
 // has it). Every pair of random trees, with and without end windows: the same facing pairs as
 // pair_faces, and the answers, node tests and occluder tests of leaf_pair_visible.
 TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
@@ -496,6 +496,16 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
                     const int n = std::min(16, v.num_leaves - b0 - int(a % 3));
                     if (n <= 0) continue;
                     const uint32_t m = detail::facing_mask(v, lc, a, b0, n, vp);
+                    // Two rows at once (the backend's form), 8 columns: a and another row.
+                    const int32_t a1 = int32_t((a * 7 + 3) % v.num_leaves);
+                    const int n8 = std::min(n, 8);
+                    const uint32_t m2 = detail::facing_rows(v, lc, a, a1, b0, n8, vp);
+                    ASSERT_EQ(m2 & 0xffu, m & ((1u << n8) - 1)) << "rows " << a << " " << a1;
+                    for (int i = 0; i < n8; ++i)
+                        ASSERT_EQ(bool(m2 >> (8 + i) & 1u),
+                                  a1 != b0 + i &&
+                                      detail::pair_faces(v.leaves[a1], v.leaves[b0 + i], vp))
+                            << "pair " << a1 << " " << b0 + i;
                     for (int i = 0; i < n; ++i) {
                         const int32_t b = b0 + i;
                         const bool faces = detail::pair_faces(v.leaves[a], v.leaves[b], vp);

@@ -53,9 +53,9 @@ class CpuBackend final : public HostBackend<CpuBackend> {
         s.ready = !ctx_ || !(ctx_->margin > 0) || uint64_t(job.rows) * job.cols < kShaftPairs;
     }
     // Only pairs that face go into packets (leaf_pair_visible: no other is visible), found 8
-    // columns at a time (packet_walk.h facing_mask).
-    uint32_t facing_mask(int32_t a, int32_t b0, int32_t n) const {
-        return detail::facing_mask(view_, columns_, a, b0, n, vp_);
+    // columns of two rows at a time (packet_walk.h facing_rows).
+    uint32_t facing_rows(int32_t a0, int32_t a1, int32_t b0, int32_t n) const {
+        return detail::facing_rows(view_, columns_, a0, a1, b0, n, vp_);
     }
     uint32_t visible_packet(JobState& s, const int32_t* a, const int32_t* b, int count,
                             WorkCounters* wc) const {

@@ -149,6 +149,56 @@ VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafC
 }
 #endif
 
+#if VMAP_PACKET_ISA
+// facing_mask for two rows at once, n <= 8 columns: lanes 0-7 row a0, lanes 8-15 row a1.
+VMAP_ZMM_TARGET inline uint32_t facing_rows_zmm(const OctreeView& t, const LeafColumns& lc,
+                                                int32_t a0, int32_t a1, int32_t b0, int n,
+                                                const VisibilityParams& vp) {
+    const __mmask8 m8 = __mmask8((1u << n) - 1);
+    const __mmask16 m = __mmask16(m8 | (uint32_t(m8) << 8));
+    const __mmask16 upper = 0xff00;
+    const LeafDisc &l0 = t.leaves[a0], &l1 = t.leaves[a1];
+    auto col = [&](const std::vector<float>& v) { return v.data() + b0; };
+    const __m512 dx = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[0]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.x),
+                                                         _mm512_set1_ps(l1.centroid.x)));
+    const __m512 dy = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[1]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.y),
+                                                         _mm512_set1_ps(l1.centroid.y)));
+    const __m512 dz = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[2]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.z),
+                                                         _mm512_set1_ps(l1.centroid.z)));
+    const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+    const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
+    __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
+    const __m512 da = dot_zmm(
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.x), _mm512_set1_ps(l1.normal.x)),
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.y), _mm512_set1_ps(l1.normal.y)),
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.z), _mm512_set1_ps(l1.normal.z)), dx,
+        dy, dz);
+    const __mmask16 row_flagged = __mmask16((l0.flags & kLeafNormalDegenerate ? 0x00ffu : 0u) |
+                                            (l1.flags & kLeafNormalDegenerate ? 0xff00u : 0u));
+    faces &= row_flagged | _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
+    const __m512 db = dot_zmm(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[0]))),
+                              _mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[1]))),
+                              _mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[2]))), dx,
+                              dy, dz);
+    const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
+        _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
+    const __m512i flags =
+        _mm512_maskz_broadcast_i32x8(0xffff, _mm256_maskz_loadu_epi32(m8, lc.flags.data() + b0));
+    const __mmask16 flagged =
+        _mm512_mask_test_epi32_mask(m, flags, _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+    faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
+    return faces;
+}
+#endif
+
+// facing_mask for rows a0 and a1 and columns b0 .. b0 + n - 1, n <= 8: bits 0-7 for row a0,
+// bits 8-15 for row a1.
+inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t a0, int32_t a1,
+                            int32_t b0, int n, const VisibilityParams& vp);
+
 // The columns b0 + i, i < n <= 16, whose leaf pair (a, b0 + i) faces (pair_faces), as a mask.
 // `lc`: the leaves of t by field.
 inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t a, int32_t b0,
@@ -228,6 +278,19 @@ inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         open[top++] = int32_t(k);
     }
     while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
+}
+
+inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t a0, int32_t a1,
+                            int32_t b0, int n, const VisibilityParams& vp) {
+#if VMAP_PACKET_ISA
+    static const bool zmm = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+    }();
+    if (zmm) return facing_rows_zmm(t, lc, a0, a1, b0, n, vp);
+#endif
+    return facing_mask(t, lc, a0, b0, n, vp) | facing_mask(t, lc, a1, b0, n, vp) << 8;
 }
 
 template <int W>

@@ -352,6 +352,66 @@ TEST(Construction, ShaftListsGiveTheWholeWalksAnswers) {
     EXPECT_GT(shorter, 1000u) << "the lists should leave out parts of the tree";
 }
 
+// The CPU backend's lists (box_walk_nodes: walk_shaft's box test and flat ends, no plane or
+// disc tests) hold shaft_walk_nodes' (every entry of that list is in this one) and give every
+// leaf pair under their node pair the whole walk's answer, one at a time and in packets of
+// facing pairs (load_faced, the backend's path).
+TEST(Construction, BoxListsHoldTheShaftListsAndGiveTheWholeWalksAnswers) {
+    uint64_t pairs = 0, shorter = 0;
+    for (uint64_t seed = 420; seed < 430; ++seed) {
+        NodeTestScene sc(seed, 1 + int(seed % 3));
+        const Octree& t = sc.t;
+        const auto& m = sc.m;
+        detail::NodePairContext& c = sc.c;
+        c.leaves_stored = true;
+        ASSERT_GT(c.margin, 0.0);
+        const int32_t L = t.num_leaves();
+        std::vector<WalkNode> list, shaft;
+        std::vector<int32_t> scratch;
+        for (int32_t a = 0; a < t.num_nodes(); a += 1 + int32_t(seed % 2))
+            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 2 + int32_t(seed % 3)) {
+                detail::box_walk_nodes(c, a, b, list, scratch);
+                detail::shaft_walk_nodes(c, a, b, shaft, scratch);
+                size_t k = 0;  // shaft's entries in order within list (same boxes, same leaves)
+                for (const WalkNode& w : list)
+                    if (k < shaft.size() && w.leaf == shaft[k].leaf && w.lo == shaft[k].lo &&
+                        w.hi == shaft[k].hi)
+                        ++k;
+                ASSERT_EQ(k, shaft.size()) << "seed " << seed << ": nodes " << a << ", " << b;
+                OctreeView lv = c.tree;
+                lv.walk = list.data();
+                lv.num_nodes = int32_t(list.size());
+                shorter += list.size() < size_t(t.num_nodes());
+                std::vector<int32_t> xs, ys;
+                for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
+                    for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y) {
+                        WorkCounters wc;
+                        ASSERT_EQ(detail::leaf_pair_visible<true>(lv, x, y, c.vp, &wc),
+                                  bool(m[size_t(x) * L + y]))
+                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
+                            << ", " << y;
+                        ++pairs;
+                        if (detail::pair_faces(lv.leaves[x], lv.leaves[y], c.vp))
+                            xs.push_back(x), ys.push_back(y);
+                    }
+                for (size_t k0 = 0; k0 < xs.size(); k0 += 32) {
+                    const int n = int(std::min<size_t>(32, xs.size() - k0));
+                    detail::SegmentPacket<32> pk;
+                    WorkCounters wc;
+                    const uint32_t vis =
+                        pk.load_faced(lv, xs.data() + k0, ys.data() + k0, n, c.vp, &wc)
+                            ? pk.walk(lv, c.vp, &wc)
+                            : 0u;
+                    for (int i = 0; i < n; ++i)
+                        ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k0 + i]) * L + ys[k0 + i]]))
+                            << "seed " << seed << ": packet, nodes " << a << ", " << b;
+                }
+            }
+    }
+    EXPECT_GT(pairs, 100000u);
+    EXPECT_GT(shorter, 1000u) << "the lists should leave out parts of the tree";
+}
+
 // The default picks by backend: node-pair decisions on the CPU (where they pay), the leaf-pair
 // walk on the GPU (gpu_test checks that the two give the same V-map there).
 TEST(Construction, AutoDecidesNodePairsOnTheCpu) {

@@ -448,13 +448,86 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
         for (int32_t l = 0; l < v.num_leaves; ++l)
             flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
         SCOPED_TRACE(seed);
-        // Every lane loop this CPU runs (SSE2, AVX2, AVX-512), and a packet not a power of 2.
-        for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa)
-            packet_matches_pairs<32>(v, vp, isa, &alone);
-        packet_matches_pairs<7>(v, vp, 0, &alone);
+        // Without and with end windows (the vector occluder test of the AVX-512 loop takes
+        // every rule of counts_as_occluder); every lane loop this CPU runs (SSE2, AVX2,
+        // AVX-512), and a packet not a power of 2.
+        for (float window : {0.f, 2.f}) {
+            vp.end_window = window;
+            vp.eps = window > 0 ? 0.005f : 0.01f;
+            for (int isa = 0; isa <= detail::SegmentPacket<32>::best_isa(); ++isa)
+                packet_matches_pairs<32>(v, vp, isa, &alone);
+            packet_matches_pairs<7>(v, vp, 0, &alone);
+        }
     }
     EXPECT_GT(alone, 100);  // pairs with a zero direction component, which walk alone
     EXPECT_GT(flagged, 10);
+}
+
+// The CPU backend's path into the packets: facing_mask over up to 16 columns of a row and
+// facing_rows over 8 columns of two rows (the leaves by field), then packets of facing pairs only through load_faced (AVX-512 where the CPU
+// has it). Every pair of random trees, with and without end windows: the same facing pairs as
+// pair_faces, and the answers, node tests and occluder tests of leaf_pair_visible.
+TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
+    uint64_t faced = 0;
+    for (uint32_t seed = 21; seed <= 30; ++seed) {
+        PointSet ps = random_scene(seed, 100 + int(seed) * 10);
+        std::vector<uint32_t> order;
+        const Octree t = Octree::build(ps, {int(5 + seed % 4), int(1 + seed % 3)}, order);
+        const OctreeView v = octree_view(t);
+        const detail::LeafColumns lc(v);
+        SCOPED_TRACE(seed);
+        for (float window : {0.f, 2.f}) {
+            VisibilityParams vp;
+            vp.K = int(1 + seed % 3);
+            vp.end_window = window;
+            WorkCounters want, got;
+            detail::SegmentPacket<32> pk;
+            int32_t pa[32], pb[32];
+            int count = 0;
+            uint32_t expect = 0;
+            auto flush = [&] {
+                const uint32_t mask =
+                    pk.load_faced(v, pa, pb, count, vp, &got) ? pk.walk(v, vp, &got) : 0u;
+                ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0];
+                count = 0, expect = 0;
+            };
+            for (int32_t a = 0; a < v.num_leaves; ++a)
+                for (int32_t b0 = a + 1; b0 < v.num_leaves; b0 += 16) {
+                    const int n = std::min(16, v.num_leaves - b0 - int(a % 3));
+                    if (n <= 0) continue;
+                    const uint32_t m = detail::facing_mask(v, lc, a, b0, n, vp);
+                    // Two rows at once (the backend's form), 8 columns: a and another row.
+                    const int32_t a1 = int32_t((a * 7 + 3) % v.num_leaves);
+                    const int n8 = std::min(n, 8);
+                    const uint32_t m2 = detail::facing_rows(v, lc, a, a1, b0, n8, vp);
+                    ASSERT_EQ(m2 & 0xffu, m & ((1u << n8) - 1)) << "rows " << a << " " << a1;
+                    for (int i = 0; i < n8; ++i)
+                        ASSERT_EQ(bool(m2 >> (8 + i) & 1u),
+                                  a1 != b0 + i &&
+                                      detail::pair_faces(v.leaves[a1], v.leaves[b0 + i], vp))
+                            << "pair " << a1 << " " << b0 + i;
+                    for (int i = 0; i < n; ++i) {
+                        const int32_t b = b0 + i;
+                        const bool faces = detail::pair_faces(v.leaves[a], v.leaves[b], vp);
+                        ASSERT_EQ(bool(m >> i & 1u), faces) << "pair " << a << " " << b;
+                        const bool vis = leaf_pair_visible<true>(v, a, b, vp, &want);
+                        if (!faces) {
+                            ASSERT_FALSE(vis);
+                            continue;
+                        }
+                        if (vis) expect |= 1u << count;
+                        pa[count] = a, pb[count] = b;
+                        if (++count == 32) flush();
+                    }
+                }
+            if (count > 0) flush();
+            EXPECT_EQ(got.facing_pairs, want.facing_pairs);
+            EXPECT_EQ(got.node_tests, want.node_tests);
+            EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+            faced += want.facing_pairs;
+        }
+    }
+    EXPECT_GT(faced, 100000u);
 }
 
 // A segment with a zero direction component that runs in a box's face (p.x == lo.x): the

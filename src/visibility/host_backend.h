@@ -15,6 +15,9 @@
 // and, to keep pairs that cannot be visible out of the packets (which then fill with pairs that
 // walk),
 //   bool may_be_visible(int32_t a, int32_t b) const;  // false: the pair is not visible.
+// or, the same for up to 8 columns of two rows at once,
+//   uint32_t facing_rows(int32_t a0, int32_t a1, int32_t b0, int32_t n) const;
+//   // bit i: (a0, b0 + i) may be visible, bit 8 + i: (a1, b0 + i)
 #pragma once
 
 #include <tbb/blocked_range.h>
@@ -171,15 +174,37 @@ class HostBackend : public Backend {
             const uint64_t local = item - rg.first[j];
             const uint64_t n = std::min<uint64_t>({kChunk, rg.end - item, rg.first[j + 1] - item});
             const uint64_t rw = row_words(job.cols);
+            WordPos pos[kChunk];
+            for (uint64_t k = 0; k < n; ++k) pos[k] = word_pos(job, local + k);
+            uint32_t* const w0 = rg.bits + job.word_offset + local;
             for (uint64_t k0 = 0; k0 < std::min(n, rw); ++k0)
-                for (int32_t blk = 0; blk < 32; blk += kBlock)
-                    for (uint64_t k = k0; k < n; k += rw) {
-                        const WordPos at = word_pos(job, local + k);
-                        uint32_t* w = rg.bits + job.word_offset + local + k;
-                        for (int32_t c = at.c0 + blk; c < std::min(at.c1, at.c0 + blk + kBlock);
-                             ++c)
-                            pk.add(at.a, job.col0 + c, w, 1u << (c - at.c0));
+                for (int32_t blk = 0; blk < 32; blk += kBlock) {
+                    // The words k0, k0 + rw, ...: one column range in consecutive rows.
+                    const int32_t cb = pos[k0].c0 + blk;
+                    const int32_t ce = std::min(pos[k0].c1, pos[k0].c0 + blk + kBlock);
+                    if (cb >= ce) continue;
+                    if constexpr (requires { self.facing_rows(0, 0, 0, 0); }) {
+                        uint64_t k = k0;
+                        for (; k + rw < n; k += 2 * rw) {  // two rows at a time
+                            const uint32_t m =
+                                self.facing_rows(pos[k].a, pos[k + rw].a, job.col0 + cb, ce - cb);
+                            pk.add_mask(pos[k].a, job.col0 + cb, ce - cb, m & 0xffu, w0 + k,
+                                        cb - pos[k].c0);
+                            pk.add_mask(pos[k + rw].a, job.col0 + cb, ce - cb, m >> 8,
+                                        w0 + k + rw, cb - pos[k].c0);
+                        }
+                        if (k < n) {
+                            const uint32_t m =
+                                self.facing_rows(pos[k].a, pos[k].a, job.col0 + cb, ce - cb);
+                            pk.add_mask(pos[k].a, job.col0 + cb, ce - cb, m & 0xffu, w0 + k,
+                                        cb - pos[k].c0);
+                        }
+                    } else {
+                        for (uint64_t k = k0; k < n; k += rw)
+                            for (int32_t c = cb; c < ce; ++c)
+                                pk.add(pos[k].a, job.col0 + c, w0 + k, 1u << (c - pos[k].c0));
                     }
+                }
             item += n;
             if (item >= rg.end || item >= rg.first[j + 1]) pk.flush();  // pairs of one job
 
@@ -209,11 +234,25 @@ class HostBackend : public Backend {
             pa[count] = a, pb[count] = b, word[count] = w, bit[count] = m;
             if (++count == P) flush();
         }
+        // Columns b0 .. b0 + n - 1 of row a (bits bit0 .. of word w): those in m (that face:
+        // Derived::facing_rows) go into packets; the others are not visible.
+        void add_mask(int32_t a, int32_t b0, int32_t n, uint32_t m, uint32_t* w, int32_t bit0) {
+            const int32_t skipped = n - __builtin_popcount(m);
+            wc.pairs += uint64_t(skipped);
+            rg.pairs += uint64_t(skipped);
+            for (; m; m &= m - 1) {
+                const int i = __builtin_ctz(m);
+                pa[count] = a, pb[count] = b0 + i, word[count] = w, bit[count] = 1u << (bit0 + i);
+                if (++count == P) flush();
+            }
+        }
         void flush() {
             if (count == 0) return;
             const uint32_t vis = self.visible_packet(st.state, pa, pb, count, &wc);
-            for (int i = 0; i < count; ++i)
-                if (vis >> i & 1u) *word[i] |= bit[i];
+            for (uint32_t m = vis; m; m &= m - 1) {  // the visible lanes only
+                const int i = __builtin_ctz(m);
+                *word[i] |= bit[i];
+            }
             wc.pairs += count;
             rg.pairs += count;
             wc.visible_pairs += __builtin_popcount(vis);

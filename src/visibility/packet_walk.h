@@ -16,14 +16,24 @@
 // apart (no inverse); a pair with one walks alone, through leaf_pair_visible itself, so the
 // packet's loop has no such case. tests/visibility_test.cpp holds the packet to
 // leaf_pair_visible on randomized trees, every pair, answers and counters.
+//
+// On AVX-512 the rest of a pair's work is in vectors too, with the float operations of
+// leaf_pair.h in the same order (so the same bits): the facing test for 16 columns of a row
+// (facing_mask, from the leaves by field, LeafColumns), the setup of 16 facing pairs' segments
+// (load_faced: pair_segment), and a leaf's occluder test for the lanes that reach it
+// (occluders_zmm: counts_as_occluder for a leaf with a plane; a flagged leaf goes lane by lane).
+// On the default scene this took the CPU's user time from 24 s to about 14 s
+// (docs/results.md, "The CPU walk in vectors").
 #pragma once
 
 #include <array>
 #include <climits>
 #include <cstdint>
+#include <vector>
 
 #include "octree/records.h"
 #include "visibility/leaf_pair.h"
+#include "visibility/node_pair.h"
 
 // The packet loop compiled for AVX2 and AVX-512 too, chosen at run time (GCC on x86-64).
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && !defined(__CUDACC__)
@@ -37,6 +47,252 @@
 
 namespace vmap::detail {
 
+// The leaves' centroids, normals and flags by field (structure of arrays): the facing test
+// loads 16 consecutive leaves' fields as 16 lanes.
+struct LeafColumns {
+    std::vector<float> c[3], n[3];
+    std::vector<uint32_t> flags;
+    LeafColumns() = default;
+    explicit LeafColumns(const OctreeView& t) {
+        for (int k = 0; k < 3; ++k)
+            c[k].resize(size_t(t.num_leaves)), n[k].resize(size_t(t.num_leaves));
+        flags.resize(size_t(t.num_leaves));
+        for (int32_t l = 0; l < t.num_leaves; ++l) {
+            const LeafDisc& d = t.leaves[l];
+            c[0][l] = d.centroid.x, c[1][l] = d.centroid.y, c[2][l] = d.centroid.z;
+            n[0][l] = d.normal.x, n[1][l] = d.normal.y, n[2][l] = d.normal.z;
+            flags[l] = d.flags;
+        }
+    }
+};
+
+#if VMAP_PACKET_ISA
+#define VMAP_ZMM_TARGET __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq")))
+// _mm512_sqrt_ps through an all-lanes mask (GCC 12's unmasked forms start
+// from _mm512_undefined_*, which -Wuninitialized reports).
+VMAP_ZMM_TARGET inline __m512 sqrt_zmm(__m512 a) {
+    return _mm512_mask_sqrt_ps(a, __mmask16(0xffff), a);
+}
+// The fields of the leaves idx[i], i < n <= 16 (zero past n), as 16 lanes each: f[0..2] the
+// centroid, f[3] Delta, f[4..6] the normal, f[7] the flags' bits. A leaf is 8 floats, so lanes i
+// and i + 8 are loaded into one register and the two 8 x 8 blocks transposed together (fewer
+// micro-ops than 16 gathers).
+VMAP_ZMM_TARGET inline void leaf_fields(const LeafDisc* leaves, const int32_t* idx, int n,
+                                        __m512 f[8]) {
+    static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "a leaf is read as 8 floats");
+    alignas(32) static const float zero[8] = {};
+    const float* r[16];
+    for (int i = 0; i < 16; ++i)
+        r[i] = i < n ? reinterpret_cast<const float*>(leaves + idx[i]) : zero;
+    __m512 z[8], t[8], u[8];
+    const __mmask16 all = 0xffff;
+    for (int i = 0; i < 8; ++i) {  // (masked forms: GCC 12's unmasked ones start undefined)
+        z[i] = _mm512_maskz_loadu_ps(0x00ff, r[i]);
+        const auto upper = reinterpret_cast<uintptr_t>(r[i + 8]) - 8 * sizeof(float);
+        z[i] = _mm512_mask_loadu_ps(z[i], 0xff00, reinterpret_cast<const float*>(upper));
+    }
+    for (int i = 0; i < 8; i += 2) {
+        t[i] = _mm512_mask_unpacklo_ps(z[i], all, z[i], z[i + 1]);
+        t[i + 1] = _mm512_mask_unpackhi_ps(z[i], all, z[i], z[i + 1]);
+    }
+    for (int i = 0; i < 8; i += 4) {
+        u[i] = _mm512_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 1] = _mm512_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(3, 2, 3, 2));
+        u[i + 2] = _mm512_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 3] = _mm512_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(3, 2, 3, 2));
+    }
+    const __m512i lo = _mm512_setr_epi32(0, 1, 2, 3, 16, 17, 18, 19, 8, 9, 10, 11, 24, 25, 26, 27);
+    const __m512i hi =
+        _mm512_setr_epi32(4, 5, 6, 7, 20, 21, 22, 23, 12, 13, 14, 15, 28, 29, 30, 31);
+    for (int k = 0; k < 4; ++k) {
+        f[k] = _mm512_permutex2var_ps(u[k], lo, u[k + 4]);
+        f[k + 4] = _mm512_permutex2var_ps(u[k], hi, u[k + 4]);
+    }
+}
+// dot(a, b) as vec.h evaluates it: (a.x b.x + a.y b.y) + a.z b.z.
+VMAP_ZMM_TARGET inline __m512 dot_zmm(__m512 ax, __m512 ay, __m512 az, __m512 bx, __m512 by,
+                                      __m512 bz) {
+    return _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(ax, bx), _mm512_mul_ps(ay, by)),
+                         _mm512_mul_ps(az, bz));
+}
+// facing_mask's lanes on AVX-512: pair_faces' float operations on 16 columns at once (the same
+// order; vsqrtps is IEEE like sqrtf; FMA contraction is off), so the same answers.
+VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafColumns& lc,
+                                                int32_t a, int32_t b0, int n,
+                                                const VisibilityParams& vp) {
+    const __mmask16 m = __mmask16(n >= 16 ? 0xffff : (1u << n) - 1);
+    const LeafDisc& la = t.leaves[a];
+    const __m512 dx =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[0].data() + b0), _mm512_set1_ps(la.centroid.x));
+    const __m512 dy =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[1].data() + b0), _mm512_set1_ps(la.centroid.y));
+    const __m512 dz =
+        _mm512_sub_ps(_mm512_maskz_loadu_ps(m, lc.c[2].data() + b0), _mm512_set1_ps(la.centroid.z));
+    const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+    const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
+    __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
+    if (!(la.flags & kLeafNormalDegenerate)) {
+        const __m512 da = dot_zmm(_mm512_set1_ps(la.normal.x), _mm512_set1_ps(la.normal.y),
+                                  _mm512_set1_ps(la.normal.z), dx, dy, dz);
+        faces &= _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
+    }
+    const __m512 db = dot_zmm(_mm512_maskz_loadu_ps(m, lc.n[0].data() + b0),
+                              _mm512_maskz_loadu_ps(m, lc.n[1].data() + b0),
+                              _mm512_maskz_loadu_ps(m, lc.n[2].data() + b0), dx, dy, dz);
+    const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
+        _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
+    const __mmask16 flagged =
+        _mm512_mask_test_epi32_mask(m, _mm512_maskz_loadu_epi32(m, lc.flags.data() + b0),
+                                    _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+    faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
+    return faces;
+}
+#endif
+
+#if VMAP_PACKET_ISA
+// facing_mask for two rows at once, n <= 8 columns: lanes 0-7 row a0, lanes 8-15 row a1.
+VMAP_ZMM_TARGET inline uint32_t facing_rows_zmm(const OctreeView& t, const LeafColumns& lc,
+                                                int32_t a0, int32_t a1, int32_t b0, int n,
+                                                const VisibilityParams& vp) {
+    const __mmask8 m8 = __mmask8((1u << n) - 1);
+    const __mmask16 m = __mmask16(m8 | (uint32_t(m8) << 8));
+    const __mmask16 upper = 0xff00;
+    const LeafDisc &l0 = t.leaves[a0], &l1 = t.leaves[a1];
+    auto col = [&](const std::vector<float>& v) { return v.data() + b0; };
+    const __m512 dx = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[0]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.x),
+                                                         _mm512_set1_ps(l1.centroid.x)));
+    const __m512 dy = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[1]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.y),
+                                                         _mm512_set1_ps(l1.centroid.y)));
+    const __m512 dz = _mm512_sub_ps(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.c[2]))),
+                                    _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.centroid.z),
+                                                         _mm512_set1_ps(l1.centroid.z)));
+    const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+    const __m512 lim = _mm512_mul_ps(_mm512_set1_ps(vp.facing_tol), len);
+    __mmask16 faces = m & _mm512_cmp_ps_mask(len, _mm512_setzero_ps(), _CMP_GT_OQ);
+    const __m512 da = dot_zmm(
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.x), _mm512_set1_ps(l1.normal.x)),
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.y), _mm512_set1_ps(l1.normal.y)),
+        _mm512_mask_blend_ps(upper, _mm512_set1_ps(l0.normal.z), _mm512_set1_ps(l1.normal.z)), dx,
+        dy, dz);
+    const __mmask16 row_flagged = __mmask16((l0.flags & kLeafNormalDegenerate ? 0x00ffu : 0u) |
+                                            (l1.flags & kLeafNormalDegenerate ? 0xff00u : 0u));
+    faces &= row_flagged | _mm512_cmp_ps_mask(da, lim, _CMP_GT_OQ);
+    const __m512 db = dot_zmm(_mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[0]))),
+                              _mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[1]))),
+                              _mm512_maskz_broadcast_f32x8(0xffff, _mm256_maskz_loadu_ps(m8, col(lc.n[2]))), dx,
+                              dy, dz);
+    const __m512 neg = _mm512_castsi512_ps(_mm512_xor_si512(
+        _mm512_castps_si512(db), _mm512_set1_epi32(int(0x80000000u))));  // -db, exactly
+    const __m512i flags =
+        _mm512_maskz_broadcast_i32x8(0xffff, _mm256_maskz_loadu_epi32(m8, lc.flags.data() + b0));
+    const __mmask16 flagged =
+        _mm512_mask_test_epi32_mask(m, flags, _mm512_set1_epi32(int(kLeafNormalDegenerate)));
+    faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
+    return faces;
+}
+#endif
+
+// facing_mask for rows a0 and a1 and columns b0 .. b0 + n - 1, n <= 8: bits 0-7 for row a0,
+// bits 8-15 for row a1.
+inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t a0, int32_t a1,
+                            int32_t b0, int n, const VisibilityParams& vp);
+
+// The columns b0 + i, i < n <= 16, whose leaf pair (a, b0 + i) faces (pair_faces), as a mask.
+// `lc`: the leaves of t by field.
+inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t a, int32_t b0,
+                            int n, const VisibilityParams& vp) {
+#if VMAP_PACKET_ISA
+    static const bool zmm = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+    }();
+    if (zmm) return facing_mask_zmm(t, lc, a, b0, n, vp);
+#else
+    (void)lc;
+#endif
+    uint32_t m = 0;
+    for (int i = 0; i < n; ++i) m |= uint32_t(pair_faces(t.leaves[a], t.leaves[b0 + i], vp)) << i;
+    return m;
+}
+
+// shaft_walk_nodes' list (node_pair.h) with walk_shaft's box test and flat-end rule alone,
+// without its plane and disc tests: every node walk_shaft enters passes the tests kept here, so
+// this list holds that one (and both are ancestor-closed tops of the tree, in preorder), and
+// every leaf pair under (A, B) gets the answer of the whole walk through it as through that one
+// (node_pair.h: walk_shaft prunes only nodes that hold no actual occluder of such a pair, e4).
+// The plane and disc tests (square roots, divisions, in double) cost most of a shaft walk's
+// time and leave few nodes out of these lists. `orig` is scratch.
+// `pads`, when given, holds per node its bounds' pad and whether it has a flagged leaf below
+// (node_pads), read instead of the whole bounds.
+struct NodePad {
+    float pad = 0;
+    int32_t ndeg = 0;
+};
+inline std::vector<NodePad> node_pads(const NodePairContext& c) {
+    std::vector<NodePad> p(size_t(c.tree.num_nodes));
+    for (int32_t n = 0; n < c.tree.num_nodes; ++n) {
+        const NodeBounds x = bounds_at(c, n);
+        p[size_t(n)] = {x.pad, x.ndeg};
+    }
+    return p;
+}
+inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
+                           std::vector<WalkNode>& out, std::vector<int32_t>& orig,
+                           const NodePad* pads = nullptr) {
+    out.clear();
+    orig.clear();
+    bool flat_a, flat_b;
+    flat_ends(c, A, B, &flat_a, &flat_b);
+    const NodeBounds na = bounds_at(c, A);
+    const NodeBounds nbb = bounds_at(c, B);
+    const Shaft s =
+        make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
+    const double E = c.margin;
+    const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
+    for (int32_t n = 0; n < c.tree.num_nodes;) {
+        const WalkNode w = c.tree.walk[n];
+        const bool in_a = n >= A && n < c.skip[A], in_b = n >= B && n < c.skip[B];
+        const NodePad x = pads ? pads[n] : NodePad{bounds_at(c, n).pad, bounds_at(c, n).ndeg};
+        if (!shaft_meets_box(s, w.lo, w.hi, E + x.pad) ||
+            (in_a && (a_leaf || (flat_a && x.ndeg == 0))) ||
+            (in_b && (b_leaf || (flat_b && x.ndeg == 0)))) {
+            n = w.skip;
+            continue;
+        }
+        out.push_back(w);
+        orig.push_back(n);
+        ++n;
+    }
+    // Skips remapped to the list, as shaft_walk_nodes does: entries come in preorder and the
+    // list is ancestor-closed, so the open nodes form a stack and an entry closes every open
+    // node whose subtree ends at or before it.
+    std::vector<int32_t>& open = orig;  // reused: orig[k] is needed only for entries after k
+    size_t top = 0;
+    for (size_t k = 0; k < out.size(); ++k) {
+        const int32_t o = orig[k];
+        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
+            out[size_t(open[--top])].skip = int32_t(k);
+        open[top++] = int32_t(k);
+    }
+    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
+}
+
+inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t a0, int32_t a1,
+                            int32_t b0, int n, const VisibilityParams& vp) {
+#if VMAP_PACKET_ISA
+    static const bool zmm = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512vl") &&
+               __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
+    }();
+    if (zmm) return facing_rows_zmm(t, lc, a0, a1, b0, n, vp);
+#endif
+    return facing_mask(t, lc, a0, b0, n, vp) | facing_mask(t, lc, a1, b0, n, vp) << 8;
+}
+
 template <int W>
 class SegmentPacket {
     static_assert(W >= 1 && W <= 32, "a packet's lanes are the bits of one word");
@@ -48,7 +304,7 @@ class SegmentPacket {
     template <class Counters>
     uint32_t load(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
                   const VisibilityParams& vp, Counters* wc, bool faced = false) {
-        live_ = alone_ = 0;
+        live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
         int n = 0;  // the lanes to walk, packed
         for (int k = 0; k < count; ++k) {
             const LeafDisc& la = t.leaves[a[k]];
@@ -56,8 +312,8 @@ class SegmentPacket {
             if (!faced && !pair_faces(la, lb, vp)) continue;
             lane_[n] = k;
             a_[n] = a[k], b_[n] = b[k];
-            seg_[n] = pair_segment(la, lb, vp, true);
-            const SlabRay& r = seg_[n].ray;
+            const PairSegment sg = pair_segment(la, lb, vp, true);
+            const SlabRay& r = sg.ray;
             const bool small =
                 fabsf(r.d.x) < 1e-30f || fabsf(r.d.y) < 1e-30f || fabsf(r.d.z) < 1e-30f;
             live_ |= uint32_t(!small) << n;
@@ -67,15 +323,36 @@ class SegmentPacket {
             p_[0][n] = r.p.x, p_[1][n] = r.p.y, p_[2][n] = r.p.z;
             inv_[0][n] = r.inv.x, inv_[1][n] = r.inv.y, inv_[2][n] = r.inv.z;
             t0_[n] = r.t0, t1_[n] = r.t1;
+            d_[0][n] = sg.d.x, d_[1][n] = sg.d.y, d_[2][n] = sg.d.z;
+            q_[0][n] = sg.q.x, q_[1][n] = sg.q.y, q_[2][n] = sg.q.z;
+            na_[0][n] = sg.na.x, na_[1][n] = sg.na.y, na_[2][n] = sg.na.z;
+            nb_[0][n] = sg.nb.x, nb_[1][n] = sg.nb.y, nb_[2][n] = sg.nb.z;
+            len_[n] = sg.len;
+            delta_a_[n] = sg.delta_a, delta_b_[n] = sg.delta_b;
+            win_a_[n] = sg.window_a, win_b_[n] = sg.window_b;
+            no_plane_a_ |= uint32_t(!sg.plane_a) << n;
+            no_plane_b_ |= uint32_t(!sg.plane_b) << n;
             ++n;
         }
-        for (int i = n; i < W; ++i) {  // no pair: past every node (finite slabs, no NaN)
-            resume_[i] = INT_MAX;
-            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
-            t0_[i] = t1_[i] = 0.f;
-        }
+        pad(n);
         wc->facing_pairs += uint64_t(__builtin_popcount(live_));
         return n > 0;
+    }
+    // load(t, a, b, count, vp, wc, true) (every pair faces), for 16 lanes at a time where the
+    // CPU has AVX-512: pair_segment's float operations on every lane (vsqrtps and vdivps are
+    // IEEE like sqrtf and /, FMA contraction is off), so the same bits.
+    template <class Counters>
+    uint32_t load_faced(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+                        const VisibilityParams& vp, Counters* wc) {
+#if VMAP_PACKET_ISA
+        static const int isa = best_isa();
+        if (isa == 2 && W == 32) {
+            load_zmm(t, a, b, count, vp);
+            wc->facing_pairs += uint64_t(__builtin_popcount(live_));
+            return count > 0;
+        }
+#endif
+        return load(t, a, b, count, vp, wc, true);
     }
 
     // Walks `t` (the whole preorder array or a job's shaft list, as leaf_pair_visible would)
@@ -124,6 +401,106 @@ class SegmentPacket {
     }
 
   private:
+    // Lanes n..W-1 hold no pair: past every node (finite slabs, no NaN).
+    void pad(int n) {
+        for (int i = n; i < W; ++i) pad_lane(i);
+    }
+    // Lane i's PairSegment, from the lanes' arrays (the scalar occluder test).
+    PairSegment segment(int i) const {
+        PairSegment s;
+        s.p = {p_[0][i], p_[1][i], p_[2][i]};
+        s.d = {d_[0][i], d_[1][i], d_[2][i]};
+        s.len = len_[i];
+        s.faces = true;
+        s.ray = SlabRay{s.p, {inv_[0][i], inv_[1][i], inv_[2][i]}, s.d, t0_[i], t1_[i]};
+        s.q = {q_[0][i], q_[1][i], q_[2][i]};
+        s.na = {na_[0][i], na_[1][i], na_[2][i]};
+        s.nb = {nb_[0][i], nb_[1][i], nb_[2][i]};
+        s.plane_a = !(no_plane_a_ >> i & 1u);
+        s.plane_b = !(no_plane_b_ >> i & 1u);
+        s.delta_a = delta_a_[i], s.delta_b = delta_b_[i];
+        s.window_a = win_a_[i], s.window_b = win_b_[i];
+        return s;
+    }
+#if VMAP_PACKET_ISA
+    // load's lanes for pairs that all face, 16 at a time: the leaves' fields gathered (a
+    // LeafDisc is 8 floats), then pair_segment (faces = true, so len > 0) written out.
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), noinline)) void load_zmm(
+        const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+        const VisibilityParams& vp) {
+        live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
+        const __m512 eps = _mm512_set1_ps(vp.eps), half = _mm512_set1_ps(0.5f),
+                     shrink = _mm512_set1_ps(0.999f), one = _mm512_set1_ps(1.f),
+                     window = _mm512_set1_ps(vp.end_window), tiny = _mm512_set1_ps(1e-30f);
+        const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
+        for (int o = 0; o < count; o += 16) {
+            const __mmask16 m = __mmask16(count - o >= 16 ? 0xffff : (1u << (count - o)) - 1);
+            const __m512i ia = _mm512_maskz_loadu_epi32(m, a + o);
+            const __m512i ib = _mm512_maskz_loadu_epi32(m, b + o);
+            _mm512_store_si512(a_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ia));
+            _mm512_store_si512(b_ + o, _mm512_mask_mov_epi32(_mm512_set1_epi32(-1), m, ib));
+            __m512 fa[8], fb[8];
+            leaf_fields(t.leaves, a + o, count - o, fa);
+            leaf_fields(t.leaves, b + o, count - o, fb);
+            const __m512 ax = fa[0], ay = fa[1], az = fa[2], da = fa[3];
+            const __m512 bx = fb[0], by = fb[1], bz = fb[2], db = fb[3];
+            const __m512 dx = _mm512_sub_ps(bx, ax), dy = _mm512_sub_ps(by, ay),
+                         dz = _mm512_sub_ps(bz, az);
+            const __m512 len = sqrt_zmm(dot_zmm(dx, dy, dz, dx, dy, dz));
+            const __m512 wa = _mm512_mul_ps(window, da), wb = _mm512_mul_ps(window, db);
+            // len > 0 for a facing pair: ta = min(max(eps, wa / len), 0.5), tb alike
+            const __m512 ta = min_zmm(max_zmm(eps, _mm512_div_ps(wa, len)), half);
+            const __m512 tb = min_zmm(max_zmm(eps, _mm512_div_ps(wb, len)), half);
+            _mm512_store_ps(t0_ + o, _mm512_mul_ps(ta, shrink));
+            _mm512_store_ps(t1_ + o, _mm512_sub_ps(one, _mm512_mul_ps(tb, shrink)));
+            const __mmask16 small =
+                m & (_mm512_cmp_ps_mask(_mm512_and_ps(dx, absmask), tiny, _CMP_LT_OQ) |
+                     _mm512_cmp_ps_mask(_mm512_and_ps(dy, absmask), tiny, _CMP_LT_OQ) |
+                     _mm512_cmp_ps_mask(_mm512_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
+            live_ |= uint32_t(m & ~small) << o;
+            alone_ |= uint32_t(small) << o;
+            _mm512_store_si512(resume_ + o,
+                               _mm512_mask_mov_epi32(_mm512_setzero_si512(), __mmask16(~m | small),
+                                                     _mm512_set1_epi32(INT_MAX)));
+            _mm512_store_si512(occluders_ + o, _mm512_setzero_si512());
+            _mm512_store_ps(p_[0] + o, ax), _mm512_store_ps(p_[1] + o, ay);
+            _mm512_store_ps(p_[2] + o, az);
+            _mm512_store_ps(inv_[0] + o, _mm512_div_ps(one, dx));
+            _mm512_store_ps(inv_[1] + o, _mm512_div_ps(one, dy));
+            _mm512_store_ps(inv_[2] + o, _mm512_div_ps(one, dz));
+            _mm512_store_ps(d_[0] + o, dx), _mm512_store_ps(d_[1] + o, dy);
+            _mm512_store_ps(d_[2] + o, dz);
+            _mm512_store_ps(q_[0] + o, bx), _mm512_store_ps(q_[1] + o, by);
+            _mm512_store_ps(q_[2] + o, bz);
+            _mm512_store_ps(na_[0] + o, fa[4]), _mm512_store_ps(na_[1] + o, fa[5]);
+            _mm512_store_ps(na_[2] + o, fa[6]);
+            _mm512_store_ps(nb_[0] + o, fb[4]), _mm512_store_ps(nb_[1] + o, fb[5]);
+            _mm512_store_ps(nb_[2] + o, fb[6]);
+            _mm512_store_ps(len_ + o, len);
+            _mm512_store_ps(delta_a_ + o, da), _mm512_store_ps(delta_b_ + o, db);
+            _mm512_store_ps(win_a_ + o, wa), _mm512_store_ps(win_b_ + o, wb);
+            const __m512i flag = _mm512_set1_epi32(int(kLeafNormalDegenerate));
+            no_plane_a_ |=
+                uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fa[7]), flag)) << o;
+            no_plane_b_ |=
+                uint32_t(_mm512_mask_test_epi32_mask(m, _mm512_castps_si512(fb[7]), flag)) << o;
+        }
+        for (int i = 0; i < count; ++i) lane_[i] = i;
+        // Lanes past count: padding as in pad() (no pair, finite slabs).
+        for (int i = count; i < ((count + 15) & ~15); ++i) {
+            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+            t0_[i] = t1_[i] = 0.f;
+        }
+        for (int i = (count + 15) & ~15; i < W; ++i) pad_lane(i);
+    }
+#endif
+    void pad_lane(int i) {
+        resume_[i] = INT_MAX;
+        p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+        t0_[i] = t1_[i] = 0.f;
+        a_[i] = b_[i] = -1;
+        occluders_[i] = 0;
+    }
     // 1 << i, as a table: the lane loop's masks then vectorise with SSE2 as well.
     static constexpr auto kBit = [] {
         std::array<uint32_t, W> b{};
@@ -227,12 +604,17 @@ class SegmentPacket {
                 n = w.skip;
                 continue;
             }
-            if (w.leaf >= 0) {  // occluders_at reads and sets resume_
-                _mm512_store_si512(resume_, resume[0]);
-                _mm512_store_si512(resume_ + 16, resume[1]);
-                live -= occluders_at(t, w.leaf, hits, vp, wc);
-                resume[0] = _mm512_load_si512(resume_);
-                resume[1] = _mm512_load_si512(resume_ + 16);
+            if (w.leaf >= 0) {
+                const LeafDisc& x = t.leaves[w.leaf];
+                if (!(x.flags & kLeafNormalDegenerate)) {
+                    live -= occluders_zmm(x, w.leaf, hits, resume, vp, wc);
+                } else {  // occluders_at reads and sets resume_
+                    _mm512_store_si512(resume_, resume[0]);
+                    _mm512_store_si512(resume_ + 16, resume[1]);
+                    live -= occluders_at(t, w.leaf, hits, vp, wc);
+                    resume[0] = _mm512_load_si512(resume_);
+                    resume[1] = _mm512_load_si512(resume_ + 16);
+                }
             }
             ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
         }
@@ -242,6 +624,93 @@ class SegmentPacket {
         int64_t sum = 0;
         for (int i = 0; i < W; ++i) sum += sums[i];
         return sum;
+    }
+    // occluders_at for a leaf x with a plane (not flagged), the lanes in 16 at a time:
+    // counts_as_occluder's float operations in the same order on every lane (in_front_of_ends,
+    // is_actual_occluder's plane branch, exits_at_an_end, beyond_the_end_windows; FMA
+    // contraction is off, vdivps and the compares are IEEE like their scalar forms), so the same
+    // bits; a lane whose own end is x is left out and not counted, as occluder_reached does.
+    // The lanes that reach their K-th occluder leave: resume to INT_MAX, out of live_.
+    template <class Counters>
+    __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq"), always_inline)) inline int
+    occluders_zmm(const LeafDisc& x, int32_t leaf, uint32_t hits, __m512i resume[2],
+                  const VisibilityParams& vp, Counters* wc) {
+        const __m512 cx = _mm512_set1_ps(x.centroid.x), cy = _mm512_set1_ps(x.centroid.y),
+                     cz = _mm512_set1_ps(x.centroid.z);
+        const __m512 nx = _mm512_set1_ps(x.normal.x), ny = _mm512_set1_ps(x.normal.y),
+                     nz = _mm512_set1_ps(x.normal.z);
+        const __m512 zero = _mm512_setzero_ps(), half = _mm512_set1_ps(0.5f),
+                     one = _mm512_set1_ps(1.f);
+        const __m512 eps = _mm512_set1_ps(vp.eps), eps1 = _mm512_set1_ps(1.f - vp.eps);
+        const __m512 ptol = _mm512_set1_ps(vp.parallel_tol);
+        const __m512 dd = _mm512_set1_ps(x.delta * x.delta);
+        const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K);
+        const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
+        int left = 0;
+        for (int h = 0; h < 2; ++h) {
+            __mmask16 m = __mmask16(hits >> (16 * h));
+            if (!m) continue;
+            const int o = 16 * h;
+            m &= __mmask16(~(_mm512_cmpeq_epi32_mask(_mm512_load_si512(a_ + o), lf) |
+                             _mm512_cmpeq_epi32_mask(_mm512_load_si512(b_ + o), lf)));
+            wc->occluder_tests += uint64_t(__builtin_popcount(m));
+            const __m512 px = _mm512_load_ps(p_[0] + o), py = _mm512_load_ps(p_[1] + o),
+                         pz = _mm512_load_ps(p_[2] + o);
+            const __m512 qx = _mm512_load_ps(q_[0] + o), qy = _mm512_load_ps(q_[1] + o),
+                         qz = _mm512_load_ps(q_[2] + o);
+            const __m512 dx = _mm512_load_ps(d_[0] + o), dy = _mm512_load_ps(d_[1] + o),
+                         dz = _mm512_load_ps(d_[2] + o);
+            const __m512 len = _mm512_load_ps(len_ + o);
+            // in_front_of_ends: dot(na, c - p) > 0 and dot(nb, c - q) > 0, where an end has a plane
+            const __m512 vx = _mm512_sub_ps(cx, px), vy = _mm512_sub_ps(cy, py),
+                         vz = _mm512_sub_ps(cz, pz);
+            const __m512 fa = dot_zmm(_mm512_load_ps(na_[0] + o), _mm512_load_ps(na_[1] + o),
+                                      _mm512_load_ps(na_[2] + o), vx, vy, vz);
+            const __m512 fb = dot_zmm(_mm512_load_ps(nb_[0] + o), _mm512_load_ps(nb_[1] + o),
+                                      _mm512_load_ps(nb_[2] + o), _mm512_sub_ps(cx, qx),
+                                      _mm512_sub_ps(cy, qy), _mm512_sub_ps(cz, qz));
+            m &= __mmask16(_mm512_cmp_ps_mask(fa, zero, _CMP_GT_OQ) | (no_plane_a_ >> o));
+            m &= __mmask16(_mm512_cmp_ps_mask(fb, zero, _CMP_GT_OQ) | (no_plane_b_ >> o));
+            // is_actual_occluder, x with a plane: not parallel, cut in (eps, 1 - eps), on the disc
+            const __m512 nd = dot_zmm(nx, ny, nz, dx, dy, dz);
+            m &= __mmask16(~_mm512_cmp_ps_mask(_mm512_and_ps(nd, absmask), _mm512_mul_ps(ptol, len),
+                                               _CMP_LE_OQ));
+            const __m512 tt = _mm512_div_ps(dot_zmm(nx, ny, nz, vx, vy, vz), nd);
+            m &= _mm512_cmp_ps_mask(tt, eps, _CMP_GT_OQ) & _mm512_cmp_ps_mask(tt, eps1, _CMP_LT_OQ);
+            const __m512 ex = _mm512_sub_ps(_mm512_add_ps(px, _mm512_mul_ps(dx, tt)), cx);
+            const __m512 ey = _mm512_sub_ps(_mm512_add_ps(py, _mm512_mul_ps(dy, tt)), cy);
+            const __m512 ez = _mm512_sub_ps(_mm512_add_ps(pz, _mm512_mul_ps(dz, tt)), cz);
+            m &= _mm512_cmp_ps_mask(dot_zmm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ);
+            // exits_at_an_end (x has a plane) and beyond_the_end_windows, by the nearer end
+            const __mmask16 near_a = _mm512_cmp_ps_mask(tt, half, _CMP_LT_OQ);
+            const __m512 from_end =
+                _mm512_mul_ps(_mm512_mask_blend_ps(near_a, _mm512_sub_ps(one, tt), tt), len);
+            const __m512 hd =
+                _mm512_mul_ps(half, _mm512_mask_blend_ps(near_a, _mm512_load_ps(delta_b_ + o),
+                                                         _mm512_load_ps(delta_a_ + o)));
+            const __m512 ux = _mm512_mask_blend_ps(near_a, qx, px),
+                         uy = _mm512_mask_blend_ps(near_a, qy, py),
+                         uz = _mm512_mask_blend_ps(near_a, qz, pz);
+            const __m512 back = dot_zmm(nx, ny, nz, _mm512_sub_ps(ux, cx), _mm512_sub_ps(uy, cy),
+                                        _mm512_sub_ps(uz, cz));
+            const __mmask16 plane_near =
+                __mmask16(~((near_a & (no_plane_a_ >> o)) | (~near_a & (no_plane_b_ >> o))));
+            const __mmask16 exits = plane_near & _mm512_cmp_ps_mask(from_end, hd, _CMP_LT_OQ) &
+                                    _mm512_cmp_ps_mask(back, zero, _CMP_LT_OQ);
+            const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),
+                                                    _mm512_load_ps(win_a_ + o));
+            m &= __mmask16(~exits) & _mm512_cmp_ps_mask(from_end, win, _CMP_NLT_UQ);
+            // The K rule: a lane at its K-th occluder is hidden and leaves the walk.
+            __m512i occ = _mm512_load_si512(occluders_ + o);
+            occ = _mm512_mask_add_epi32(occ, m, occ, _mm512_set1_epi32(1));
+            _mm512_store_si512(occluders_ + o, occ);
+            const __mmask16 done = _mm512_mask_cmpge_epi32_mask(m, occ, kk);
+            if (!done) continue;
+            resume[h] = _mm512_mask_mov_epi32(resume[h], done, _mm512_set1_epi32(INT_MAX));
+            live_ &= ~(uint32_t(done) << o);
+            left += __builtin_popcount(done);
+        }
+        return left;
     }
     // _mm512_min_ps and _mm512_max_ps, all lanes through the mask (GCC 12's unmasked forms start
     // from _mm512_undefined_ps, which -Wuninitialized reports).
@@ -269,7 +738,7 @@ class SegmentPacket {
         int left = 0;
         for (; hits; hits &= hits - 1) {
             const int i = __builtin_ctz(hits);
-            if (!occluder_reached<true>(t, seg_[i], leaf, a_[i], b_[i], vp, occluders_[i], wc))
+            if (!occluder_reached<true>(t, segment(i), leaf, a_[i], b_[i], vp, occluders_[i], wc))
                 continue;
             live_ &= ~(1u << i);
             resume_[i] = INT_MAX;
@@ -283,9 +752,21 @@ class SegmentPacket {
     alignas(64) float t0_[W];
     alignas(64) float t1_[W];
     alignas(64) int32_t resume_[W];
-    int32_t a_[W], b_[W], occluders_[W];
-    int32_t lane_[W];  // the pair's place in the packet, per lane
-    PairSegment seg_[W];
+    alignas(64) int32_t a_[W];
+    alignas(64) int32_t b_[W];
+    alignas(64) int32_t occluders_[W];
+    // The rest of the lanes' segments (PairSegment), by field, for the vector occluder test.
+    alignas(64) float d_[3][W];
+    alignas(64) float q_[3][W];
+    alignas(64) float na_[3][W];
+    alignas(64) float nb_[3][W];
+    alignas(64) float len_[W];
+    alignas(64) float delta_a_[W];  // the ends' disc radii
+    alignas(64) float delta_b_[W];
+    alignas(64) float win_a_[W];  // the end windows
+    alignas(64) float win_b_[W];
+    uint32_t no_plane_a_ = 0, no_plane_b_ = 0;  // lanes whose end a (b) has no plane
+    int32_t lane_[W];                           // the pair's place in the packet, per lane
     uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
     uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)
 };

@@ -78,11 +78,11 @@ class HostBackend : public Backend {
 
     double busy_seconds() const override { return busy_; }
     bool counts_progress() const override { return true; }
-    // About 3e7 leaf pairs (of all, decided or walked) per second per core with the packet walk
-    // and node decisions (docs/results.md "The CPU packet walk", branch shaft: 3.1e7 on
-    // cornell-two-models at 60,000 points, 3.9e7 on the default scene; user time).
+    // About 4.5e7 leaf pairs (of all, decided or walked) per second per core with the packet
+    // walk in vectors and node decisions (docs/results.md "The CPU walk in vectors": 5.1e7 on
+    // the default scene, user time, AVX-512; 3e7 before, and about that without AVX-512).
     double expected_pairs_per_second() const override {
-        return 3e7 * tbb::this_task_arena::max_concurrency();
+        return 4.5e7 * tbb::this_task_arena::max_concurrency();
     }
 
   private:

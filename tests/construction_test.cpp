@@ -301,6 +301,42 @@ TEST_P(NodeConstruction, DecisionsAgreeWithEveryLeafPair) {
 
 VMAP_ON_EACH_BACKEND(NodeConstruction);
 
+// Every leaf pair under node pair (a, b), walked over `list` (a list of the tree's nodes for
+// that pair), gets the whole walk's answer (m, the leaf-by-leaf table): one at a time, then in
+// packets of 32, all pairs loaded (load) or only those that face (load_faced, the backend's
+// path). Adds the pairs to *pairs.
+void expect_list_gives_the_whole_walks_answers(const Octree& t, const detail::NodePairContext& c,
+                                               const std::vector<uint8_t>& m,
+                                               std::vector<WalkNode>& list, int32_t a, int32_t b,
+                                               bool faced, uint64_t* pairs) {
+    const int32_t L = t.num_leaves();
+    OctreeView lv = c.tree;
+    lv.walk = list.data();
+    lv.num_nodes = int32_t(list.size());
+    std::vector<int32_t> xs, ys;
+    for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
+        for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y) {
+            WorkCounters wc;
+            ASSERT_EQ(detail::leaf_pair_visible<true>(lv, x, y, c.vp, &wc),
+                      bool(m[size_t(x) * L + y]))
+                << "nodes " << a << ", " << b << ", leaves " << x << ", " << y;
+            ++*pairs;
+            if (!faced || detail::pair_faces(lv.leaves[x], lv.leaves[y], c.vp))
+                xs.push_back(x), ys.push_back(y);
+        }
+    for (size_t k = 0; k < xs.size(); k += 32) {
+        const int n = int(std::min<size_t>(32, xs.size() - k));
+        detail::SegmentPacket<32> pk;
+        WorkCounters wc;
+        const bool any = faced ? pk.load_faced(lv, xs.data() + k, ys.data() + k, n, c.vp, &wc)
+                               : pk.load(lv, xs.data() + k, ys.data() + k, n, c.vp, &wc);
+        const uint32_t vis = any ? pk.walk(lv, c.vp, &wc) : 0u;
+        for (int i = 0; i < n; ++i)
+            ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k + i]) * L + ys[k + i]]))
+                << "packet, nodes " << a << ", " << b;
+    }
+}
+
 // The CPU walks a job's leaf pairs through the shaft list of an enclosing node pair (the split
 // pair it came from: cpu_backend.cpp): for every node pair (A, B) of disjoint subtrees, each leaf
 // pair under it, and so under any pair of A's and B's descendants, walked through (A, B)'s list
@@ -308,44 +344,19 @@ VMAP_ON_EACH_BACKEND(NodeConstruction);
 TEST(Construction, ShaftListsGiveTheWholeWalksAnswers) {
     uint64_t pairs = 0, shorter = 0;
     for (uint64_t seed = 400; seed < 412; ++seed) {
+        SCOPED_TRACE(seed);
         NodeTestScene sc(seed, 1 + int(seed % 3));
-        const Octree& t = sc.t;
-        const auto& m = sc.m;
         detail::NodePairContext& c = sc.c;
         c.leaves_stored = true;
         ASSERT_GT(c.margin, 0.0);
-        const int32_t L = t.num_leaves();
         std::vector<WalkNode> list;
         std::vector<int32_t> scratch;
-        for (int32_t a = 0; a < t.num_nodes(); a += 1 + int32_t(seed % 2))
-            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 2 + int32_t(seed % 3)) {
+        for (int32_t a = 0; a < sc.t.num_nodes(); a += 1 + int32_t(seed % 2))
+            for (int32_t b = sc.t.skip()[a]; b < sc.t.num_nodes(); b += 2 + int32_t(seed % 3)) {
                 detail::shaft_walk_nodes(c, a, b, list, scratch);
-                OctreeView lv = c.tree;
-                lv.walk = list.data();
-                lv.num_nodes = int32_t(list.size());
-                shorter += list.size() < size_t(t.num_nodes());
-                std::vector<int32_t> xs, ys;
-                for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
-                    for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y) {
-                        WorkCounters wc;
-                        ASSERT_EQ(detail::leaf_pair_visible<true>(lv, x, y, c.vp, &wc),
-                                  bool(m[size_t(x) * L + y]))
-                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
-                            << ", " << y;
-                        xs.push_back(x), ys.push_back(y);
-                        ++pairs;
-                    }
-                for (size_t k = 0; k < xs.size(); k += 32) {  // the packet walk, 32 at a time
-                    const int n = int(std::min<size_t>(32, xs.size() - k));
-                    detail::SegmentPacket<32> pk;
-                    WorkCounters wc;
-                    const uint32_t vis = pk.load(lv, xs.data() + k, ys.data() + k, n, c.vp, &wc)
-                                             ? pk.walk(lv, c.vp, &wc)
-                                             : 0u;
-                    for (int i = 0; i < n; ++i)
-                        ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k + i]) * L + ys[k + i]]))
-                            << "seed " << seed << ": packet, nodes " << a << ", " << b;
-                }
+                shorter += list.size() < size_t(sc.t.num_nodes());
+                expect_list_gives_the_whole_walks_answers(sc.t, c, sc.m, list, a, b, false, &pairs);
+                if (HasFatalFailure()) return;
             }
     }
     EXPECT_GT(pairs, 100000u);
@@ -359,17 +370,15 @@ TEST(Construction, ShaftListsGiveTheWholeWalksAnswers) {
 TEST(Construction, BoxListsHoldTheShaftListsAndGiveTheWholeWalksAnswers) {
     uint64_t pairs = 0, shorter = 0;
     for (uint64_t seed = 420; seed < 430; ++seed) {
+        SCOPED_TRACE(seed);
         NodeTestScene sc(seed, 1 + int(seed % 3));
-        const Octree& t = sc.t;
-        const auto& m = sc.m;
         detail::NodePairContext& c = sc.c;
         c.leaves_stored = true;
         ASSERT_GT(c.margin, 0.0);
-        const int32_t L = t.num_leaves();
         std::vector<WalkNode> list, shaft;
         std::vector<int32_t> scratch;
-        for (int32_t a = 0; a < t.num_nodes(); a += 1 + int32_t(seed % 2))
-            for (int32_t b = t.skip()[a]; b < t.num_nodes(); b += 2 + int32_t(seed % 3)) {
+        for (int32_t a = 0; a < sc.t.num_nodes(); a += 1 + int32_t(seed % 2))
+            for (int32_t b = sc.t.skip()[a]; b < sc.t.num_nodes(); b += 2 + int32_t(seed % 3)) {
                 detail::box_walk_nodes(c, a, b, list, scratch);
                 detail::shaft_walk_nodes(c, a, b, shaft, scratch);
                 size_t k = 0;  // shaft's entries in order within list (same boxes, same leaves)
@@ -377,35 +386,10 @@ TEST(Construction, BoxListsHoldTheShaftListsAndGiveTheWholeWalksAnswers) {
                     if (k < shaft.size() && w.leaf == shaft[k].leaf && w.lo == shaft[k].lo &&
                         w.hi == shaft[k].hi)
                         ++k;
-                ASSERT_EQ(k, shaft.size()) << "seed " << seed << ": nodes " << a << ", " << b;
-                OctreeView lv = c.tree;
-                lv.walk = list.data();
-                lv.num_nodes = int32_t(list.size());
-                shorter += list.size() < size_t(t.num_nodes());
-                std::vector<int32_t> xs, ys;
-                for (int32_t x = t.leaf_begin()[a]; x < t.leaf_end()[a]; ++x)
-                    for (int32_t y = t.leaf_begin()[b]; y < t.leaf_end()[b]; ++y) {
-                        WorkCounters wc;
-                        ASSERT_EQ(detail::leaf_pair_visible<true>(lv, x, y, c.vp, &wc),
-                                  bool(m[size_t(x) * L + y]))
-                            << "seed " << seed << ": nodes " << a << ", " << b << ", leaves " << x
-                            << ", " << y;
-                        ++pairs;
-                        if (detail::pair_faces(lv.leaves[x], lv.leaves[y], c.vp))
-                            xs.push_back(x), ys.push_back(y);
-                    }
-                for (size_t k0 = 0; k0 < xs.size(); k0 += 32) {
-                    const int n = int(std::min<size_t>(32, xs.size() - k0));
-                    detail::SegmentPacket<32> pk;
-                    WorkCounters wc;
-                    const uint32_t vis =
-                        pk.load_faced(lv, xs.data() + k0, ys.data() + k0, n, c.vp, &wc)
-                            ? pk.walk(lv, c.vp, &wc)
-                            : 0u;
-                    for (int i = 0; i < n; ++i)
-                        ASSERT_EQ(bool(vis >> i & 1u), bool(m[size_t(xs[k0 + i]) * L + ys[k0 + i]]))
-                            << "seed " << seed << ": packet, nodes " << a << ", " << b;
-                }
+                ASSERT_EQ(k, shaft.size()) << "nodes " << a << ", " << b;
+                shorter += list.size() < size_t(sc.t.num_nodes());
+                expect_list_gives_the_whole_walks_answers(sc.t, c, sc.m, list, a, b, true, &pairs);
+                if (HasFatalFailure()) return;
             }
     }
     EXPECT_GT(pairs, 100000u);

@@ -469,6 +469,23 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
 // exactly when the full walk reaches it (the same float box tests on the same ancestors). So
 // the answers are those of the full walk, byte for byte; the work counted is less. `orig` is
 // scratch.
+// The skips of a list of tree nodes (out[k] the record of preorder node orig[k]) remapped to
+// the list: a node's skip becomes the first entry past its subtree. Entries come in preorder
+// and the list is ancestor-closed, so the open nodes form a stack (the innermost on top) and an
+// entry closes every open node whose subtree ends at or before it. `orig` is used up (reused
+// as the stack: orig[k] is needed only for entries after k).
+inline void list_skips(std::vector<WalkNode>& out, std::vector<int32_t>& orig) {
+    std::vector<int32_t>& open = orig;
+    size_t top = 0;
+    for (size_t k = 0; k < out.size(); ++k) {
+        const int32_t o = orig[k];
+        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
+            out[size_t(open[--top])].skip = int32_t(k);
+        open[top++] = int32_t(k);
+    }
+    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
+}
+
 inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
                              std::vector<WalkNode>& out, std::vector<int32_t>& orig) {
     out.clear();
@@ -483,18 +500,7 @@ inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         orig.push_back(n);
         return true;
     });
-    // A node's skip in the list: the first entry past its subtree. Entries come in preorder
-    // and the list is ancestor-closed, so the open nodes form a stack (the innermost on top)
-    // and an entry closes every open node whose subtree ends at or before it.
-    std::vector<int32_t>& open = orig;  // reused: orig[k] is needed only for entries after k
-    size_t top = 0;
-    for (size_t k = 0; k < out.size(); ++k) {
-        const int32_t o = orig[k];
-        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
-            out[size_t(open[--top])].skip = int32_t(k);
-        open[top++] = int32_t(k);
-    }
-    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
+    list_skips(out, orig);
 }
 
 // Whether the construction tests (A, B) at all: a pair of two leaves is one leaf pair, walked

@@ -266,18 +266,7 @@ inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
         orig.push_back(n);
         ++n;
     }
-    // Skips remapped to the list, as shaft_walk_nodes does: entries come in preorder and the
-    // list is ancestor-closed, so the open nodes form a stack and an entry closes every open
-    // node whose subtree ends at or before it.
-    std::vector<int32_t>& open = orig;  // reused: orig[k] is needed only for entries after k
-    size_t top = 0;
-    for (size_t k = 0; k < out.size(); ++k) {
-        const int32_t o = orig[k];
-        while (top > 0 && out[size_t(open[top - 1])].skip <= o)
-            out[size_t(open[--top])].skip = int32_t(k);
-        open[top++] = int32_t(k);
-    }
-    while (top > 0) out[size_t(open[--top])].skip = int32_t(out.size());
+    list_skips(out, orig);  // the skips remapped to the list (node_pair.h)
 }
 
 inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t a0, int32_t a1,

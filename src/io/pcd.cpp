@@ -77,6 +77,7 @@ struct Header {
     uint64_t width = 0, height = 1, points = 0;
     bool have_points = false;
     std::optional<Viewpoint> viewpoint;
+    std::array<double, 3> view_at{};  // the viewpoint's position as written (double)
     Data data = Data::kAscii;
     uint64_t record = 0;  // bytes a point
     uint64_t values = 0;  // values a point (ascii)
@@ -157,14 +158,16 @@ void header_line(InputFile& in, Header& h, const std::vector<std::string_view>& 
                  "qx qy qz), found ",
                  w.size() - 1);
         }
-        float v[7];
+        double v[7];
         for (int k = 0; k < 7; ++k) {
-            if (!parse_real(w[k + 1], v[k]) || !std::isfinite(v[k])) {
+            if (!parse_real(w[k + 1], v[k]) || !std::isfinite(float(v[k]))) {
                 fail(in.path(), "header line ", in.line(), ": VIEWPOINT: invalid number ",
                      quoted(w[k + 1]));
             }
         }
-        h.viewpoint = Viewpoint{{v[0], v[1], v[2]}, {v[3], v[4], v[5], v[6]}};
+        h.viewpoint = Viewpoint{{float(v[0]), float(v[1]), float(v[2])},
+                                {float(v[3]), float(v[4]), float(v[5]), float(v[6])}};
+        h.view_at = {v[0], v[1], v[2]};
     } else {
         fail(in.path(), "header line ", in.line(), ": unknown keyword ", quoted(key));
     }
@@ -477,10 +480,10 @@ ModelData read_pcd(const std::string& path, const std::array<double, 3>& origin)
     ModelData out;
     out.points.origin = origin;
     out.viewpoint = h.viewpoint;
-    if (out.viewpoint) {
-        Vec3& v = out.viewpoint->origin;
-        v = {float(double(v.x) - origin[0]), float(double(v.y) - origin[1]),
-             float(double(v.z) - origin[2])};
+    if (out.viewpoint && origin != std::array<double, 3>{0, 0, 0}) {
+        const std::array<double, 3>& v = h.view_at;
+        out.viewpoint->origin = {float(v[0] - origin[0]), float(v[1] - origin[1]),
+                                 float(v[2] - origin[2])};
     }
     Sink sink(h, out);
     if (h.data == Data::kAscii) {

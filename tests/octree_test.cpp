@@ -256,6 +256,32 @@ TEST(Octree, LeafWhoseNormalsCancelIsFlagged) {
     EXPECT_EQ(flagged, 1);
 }
 
+// Copies of a point (a cloud exported twice) each get a radius 1/sqrt(2) smaller from the halved
+// spacing; their leaf's disc is the one disc of their summed area, not the smaller one. Points
+// at distinct positions keep the largest radius.
+TEST(Octree, CopiesOfAPointMakeOneDiscOfTheirSummedArea) {
+    PointSet ps;
+    for (const Vec3 p : {Vec3{0, 0, 0}, Vec3{1, 1, 1}, Vec3{1, 0, 0}})
+        for (int copy = 0; copy < 2; ++copy) {
+            ps.positions.push_back(p);
+            ps.normals.push_back({0, 0, 1});
+            ps.radii.push_back(0.05f / std::sqrt(2.f));
+        }
+    ps.positions.push_back({0.01f, 0, 0});  // beside the first pair, a larger radius
+    ps.normals.push_back({0, 0, 1});
+    ps.radii.push_back(0.06f);
+    std::vector<uint32_t> order;
+    OctreeParams p{1, 1};  // leaves of a few points each: height 1
+    p.delta_floor = 1;
+    const Octree t = Octree::build(ps, p, order);
+    ASSERT_EQ(t.num_leaves(), 3);
+    std::vector<float> splats = t.leaf_splat();
+    std::sort(splats.begin(), splats.end());
+    EXPECT_NEAR(splats[0], 0.05f, 1e-7f);  // the pair at (1, 1, 1)
+    EXPECT_NEAR(splats[1], 0.05f, 1e-7f);  // the pair at (1, 0, 0)
+    EXPECT_EQ(splats[2], 0.06f);  // the pair at 0 (0.05 together) beside a 0.06 point
+}
+
 TEST(Octree, DuplicatePointsStopAtMaxHeight) {
     PointSet ps;
     for (int i = 0; i < 50; ++i) {

@@ -7,6 +7,8 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <tuple>
+#include <vector>
 
 #include "geom/morton.h"
 #include "octree/delta_rule.h"
@@ -198,8 +200,36 @@ std::vector<uint64_t> morton_sort(PointSet& points, Vec3 root_min, float size,
     return code;
 }
 
+// The largest splat radius of points k in [b, e), where points at one position (exact copies:
+// a cloud exported twice, two copies of a scan station) count as one disc of their summed area.
+// Copies halve the spacing, so each gets a radius 1/sqrt(2) smaller (the right share of the
+// area), but their discs coincide and cover only what one smaller disc does: the leaf's disc
+// from the largest radius alone left holes the copies never filled. Without copies, the
+// largest radius, bit for bit (sqrt of a float's square in double is the float).
+float largest_splat(const PointSet& points, uint32_t b, uint32_t e) {
+    if (points.radii.empty()) return 0;
+    if (e - b == 1) return points.radii[b];
+    std::vector<uint32_t> at(e - b);
+    for (uint32_t k = b; k < e; ++k) at[k - b] = k;
+    const auto key = [&](uint32_t k) {
+        const Vec3 p = points.positions[k];
+        return std::tuple(p.x, p.y, p.z);
+    };
+    std::sort(at.begin(), at.end(), [&](uint32_t i, uint32_t j) { return key(i) < key(j); });
+    float splat = 0;
+    for (size_t i = 0; i < at.size();) {
+        double area = 0;  // of the copies at one position, in r^2
+        size_t j = i;
+        for (; j < at.size() && key(at[j]) == key(at[i]); ++j)
+            area += double(points.radii[at[j]]) * double(points.radii[at[j]]);
+        splat = std::max(splat, float(std::sqrt(area)));
+        i = j;
+    }
+    return splat;
+}
+
 // Per leaf: the centroid and mean normal of its points (flagged when they cancel out) and the
-// largest splat radius. Delta is left to apply_delta_rule.
+// largest splat radius (largest_splat). Delta is left to apply_delta_rule.
 void leaf_means(detail::OctreeData& t, const PointSet& points) {
     const int32_t L = static_cast<int32_t>(t.leaf_node.size());
     t.leaves.resize(L);
@@ -208,13 +238,12 @@ void leaf_means(detail::OctreeData& t, const PointSet& points) {
         const int32_t nd = t.leaf_node[l];
         const uint32_t b = t.point_begin[nd], e = t.point_end[nd];
         double cx = 0, cy = 0, cz = 0, nx = 0, ny = 0, nz = 0;
-        float splat = 0;
         for (uint32_t k = b; k < e; ++k) {
             const Vec3 p = points.positions[k], q = points.normals[k];
             cx += p.x, cy += p.y, cz += p.z;
             nx += q.x, ny += q.y, nz += q.z;
-            if (!points.radii.empty()) splat = std::max(splat, points.radii[k]);
         }
+        const float splat = largest_splat(points, b, e);
         const double cnt = e - b;
         LeafDisc d;
         d.centroid = {float(cx / cnt), float(cy / cnt), float(cz / cnt)};

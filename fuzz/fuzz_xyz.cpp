@@ -27,5 +27,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         (void)m;
     } catch (const vmap::Error&) {
     }
+    try {  // read around a far origin, as load_point_cloud reads a georeferenced cloud
+        const vmap::ModelData m = vmap::read_xyz(path, {{512345.0, 4123456.0, 210.0}});
+        (void)m;
+    } catch (const vmap::Error&) {
+    }
     return 0;
 }

@@ -186,6 +186,7 @@ PointSet read_build_input(BuildOptions& o, BuildParams& bp, std::string& what) {
     what = input.description;
     bp.octree = input.octree;
     o.params.octree = bp.octree;
+    bp.visibility.roughness = o.params.visibility.roughness = input.roughness;
     if (!warned) warn_if_long(o.input.path, input.points.size(), bp.octree);
     return std::move(input.points);
 }
@@ -207,6 +208,7 @@ std::string input_key(const BuildOptions& o) {
     add("max-height", in.max_height);
     add("leaf-points", in.leaf_points);
     add("delta-floor", in.delta_floor);
+    add("roughness", in.roughness);
     if (in.as_points) key += ", as points";
     if (o.normals != "keep") key += fmt::format(", normals {}", o.normals);
     if (const auto& v = in.cloud.viewpoint)

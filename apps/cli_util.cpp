@@ -104,6 +104,11 @@ void add_input_options(CLI::App* app, InputOptions& in, const std::string& help)
                                 OctreeParams::kEvenDeltaFloor, OctreeParams::kDefaultDeltaFloor))
         ->check(checked_by(&OctreeParams::delta_floor,
                            fmt::format("FLOAT in [0 - {}]", OctreeParams::kDeltaFloorLimit)));
+    app->add_option("--roughness", in.roughness,
+                    "A V-map built here: an occluder of a point's own sheet raised above it by "
+                    "less than this (the input's units: a scan's noise) does not occlude; "
+                    "default: from a point cloud's measured noise, 0 for scene and mesh files")
+        ->check(checked_by(&VisibilityParams::roughness, "FLOAT >= 0"));
 }
 
 void add_camera_options(CLI::App* app, CameraOptions& c) {

@@ -63,7 +63,8 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
         return std::move(*in.vmap);
     }
     count_emitters(in.points, o.in.path);
-    const BuildParams bp = gi_build_params(in.octree, o);
+    BuildParams bp = gi_build_params(in.octree, o);
+    bp.visibility.roughness = in.roughness;
     warn_if_long(o.in.path, in.points.size(), bp.octree);
     BuildStats st;
     VisibilityMap vm = build_vmap(std::move(in.points), bp, &st, o.in.path);

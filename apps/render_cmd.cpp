@@ -48,6 +48,7 @@ struct Source {
     std::optional<VisibilityMap> vm;
     std::optional<Camera> camera;
     OctreeParams octree;
+    float roughness = 0;  // Input::roughness
 };
 
 Source load_source(const RenderArgs& a) {
@@ -57,6 +58,7 @@ Source load_source(const RenderArgs& a) {
     print_notes(in.notes);
     Source s;
     s.octree = in.octree;
+    s.roughness = in.roughness;
     s.camera = in.camera;
     if (in.vmap) {
         s.points = points_in_input_order(*in.vmap);
@@ -76,6 +78,7 @@ VisibilityMap build_at(const RenderArgs& a, const Source& s, std::optional<int> 
                        BuildStats* stats = nullptr) {
     BuildParams bp;
     bp.octree = s.octree;  // the scene's or the map's, with --max-height/--leaf-points
+    bp.visibility.roughness = s.roughness;
     if (height) bp.octree.max_height = *height;
     bp.backend = a.backend;
     bp.progress = stderr_progress();

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <optional>
 
 #include "apps/commands.h"
 #include "vmap/error.h"
@@ -24,6 +25,7 @@ struct Options {
     bool time_embree = false;
     int runs = 5;
     uint64_t embree_pairs = 2000000;
+    std::optional<float> roughness;  // --roughness: else measured for a raw cloud
 };
 Options opt;
 
@@ -97,6 +99,16 @@ void add_predict_options(CLI::App* c) {
                   "Build from the samples as a raw cloud: normals (true normals, radii "
                   "estimated) or bare (normals and radii estimated, as for a scan)")
         ->check(CLI::IsMember({"normals", "bare"}));
+    c->add_option("--roughness", opt.roughness,
+                  "The predicate's roughness (scene units): an occluder of a point's own sheet "
+                  "raised above it by less than this does not occlude; default: a raw cloud's "
+                  "measured noise (--as-cloud, --cloud), 0 for the scene's samples")
+        ->check(CLI::Range(0.f, 1e30f));
+    c->add_option("--noise", opt.vp.noise,
+                  "With --as-cloud: move each point of the cloud by Gaussian noise of this many "
+                  "sample spacings per axis, as a scanner's range noise (the truth keeps the exact "
+                  "points)")
+        ->check(CLI::Range(0.0, 10.0));
     c->add_option("--cloud", opt.vp.cloud,
                   "Score this cloud file (PLY/OFF) against the scene's triangles instead of the "
                   "scene's samples")
@@ -139,7 +151,7 @@ Command add_validate_command(CLI::App& app) {
          {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
           "--parallel-tol", "--end-window", "--occluders", "--backend", "--predict", "--delta-scale",
           "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
-          "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes"})
+          "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes", "--roughness", "--noise"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return {c, [] { return run_validate_command(); }, true};
 }
@@ -147,6 +159,10 @@ Command add_validate_command(CLI::App& app) {
 int run_validate_command() {
     ValidateParams& vp = opt.vp;
     vp.progress = stderr_progress();
+    if (opt.roughness) {
+        vp.visibility.roughness = *opt.roughness;
+        vp.measure_roughness = false;
+    }
     for (const std::string& s : opt.scenes) io::check_input_path(s);
     check_output(opt.json, "--json", opt.scenes);
     check_output(opt.md, "--md", opt.scenes);

@@ -53,6 +53,7 @@ VisibilityMap input_map(const ViewArgs& a, view::ServerConfig& cfg) {
     if (in.vmap) return std::move(*in.vmap);
     BuildParams bp;
     bp.octree = in.octree;
+    bp.visibility.roughness = in.roughness;
     bp.backend = a.backend;
     bp.progress = cli::stderr_progress();
     BuildStats st;

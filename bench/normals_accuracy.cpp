@@ -287,6 +287,10 @@ void print_per_surface(const Scene& sc, const PointSet& truth, const PointSet& e
         const bool ok = dot(est.normals[i], truth.normals[i]) > 0;
         all[surf[i]].add(ok, 0, 0);
         if (!ok) ++wrong[surf[i]][inside[i] ? 0 : thin[i] ? 1 : near[i] ? 2 : 3];
+        if (const char* d = std::getenv("DUMP_WRONG"); d && !ok && sc.surfaces[surf[i]].name == d)
+            fmt::print(stderr, "W {:.4f} {:.4f} {:.4f}  n {:.2f} {:.2f} {:.2f}\n", truth.positions[i].x,
+                       truth.positions[i].y, truth.positions[i].z, truth.normals[i].x,
+                       truth.normals[i].y, truth.normals[i].z);
     }
     for (size_t s = 0; s < m; ++s)
         fmt::print(stderr,

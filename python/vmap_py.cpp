@@ -80,6 +80,7 @@ struct BuildArgs {
     int K = VisibilityParams{}.K;
     float eps = VisibilityParams{}.eps, facing_tol = VisibilityParams{}.facing_tol,
           parallel_tol = VisibilityParams{}.parallel_tol, end_window = VisibilityParams{}.end_window;
+    std::optional<float> roughness;  // None: a cloud's measured noise (0 for a scene file)
     std::string backend = "auto", occluders = "spheres";
     int threads = 0;
     uint64_t batch_pairs = BuildParams{}.max_batch_pairs;
@@ -91,7 +92,7 @@ struct BuildArgs {
         if (max_height) bp.octree.max_height = *max_height;
         if (leaf_points) bp.octree.leaf_points = *leaf_points;
         if (delta_floor) bp.octree.delta_floor = *delta_floor;
-        bp.visibility = {K, eps, facing_tol, parallel_tol, end_window};
+        bp.visibility = {K, eps, facing_tol, parallel_tol, end_window, roughness.value_or(0.f)};
         bp.backend = parse<Backend>(backend, "backend");
         bp.occluders = parse<OccluderSearch>(occluders, "occluders");
         bp.threads = threads;
@@ -124,9 +125,12 @@ ProgressCallback python_progress(py::object fn) {
     };
 }
 
+// `cloud`: the points are a scan's (not samples of a scene): without a roughness given, the
+// predicate's is the cloud's measured noise, as `vmap build` takes it (vmap/input.h).
 VisibilityMap build_points(PointSet ps, const BuildArgs& a, const std::string& source,
-                           std::optional<OctreeParams> file_octree) {
+                           std::optional<OctreeParams> file_octree, bool cloud) {
     BuildParams bp = a.params(file_octree);
+    if (cloud && !a.roughness) bp.visibility.roughness = roughness_of(estimate_surface_noise(ps));
     bp.progress = python_progress(a.progress);
     py::gil_scoped_release nogil;
     return build_vmap(std::move(ps), bp, nullptr, source);
@@ -142,13 +146,13 @@ VisibilityMap build_file(const std::string& path, std::optional<uint64_t> points
         PointSet ps = load_point_cloud(path);
         OctreeParams op = BuildParams{}.octree;
         op.delta_floor = cloud_delta_floor(ps);  // as `vmap build` chooses it for a cloud
-        return build_points(std::move(ps), a, path, op);
+        return build_points(std::move(ps), a, path, op, true);
     }
     Scene sc = load_scene(path);
     if (points) sc.points = *points;
     if (seed) sc.seed = *seed;
     if (sampling) sc.pattern = parse<SamplePattern>(*sampling, "sampling");
-    return build_points(sample_scene(sc), a, path, scene_octree(sc));
+    return build_points(sample_scene(sc), a, path, scene_octree(sc), false);
 }
 
 uint32_t id_of(const VisibilityMap& vm, int64_t i, const char* what) {
@@ -291,6 +295,7 @@ BuildArgs build_args(const py::kwargs& kw) {
         {"facing_tol", [](BuildArgs& a, py::handle v) { a.facing_tol = v.cast<float>(); }},
         {"parallel_tol", [](BuildArgs& a, py::handle v) { a.parallel_tol = v.cast<float>(); }},
         {"end_window", [](BuildArgs& a, py::handle v) { a.end_window = v.cast<float>(); }},
+        {"roughness", [](BuildArgs& a, py::handle v) { a.roughness = v.cast<float>(); }},
         {"backend", [](BuildArgs& a, py::handle v) { a.backend = v.cast<std::string>(); }},
         {"occluders", [](BuildArgs& a, py::handle v) { a.occluders = v.cast<std::string>(); }},
         {"threads", [](BuildArgs& a, py::handle v) { a.threads = v.cast<int>(); }},
@@ -320,14 +325,15 @@ void def_build(py::module_& m) {
                std::optional<Array<float>> radii, std::optional<Array<float>> colors,
                std::optional<Array<float>> emission, py::kwargs kw) {
             return build_points(point_set(points, normals, radii, colors, emission), args(kw),
-                                "points", std::nullopt);
+                                "points", std::nullopt, true);
         },
         py::arg("points"), py::arg("normals") = py::none(), py::arg("radii") = py::none(),
         py::arg("colors") = py::none(), py::arg("emission") = py::none(),
         "V-map of a point set: points N x 3; normals N x 3 (estimated when None), radii N "
         "(splat radii), colors N x 3 (albedo, 0.8 grey when None), emission N x 3. Options as "
         "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, "
-        "end_window, backend ('auto', 'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
+        "end_window, roughness (None: the points' measured noise, vmap.surface_noise), backend ('auto', "
+        "'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
         "(a function of a dict; returning False cancels).");
     m.def(
         "build_file",
@@ -339,6 +345,22 @@ void def_build(py::module_& m) {
         "V-map of a scene file (.json: sampled with `points`, `seed` and `sampling` ('blue-noise' "
         "or 'uniform') when given, its octree defaults, the disc floor by the sampling) or a "
         "point cloud (.ply/.off); options as build().");
+    m.def(
+        "surface_noise",
+        [](const Array<float>& points) {
+            PointSet ps;
+            ps.positions = vec3s(points, "points");
+            py::gil_scoped_release nogil;
+            const SurfaceNoise n = estimate_surface_noise(ps);
+            py::gil_scoped_acquire gil;
+            py::dict d;
+            d["sigma"] = n.sigma, d["spacing"] = n.spacing, d["roughness"] = roughness_of(n);
+            return d;
+        },
+        py::arg("points"),
+        "A scan's surface noise, points N x 3: {'sigma': the points' scatter off their surface "
+        "(median jet-fit residual), 'spacing': the sample spacing, 'roughness': what build() "
+        "takes for these points when given none}.");
     m.def("load", &load_vmap, py::arg("path"), py::call_guard<py::gil_scoped_release>(),
           "Reads a .vmap file.");
 }
@@ -356,6 +378,10 @@ void def_map(py::module_& m) {
                                [](const VisibilityMap& v) { return v.octree_params().delta_floor; })
         .def_property_readonly(
             "end_window", [](const VisibilityMap& v) { return v.visibility_params().end_window; })
+        .def_property_readonly(
+            "roughness", [](const VisibilityMap& v) { return v.visibility_params().roughness; },
+            "The predicate's roughness (the input's units): steps below it between a point and "
+            "its own sheet did not occlude; 0 for samples of a scene.")
         .def_property_readonly(
             "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
             "Positions, N x 3 float32, in input order, relative to origin.")

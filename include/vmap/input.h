@@ -24,6 +24,7 @@ struct InputOptions {
     std::optional<SamplePattern> pattern;        // sampling: scene and mesh files only
     std::optional<int> max_height, leaf_points;  // the octree: not for a .vmap (it has one)
     std::optional<float> delta_floor;            // the octree: not for a .vmap
+    std::optional<float> roughness;              // the predicate's (Input::roughness): not for a .vmap
     CloudOptions cloud;                          // point clouds only
     // Scene and mesh files: called with the number of points and the octree parameters before
     // the sampling starts (which takes seconds for millions of points), e.g. to warn that the
@@ -43,6 +44,10 @@ struct Input {
     std::optional<VisibilityMap> vmap;  // a .vmap input
     std::optional<Camera> camera;       // a scene's camera
     OctreeParams octree;                // the scene's (or the map's, or the default) with overrides
+    // The predicate's roughness for building from it (VisibilityParams::roughness): a cloud's
+    // measured noise (estimate_surface_noise, roughness_of), or InputOptions::roughness when
+    // given; 0 for samples of a scene or mesh, which lie on their surfaces; the map's for a .vmap.
+    float roughness = 0;
     std::vector<std::string> notes;     // what the files held but vmap does not use (Scene::notes)
     std::vector<std::string> done;      // what the cloud reader estimated (load_point_cloud)
 };
@@ -52,7 +57,7 @@ struct Input {
 // a point cloud (load_point_cloud with o.cloud). o.max_height, o.leaf_points and o.delta_floor
 // replace the scene's octree parameters (scene_octree; else BuildParams' defaults). Throws vmap::Error naming the file
 // for what its loader refuses, for points, seed or pattern given with a cloud or a .vmap, and
-// for max_height, leaf_points or delta_floor given with a .vmap.
+// for max_height, leaf_points, delta_floor or roughness given with a .vmap.
 Input load_input(const InputOptions& o);
 
 }  // namespace vmap

@@ -131,6 +131,32 @@ float even_sampling_radius_scale(double close_share);
 // for consistent normals. Needs normals; 0 for fewer than 2 points.
 double normal_inconsistency(const PointSet& points, size_t k = 8);
 
+// A scan's surface noise (range noise, registration jitter): points scattered off the surface
+// they sample. sigma is the median, over at most kNoiseProbes points at a fixed stride, of the
+// residual of a second-order height function (a jet) fitted by least squares to each one's
+// kNoiseNeighbours nearest (all of them: noise must not be filtered out by same-sheet tests),
+// over its k - 6 degrees of freedom: the noise's standard deviation along the normal on a smooth
+// surface, and about 0 for exact samples of smooth or flat surfaces (creases, thin parts and
+// contacts, where the neighbours span two sheets, are a minority the median leaves out).
+// spacing: sqrt(pi) x the median splat radius from the 8 nearest (estimate_radii's rule, all
+// neighbours). Both in the cloud's units; zero for fewer than kNoiseNeighbours + 1 points or
+// non-finite coordinates. Measured in docs/validation.md "Noisy scans".
+struct SurfaceNoise {
+    double sigma = 0;
+    double spacing = 0;
+};
+inline constexpr size_t kNoiseNeighbours = 24;
+inline constexpr size_t kNoiseProbes = 20000;
+SurfaceNoise estimate_surface_noise(const PointSet& points);
+
+// The predicate's roughness for a cloud of this noise (VisibilityParams::roughness): the step
+// that two points' noise along the normal reaches at three standard deviations (3 sqrt 2
+// sigma), or 0 when sigma is below kNoiseFloor sample spacings (exact samples, whose jet
+// residuals are rounding and the facets of a mesh: their V-maps stay as they were).
+inline constexpr double kRoughnessSigmas = 4.2426;  // 3 sqrt(2)
+inline constexpr double kNoiseFloor = 0.02;
+float roughness_of(const SurfaceNoise& noise);
+
 // The k-d tree over positions that normal and radius estimation search (nanoflann, leaf size
 // 16), for tools that score what they estimate (bench/normals_accuracy.cpp). It refers to
 // `positions`, which must outlive it and stay unchanged.

@@ -79,6 +79,13 @@ struct ValidateParams {
     // their true normals and no radii; "bare": positions only (normals and radii estimated, as
     // for a scan). Either goes through load_point_cloud, as `vmap build cloud.ply` would.
     std::string as_cloud;
+    // With as_cloud: Gaussian noise of this many sample spacings (sqrt(pi) x the true splat
+    // radius) per axis moves each point of the cloud the prediction is built from, as a
+    // scanner's range noise would; the truth keeps the exact points on the surfaces. 0: none.
+    double noise = 0;
+    // Raw clouds (as_cloud, cloud): the predicate's roughness from the cloud's measured noise
+    // (estimate_surface_noise, roughness_of), as `vmap build` takes it; false: visibility's.
+    bool measure_roughness = true;
     // A cloud file to score instead of the scene's samples (truth from the scene's triangles;
     // each point's true normal and model flag from the nearest point of a dense scene sample).
     std::string cloud;

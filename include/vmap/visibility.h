@@ -19,11 +19,26 @@ struct VisibilityParams {
     // nearer end, Delta_end that end's disc radius: a window at each end in the ends' own
     // scale, beside eps's share of the length (docs/gi.md "The end window"). 0: none.
     float end_window = 0.f;
+    // A scan's surface noise: a leaf whose plane an end lies behind by less than this (in the
+    // input's units), with its normal within 37 degrees of that end's, is a bump of the end's
+    // own rough sheet, not an occluder (exits_at_an_end in src/visibility/leaf_pair.h; docs/
+    // design.md "Noisy scans"). `vmap build` sets it from the cloud's measured noise
+    // (estimate_surface_noise in vmap/normals.h); samples of a scene lie on their surfaces: 0.
+    float roughness = 0.f;
 
     // Throws vmap::Error naming `source` and the field for a value out of range: K 1..1000,
-    // eps [0, 0.5), facing_tol and parallel_tol [0, 1), end_window [0, 100].
+    // eps [0, 0.5), facing_tol and parallel_tol [0, 1), end_window [0, 100], roughness finite
+    // and >= 0.
     void check(const std::string& source) const;
 };
+
+// The parameters as the predicate reads them in an octree's frame (world = local x scale,
+// Octree::scale()): the roughness is a length, the rest are ratios and counts. The scale is a
+// power of two, so the division is exact.
+inline VisibilityParams in_octree_frame(VisibilityParams vp, double scale) {
+    vp.roughness = float(double(vp.roughness) / scale);
+    return vp;
+}
 
 // Work counted while resolving leaf pairs.
 struct WorkCounters {

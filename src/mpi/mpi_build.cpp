@@ -295,7 +295,8 @@ uint64_t input_hash(const VisibilityMap& vm) {
                                     vp.eps,
                                     vp.facing_tol,
                                     vp.parallel_tol,
-                                    vp.end_window};
+                                    vp.end_window,
+                                    vp.roughness};
     uint64_t x = h(vm.points().positions) ^ h(vm.points().normals) * 3 ^ h(vm.points().radii) * 5 ^
                  h(vm.order()) * 7 ^ h(params) * 11;
     return x ^ uint64_t(vm.octree().num_nodes()) * 0x9e3779b97f4a7c15ULL;
@@ -657,7 +658,7 @@ void share_bytes(void* data, size_t bytes) {
         MPI_Bcast(p + at, int(std::min(kChunkBytes, bytes - at)), MPI_BYTE, 0, MPI_COMM_WORLD);
 }
 
-// Rank 0's points (as read) and octree parameters to the other ranks, which build the octree
+// Rank 0's points (as read), octree and predicate parameters to the other ranks, which build the octree
 // from them (the same octree: check_same_input checks it with the rest). The sizes go first and
 // every rank makes room for all of it before any data moves, agreed: a rank that cannot (out of
 // memory) ends the job instead of leaving the others in a broadcast it never joins.
@@ -668,6 +669,9 @@ std::string share_input(Run& r, Early& e) {
                      p.emission.size()};
     MPI_Bcast(n, 5, MPI_UINT64_T, 0, MPI_COMM_WORLD);
     MPI_Bcast(&e.params.octree, int(sizeof(OctreeParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
+    // The predicate's too: rank 0's reading sets the roughness from the cloud's noise.
+    static_assert(std::is_trivially_copyable_v<VisibilityParams>);
+    MPI_Bcast(&e.params.visibility, int(sizeof(VisibilityParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
     MPI_Bcast(p.origin.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     std::string err = r.c.agree(attempt([&] {
         p.positions.resize(n[0]), p.normals.resize(n[1]), p.colors.resize(n[2]);

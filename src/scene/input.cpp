@@ -20,14 +20,16 @@ void apply_octree_overrides(const InputOptions& o, OctreeParams& p) {
 }
 
 void load_map(const InputOptions& o, Input& in) {
-    if (o.max_height || o.leaf_points || o.delta_floor)
+    if (o.max_height || o.leaf_points || o.delta_floor || o.roughness)
         throw Error(fmt::format(
-            "{}: max_height, leaf_points and delta_floor (--max-height, --leaf-points, "
-            "--delta-floor) apply when building a V-map, not to a .vmap",
+            "{}: max_height, leaf_points, delta_floor and roughness (--max-height, "
+            "--leaf-points, --delta-floor, --roughness) apply when building a V-map, not to a "
+            ".vmap",
             o.path));
     in.kind = InputKind::kVmap;
     in.vmap = load_vmap(o.path);
     in.octree = in.vmap->octree_params();
+    in.roughness = in.vmap->visibility_params().roughness;
     in.description = fmt::format("V-map {}", o.path);
 }
 
@@ -48,6 +50,22 @@ void load_cloud(const InputOptions& o, Input& in) {
                                                 : "in between"));
     }
     apply_octree_overrides(o, in.octree);
+    if (o.roughness) {
+        in.roughness = *o.roughness;
+    } else {
+        // A scan's points scatter off their surfaces: steps of the noise's size between a
+        // point and its own sheet are no occluders (VisibilityParams::roughness).
+        const SurfaceNoise noise = estimate_surface_noise(in.points);
+        in.roughness = roughness_of(noise);
+        const double share = noise.spacing > 0 ? noise.sigma / noise.spacing : 0.0;
+        in.done.push_back(
+            in.roughness > 0
+                ? fmt::format("surface noise: {:.3g} ({:.2f} sample spacings of {:.3g}): steps "
+                              "up to {:.3g} between a point and its own sheet do not occlude",
+                              noise.sigma, share, noise.spacing, in.roughness)
+                : fmt::format("surface noise: none measured ({:.3f} sample spacings, under {})",
+                              share, kNoiseFloor));
+    }
     in.description = fmt::format("point cloud {}", o.path);
 }
 
@@ -60,6 +78,7 @@ void load_sampled(const InputOptions& o, Input& in) {
     if (o.pattern) sc.pattern = *o.pattern;
     in.octree = scene_octree(sc);
     apply_octree_overrides(o, in.octree);
+    in.roughness = o.roughness.value_or(0.f);  // samples lie on the surfaces
     in.name = sc.name;
     in.camera = sc.camera;
     in.notes = sc.notes;

@@ -981,4 +981,78 @@ void orient_toward(PointSet& points, const std::vector<Vec3>& sensors, const cha
             points.normals[i] = -points.normals[i];
 }
 
+SurfaceNoise estimate_surface_noise(const PointSet& points) {
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    SurfaceNoise out;
+    if (n < kNoiseNeighbours + 1) return out;
+    for (const Vec3& p : pts)
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z)) return out;
+    const detail::CloudAdaptor adaptor{pts};
+    const detail::KdTree tree(3, adaptor, nanoflann::KDTreeSingleIndexAdaptorParams(16));
+    // At most kNoiseProbes points, at a fixed stride: the same answer on every run.
+    const size_t probes = std::min(n, kNoiseProbes), stride = n / probes;
+    std::vector<double> sigma(probes, -1), spacing2(probes, -1);
+    parallel_for_range<size_t>(probes, 64, [&](size_t chunk_begin, size_t chunk_end) {
+        uint32_t nb[kNoiseNeighbours];
+        float d2[kNoiseNeighbours];
+        for (size_t k = chunk_begin; k < chunk_end; ++k) {
+            const size_t i = k * stride;
+            const float query[3] = {pts[i].x, pts[i].y, pts[i].z};
+            if (tree.knnSearch(query, kNoiseNeighbours, nb, d2) < kNoiseNeighbours) continue;
+            // The density as estimate_radii reads it (8 nearest, all of them): r^2 = mean of
+            // d_j^2 / j, a spacing of sqrt(pi) r.
+            double r2 = 0;
+            for (size_t j = 1; j <= 8; ++j) r2 += double(d2[j]) / double(j);
+            spacing2[k] = M_PI * r2 / 8;
+            const std::optional<Vec3> nz = plane_normal(pts, nb, kNoiseNeighbours);
+            if (!nz || !(d2[kNoiseNeighbours - 1] > 0)) continue;
+            // The jet (z = a x^2 + b xy + c y^2 + d x + e y + f over the plane's frame) through
+            // all the neighbours, unweighted: with 6 unknowns, the residual's mean square over
+            // k - 6 degrees of freedom is the noise's variance along the normal.
+            const Vec3 ax = std::fabs(nz->x) <= std::fabs(nz->y) && std::fabs(nz->x) <= std::fabs(nz->z)
+                                ? Vec3{1, 0, 0}
+                            : std::fabs(nz->y) <= std::fabs(nz->z) ? Vec3{0, 1, 0}
+                                                                   : Vec3{0, 0, 1};
+            Vec3 u = ax - *nz * dot(ax, *nz);
+            u = u / length(u);
+            const Vec3 v = cross(*nz, u);
+            const double s = 1.0 / std::sqrt(double(d2[kNoiseNeighbours - 1]));
+            double a[6][6] = {}, b[6] = {}, xyz[kNoiseNeighbours][3];
+            for (size_t j = 0; j < kNoiseNeighbours; ++j) {
+                const Vec3 d = pts[nb[j]] - pts[i];
+                const double x = s * dot(d, u), y = s * dot(d, v), z = s * dot(d, *nz);
+                xyz[j][0] = x, xyz[j][1] = y, xyz[j][2] = z;
+                const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
+                for (int r = 0; r < 6; ++r) {
+                    b[r] += phi[r] * z;
+                    for (int c = 0; c < 6; ++c) a[r][c] += phi[r] * phi[c];
+                }
+            }
+            if (!solve6(a, b)) continue;
+            double ssr = 0;
+            for (size_t j = 0; j < kNoiseNeighbours; ++j) {
+                const double x = xyz[j][0], y = xyz[j][1];
+                const double f = b[0] * x * x + b[1] * x * y + b[2] * y * y + b[3] * x + b[4] * y + b[5];
+                ssr += (xyz[j][2] - f) * (xyz[j][2] - f);
+            }
+            sigma[k] = std::sqrt(ssr / double(kNoiseNeighbours - 6)) / s;
+        }
+    });
+    auto median = [](std::vector<double> v) {
+        std::erase_if(v, [](double x) { return !(x >= 0); });
+        if (v.empty()) return 0.0;
+        std::nth_element(v.begin(), v.begin() + ptrdiff_t(v.size() / 2), v.end());
+        return v[v.size() / 2];
+    };
+    out.sigma = median(sigma);
+    out.spacing = std::sqrt(median(spacing2));
+    return out;
+}
+
+float roughness_of(const SurfaceNoise& noise) {
+    if (!(noise.spacing > 0) || !(noise.sigma >= kNoiseFloor * noise.spacing)) return 0.f;
+    return float(kRoughnessSigmas * noise.sigma);
+}
+
 }  // namespace vmap

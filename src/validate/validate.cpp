@@ -72,6 +72,10 @@ void ValidateParams::check(const std::string& src) const {
                                 src, p.as_cloud));
     if (!p.as_cloud.empty() && !p.cloud.empty())
         throw Error(fmt::format("{}: give as_cloud or cloud, not both", src));
+    if (!(p.noise >= 0 && p.noise <= 10))
+        throw Error(fmt::format("{}: noise {} out of range [0, 10] sample spacings", src, p.noise));
+    if (p.noise > 0 && p.as_cloud.empty())
+        throw Error(fmt::format("{}: noise needs as_cloud (normals or bare)", src));
     if (p.eyes > 10000)
         throw Error(fmt::format("{}: eyes {} out of range (0..10000)", src, p.eyes));
     p.visibility.check(src);
@@ -118,7 +122,7 @@ std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
 // Leaf-pair evaluation as the V-map builder does it: the lower leaf index first.
 struct DirectPredictor {
     const Octree& t;
-    const VisibilityParams& vp;
+    const VisibilityParams vp;  // in the octree's frame
     const detail::LeafGrid* grid;  // non-null: the grid walk
     bool operator()(int32_t a, int32_t b, WorkCounters* wc) const {
         if (a > b) std::swap(a, b);
@@ -142,9 +146,20 @@ struct ScoredPoints {
 
 // Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
 // raw-cloud path, as `vmap build cloud.ply` would.
-PointSet through_cloud_path(const PointSet& pts, bool normals, const std::string& path) {
+// With noise > 0 each position first moves by Gaussian noise of `noise` sample spacings per
+// axis (seeded, the same for every run).
+PointSet through_cloud_path(const PointSet& pts, bool normals, double noise,
+                            const std::string& path) {
     PointSet bare;
     bare.positions = pts.positions;
+    if (noise > 0) {
+        std::mt19937_64 rng(0x5ca90015eULL);
+        std::normal_distribution<float> g(0.f, 1.f);
+        for (size_t i = 0; i < bare.size(); ++i) {
+            const float s = float(noise * std::sqrt(M_PI)) * pts.radii[i];
+            bare.positions[i] += Vec3{g(rng), g(rng), g(rng)} * s;
+        }
+    }
     if (normals) bare.normals = pts.normals;
     const std::string tmp =
         (std::filesystem::temp_directory_path() /
@@ -221,7 +236,7 @@ ScoredPoints scored_points(const Scene& sc, const ValidateParams& p, const std::
     if (p.as_cloud.empty())
         sp.pred = sp.truth;
     else
-        sp.pred = through_cloud_path(sp.truth, p.as_cloud == "normals", path);
+        sp.pred = through_cloud_path(sp.truth, p.as_cloud == "normals", p.noise, path);
     return sp;
 }
 
@@ -409,7 +424,8 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
     row.leaves = hp.t.num_leaves();
     row.backend = params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
     hp.direct =
-        std::make_unique<DirectPredictor>(DirectPredictor{hp.t, params.visibility, hp.grid.get()});
+        std::make_unique<DirectPredictor>(
+        DirectPredictor{hp.t, in_octree_frame(params.visibility, hp.t.scale()), hp.grid.get()});
     hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
 }
 
@@ -547,6 +563,8 @@ ValidationReport report_header(const Scene& sc, const ScoredPoints& sp, const st
                : params.as_cloud == "bare"    ? "the samples as a bare raw cloud (normals and "
                                                 "radii estimated)"
                                               : "the scene's samples";
+    if (params.noise > 0)
+        r.source += fmt::format(", moved by noise of {} sample spacings per axis", params.noise);
     if (!r.params.leaf_points)
         r.params.leaf_points = sc.octree ? sc.octree->leaf_points : OctreeParams{}.leaf_points;
     std::tie(r.normal_agreement, r.normal_agreement_model) = normal_agreement(sp);
@@ -584,9 +602,13 @@ PairSets sample_truth(const ExactVisibility& exact, const ScoredPoints& sp,
 
 }  // namespace
 
-ValidationReport validate_scene(const std::string& path, const ValidateParams& params) {
+ValidationReport validate_scene(const std::string& path, const ValidateParams& given) {
+    ValidateParams params = given;
     const Scene sc = validation_scene(path, params);
     ScoredPoints sp = scored_points(sc, params, path);
+    // A raw cloud's predicate takes the roughness of its measured noise, as `vmap build` does.
+    if (params.measure_roughness && (!params.as_cloud.empty() || !params.cloud.empty()))
+        params.visibility.roughness = roughness_of(estimate_surface_noise(sp.pred));
     const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
     const auto t0 = Clock::now();
     ExactVisibility exact(sc.surfaces, path);
@@ -646,12 +668,14 @@ std::string validation_markdown(const ValidationReport& r) {
         pct(double(r.truth_visible) / r.pairs), r.triangles, r.offset, p.ray_offset,
         r.truth_seconds);
     s += fmt::format(
-        "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}; "
+        "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}, "
+        "roughness {:g}; "
         "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).  \n"
         "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
         "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
-        name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, p.leaf_points, p.delta_scale,
+        name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, vp.roughness,
+        p.leaf_points, p.delta_scale,
         r.delta_floor, r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
         r.live_pairs,
         r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
@@ -731,6 +755,7 @@ std::string validation_json(const ValidationReport& r) {
            {"eps", p.visibility.eps},
            {"facing_tol", p.visibility.facing_tol},
            {"parallel_tol", p.visibility.parallel_tol},
+           {"roughness", p.visibility.roughness},
            {"delta_scale", p.delta_scale},
            {"splat_floor", r.delta_floor},
            {"model_points", r.model_points},
@@ -936,7 +961,7 @@ EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
         throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
     const LeafPairs lp = sample_leaf_pairs(t.num_leaves(), p.sample_pairs);
     r.pairs = lp.size();
-    TimedPasses tp{octree_view(t), p.visibility, exact, lp, {}, {}, {}, {}, {}, {}};
+    TimedPasses tp{octree_view(t), in_octree_frame(p.visibility, t.scale()), exact, lp, {}, {}, {}, {}, {}, {}};
     tp.kern.resize(lp.size()), tp.ray.resize(lp.size());
     r.kernel_work = tp.counted_kernel();
     time_passes(tp, p.runs, r, path);

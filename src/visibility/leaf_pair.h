@@ -135,6 +135,7 @@ struct PairSegment {
     bool plane_a, plane_b;
     float delta_a, delta_b;
     float window_a, window_b;
+    float roughness;  // VisibilityParams::roughness, in the octree's frame (exits_at_an_end)
 };
 // The facing part alone (the CPU's packet walk sets up only the pairs that face).
 VMAP_HD bool pair_faces(const LeafDisc& la, const LeafDisc& lb, const VisibilityParams& vp) {
@@ -169,6 +170,7 @@ VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
     s.plane_b = !(lb.flags & kLeafNormalDegenerate);
     s.delta_a = la.delta;
     s.delta_b = lb.delta;
+    s.roughness = vp.roughness;
     return s;
 }
 VMAP_HD PairSegment pair_segment(const LeafDisc& la, const LeafDisc& lb,
@@ -209,13 +211,24 @@ VMAP_HD float from_nearer_end(const PairSegment& s, float t) {
 // drops occluders the eps window lets count, never adds one: every node-level proof of
 // node_pair.h (an upper bound on the occluders) still holds, and the walk's sub-segment is
 // unchanged. A flagged x or end has no plane to be behind and is not dropped.
+// A rough sheet (a scan's noise, VisibilityParams::roughness): an end lying behind x's plane by
+// less than the roughness, with x's normal within 37 degrees of the end's, is the same kind of
+// exit at any distance along the segment: x is a neighbour on the end's own sheet that the noise
+// raised a little above the end, and a segment leaving at a shallow angle passes under its disc
+// far beyond half a disc (at a step h and an angle a to the sheet, h / sin a from the end). Off
+// the sheet's direction (the far wall of an object, a crease's other face) the rule leaves x
+// counting; a part thinner than the roughness lying flat on the end's sheet (a plate on a floor)
+// is taken for the sheet's noise. With roughness 0 this is the rule above, bit for bit.
+inline constexpr float kSameSheetCos = 0.8f;  // 37 degrees, as the normals' same-sheet tests
 VMAP_HD bool exits_at_an_end(const PairSegment& s, const LeafDisc& x, float t) {
     if (x.flags & kLeafNormalDegenerate) return false;
     const bool near_a = t < 0.5f;
     if (!(near_a ? s.plane_a : s.plane_b)) return false;
     const float from_end = from_nearer_end(s, t);
-    if (!(from_end < 0.5f * (near_a ? s.delta_a : s.delta_b))) return false;
-    return dot(x.normal, (near_a ? s.p : s.q) - x.centroid) < 0.f;
+    const float back = dot(x.normal, (near_a ? s.p : s.q) - x.centroid);
+    if (!(back < 0.f)) return false;
+    return from_end < 0.5f * (near_a ? s.delta_a : s.delta_b) ||
+           (-back < s.roughness && dot(x.normal, near_a ? s.na : s.nb) > kSameSheetCos);
 }
 
 // The end windows (VisibilityParams::end_window, docs/gi.md "The end window"): a crossing at t

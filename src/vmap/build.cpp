@@ -80,7 +80,8 @@ void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, No
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
     nt.ctx = {octree_view(t),  nt.nb.nodes.data(), nt.nb.cones.data(),
-              t.skip().data(), params.visibility,  detail::node_pair_margin(t.boxes()[0])};
+              t.skip().data(), in_octree_frame(params.visibility, t.scale()),
+              detail::node_pair_margin(t.boxes()[0])};
     nt.ctx.leaves_stored = true;  // node_bounds() stores the leaves' bounds too
 }
 
@@ -129,7 +130,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     prepare_node_tests(t, params, gpu, nt);
     st.construction = nt.on ? "nodes" : "leaf-pairs";
     const detail::FrontierParams fp = frontier_params(params, gpu, nt.on);
-    backend->prepare(t, params.visibility, fp.batch_words);
+    backend->prepare(t, in_octree_frame(params.visibility, t.scale()), fp.batch_words);
     backend->set_node_context(nt.on ? &nt.ctx : nullptr);
     st.seconds_plan = seconds_since(t1);
     auto fr = std::make_unique<detail::Frontier>(t, nt.on ? &nt.ctx : nullptr, *backend, params,

@@ -1,6 +1,8 @@
 // The range checks of the parameter structs (one check() each; messages name the field).
 #include <fmt/format.h>
 
+#include <cmath>
+
 #include "vmap/error.h"
 #include "vmap/visibility_map.h"
 
@@ -32,6 +34,8 @@ void VisibilityParams::check(const std::string& source) const {
     if (!(end_window >= 0 && end_window <= kEndWindowLimit))
         throw Error(fmt::format("{}: end_window {} out of range [0, {}]", source, end_window,
                                 kEndWindowLimit));
+    if (!(roughness >= 0 && std::isfinite(roughness)))
+        throw Error(fmt::format("{}: roughness {} out of range (finite, >= 0)", source, roughness));
 }
 
 void BuildParams::check(const std::string& source) const {

@@ -49,8 +49,9 @@ void print_params(const VisibilityMap& vm) {
         "leaves\n",
         o.max_height, o.leaf_points, o.delta_floor, vm.octree().height(), vm.octree().num_nodes(),
         vm.octree().num_leaves());
-    fmt::print("predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}, end_window {}\n", v.K,
-               v.eps, v.facing_tol, v.parallel_tol, v.end_window);
+    fmt::print(
+        "predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}, end_window {}, roughness {}\n",
+        v.K, v.eps, v.facing_tol, v.parallel_tol, v.end_window, v.roughness);
 }
 
 nlohmann::json params_json(const VisibilityMap& vm) {
@@ -66,7 +67,8 @@ nlohmann::json params_json(const VisibilityMap& vm) {
             {"eps", short_decimal(v.eps)},
             {"facing_tol", short_decimal(v.facing_tol)},
             {"parallel_tol", short_decimal(v.parallel_tol)},
-            {"end_window", short_decimal(v.end_window)}};
+            {"end_window", short_decimal(v.end_window)},
+            {"roughness", short_decimal(v.roughness)}};
 }
 
 }  // namespace vmap::cli

@@ -10,6 +10,7 @@
 #include "visibility/predicate_cases.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/packet_walk.h"
+#include "vmap/normals.h"
 
 namespace vmap {
 namespace {
@@ -202,6 +203,52 @@ TEST_P(EndPlanes, TheExitRuleAppliesAtTheFarEndToo) {
     EXPECT_TRUE(counts(x));
 }
 
+// A rough sheet (VisibilityParams::roughness, a scan's noise): a neighbour of a's own sheet
+// (the same normal) raised 0.01 above a, which the segment, rising at 0.1, leaves through its
+// disc about 0.1 from a: far beyond half of a's disc radius (0.025), so without roughness it
+// counts; with a roughness above the step it is the sheet's noise and does not.
+TEST_P(EndPlanes, ABumpOfAnEndsRoughSheetDoesNotCount) {
+    const LeafDisc x = disc({0.11f, 0.01f, 0}, {0, 1, 0}, 0.05f);
+    ASSERT_TRUE(in_front_of_ends(x));
+    ASSERT_LT(dot(x.normal, a.centroid - x.centroid), 0.f);
+    EXPECT_TRUE(cuts(x));
+    EXPECT_TRUE(counts(x));
+    vp.roughness = 0.02f;
+    EXPECT_FALSE(counts(x));
+    vp.roughness = 0.005f;  // a step higher than the roughness is a real one
+    EXPECT_TRUE(counts(x));
+    // The same bump the segment goes into (its normal turned down) is no exit: it counts.
+    vp.roughness = 0.02f;
+    LeafDisc in = x;
+    in.normal = -x.normal;
+    EXPECT_TRUE(counts(in));
+}
+TEST_P(EndPlanes, ARoughSheetsRuleNeedsTheEndsOwnNormal) {
+    vp.roughness = 0.1f;  // every step below: the normals decide
+    // 35 degrees from a's normal: its own sheet, tilted by the noise.
+    const LeafDisc near = disc({0.11f, 0.01f, 0}, {0.7f, 1, 0}, 0.05f);
+    ASSERT_TRUE(cuts(near));
+    ASSERT_LT(dot(near.normal, a.centroid - near.centroid), 0.f);
+    EXPECT_FALSE(counts(near));
+    // 39 degrees: another surface (a crease's other face, an object's far side) still counts.
+    const LeafDisc off = disc({0.11f, 0.01f, 0}, {0.8f, 1, 0}, 0.05f);
+    ASSERT_TRUE(cuts(off));
+    ASSERT_LT(dot(off.normal, a.centroid - off.centroid), 0.f);
+    EXPECT_TRUE(counts(off));
+}
+TEST_P(EndPlanes, ARoughSheetsRuleAppliesAtTheFarEnd) {
+    // b on a ceiling-like sheet (normal nearly -y) that the segment reaches at 8.6 degrees; a
+    // bump of its sheet 0.01 in front of b, cut about 0.067 from b (b's Delta 0.05).
+    b.normal = Vec3{-0.05f, -1, 0} / length(Vec3{-0.05f, -1, 0});
+    const LeafDisc x = disc({0.9332f, 0.0933f, 0}, b.normal, 0.05f);
+    ASSERT_TRUE(in_front_of_ends(x));
+    ASSERT_TRUE(cuts(x));
+    ASSERT_LT(dot(x.normal, b.centroid - x.centroid), 0.f);
+    EXPECT_TRUE(counts(x));
+    vp.roughness = 0.02f;
+    EXPECT_FALSE(counts(x));
+}
+
 // The end windows (VisibilityParams::end_window): a crossing within end_window x Delta_end of
 // the nearer end does not count, whichever way the leaf faces; the window is in the end's own
 // disc radii. a's Delta is 0.05; x is a surface the segment goes into (it counts with no
@@ -363,6 +410,17 @@ VMAP_ON_EACH_BACKEND_WITH(TraversalOracle,
 // and walk alone: segments between two facing plates on a grid, whose boxes' faces lie on the
 // segments' lines), on a sphere, on both sides of a thin wall, and pairs of points with opposite
 // normals at one place (flagged leaves).
+// The scene's points moved by Gaussian noise (0.01 per axis: a sixth of the splats), as a
+// scan's: the roughness rule of exits_at_an_end fires on them (with VisibilityParams::roughness
+// kNoisyRoughness, 3 sqrt 2 sigma).
+constexpr float kNoisyRoughness = 0.0424f;
+PointSet noisy(PointSet ps, uint32_t seed) {
+    std::mt19937 rng(seed * 31 + 7);
+    std::normal_distribution<float> g(0.f, 0.01f);
+    for (Vec3& p : ps.positions) p += Vec3{g(rng), g(rng), g(rng)};
+    return ps;
+}
+
 PointSet random_scene(uint32_t seed, int n) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<float> u(-1.f, 1.f);
@@ -438,12 +496,16 @@ void packet_matches_pairs(const OctreeView& v, const VisibilityParams& vp, int i
 
 TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
     int alone = 0, flagged = 0;
-    for (uint32_t seed = 1; seed <= 12; ++seed) {
+    for (uint32_t seed = 1; seed <= 16; ++seed) {
+        // The last four scenes noisy, with a roughness (a scan's rough sheets).
+        const bool rough = seed > 12;
         PointSet ps = random_scene(seed, 100 + int(seed) * 12);
+        if (rough) ps = noisy(std::move(ps), seed);
         std::vector<uint32_t> order;
         const Octree t = Octree::build(ps, {int(5 + seed % 4), int(1 + seed % 3)}, order);
         VisibilityParams vp;
         vp.K = int(1 + seed % 3);
+        vp.roughness = rough ? kNoisyRoughness : 0.f;
         const OctreeView v = octree_view(t);
         for (int32_t l = 0; l < v.num_leaves; ++l)
             flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
@@ -463,14 +525,72 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
     EXPECT_GT(flagged, 10);
 }
 
+// What the roughness is for: a floor and a wall of an empty room see each other everywhere.
+// Sampled exactly, nearly every floor-wall pair is visible; with noise of a quarter spacing the
+// floor's neighbours, raised by the noise, hide the pairs leaving at shallow angles; with the
+// roughness of that noise (3 sqrt 2 sigma) they are visible again. The noisy pairs' counts
+// also rule out a roughness the packets would ignore (the vector loop against the scalar walk).
+TEST(RoughSheets, NoiseHidesShallowPairsAndTheRoughnessGivesThemBack) {
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(0.f, 1.f);
+    const int floor_n = 4000, wall_n = 2000;
+    const float r = std::sqrt(1.f / (float(M_PI) * floor_n));  // a sample's share of the floor
+    const float sigma = 0.25f * std::sqrt(float(M_PI)) * r;     // a quarter sample spacing
+    PointSet exact;
+    for (int i = 0; i < floor_n + wall_n; ++i) {
+        const bool floor = i < floor_n;
+        exact.positions.push_back(floor ? Vec3{u(rng), 0, u(rng)} : Vec3{u(rng), 0.5f * u(rng), 1});
+        exact.normals.push_back(floor ? Vec3{0, 1, 0} : Vec3{0, 0, -1});
+        exact.radii.push_back(r);
+    }
+    PointSet rough = exact;
+    std::normal_distribution<float> g(0.f, sigma);
+    for (Vec3& p : rough.positions) p += Vec3{g(rng), g(rng), g(rng)};
+    // Floor-wall point pairs, the same for each cloud.
+    std::vector<std::pair<uint32_t, uint32_t>> pairs;
+    for (int k = 0; k < 3000; ++k)
+        pairs.push_back({uint32_t(rng() % floor_n), uint32_t(floor_n + rng() % wall_n)});
+    auto visible_share = [&](PointSet ps, float roughness, bool packets) {
+        std::vector<uint32_t> order;
+        const Octree t = Octree::build(ps, {12, 1}, order);
+        std::vector<uint32_t> at(order.size());
+        for (uint32_t k = 0; k < order.size(); ++k) at[order[k]] = k;
+        VisibilityParams vp;
+        vp.roughness = roughness;
+        const OctreeView v = octree_view(t);
+        int visible = 0;
+        for (const auto& [i, j] : pairs) {
+            int32_t a = t.leaf_of_point(at[i]), b = t.leaf_of_point(at[j]);
+            if (a > b) std::swap(a, b);
+            WorkCounters wc;
+            bool vis = detail::leaf_pair_visible<true>(v, a, b, vp, &wc);
+            if (packets) {
+                detail::SegmentPacket<32> pk;
+                const bool live = pk.load(v, &a, &b, 1, vp, &wc) != 0;
+                EXPECT_EQ(live && pk.walk(v, vp, &wc) != 0u, vis) << i << " " << j;
+            }
+            visible += vis;
+        }
+        return double(visible) / double(pairs.size());
+    };
+    const double exact_share = visible_share(exact, 0, false);
+    const double noisy_share = visible_share(rough, 0, false);
+    const double rough_share = visible_share(rough, float(kRoughnessSigmas) * sigma, true);
+    EXPECT_GT(exact_share, 0.97);
+    EXPECT_LT(noisy_share, exact_share - 0.05) << noisy_share;
+    EXPECT_GT(rough_share, exact_share - 0.02) << noisy_share;
+}
+
 // The CPU backend's path into the packets: facing_mask over up to 16 columns of a row and
 // facing_rows over 8 columns of two rows (the leaves by field), then packets of facing pairs only through load_faced (AVX-512 where the CPU
 // has it). Every pair of random trees, with and without end windows: the same facing pairs as
 // pair_faces, and the answers, node tests and occluder tests of leaf_pair_visible.
 TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
     uint64_t faced = 0;
-    for (uint32_t seed = 21; seed <= 30; ++seed) {
+    for (uint32_t seed = 21; seed <= 34; ++seed) {
+        const bool rough = seed > 30;  // noisy, with a roughness
         PointSet ps = random_scene(seed, 100 + int(seed) * 10);
+        if (rough) ps = noisy(std::move(ps), seed);
         std::vector<uint32_t> order;
         const Octree t = Octree::build(ps, {int(5 + seed % 4), int(1 + seed % 3)}, order);
         const OctreeView v = octree_view(t);
@@ -480,6 +600,7 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
             VisibilityParams vp;
             vp.K = int(1 + seed % 3);
             vp.end_window = window;
+            vp.roughness = rough ? kNoisyRoughness : 0.f;
             WorkCounters want, got;
             detail::SegmentPacket<32> pk;
             int32_t pa[32], pb[32];

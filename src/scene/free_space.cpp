@@ -464,6 +464,7 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
 // wall near it (an open side, a lone object) keeps its place. In the room's frame (vote_sides),
 // where walls are perpendicular to the axes.
 constexpr double kStrayShare = 0.02;
+constexpr float kFaceNoiseSigmas = 8;
 constexpr size_t kWallPoints = 64;
 
 Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, const Bounds& full,
@@ -588,8 +589,8 @@ FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
 
 // The side that the regions make free (+1 along n, -1 against it), or 0 for no verdict.
 // plus, minus: the sides' states (1 free, 0 solid, -1 occupied all along the probe).
-int space_side(int plus, int minus, float box_exit_free_side, bool room_wall, float r_med) {
-    const bool on_box_face = box_exit_free_side <= 0.5f * r_med;
+int space_side(int plus, int minus, float box_exit_free_side, bool room_wall, float on_face) {
+    const bool on_box_face = box_exit_free_side <= on_face;
     // Free space that is only the padding beyond a room's open-air wall (room_wall_faces: the
     // outer side of its wall, floor or ceiling) is no evidence: nothing there was scanned.
     // Without this, a wall point with an object a few millimetres in front of it (the probe
@@ -608,11 +609,20 @@ int space_side(int plus, int minus, float box_exit_free_side, bool room_wall, fl
     return 0;
 }
 
+// Where a ray from a point starts to count hits: past the point's own neighbours' discs, which
+// a ray leaves at once, and on a noisy surface past the noise's slab too (neighbours raised by
+// the noise stand about 3 sigma off the point's plane on either side, 4 sigma along a ring ray
+// at 40 degrees: kRayNoiseSigmas).
+constexpr float kRayNoiseSigmas = 6;
+float ray_start(float radius, float r_med, float noise) {
+    return 0.5f * std::max(radius, 0.25f * r_med) + kRayNoiseSigmas * noise;
+}
+
 // The side whose rays travel farther, signed (+ along n), weighted by the depth contrast
 // (far - near) / (far + near); 0 without clear evidence.
-float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med) {
-    // Skips the point's own neighbours' discs, which a ray leaves at once.
-    const float tmin = 0.5f * std::max(radius, 0.25f * r_med);
+float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float r_med,
+               float noise) {
+    const float tmin = ray_start(radius, r_med, noise);
     const DiscCaster::Depth p = caster.side_depth(i, n, tmin), m = caster.side_depth(i, -n, tmin);
     // No surface seen on either side (a lone plane), or a weak preference (less than half as far
     // again): no evidence, so the point takes its sign from its neighbours.
@@ -629,12 +639,12 @@ float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float
 // opening). A lone object's faces or extreme points have solid on their inner side.
 std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>& pts,
                                     const std::vector<Vec3>& normals, const DiscCaster& caster,
-                                    const Bounds& b, float r_med) {
+                                    const Bounds& b, float on_face) {
     std::array<uint64_t, 6> on{}, both{};
     for (size_t i = 0; i < pts.size(); ++i) {
         const bool free2 = fs.state(fs.sides[i][0]) == 1 && fs.state(fs.sides[i][1]) == 1;
         for (const Vec3 d : {normals[i], -normals[i]}) {
-            if (caster.box_exit(pts[i], d) > 0.5f * r_med) continue;
+            if (caster.box_exit(pts[i], d) > on_face) continue;
             const size_t f = size_t(DiscCaster::exit_face(b, pts[i], d));
             ++on[f];
             both[f] += free2;
@@ -648,7 +658,7 @@ std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>
 }  // namespace
 
 SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>& world_normals,
-                     const std::vector<float>& radii) {
+                     const std::vector<float>& radii, float noise) {
     const std::array<Vec3, 3> frame = room_frame(world_normals);
     const std::vector<Vec3> pts = in_frame(world_pts, frame);
     const std::vector<Vec3> normals = in_frame(world_normals, frame);
@@ -669,23 +679,27 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     v.method = fs.method;
     const Bounds walls = wall_box(pts, normals, b, r_med);
     const DiscCaster caster(pts, normals, radii, b, walls, r_med, 2 * g.h);
-    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, r_med);
+    // A point lies on the box's face when its side leaves the box within half a splat radius,
+    // and on a noisy wall within the noise's reach too: the face is the wall's outermost point,
+    // about 4 sigma out, and the wall's points scatter about as far in (kFaceNoiseSigmas).
+    const float on_face = 0.5f * r_med + kFaceNoiseSigmas * noise;
+    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, on_face);
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);
             const Vec3 free_n = plus == 1 ? normals[i] : -normals[i];
             const bool wall = room_wall[size_t(DiscCaster::exit_face(walls, pts[i], free_n))];
             float side =
-                float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, r_med));
+                float(space_side(plus, minus, caster.box_exit(pts[i], free_n), wall, on_face));
             SideCue cue = SideCue::kSpace;
             // An open sheet inside the scene: free on both sides, neither of them the bounding
             // box's face (a room's walls lie on it). 2 where a surface lies within the probe's
             // reach along the normal on either side: the probe may have walked through a part
             // thinner than that reach (or the point sits at a crease).
-            if (plus == 1 && minus == 1 && caster.box_exit(pts[i], normals[i]) > 0.5f * r_med &&
-                caster.box_exit(pts[i], -normals[i]) > 0.5f * r_med) {
+            if (plus == 1 && minus == 1 && caster.box_exit(pts[i], normals[i]) > on_face &&
+                caster.box_exit(pts[i], -normals[i]) > on_face) {
                 const float reach = 0.5f * g.h * float(kProbeSteps);
-                const float tmin = 0.5f * std::max(radii[i], 0.25f * r_med);
+                const float tmin = ray_start(radii[i], r_med, noise);
                 v.open[i] = 1;
                 for (const Vec3 d : {normals[i], -normals[i]}) {
                     const float t = caster.first_hit(uint32_t(i), d, tmin);
@@ -693,7 +707,7 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
                 }
             }
             if (side == 0) {
-                side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med);
+                side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med, noise);
                 cue = SideCue::kRays;
             }
             if (side == 0) continue;

@@ -54,7 +54,9 @@ struct SideVotes {
 //    travel clearly farther before meeting surface is free (a ray that escapes travels without
 //    end, unless it leaves the bounding box at once: a room's walls lie on the box and see
 //    nothing outside it). No surface seen, or no clear margin: no vote.
+// `noise`: the points' scatter off their surfaces (estimate_surface_noise's sigma; 0 for exact
+// samples): a noisy wall's points lie up to a few sigma inside the bounding box's face.
 SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-                     const std::vector<float>& radii);
+                     const std::vector<float>& radii, float noise = 0);
 
 }  // namespace vmap::detail

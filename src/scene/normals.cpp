@@ -840,7 +840,13 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 estimate_radii(tmp, rp);
                 radii = std::move(tmp.radii);
             }
-            detail::SideVotes votes = detail::vote_sides(pts, normals, radii);
+            PointSet at;
+            at.positions = pts;
+            // The points' scatter off their surfaces, where one is measured (as roughness_of:
+            // exact samples orient as they always did).
+            const SurfaceNoise sn = estimate_surface_noise(at);
+            const float noise = roughness_of(sn) > 0 ? float(sn.sigma) : 0.f;
+            detail::SideVotes votes = detail::vote_sides(pts, normals, radii, noise);
             const Graph g = symmetrise(fits, n);
             shape_votes(pts, g, fits.degenerate, normals, votes);
             for (size_t i = 0; i < n; ++i) {

@@ -342,6 +342,7 @@ void run_scene(const std::string& path, const Options& o) {
 
     PointSet raw;
     raw.positions = truth.positions;
+    if (o.noise > 0) add_noise(raw, truth, o.noise);  // a scan's noise (signs still scored)
     if (!o.write_dir.empty())
         write_ply(o.write_dir + "/" + sc.name + (o.objects_only ? "-objects" : "") + ".ply", raw);
     const auto t0 = std::chrono::steady_clock::now();

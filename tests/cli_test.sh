@@ -337,6 +337,48 @@ if expect_ok "build a cloud far from its file's zero" \
         show info far.vmap
     fi
 fi
+# A scan's noise: the sphere again, 2000 points, moved by Gaussian noise of 2 mm (a quarter of
+# their spacing). The build measures it and sets the predicate's roughness; the exact sphere
+# measures none; --roughness replaces the measure; a .vmap has its own.
+run build sphere.ply --max-height 4 -o exact.vmap --backend cpu
+if [ "$rc" -eq 0 ] && grep -q '^vmap build: surface noise: none measured' err.txt; then
+    ok "an exact cloud measures no surface noise"
+else
+    fail "an exact cloud's build does not say it measured no noise"
+    show build sphere.ply --max-height 4
+fi
+awk 'BEGIN {
+    srand(3); n = 2000; pi = 3.14159265358979; g = pi * (3 - sqrt(5)); s = 0.002;
+    printf "ply\nformat ascii 1.0\nelement vertex %d\n", n;
+    printf "property float x\nproperty float y\nproperty float z\nend_header\n";
+    for (i = 0; i < n; i++) {
+        y = 1 - 2 * (i + 0.5) / n; r = sqrt(1 - y * y); a = g * i;
+        for (k = 0; k < 3; k++) e[k] = s * sqrt(-2 * log(1 - rand())) * cos(2 * pi * rand());
+        printf "%.6f %.6f %.6f\n", 0.1 * r * cos(a) + e[0], 0.1 * y + e[1], 0.1 * r * sin(a) + e[2];
+    }
+}' >noisy.ply
+if expect_ok "build a noisy cloud" build noisy.ply --max-height 6 -o noisy.vmap --backend cpu; then
+    if grep -qE '^vmap build: surface noise: 0\.00(1[6-9]|2)[0-9]* \(.*do not occlude' err.txt &&
+        run info noisy.vmap && grep -qE '^predicate: .*roughness 0\.00[89]' out.txt; then
+        ok "a noisy cloud's noise is measured (2 mm) and kept as the map's roughness (3 sqrt 2 x)"
+    else
+        fail "a noisy cloud's noise not measured near 2 mm, or the roughness not in the map"
+        show build noisy.ply --max-height 6
+        show info noisy.vmap
+    fi
+fi
+if expect_ok "build a noisy cloud with --roughness 0" \
+    build noisy.ply --max-height 6 --roughness 0 -o rough0.vmap --backend cpu; then
+    if ! grep -q 'surface noise' err.txt && run info rough0.vmap &&
+        grep -qE '^predicate: .*roughness 0$' out.txt; then
+        ok "--roughness replaces the measured noise"
+    else
+        fail "--roughness 0: the noise still measured, or the map's roughness not 0"
+        show info rough0.vmap
+    fi
+fi
+expect_usage_error "--roughness below 0" build noisy.ply --roughness -1
+expect_input_error "--roughness on a .vmap" noisy.vmap render noisy.vmap --roughness 1 -o r.png
 expect_input_error "--normals flip on a cloud without normals" sphere.ply \
     build sphere.ply --normals flip --max-height 4 -o flip.vmap
 expect_no_file "a failed --normals flip writes nothing" flip.vmap

@@ -104,11 +104,14 @@ TEST(Input, AVmapIsLoadedAndOctreeOverridesAreAnError) {
     EXPECT_EQ(in.octree.max_height, 4);
     EXPECT_TRUE(in.points.positions.empty());
     o.max_height = 6;
-    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points and delta_floor"));
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points, delta_floor and roughness"));
     o.max_height.reset();
     o.delta_floor = 2.0f;
-    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points and delta_floor"));
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points, delta_floor and roughness"));
     o.delta_floor.reset();
+    o.roughness = 0.001f;
+    EXPECT_TRUE(throws_naming(o, "m.vmap: max_height, leaf_points, delta_floor and roughness"));
+    o.roughness.reset();
     o.points = 10;
     EXPECT_TRUE(throws_naming(o, "not to a .vmap"));
 }

@@ -118,6 +118,28 @@ def test_end_window_matches_the_cli(small, tmp_path):
     assert vmap.load(str(py_file)).end_window == 3.0
 
 
+def noisy_sphere(sigma, n=3000, seed=4):
+    rng = np.random.default_rng(seed)
+    p = rng.normal(size=(n, 3))
+    p = 0.1 * p / np.linalg.norm(p, axis=1, keepdims=True)
+    return (p + rng.normal(scale=sigma, size=p.shape)).astype(np.float32)
+
+
+def test_surface_noise_and_roughness(tmp_path):
+    exact, rough = noisy_sphere(0.0), noisy_sphere(0.001)
+    assert vmap.surface_noise(exact)["roughness"] == 0.0
+    n = vmap.surface_noise(rough)
+    assert abs(n["sigma"] - 0.001) < 0.0002 and n["spacing"] > 0
+    assert abs(n["roughness"] - 4.2426 * n["sigma"]) < 1e-6
+    # build() takes the points' measured roughness unless given one; it is kept in the file
+    m = vmap.build(rough, max_height=5, backend="cpu")
+    assert m.roughness == pytest.approx(n["roughness"], rel=1e-6)
+    m.save(str(tmp_path / "r.vmap"))
+    assert vmap.load(str(tmp_path / "r.vmap")).roughness == m.roughness
+    assert vmap.build(rough, max_height=5, backend="cpu", roughness=0.0).roughness == 0.0
+    assert vmap.build(exact, max_height=5, backend="cpu").roughness == 0.0
+
+
 def test_one_thread_gives_the_same_map(small):
     one = vmap.build_file(SCENE, points=2000, seed=3, threads=1, **OPTS)
     pairs = np.random.default_rng(5).integers(0, small.num_points, size=(2000, 2))

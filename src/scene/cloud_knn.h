@@ -2,6 +2,7 @@
 // positions read in place) and the test for "the same surface side".
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <nanoflann.hpp>
@@ -36,9 +37,11 @@ using KdTree =
 // test; the other wall at a room's edge fails the second. (Allowing more off the plane where
 // the normals turn, to follow tight curves, let the other face of plates back in: their fitted
 // normals tilt where the neighbourhood mixes both faces.)
-inline bool same_surface(Vec3 p, Vec3 np, Vec3 q, Vec3 nq) {
+// On a noisy cloud, `slack` (the roughness: the noise's reach off the plane, roughness_of in
+// vmap/normals.h) is allowed off the plane besides; 0 for exact samples, as before.
+inline bool same_surface(Vec3 p, Vec3 np, Vec3 q, Vec3 nq, float slack = 0) {
     const Vec3 d = q - p;
-    const float off = std::fabs(dot(np, d));
+    const float off = std::max(0.0f, std::fabs(dot(np, d)) - slack);
     return off * off <= 0.0625f * length2(d) && std::fabs(dot(np, nq)) >= 0.8f;
 }
 

@@ -678,11 +678,13 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
     v.method = fs.method;
     const Bounds walls = wall_box(pts, normals, b, r_med);
-    const DiscCaster caster(pts, normals, radii, b, walls, r_med, 2 * g.h);
     // A point lies on the box's face when its side leaves the box within half a splat radius,
     // and on a noisy wall within the noise's reach too: the face is the wall's outermost point,
-    // about 4 sigma out, and the wall's points scatter about as far in (kFaceNoiseSigmas).
+    // about 4 sigma out, and the wall's points scatter about as far in (kFaceNoiseSigmas). A ray
+    // that leaves the box within two cells (and that reach) has left "at once".
     const float on_face = 0.5f * r_med + kFaceNoiseSigmas * noise;
+    const DiscCaster caster(pts, normals, radii, b, walls, r_med,
+                            2 * g.h + kFaceNoiseSigmas * noise);
     const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, on_face);
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {

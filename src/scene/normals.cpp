@@ -180,6 +180,10 @@ struct LocalFits {
     // grazing the other face; each sheet normal then takes the sign of its smooth one.
     std::vector<Vec3> sheet_normals;
     std::vector<uint8_t> degenerate;  // neighbourhood coincident or collinear: normal unknown
+    // The points' measured scatter off their surfaces (estimate_surface_noise's sigma where
+    // roughness_of sees one, else 0) and the slack off the tangent plane that the same-sheet
+    // tests allow for it (the roughness, 3 sqrt 2 sigma).
+    float noise = 0, slack = 0;
 };
 
 // The weighted least-squares plane normal of the given points (weights w, or all 1 when null),
@@ -231,11 +235,12 @@ constexpr size_t kBandwidthNeighbour = 6;
 // perpendicular (the other face of a thin part or plate, and another surface a few millimetres
 // away, fail). On a curve the two planes tilt opposite ways and their offsets cancel, so a
 // small sphere keeps its neighbours, which a test against p's plane alone would drop.
-bool on_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq) {
+// On a noisy cloud the slack (LocalFits::slack) is allowed off the planes besides.
+bool on_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq, float slack) {
     const float c = dot(np, nq);
     if (std::fabs(c) < 0.8f) return false;
     const Vec3 d = q - p;
-    const float off = 0.5f * std::fabs(dot(np + (c < 0 ? -nq : nq), d));
+    const float off = std::max(0.0f, 0.5f * std::fabs(dot(np + (c < 0 ? -nq : nq), d)) - slack);
     return off * off <= 0.0625f * length2(d);
 }
 
@@ -256,7 +261,7 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             size_t kept = 0;
             for (size_t j = 0; j < c; ++j) {
                 w[j] = h2 > 0 ? std::exp(-d2[i * c + j] / h2) : 1.0f;
-                if (prev && nb[j] != i && !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]]))
+                if (prev && nb[j] != i && !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]], fits.slack))
                     w[j] = 0;
                 kept += w[j] > 0;
             }
@@ -339,7 +344,7 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             size_t kept = 0;
             const uint32_t* nb = &cand[i * c];
             for (size_t j = 0; j < c; ++j) {
-                if (nb[j] != i && !on_sheet(pts[i], nz, pts[nb[j]], fits.sheet_normals[nb[j]]))
+                if (nb[j] != i && !on_sheet(pts[i], nz, pts[nb[j]], fits.sheet_normals[nb[j]], fits.slack))
                     continue;
                 const double w = std::exp(-double(d2[i * c + j]) / double(h2));
                 const Vec3 d = pts[nb[j]] - pts[i];
@@ -373,6 +378,11 @@ LocalFits fit_local_planes(const std::vector<Vec3>& pts, const NormalEstimationP
     const size_t c = fit ? std::min(std::max(params.k, params.fit_neighbours), n) : kk;
     fits.neighbours.resize(n * kk);
     fits.degenerate.assign(n, 0);
+    PointSet at;
+    at.positions = pts;
+    const SurfaceNoise sn = estimate_surface_noise(at);
+    fits.slack = roughness_of(sn);
+    fits.noise = fits.slack > 0 ? float(sn.sigma) : 0.f;
     std::vector<uint32_t> cand(n * c);
     std::vector<float> d2(n * c);
 
@@ -513,10 +523,10 @@ class PointHeap {
 // Edge weight for propagation: 1 - |cos| between the normals, and more (used last) for a pair
 // that is not on one surface side, such as the two faces of a plate thinner than the spacing.
 float edge_weight(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-                  const std::vector<uint8_t>& degenerate, uint32_t a, uint32_t b) {
+                  const std::vector<uint8_t>& degenerate, uint32_t a, uint32_t b, float slack) {
     if (degenerate[a] || degenerate[b]) return kDegenerateEdgeWeight;
     const float w = 1.0f - std::fabs(dot(normals[a], normals[b]));
-    return detail::same_surface(pts[a], normals[a], pts[b], normals[b]) ? w : w + 1.0f;
+    return detail::same_surface(pts[a], normals[a], pts[b], normals[b], slack) ? w : w + 1.0f;
 }
 
 // Orients the normals that `fixed` leaves free, in place: Prim's algorithm over the neighbour
@@ -525,7 +535,7 @@ float edge_weight(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals
 // from its point farthest from the centroid (where "outward" is least ambiguous), pointing away.
 void propagate(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
                const std::vector<uint8_t>& degenerate, const std::vector<uint8_t>& fixed,
-               std::vector<Vec3>& normals) {
+               std::vector<Vec3>& normals, float slack) {
     const size_t n = pts.size();
     std::vector<uint8_t> in_tree(n, 0);
     std::vector<uint32_t> parent(n);
@@ -535,7 +545,7 @@ void propagate(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
         in_tree[v] = 1;
         for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
             const uint32_t u = g.adjacent[e];
-            if (!in_tree[u] && heap.push_or_lower(u, edge_weight(pts, normals, degenerate, v, u)))
+            if (!in_tree[u] && heap.push_or_lower(u, edge_weight(pts, normals, degenerate, v, u, slack)))
                 parent[u] = v;
         }
     };
@@ -601,7 +611,8 @@ size_t agree_with_neighbours(const std::vector<Vec3>& pts, const LocalFits& fits
                 const uint32_t o = fits.neighbours[i * k + j];
                 if (o == i || fits.degenerate[o] || votes.cue[o] == detail::SideCue::kNone)
                     continue;
-                if (!detail::same_surface(pts[i], normals[i], pts[o], normals[o])) continue;
+                if (!detail::same_surface(pts[i], normals[i], pts[o], normals[o], fits.slack))
+                    continue;
                 const float w = votes.cue[o] == detail::SideCue::kSpace ? 2.0f : 1.0f;
                 (dot(normals[i], normals[o]) > 0 ? agree : disagree) += w;
             }
@@ -634,7 +645,7 @@ constexpr float kVoteLinkOffset = 0.5f;
 
 size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radii, const Graph& g,
                     const std::vector<uint8_t>& degenerate, const detail::SideVotes& votes,
-                    std::vector<uint8_t>& fixed, std::vector<Vec3>& normals) {
+                    std::vector<uint8_t>& fixed, std::vector<Vec3>& normals, float slack) {
     const size_t n = pts.size();
     // Belief along each point's current normal (already signed by its own vote).
     std::vector<float> own(n, 0.0f);
@@ -642,10 +653,10 @@ size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radi
     std::vector<float> cur = own, next(n);
     auto linked = [&](uint32_t i, uint32_t j) {
         const Vec3 d = pts[j] - pts[i];
-        const float reach = kVoteLinkOffset * std::min(radii[i], radii[j]);
+        const float reach = kVoteLinkOffset * std::min(radii[i], radii[j]) + slack;
         return !degenerate[j] && std::fabs(dot(normals[i], normals[j])) >= kVoteLinkCos &&
                std::fabs(dot(normals[i], d)) <= reach && std::fabs(dot(normals[j], d)) <= reach &&
-               detail::same_surface(pts[i], normals[i], pts[j], normals[j]);
+               detail::same_surface(pts[i], normals[i], pts[j], normals[j], slack);
     };
     for (int round = 0; round < kVoteRounds; ++round) {
         parallel_for_range<size_t>(n, 1024, [&](size_t chunk_begin, size_t chunk_end) {
@@ -706,7 +717,7 @@ constexpr size_t kMinSheet = size_t(kVoteRounds) * kVoteRounds;
 
 size_t shape_votes(const std::vector<Vec3>& pts, const Graph& g,
                    const std::vector<uint8_t>& degenerate, const std::vector<Vec3>& normals,
-                   detail::SideVotes& votes) {
+                   detail::SideVotes& votes, float slack) {
     const size_t n = pts.size();
     std::vector<uint8_t> seen(n, 0);
     std::vector<uint32_t> stack, sheet;
@@ -724,7 +735,7 @@ size_t shape_votes(const std::vector<Vec3>& pts, const Graph& g,
             for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
                 const uint32_t u = g.adjacent[e];
                 if (seen[u] || !votes.open[u] || degenerate[u] ||
-                    !detail::same_surface(pts[v], normals[v], pts[u], normals[u]))
+                    !detail::same_surface(pts[v], normals[v], pts[u], normals[u], slack))
                     continue;
                 seen[u] = 1;
                 stack.push_back(u);
@@ -840,15 +851,9 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 estimate_radii(tmp, rp);
                 radii = std::move(tmp.radii);
             }
-            PointSet at;
-            at.positions = pts;
-            // The points' scatter off their surfaces, where one is measured (as roughness_of:
-            // exact samples orient as they always did).
-            const SurfaceNoise sn = estimate_surface_noise(at);
-            const float noise = roughness_of(sn) > 0 ? float(sn.sigma) : 0.f;
-            detail::SideVotes votes = detail::vote_sides(pts, normals, radii, noise);
+            detail::SideVotes votes = detail::vote_sides(pts, normals, radii, fits.noise);
             const Graph g = symmetrise(fits, n);
-            shape_votes(pts, g, fits.degenerate, normals, votes);
+            shape_votes(pts, g, fits.degenerate, normals, votes, fits.slack);
             for (size_t i = 0; i < n; ++i) {
                 if (fits.degenerate[i] || votes.cue[i] == detail::SideCue::kNone) continue;
                 if (votes.sign[i] < 0) normals[i] = -normals[i];
@@ -859,13 +864,13 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
             }
             rep.by_neighbours = agree_with_neighbours(pts, fits, votes, normals);
             rep.by_neighbours +=
-                spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals);
+                spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals, fits.slack);
             rep.method = votes.method;
-            propagate(pts, centroid, g, fits.degenerate, fixed, normals);
+            propagate(pts, centroid, g, fits.degenerate, fixed, normals, fits.slack);
             return;
         }
     }
-    propagate(pts, centroid, symmetrise(fits, n), fits.degenerate, fixed, normals);
+    propagate(pts, centroid, symmetrise(fits, n), fits.degenerate, fixed, normals, fits.slack);
 }
 
 void check_cloud(const std::vector<Vec3>& pts, const NormalEstimationParams& params,
@@ -987,6 +992,125 @@ void orient_toward(PointSet& points, const std::vector<Vec3>& sensors, const cha
             points.normals[i] = -points.normals[i];
 }
 
+// The jet z = a x^2 + b xy + c y^2 + d x + e y + f through the kept points (x, y, z), least
+// squares; false when singular.
+template <size_t K>
+bool jet_through(const double (&xyz)[K][3], const bool (&keep)[K], double (&coef)[6]) {
+    double a[6][6] = {};
+    std::fill(coef, coef + 6, 0.0);
+    for (size_t j = 0; j < K; ++j) {
+        if (!keep[j]) continue;
+        const double x = xyz[j][0], y = xyz[j][1];
+        const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
+        for (int r = 0; r < 6; ++r) {
+            coef[r] += phi[r] * xyz[j][2];
+            for (int c = 0; c < 6; ++c) a[r][c] += phi[r] * phi[c];
+        }
+    }
+    return solve6(a, coef);
+}
+template <size_t K>
+void jet_residuals(const double (&xyz)[K][3], const double (&c)[6], double (&res)[K]) {
+    for (size_t j = 0; j < K; ++j) {
+        const double x = xyz[j][0], y = xyz[j][1];
+        res[j] = xyz[j][2] - (c[0] * x * x + c[1] * x * y + c[2] * y * y + c[3] * x + c[4] * y + c[5]);
+    }
+}
+
+
+constexpr double kTwoSheetGap = 0.3;
+constexpr size_t kFirstPlane = 8;
+
+// One probe of estimate_surface_noise: the noise's standard deviation along the normal at the
+// point nb[0] (the query itself, at distance 0) from its kNoiseNeighbours nearest nb (squared
+// distances d2), or nothing where no fit can be made.
+// The jet (z = a x^2 + b xy + c y^2 + d x + e y + f over a plane's frame) through the
+// neighbours, unweighted: with 6 unknowns, the residual's mean square over k - 6 degrees of
+// freedom is the noise's variance along the normal. Two sheets in reach (the other face of a
+// plate, a surface a spacing or two away) put the heights along the plane's normal in two
+// clusters: the widest gap between the sorted heights is more than kTwoSheetGap of their range
+// (Gaussian noise and a smooth curve leave a gap that wide at a few probes in a hundred, which
+// the median does not feel). Then only the cluster of the point itself (its own sheet) is
+// kept, its plane fitted again (the first, pulled by both sheets, tilts and smears them) and
+// split again; the jet is fitted through what is left.
+std::optional<double> probe_noise(const std::vector<Vec3>& pts, const uint32_t* nb,
+                                  const float* d2) {
+    constexpr size_t K = kNoiseNeighbours;
+    if (!(d2[K - 1] > 0)) return std::nullopt;
+    const double s = 1.0 / std::sqrt(double(d2[K - 1]));  // coordinates in neighbourhood radii
+    double xyz[K][3];
+    // The neighbours' coordinates in the frame of the plane through those kept (and among
+    // them the first `first` only); false when they span no plane.
+    auto frame = [&](const bool* keep, size_t first) {
+        uint32_t idx[K];
+        size_t c = 0;
+        for (size_t j = 0; j < first; ++j)
+            if (keep[j]) idx[c++] = nb[j];
+        const std::optional<Vec3> nz = plane_normal(pts, idx, c);
+        if (!nz) return false;
+        const Vec3 ax = std::fabs(nz->x) <= std::fabs(nz->y) && std::fabs(nz->x) <= std::fabs(nz->z)
+                            ? Vec3{1, 0, 0}
+                        : std::fabs(nz->y) <= std::fabs(nz->z) ? Vec3{0, 1, 0}
+                                                               : Vec3{0, 0, 1};
+        Vec3 u = ax - *nz * dot(ax, *nz);
+        u = u / length(u);
+        const Vec3 v = cross(*nz, u);
+        for (size_t j = 0; j < K; ++j) {
+            const Vec3 d = pts[nb[j]] - pts[nb[0]];
+            xyz[j][0] = s * dot(d, u), xyz[j][1] = s * dot(d, v), xyz[j][2] = s * dot(d, *nz);
+        }
+        return true;
+    };
+    // Keeps, of those kept, the point's own side of the widest gap between heights when it
+    // is wider than kTwoSheetGap of their range; false when there is no such gap.
+    auto split = [&](bool* keep, size_t& m) {
+        double z[K];
+        size_t c = 0;
+        for (size_t j = 0; j < K; ++j)
+            if (keep[j]) z[c++] = xyz[j][2];
+        std::sort(z, z + c);
+        double widest = 0, at = 0;
+        for (size_t j = 1; j < c; ++j)
+            if (z[j] - z[j - 1] > widest) widest = z[j] - z[j - 1], at = 0.5 * (z[j] + z[j - 1]);
+        if (!(widest > kTwoSheetGap * (z[c - 1] - z[0]))) return false;
+        const bool above = xyz[0][2] > at;
+        m = 0;
+        for (size_t j = 0; j < K; ++j) m += keep[j] = keep[j] && (xyz[j][2] > at) == above;
+        return true;
+    };
+    bool keep[K];
+    size_t m = K;
+    // Two sheets seen in the frame of all the neighbours (both faces of a plate thinner than
+    // the spacing: a thin slab) or of the nearest kFirstPlane (a sheet a spacing or two away:
+    // through all, the two make a thick slab the plane tilts across). Then the point's own
+    // sheet is fitted again, and split again if it still holds two.
+    bool two = false;
+    for (size_t first : {K, kFirstPlane}) {
+        std::fill(keep, keep + K, true);
+        m = K;
+        if (!frame(keep, first)) continue;
+        if ((two = split(keep, m))) break;
+    }
+    if (two) {
+        for (int round = 0; round < 2; ++round) {
+            if (m < 12 || !frame(keep, K)) return std::nullopt;
+            if (!split(keep, m)) break;
+        }
+        if (m < 12) return std::nullopt;
+    } else {
+        std::fill(keep, keep + K, true);
+        m = K;
+        if (!frame(keep, K)) return std::nullopt;
+    }
+    double coef[6], res[K];
+    if (!jet_through(xyz, keep, coef)) return std::nullopt;
+    jet_residuals(xyz, coef, res);
+    double ssr = 0;
+    for (size_t j = 0; j < K; ++j)
+        if (keep[j]) ssr += res[j] * res[j];
+    return std::sqrt(ssr / double(m - 6)) / s;
+}
+
 SurfaceNoise estimate_surface_noise(const PointSet& points) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
@@ -1011,38 +1135,7 @@ SurfaceNoise estimate_surface_noise(const PointSet& points) {
             double r2 = 0;
             for (size_t j = 1; j <= 8; ++j) r2 += double(d2[j]) / double(j);
             spacing2[k] = M_PI * r2 / 8;
-            const std::optional<Vec3> nz = plane_normal(pts, nb, kNoiseNeighbours);
-            if (!nz || !(d2[kNoiseNeighbours - 1] > 0)) continue;
-            // The jet (z = a x^2 + b xy + c y^2 + d x + e y + f over the plane's frame) through
-            // all the neighbours, unweighted: with 6 unknowns, the residual's mean square over
-            // k - 6 degrees of freedom is the noise's variance along the normal.
-            const Vec3 ax = std::fabs(nz->x) <= std::fabs(nz->y) && std::fabs(nz->x) <= std::fabs(nz->z)
-                                ? Vec3{1, 0, 0}
-                            : std::fabs(nz->y) <= std::fabs(nz->z) ? Vec3{0, 1, 0}
-                                                                   : Vec3{0, 0, 1};
-            Vec3 u = ax - *nz * dot(ax, *nz);
-            u = u / length(u);
-            const Vec3 v = cross(*nz, u);
-            const double s = 1.0 / std::sqrt(double(d2[kNoiseNeighbours - 1]));
-            double a[6][6] = {}, b[6] = {}, xyz[kNoiseNeighbours][3];
-            for (size_t j = 0; j < kNoiseNeighbours; ++j) {
-                const Vec3 d = pts[nb[j]] - pts[i];
-                const double x = s * dot(d, u), y = s * dot(d, v), z = s * dot(d, *nz);
-                xyz[j][0] = x, xyz[j][1] = y, xyz[j][2] = z;
-                const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
-                for (int r = 0; r < 6; ++r) {
-                    b[r] += phi[r] * z;
-                    for (int c = 0; c < 6; ++c) a[r][c] += phi[r] * phi[c];
-                }
-            }
-            if (!solve6(a, b)) continue;
-            double ssr = 0;
-            for (size_t j = 0; j < kNoiseNeighbours; ++j) {
-                const double x = xyz[j][0], y = xyz[j][1];
-                const double f = b[0] * x * x + b[1] * x * y + b[2] * y * y + b[3] * x + b[4] * y + b[5];
-                ssr += (xyz[j][2] - f) * (xyz[j][2] - f);
-            }
-            sigma[k] = std::sqrt(ssr / double(kNoiseNeighbours - 6)) / s;
+            if (const std::optional<double> sg = probe_noise(pts, nb, d2)) sigma[k] = *sg;
         }
     });
     auto median = [](std::vector<double> v) {

@@ -78,9 +78,10 @@ Tally tally_neighbours(const std::vector<Vec3>& pts, size_t want, size_t steps, 
 // thin plate or a thin part, a surface a few millimetres away. A neighbour whose normal turns
 // (around a thin tube, across a crease) lies on p's own surface and counts, which
 // detail::same_surface (for orientation: one smooth surface) would leave out.
-bool other_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq) {
+// On a noisy cloud `slack` (its roughness, roughness_of) is allowed off the plane besides.
+bool other_sheet(Vec3 p, Vec3 np, Vec3 q, Vec3 nq, float slack) {
     const Vec3 d = q - p;
-    const float off = std::fabs(dot(np, d));
+    const float off = std::max(0.0f, std::fabs(dot(np, d)) - slack);
     return std::fabs(dot(np, nq)) >= 0.8f && off * off > 0.0625f * length2(d);
 }
 
@@ -91,7 +92,7 @@ constexpr uint32_t kNone = 0xffffffffu;
 constexpr size_t kCloseNeighbours = 8;
 
 std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& params,
-                                double* close_share) {
+                                double* close_share, float slack) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size(), k = params.k;
     const detail::CloudAdaptor adaptor{pts};
@@ -113,7 +114,7 @@ std::vector<uint32_t> raw_radii(PointSet& points, const RadiusEstimationParams& 
                 if (idx[j] == i) continue;
                 all.push_back(d2[j]);
                 const Vec3 o = pts[idx[j]];
-                if (other_sheet(p, np, o, points.normals[idx[j]])) continue;
+                if (other_sheet(p, np, o, points.normals[idx[j]], slack)) continue;
                 same[i * k + kept.size()] = idx[j];
                 kept.push_back(d2[j]);
                 if (kept.size() == k) break;
@@ -207,7 +208,10 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
     double share = kPoissonCloseShare;
     const bool correct =
         params.sampling_correction && params.k == kCloseNeighbours && params.candidates >= 32;
-    const std::vector<uint32_t> same = raw_radii(points, params, correct ? &share : nullptr);
+    // A noisy cloud's neighbours scatter off the plane: its roughness is still its own sheet.
+    const float slack = roughness_of(estimate_surface_noise(points));
+    const std::vector<uint32_t> same =
+        raw_radii(points, params, correct ? &share : nullptr, slack);
     smooth_radii(points.radii, same, params.k, params.smoothing_passes);
     if (!correct) return;
     const float scale = even_sampling_radius_scale(share);
@@ -225,6 +229,7 @@ double close_neighbour_share(const PointSet& points) {
     constexpr size_t kCandidates = 32, kMostProbes = 100000;
     // A fixed stride over the points: the same probes whatever the thread count.
     const size_t stride = (n + kMostProbes - 1) / kMostProbes;
+    const float slack = roughness_of(estimate_surface_noise(points));
     const Tally c = tally_neighbours(
         pts, std::min(kCandidates + 1, n), (n + stride - 1) / stride, stride,
         [&](size_t i, const uint32_t* idx, const float* d2, size_t got, Tally& acc) {
@@ -232,7 +237,8 @@ double close_neighbour_share(const PointSet& points) {
             size_t m = 0;
             for (size_t j = 0; j < got && m < kCloseNeighbours; ++j) {
                 if (idx[j] == i || d2[j] == 0.f) continue;  // itself, or a duplicate
-                if (other_sheet(pts[i], points.normals[i], pts[idx[j]], points.normals[idx[j]]))
+                if (other_sheet(pts[i], points.normals[i], pts[idx[j]], points.normals[idx[j]],
+                                slack))
                     continue;
                 kept[m++] = d2[j];
             }
@@ -257,13 +263,15 @@ double normal_inconsistency(const PointSet& points, size_t k) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
     if (n < 2 || points.normals.size() != n) return 0.0;
+    const float slack = roughness_of(estimate_surface_noise(points));
     const Tally c =
         tally_neighbours(pts, std::min(k + 1, n), n, 1,
                          [&](size_t i, const uint32_t* idx, const float*, size_t got, Tally& acc) {
                              for (size_t j = 0; j < got; ++j) {
                                  const uint32_t o = idx[j];
                                  if (o == i || !detail::same_surface(pts[i], points.normals[i],
-                                                                     pts[o], points.normals[o]))
+                                                                     pts[o], points.normals[o],
+                                                                     slack))
                                      continue;
                                  ++acc.total;
                                  acc.hits += dot(points.normals[i], points.normals[o]) < 0;

@@ -2,12 +2,15 @@
 // counts, byte-identical V-maps. Labelled `gpu`; without a device every test reports SKIPPED.
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include <cstdlib>
 #include <filesystem>
 
 #include "backend_fixture.h"
 #include "test_files.h"
 #include "test_util.h"
+#include "vmap/normals.h"
 #include "visibility/backend.h"
 #include "visibility/node_pair.h"
 
@@ -119,6 +122,37 @@ INSTANTIATE_TEST_SUITE_P(Scenes, GpuMatchesCpu,
                          [](const ::testing::TestParamInfo<BuildCase>& i) {
                              return test::case_name(i.param, false);
                          });
+
+// A noisy scan with its roughness (exits_at_an_end's rough-sheet rule fires): the GPU's V-map
+// is the CPU's, byte for byte, on the leaf-pair path and the node path.
+TEST(GpuBackend, ANoisyCloudWithItsRoughnessIsTheCpusVmap) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 6000, 3);
+    std::mt19937 rng(8);
+    std::normal_distribution<float> g(0.f, 0.002f);  // about a quarter of the spacing
+    for (Vec3& p : ps.positions) p += Vec3{g(rng), g(rng), g(rng)};
+    BuildParams bp = test::cpu_params(8, 1);
+    bp.visibility.roughness = roughness_of(estimate_surface_noise(ps));
+    ASSERT_GT(bp.visibility.roughness, 0.f);
+    bp.construction = Construction::kLeafPairs;
+    BuildStats cs, gs, rs;
+    const VisibilityMap cpu = build_vmap(ps, bp, &cs);
+    bp.backend = Backend::kCuda;
+    const VisibilityMap gpu = build_vmap(ps, bp, &gs);
+    EXPECT_NE(gs.backend.find("cuda"), std::string::npos) << gs.backend;
+    EXPECT_EQ(gs.work.visible_pairs, cs.work.visible_pairs);
+    EXPECT_EQ(gs.work.occluder_tests, cs.work.occluder_tests);
+    EXPECT_EQ(gpu.link_offsets(), cpu.link_offsets());
+    EXPECT_TRUE(std::ranges::equal(gpu.link_targets(), cpu.link_targets()));
+    bp.construction = Construction::kNodes;
+    const VisibilityMap nodes = build_vmap(ps, bp);
+    EXPECT_TRUE(std::ranges::equal(nodes.link_targets(), cpu.link_targets()));
+    // The rule fires: without the roughness fewer pairs are visible.
+    bp.visibility.roughness = 0;
+    bp.construction = Construction::kLeafPairs;
+    (void)build_vmap(ps, bp, &rs);
+    EXPECT_LT(rs.work.visible_pairs, gs.work.visible_pairs);
+}
 
 // The GPU's table and counts for `jobs` (kernel VMAP_CUDA_VARIANT = variant) against the CPU's.
 void expect_same_tables(const Octree& t, const std::vector<detail::PairJob>& jobs,

@@ -261,19 +261,20 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             size_t kept = 0;
             for (size_t j = 0; j < c; ++j) {
                 w[j] = h2 > 0 ? std::exp(-d2[i * c + j] / h2) : 1.0f;
-                if (prev && nb[j] != i && !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]], fits.slack))
+                if (prev && nb[j] != i &&
+                    !on_sheet(pts[i], (*prev)[i], pts[nb[j]], (*prev)[nb[j]], fits.slack))
                     w[j] = 0;
                 kept += w[j] > 0;
             }
             // A re-fit on fewer than 3 neighbours besides the point (one right at an edge,
             // whose fit leans between the faces, keeps almost none) is no plane to trust.
-            const std::optional<Vec3> normal =
-                prev && kept <= kMinK ? std::nullopt : plane_normal(pts, nb, c, w.data());
+            std::optional<Vec3> normal;
+            if (!prev || kept > kMinK) normal = plane_normal(pts, nb, c, w.data());
             if (!prev) {
-                fits.degenerate[i] = !normal;
-                out[i] = normal.value_or(Vec3{0, 0, 1});
+                fits.degenerate[i] = !normal.has_value();
+                out[i] = normal.has_value() ? *normal : Vec3{0, 0, 1};
             } else {
-                out[i] = fits.degenerate[i] ? (*prev)[i] : normal.value_or((*prev)[i]);
+                out[i] = fits.degenerate[i] || !normal.has_value() ? (*prev)[i] : *normal;
             }
         }
     });

@@ -148,10 +148,12 @@ Command add_validate_command(CLI::App& app) {
     // A later value of a single-valued option replaces an earlier one, so a sweep can vary one
     // setting of a fixed list (scripts/validate-sweep.sh).
     for (const char* name :
-         {"--points", "--pairs", "--seed", "--leaf-points", "-K", "--eps", "--facing-tol",
-          "--parallel-tol", "--end-window", "--occluders", "--backend", "--predict", "--delta-scale",
-          "--splat-floor", "--ray-offset", "--md", "--json", "--runs", "--embree-pairs", "--eyes",
-          "--eye-seed", "--as-cloud", "--cloud", "--dump-eyes", "--roughness", "--noise"})
+         {"--points",   "--pairs",      "--seed",         "--leaf-points",  "-K",
+          "--eps",      "--facing-tol", "--parallel-tol", "--end-window",   "--occluders",
+          "--backend",  "--predict",    "--delta-scale",  "--splat-floor",  "--ray-offset",
+          "--md",       "--json",       "--runs",         "--embree-pairs", "--eyes",
+          "--eye-seed", "--as-cloud",   "--cloud",        "--dump-eyes",    "--roughness",
+          "--noise"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return {c, [] { return run_validate_command(); }, true};
 }

@@ -132,8 +132,8 @@ void time_cpu(const Session& s, const PointSet& pts, BuildParams bp, Row& r, Tim
     PointSet copy = pts;
     std::vector<uint32_t> order;
     const Octree t = Octree::build(copy, bp.octree, order, "bench");
-    r.cpu_pair_rate =
-        sampled_cpu_pair_rate(t, in_octree_frame(bp.visibility, t.scale()), std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
+    r.cpu_pair_rate = sampled_cpu_pair_rate(t, in_octree_frame(bp.visibility, t.scale()),
+                                            std::min<uint64_t>(o.cpu_sample_pairs, 1ull << 40));
     // The GPU run, when there was one, says how many leaf pairs are walked.
     const uint64_t pairs =
         r.gpu_done ? r.walked : uint64_t(t.num_leaves()) * (t.num_leaves() - 1) / 2;

@@ -1,6 +1,6 @@
 // normals_accuracy: how well raw-cloud normals and splat radii are recovered.
 //
-//   normals_accuracy [--objects-only] [--per-surface] [--points N]
+//   normals_accuracy [--objects-only] [--per-surface] [--points N] [--noise F]
 //                    [--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...
 //   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
 //                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
@@ -19,7 +19,8 @@
 // --angles prints instead the unsigned angle between each estimated normal's axis and the true
 // one (so orientation is left out: it orients outward unless --orientation is given, which is
 // quick), median and 90th percentile in degrees, over all points, the room, the objects and the
-// thin parts. --noise F moves every point by Gaussian noise of F sample spacings per axis (the
+// thin parts. --noise F (both modes: the signs of a noisy scan too) moves every point by
+// Gaussian noise of F sample spacings per axis (the
 // spacing sqrt(area / points) = sqrt(pi) * splat radius), scored against the noise-free true
 // normals. --floor adds what a fit cannot beat on faceted meshes: the angle between each point's
 // true (face) normal and the plane fit of its 12 nearest in a sample 16 times denser, i.e. the
@@ -287,10 +288,6 @@ void print_per_surface(const Scene& sc, const PointSet& truth, const PointSet& e
         const bool ok = dot(est.normals[i], truth.normals[i]) > 0;
         all[surf[i]].add(ok, 0, 0);
         if (!ok) ++wrong[surf[i]][inside[i] ? 0 : thin[i] ? 1 : near[i] ? 2 : 3];
-        if (const char* d = std::getenv("DUMP_WRONG"); d && !ok && sc.surfaces[surf[i]].name == d)
-            fmt::print(stderr, "W {:.4f} {:.4f} {:.4f}  n {:.2f} {:.2f} {:.2f}\n", truth.positions[i].x,
-                       truth.positions[i].y, truth.positions[i].z, truth.normals[i].x,
-                       truth.normals[i].y, truth.normals[i].z);
     }
     for (size_t s = 0; s < m; ++s)
         fmt::print(stderr,

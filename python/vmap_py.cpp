@@ -332,7 +332,8 @@ void def_build(py::module_& m) {
         "V-map of a point set: points N x 3; normals N x 3 (estimated when None), radii N "
         "(splat radii), colors N x 3 (albedo, 0.8 grey when None), emission N x 3. Options as "
         "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, "
-        "end_window, roughness (None: the points' measured noise, vmap.surface_noise), backend ('auto', "
+        "end_window, roughness (None: the points' measured noise, vmap.surface_noise), backend "
+        "('auto', "
         "'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
         "(a function of a dict; returning False cancels).");
     m.def(
@@ -367,7 +368,8 @@ void def_build(py::module_& m) {
 
 void def_map(py::module_& m) {
     py::class_<VisibilityMap>(m, "VisibilityMap")
-        .def_property_readonly("num_points", [](const VisibilityMap& v) { return v.order().size(); })
+        .def_property_readonly("num_points",
+                               [](const VisibilityMap& v) { return v.order().size(); })
         .def_property_readonly("num_links", &VisibilityMap::num_links)
         .def_property_readonly("num_nodes",
                                [](const VisibilityMap& v) { return v.octree().num_nodes(); })

@@ -194,9 +194,9 @@ TEST_P(NodeConstruction, RandomScenesGiveTheLeafPairVmap) {
         bp.visibility.end_window =
             std::array<float, 4>{0.f, 0.f, 1.f, 2.5f}[std::mt19937_64(seed * 104729)() % 4];
         // A roughness (in the scene's units: the scale below) from a stream of its own too.
-        bp.visibility.roughness = std::array<float, 4>{0.f, 0.f, 0.002f, 0.02f}[std::mt19937_64(
-                                      seed * 15485863)() % 4] *
-                                  (seed % 7 == 0 ? 1e3f : (seed % 11 == 0 ? 1e-3f : 1.f));
+        bp.visibility.roughness =
+            std::array<float, 4>{0.f, 0.f, 0.002f, 0.02f}[std::mt19937_64(seed * 15485863)() % 4] *
+            (seed % 7 == 0 ? 1e3f : (seed % 11 == 0 ? 1e-3f : 1.f));
         bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
         // Frontier slices of a few pairs: pairs settled across slices and levels.
         bp.max_level_pairs = std::array<uint64_t, 4>{1, 7, 64, 1u << 20}[r() % 4];

@@ -2,17 +2,16 @@
 // counts, byte-identical V-maps. Labelled `gpu`; without a device every test reports SKIPPED.
 #include <gtest/gtest.h>
 
-#include <random>
-
 #include <cstdlib>
 #include <filesystem>
+#include <random>
 
 #include "backend_fixture.h"
 #include "test_files.h"
 #include "test_util.h"
-#include "vmap/normals.h"
 #include "visibility/backend.h"
 #include "visibility/node_pair.h"
+#include "vmap/normals.h"
 
 namespace vmap {
 namespace {

@@ -1343,7 +1343,6 @@ TEST(NearestPoints, MatchesBruteForce) {
     }
 }
 
-
 // ---- surface noise (estimate_surface_noise, roughness_of) ----------------------------------
 
 // A noisy sphere of radius 0.3 (a curved surface, which a plane fit would count as noise) with

@@ -7,9 +7,9 @@
 #include "backend_fixture.h"
 #include "octree/records.h"
 #include "test_util.h"
-#include "visibility/predicate_cases.h"
 #include "visibility/leaf_pair.h"
 #include "visibility/packet_walk.h"
+#include "visibility/predicate_cases.h"
 #include "vmap/normals.h"
 
 namespace vmap {
@@ -535,7 +535,7 @@ TEST(RoughSheets, NoiseHidesShallowPairsAndTheRoughnessGivesThemBack) {
     std::uniform_real_distribution<float> u(0.f, 1.f);
     const int floor_n = 4000, wall_n = 2000;
     const float r = std::sqrt(1.f / (float(M_PI) * floor_n));  // a sample's share of the floor
-    const float sigma = 0.25f * std::sqrt(float(M_PI)) * r;     // a quarter sample spacing
+    const float sigma = 0.25f * std::sqrt(float(M_PI)) * r;    // a quarter sample spacing
     PointSet exact;
     for (int i = 0; i < floor_n + wall_n; ++i) {
         const bool floor = i < floor_n;

@@ -499,8 +499,8 @@ TEST_F(VmapFile, ARoughnessOutOfRangeIsRejected) {
     const size_t parm = section_data(bytes, "PARM");
     uint64_t n;
     std::memcpy(&n, bytes.data() + parm - 8, 8);
-    for (float bad : {-1.f, std::numeric_limits<float>::infinity(),
-                      std::numeric_limits<float>::quiet_NaN()}) {
+    for (float bad :
+         {-1.f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
         SCOPED_TRACE(bad);
         std::memcpy(bytes.data() + parm + n - 4, &bad, 4);
         EXPECT_LOAD_ERROR(write_resealed(dir, "rough.vmap", bytes), "PARM", "roughness");

@@ -24,7 +24,7 @@ struct InputOptions {
     std::optional<SamplePattern> pattern;        // sampling: scene and mesh files only
     std::optional<int> max_height, leaf_points;  // the octree: not for a .vmap (it has one)
     std::optional<float> delta_floor;            // the octree: not for a .vmap
-    std::optional<float> roughness;              // the predicate's (Input::roughness): not for a .vmap
+    std::optional<float> roughness;              // the predicate's: not for a .vmap
     CloudOptions cloud;                          // point clouds only
     // Scene and mesh files: called with the number of points and the octree parameters before
     // the sampling starts (which takes seconds for millions of points), e.g. to warn that the
@@ -55,9 +55,9 @@ struct Input {
 // Reads `o.path`: a .vmap as it is; a scene file, or a mesh file unless o.as_points
 // (is_scene_input), sampled with o.points and o.seed in place of the scene's; any other file as
 // a point cloud (load_point_cloud with o.cloud). o.max_height, o.leaf_points and o.delta_floor
-// replace the scene's octree parameters (scene_octree; else BuildParams' defaults). Throws vmap::Error naming the file
-// for what its loader refuses, for points, seed or pattern given with a cloud or a .vmap, and
-// for max_height, leaf_points, delta_floor or roughness given with a .vmap.
+// replace the scene's octree parameters (scene_octree; else BuildParams' defaults). Throws
+// vmap::Error naming the file for what its loader refuses, for points, seed or pattern given with a
+// cloud or a .vmap, and for max_height, leaf_points, delta_floor or roughness given with a .vmap.
 Input load_input(const InputOptions& o);
 
 }  // namespace vmap

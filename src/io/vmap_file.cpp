@@ -48,11 +48,11 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 7;  // 2: 64-bit link offsets; 3: emission in octree order and
-                                  // the measured Delta rule (a version-2 file is built wrong);
-                                  // 4: the octree's frame (scale); 5: coded link targets,
-                                  // the octree's delta_floor; 6: the predicate's end_window;
-                                  // 7: the predicate's roughness
+constexpr uint32_t kVersion = 7;     // 2: 64-bit link offsets; 3: emission in octree order and
+                                     // the measured Delta rule (a version-2 file is built wrong);
+                                     // 4: the octree's frame (scale); 5: coded link targets,
+                                     // the octree's delta_floor; 6: the predicate's end_window;
+                                     // 7: the predicate's roughness
 constexpr uint32_t kOldestRead = 4;  // version 4 lacks PARM's delta_floor and codes no links
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 

@@ -658,9 +658,9 @@ void share_bytes(void* data, size_t bytes) {
         MPI_Bcast(p + at, int(std::min(kChunkBytes, bytes - at)), MPI_BYTE, 0, MPI_COMM_WORLD);
 }
 
-// Rank 0's points (as read), octree and predicate parameters to the other ranks, which build the octree
-// from them (the same octree: check_same_input checks it with the rest). The sizes go first and
-// every rank makes room for all of it before any data moves, agreed: a rank that cannot (out of
+// Rank 0's points (as read), octree and predicate parameters to the other ranks, which build the
+// octree from them (the same octree: check_same_input checks it with the rest). The sizes go first
+// and every rank makes room for all of it before any data moves, agreed: a rank that cannot (out of
 // memory) ends the job instead of leaving the others in a broadcast it never joins.
 std::string share_input(Run& r, Early& e) {
     static_assert(std::is_trivially_copyable_v<OctreeParams>);

@@ -345,7 +345,8 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             size_t kept = 0;
             const uint32_t* nb = &cand[i * c];
             for (size_t j = 0; j < c; ++j) {
-                if (nb[j] != i && !on_sheet(pts[i], nz, pts[nb[j]], fits.sheet_normals[nb[j]], fits.slack))
+                if (nb[j] != i &&
+                    !on_sheet(pts[i], nz, pts[nb[j]], fits.sheet_normals[nb[j]], fits.slack))
                     continue;
                 const double w = std::exp(-double(d2[i * c + j]) / double(h2));
                 const Vec3 d = pts[nb[j]] - pts[i];
@@ -546,7 +547,8 @@ void propagate(const std::vector<Vec3>& pts, Dvec centroid, const Graph& g,
         in_tree[v] = 1;
         for (size_t e = g.offsets[v]; e < g.offsets[v + 1]; ++e) {
             const uint32_t u = g.adjacent[e];
-            if (!in_tree[u] && heap.push_or_lower(u, edge_weight(pts, normals, degenerate, v, u, slack)))
+            if (!in_tree[u] &&
+                heap.push_or_lower(u, edge_weight(pts, normals, degenerate, v, u, slack)))
                 parent[u] = v;
         }
     };
@@ -1014,10 +1016,10 @@ template <size_t K>
 void jet_residuals(const double (&xyz)[K][3], const double (&c)[6], double (&res)[K]) {
     for (size_t j = 0; j < K; ++j) {
         const double x = xyz[j][0], y = xyz[j][1];
-        res[j] = xyz[j][2] - (c[0] * x * x + c[1] * x * y + c[2] * y * y + c[3] * x + c[4] * y + c[5]);
+        res[j] =
+            xyz[j][2] - (c[0] * x * x + c[1] * x * y + c[2] * y * y + c[3] * x + c[4] * y + c[5]);
     }
 }
-
 
 constexpr double kTwoSheetGap = 0.3;
 constexpr size_t kFirstPlane = 8;

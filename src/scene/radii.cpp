@@ -210,8 +210,7 @@ void estimate_radii(PointSet& points, const RadiusEstimationParams& params, cons
         params.sampling_correction && params.k == kCloseNeighbours && params.candidates >= 32;
     // A noisy cloud's neighbours scatter off the plane: its roughness is still its own sheet.
     const float slack = roughness_of(estimate_surface_noise(points));
-    const std::vector<uint32_t> same =
-        raw_radii(points, params, correct ? &share : nullptr, slack);
+    const std::vector<uint32_t> same = raw_radii(points, params, correct ? &share : nullptr, slack);
     smooth_radii(points.radii, same, params.k, params.smoothing_passes);
     if (!correct) return;
     const float scale = even_sampling_radius_scale(share);
@@ -269,9 +268,9 @@ double normal_inconsistency(const PointSet& points, size_t k) {
                          [&](size_t i, const uint32_t* idx, const float*, size_t got, Tally& acc) {
                              for (size_t j = 0; j < got; ++j) {
                                  const uint32_t o = idx[j];
-                                 if (o == i || !detail::same_surface(pts[i], points.normals[i],
-                                                                     pts[o], points.normals[o],
-                                                                     slack))
+                                 if (o == i ||
+                                     !detail::same_surface(pts[i], points.normals[i], pts[o],
+                                                           points.normals[o], slack))
                                      continue;
                                  ++acc.total;
                                  acc.hits += dot(points.normals[i], points.normals[o]) < 0;

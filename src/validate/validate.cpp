@@ -122,7 +122,7 @@ std::vector<Pair> sample_pairs(uint64_t n, uint64_t count, uint64_t seed) {
 // Leaf-pair evaluation as the V-map builder does it: the lower leaf index first.
 struct DirectPredictor {
     const Octree& t;
-    const VisibilityParams vp;  // in the octree's frame
+    const VisibilityParams vp;     // in the octree's frame
     const detail::LeafGrid* grid;  // non-null: the grid walk
     bool operator()(int32_t a, int32_t b, WorkCounters* wc) const {
         if (a > b) std::swap(a, b);
@@ -423,8 +423,7 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
     row.height = hp.t.height();
     row.leaves = hp.t.num_leaves();
     row.backend = params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
-    hp.direct =
-        std::make_unique<DirectPredictor>(
+    hp.direct = std::make_unique<DirectPredictor>(
         DirectPredictor{hp.t, in_octree_frame(params.visibility, hp.t.scale()), hp.grid.get()});
     hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
 }
@@ -675,9 +674,8 @@ std::string validation_markdown(const ValidationReport& r) {
         "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
         name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, vp.roughness,
-        p.leaf_points, p.delta_scale,
-        r.delta_floor, r.bury_distance, r.buried_points, pct(double(r.buried_points) / r.points),
-        r.live_pairs,
+        p.leaf_points, p.delta_scale, r.delta_floor, r.bury_distance, r.buried_points,
+        pct(double(r.buried_points) / r.points), r.live_pairs,
         r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
                                        r.dropped_points)
                          : std::string());
@@ -961,7 +959,16 @@ EmbreeTiming time_embree(const std::string& path, const EmbreeTimingParams& p) {
         throw Error(fmt::format("{}: the octree has one leaf: no leaf pairs", path));
     const LeafPairs lp = sample_leaf_pairs(t.num_leaves(), p.sample_pairs);
     r.pairs = lp.size();
-    TimedPasses tp{octree_view(t), in_octree_frame(p.visibility, t.scale()), exact, lp, {}, {}, {}, {}, {}, {}};
+    TimedPasses tp{octree_view(t),
+                   in_octree_frame(p.visibility, t.scale()),
+                   exact,
+                   lp,
+                   {},
+                   {},
+                   {},
+                   {},
+                   {},
+                   {}};
     tp.kern.resize(lp.size()), tp.ray.resize(lp.size());
     r.kernel_work = tp.counted_kernel();
     time_passes(tp, p.runs, r, path);

@@ -636,7 +636,8 @@ class SegmentPacket {
         const __m512 eps = _mm512_set1_ps(vp.eps), eps1 = _mm512_set1_ps(1.f - vp.eps);
         const __m512 ptol = _mm512_set1_ps(vp.parallel_tol);
         const __m512 dd = _mm512_set1_ps(x.delta * x.delta);
-        const __m512 rough_ = _mm512_set1_ps(vp.roughness), sheet_cos = _mm512_set1_ps(kSameSheetCos);
+        const __m512 rough_ = _mm512_set1_ps(vp.roughness),
+                     sheet_cos = _mm512_set1_ps(kSameSheetCos);
         const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K);
         const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
         int left = 0;
@@ -690,11 +691,13 @@ class SegmentPacket {
                 __mmask16(~((near_a & (no_plane_a_ >> o)) | (~near_a & (no_plane_b_ >> o))));
             // ... or, on a rough sheet, an end behind x's plane by less than the roughness
             // with x's normal near that end's (negation is exact: -back < r as in the scalar)
-            const __m512 same = dot_zmm(
-                nx, ny, nz,
-                _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[0] + o), _mm512_load_ps(na_[0] + o)),
-                _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[1] + o), _mm512_load_ps(na_[1] + o)),
-                _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[2] + o), _mm512_load_ps(na_[2] + o)));
+            const __m512 same = dot_zmm(nx, ny, nz,
+                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[0] + o),
+                                                             _mm512_load_ps(na_[0] + o)),
+                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[1] + o),
+                                                             _mm512_load_ps(na_[1] + o)),
+                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[2] + o),
+                                                             _mm512_load_ps(na_[2] + o)));
             const __mmask16 rough =
                 _mm512_cmp_ps_mask(_mm512_sub_ps(zero, back), rough_, _CMP_LT_OQ) &
                 _mm512_cmp_ps_mask(same, sheet_cos, _CMP_GT_OQ);
@@ -769,7 +772,7 @@ class SegmentPacket {
     alignas(64) float win_a_[W];  // the end windows
     alignas(64) float win_b_[W];
     uint32_t no_plane_a_ = 0, no_plane_b_ = 0;  // lanes whose end a (b) has no plane
-    float roughness_ = 0;                        // VisibilityParams::roughness (every lane's)
+    float roughness_ = 0;                       // VisibilityParams::roughness (every lane's)
     int32_t lane_[W];                           // the pair's place in the packet, per lane
     uint32_t live_ = 0;   // the packet's lanes still walking, then the visible ones
     uint32_t alone_ = 0;  // facing lanes that walk alone (a direction component below 1e-30)

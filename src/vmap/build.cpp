@@ -79,8 +79,11 @@ void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, No
     nt.on = nodes && params.occluders == OccluderSearch::kBoxes;
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
-    nt.ctx = {octree_view(t),  nt.nb.nodes.data(), nt.nb.cones.data(),
-              t.skip().data(), in_octree_frame(params.visibility, t.scale()),
+    nt.ctx = {octree_view(t),
+              nt.nb.nodes.data(),
+              nt.nb.cones.data(),
+              t.skip().data(),
+              in_octree_frame(params.visibility, t.scale()),
               detail::node_pair_margin(t.boxes()[0])};
     nt.ctx.leaves_stored = true;  // node_bounds() stores the leaves' bounds too
 }

@@ -10,7 +10,7 @@
 Errors are vmap.Error (a RuntimeError) carrying the library's message.
 """
 from ._vmap import (Cancelled, Error, VisibilityMap, __version__, build, build_file,
-                    built_with_cuda, commit, data_dir, load, write_png)
+                    built_with_cuda, commit, data_dir, load, surface_noise, write_png)
 
 __all__ = ["Cancelled", "Error", "VisibilityMap", "__version__", "build", "build_file",
-           "built_with_cuda", "commit", "data_dir", "load", "write_png"]
+           "built_with_cuda", "commit", "data_dir", "load", "surface_noise", "write_png"]

@@ -72,13 +72,14 @@ TEST(Api, ProgressStartsAtZeroRisesAndEndsAtTheLeafPairCount) {
 }
 
 TEST(Api, ProgressCallbackCancelsTheBuild) {
-    // A build of seconds (20,000 points, one a leaf: about 1.6e8 leaf pairs), cancelled at the
-    // second report (reports come at most ~10 a second): it stops early with Cancelled. A
-    // smaller build can finish between two reports, which is no cancellation to test.
+    // A build of seconds (60,000 points, one a leaf: about 1.8e9 leaf pairs; 20,000 finished
+    // between two reports on the GPU machine's 16 AVX-512 cores), cancelled at the second
+    // report (reports come at most ~10 a second): it stops early with Cancelled. A smaller
+    // build can finish between two reports, which is no cancellation to test.
     BuildParams bp = test::cpu_params(8, 1);
     std::atomic<int> calls{0};
     bp.progress = [&](const ProgressInfo&) { return ++calls < 2; };
-    const auto points = test::sample(test::scene_path("cornell-empty"), 20000, 2);
+    const auto points = test::sample(test::scene_path("cornell-empty"), 60000, 2);
     EXPECT_THROW(build_vmap(points, bp), Cancelled);
     EXPECT_GE(calls.load(), 2);
     // Cancelled at the first report too, before any batch is evaluated.

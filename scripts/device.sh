@@ -128,8 +128,10 @@ if [[ "$cmd" == bundle ]]; then
     # Every model a scene or a test names (the test scenes' libcgal-demo meshes too), fetched
     # first where this checkout has none yet (a fresh clone: cached, idempotent).
     "$root/scripts/fetch-models.sh"
+    # xz: the dragon's 34 MB PLY is 5.4 MB (gzip -1 made 10 MB, which with MPI and the tree
+    # passed the 64 MiB a carry holds).
     for f in models/dragon.ply models/*.off; do
-        gzip -1 -c "$f" > ".device/models/$(basename "$f").gz"
+        xz -T0 -6 -c "$f" > ".device/models/$(basename "$f").xz"
     done
     cp build-device/tests/vmap_equal .device/bin/ 2>/dev/null || true
     # (grep -q would close the pipe early: ldd's SIGPIPE fails the test under pipefail)
@@ -139,6 +141,11 @@ if [[ "$cmd" == bundle ]]; then
     find .device/lib .device/bin -type f -size +1M -exec xz -T0 -6 {} \;
     git rev-parse --short HEAD > .device/commit
     du -sh .device
+    # What `run` carries: the tracked tree and .device, at most 64 MiB.
+    total=$(( $(git ls-files -z | xargs -0 stat -c %s | awk '{s += $1} END {print s}') +
+              $(du -sb .device | cut -f1) ))
+    echo "carry: $((total / 1048576)) MiB of 64 (tree + .device)"
+    (( total <= 64 * 1048576 )) || { echo "device.sh: the carry is over 64 MiB" >&2; exit 1; }
     exit 0
 fi
 
@@ -149,9 +156,9 @@ if [[ "$cmd" == run ]]; then
     export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
     for f in .device/lib/*.xz .device/bin/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
     mkdir -p models
-    for f in .device/models/*.gz; do
-        n="models/$(basename "$f" .gz)"
-        [[ -s "$n" ]] || gunzip -c "$f" > "$n"
+    for f in .device/models/*.xz; do
+        n="models/$(basename "$f" .xz)"
+        [[ -s "$n" ]] || xz -d -c "$f" > "$n"
     done
     nvidia-smi --query-gpu=name,memory.total,clocks.max.sm --format=csv > "$OUT/gpu.txt" 2>&1 || true
     cat "$OUT/gpu.txt"

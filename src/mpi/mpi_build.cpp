@@ -658,7 +658,7 @@ void share_bytes(void* data, size_t bytes) {
         MPI_Bcast(p + at, int(std::min(kChunkBytes, bytes - at)), MPI_BYTE, 0, MPI_COMM_WORLD);
 }
 
-// Rank 0's points (as read), octree and predicate parameters to the other ranks, which build the
+// Rank 0's points (as read), octree parameters and roughness to the other ranks, which build the
 // octree from them (the same octree: check_same_input checks it with the rest). The sizes go first
 // and every rank makes room for all of it before any data moves, agreed: a rank that cannot (out of
 // memory) ends the job instead of leaving the others in a broadcast it never joins.
@@ -669,9 +669,9 @@ std::string share_input(Run& r, Early& e) {
                      p.emission.size()};
     MPI_Bcast(n, 5, MPI_UINT64_T, 0, MPI_COMM_WORLD);
     MPI_Bcast(&e.params.octree, int(sizeof(OctreeParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
-    // The predicate's too: rank 0's reading sets the roughness from the cloud's noise.
-    static_assert(std::is_trivially_copyable_v<VisibilityParams>);
-    MPI_Bcast(&e.params.visibility, int(sizeof(VisibilityParams)), MPI_BYTE, 0, MPI_COMM_WORLD);
+    // The predicate's roughness too: rank 0's reading measures it on a cloud (the other
+    // parameters are each rank's own, and check_same_input compares them).
+    MPI_Bcast(&e.params.visibility.roughness, 1, MPI_FLOAT, 0, MPI_COMM_WORLD);
     MPI_Bcast(p.origin.data(), 3, MPI_DOUBLE, 0, MPI_COMM_WORLD);
     std::string err = r.c.agree(attempt([&] {
         p.positions.resize(n[0]), p.normals.resize(n[1]), p.colors.resize(n[2]);

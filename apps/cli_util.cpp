@@ -166,9 +166,14 @@ std::array<double, 3> parse_triple(const std::string& text, const std::string& o
 
 }  // namespace
 
+std::array<double, 3> file_position(Vec3 q, const std::array<double, 3>& origin) {
+    return {q.x + origin[0], q.y + origin[1], q.z + origin[2]};
+}
+
 std::string position_text(Vec3 q, const std::array<double, 3>& origin) {
     if (origin == std::array<double, 3>{0, 0, 0}) return fmt::format("{}, {}, {}", q.x, q.y, q.z);
-    return fmt::format("{}, {}, {}", q.x + origin[0], q.y + origin[1], q.z + origin[2]);
+    const std::array<double, 3> f = file_position(q, origin);
+    return fmt::format("{}, {}, {}", f[0], f[1], f[2]);
 }
 
 Vec3 parse_vec3(const std::string& text, const std::string& option) {

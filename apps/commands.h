@@ -133,6 +133,8 @@ void add_camera_options(CLI::App* app, CameraOptions& c);
 // "x, y, z" of a position relative to `origin`, in the input's coordinates (floats as such
 // when the origin is zero, else the doubles).
 std::string position_text(Vec3 q, const std::array<double, 3>& origin);
+// The same position as numbers in the file's coordinates (q + origin, in double), e.g. for JSON.
+std::array<double, 3> file_position(Vec3 q, const std::array<double, 3>& origin);
 // --eye and --target are positions in the input's coordinates (relative to `origin`).
 Camera apply_camera(const CameraOptions& c, Camera base,
                     const std::array<double, 3>& origin = {});

@@ -158,10 +158,8 @@ void run_ray(const QueryArgs& a, const VisibilityMap& vm, Vec3 dir, json& js) {
                      {"hit", h.hit},
                      {"id", h.hit ? json(h.id) : json(nullptr)},
                      {"distance", h.hit ? json(h.distance) : json(nullptr)},
-                     {"position", h.hit ? json({q.x + vm.points().origin[0],
-                                                 q.y + vm.points().origin[1],
-                                                 q.z + vm.points().origin[2]})
-                                        : json(nullptr)},
+                     {"position",
+                      h.hit ? json(file_position(q, vm.points().origin)) : json(nullptr)},
                      {"node_tests", st.node_tests},
                      {"disc_tests", st.disc_tests}};
         return;

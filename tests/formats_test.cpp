@@ -170,6 +170,10 @@ TEST(Xyz, BadInputIsRejectedNamingTheLine) {
     // A binary file read as text: one endless line, refused without reading it whole.
     EXPECT_READ_ERROR(read_xyz(dir.write("bin.xyz", std::string(3 << 20, 'x'))), "bin.xyz",
                       "line 1", "longer than");
+    // Read around an origin (a far cloud's second reading), a coordinate whose difference from
+    // it passes a float's range is refused, naming the line.
+    EXPECT_READ_ERROR(read_xyz(dir.write("far.xyz", "1 2 3\n3e38 2 3\n"), {-3e38, 0, 0}),
+                      "far.xyz", "line 2", "coordinate: out of range");
 }
 
 // ---- PCD

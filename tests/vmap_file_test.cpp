@@ -507,6 +507,35 @@ TEST_F(VmapFile, ARoughnessOutOfRangeIsRejected) {
     }
 }
 
+// PNTS: the byte after the point count is the fields' mask (1 colours, 2 radii, 4 emission,
+// 8 origin); an unknown bit, or an origin that is not finite, is refused naming PNTS.
+TEST_F(VmapFile, UnknownPointFieldsOrANonFiniteOriginAreRejected) {
+    ScratchDir dir;
+    const std::string bytes = slurp(saved(dir));
+    const size_t pnts = section_data(bytes, "PNTS");
+    std::string bad = bytes;
+    bad[pnts + 8] = char(uint8_t(bad[pnts + 8]) | 16);
+    EXPECT_LOAD_ERROR(write_resealed(dir, "mask.vmap", bad), "PNTS", "unknown point fields");
+    // A map with an origin (a far cloud's): its last 24 bytes of PNTS are the origin.
+    Scene sc = load_scene(std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-empty.json");
+    sc.points = 300;
+    BuildParams bp;
+    bp.backend = Backend::kCpu;
+    bp.octree.max_height = 4;
+    VisibilityMap far = build_vmap(sample_scene(sc), bp, nullptr, "test");
+    detail::MapAccess::data(far).points.origin = {512345, 4123456, 210};
+    const std::string p = dir.path("far.vmap");
+    save_vmap(p, far);
+    EXPECT_EQ(load_vmap(p).points().origin, far.points().origin);
+    std::string nan = slurp(p);
+    const size_t at = section_data(nan, "PNTS");
+    uint64_t len;
+    std::memcpy(&len, nan.data() + at - 8, 8);
+    const double inf = std::numeric_limits<double>::infinity();
+    std::memcpy(nan.data() + at + len - 24, &inf, 8);
+    EXPECT_LOAD_ERROR(write_resealed(dir, "nan.vmap", nan), "PNTS", "origin is not finite");
+}
+
 TEST_F(VmapFile, LinksAreStoredInUnderHalfTheirRawSize) {
     ScratchDir dir;
     const std::string bytes = slurp(saved(dir));

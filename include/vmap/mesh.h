@@ -33,6 +33,8 @@ struct PointSet {
     size_t size() const { return positions.size(); }
     bool has_normals() const { return !normals.empty(); }
     bool has_colors() const { return !colors.empty(); }
+    // Whether the positions are relative to an origin other than the file's zero.
+    bool has_origin() const { return origin != std::array<double, 3>{0, 0, 0}; }
     bool has_radii() const { return !radii.empty(); }
 };
 

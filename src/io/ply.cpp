@@ -900,7 +900,7 @@ bool check_writable(const std::string& path, const PointSet& points) {
     return emits;
 }
 
-bool shifted(const PointSet& points) { return points.origin != std::array<double, 3>{0, 0, 0}; }
+bool shifted(const PointSet& points) { return points.has_origin(); }
 
 std::string ply_header(const PointSet& points, bool binary, bool emits) {
     const size_t n = points.size();

@@ -257,7 +257,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
     w.put(n);
-    const bool shifted = ps.origin != std::array<double, 3>{0, 0, 0};
+    const bool shifted = ps.has_origin();
     const uint8_t mask = (ps.has_colors() ? 1 : 0) | (ps.has_radii() ? 2 : 0) |
                          (ps.emission.empty() ? 0 : 4) | (shifted ? 8 : 0);
     w.put(mask);

@@ -248,7 +248,7 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
     } else {
         orient_normals(ps, np, path.c_str(), &rep);
     }
-    if (o.viewpoint && ps.origin != std::array<double, 3>{0, 0, 0}) {  // the file's coordinates
+    if (o.viewpoint && ps.has_origin()) {  // the file's coordinates
         const std::array<double, 3>& v = *o.viewpoint;
         rep.method = fmt::format("toward the viewpoint ({}, {}, {})", v[0], v[1], v[2]);
     }

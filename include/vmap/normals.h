@@ -137,7 +137,9 @@ double normal_inconsistency(const PointSet& points, size_t k = 8);
 // kNoiseNeighbours nearest (all of them: noise must not be filtered out by same-sheet tests),
 // over its k - 6 degrees of freedom: the noise's standard deviation along the normal on a smooth
 // surface, and about 0 for exact samples of smooth or flat surfaces (creases, thin parts and
-// contacts, where the neighbours span two sheets, are a minority the median leaves out).
+// contacts, where the neighbours span two sheets, are a minority the median leaves out). Shape
+// the jet cannot follow (a mesh's facets) is told from noise by reading the nearest half too:
+// noise reads the same there, shape less (src/scene/normals.cpp).
 // spacing: sqrt(pi) x the median splat radius from the 8 nearest (estimate_radii's rule, all
 // neighbours). Both in the cloud's units; zero for fewer than kNoiseNeighbours + 1 points or
 // non-finite coordinates. Measured in docs/validation.md "Noisy scans".

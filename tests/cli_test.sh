@@ -347,16 +347,7 @@ else
     fail "an exact cloud's build does not say it measured no noise"
     show build sphere.ply --max-height 4
 fi
-awk 'BEGIN {
-    srand(3); n = 2000; pi = 3.14159265358979; g = pi * (3 - sqrt(5)); s = 0.002;
-    printf "ply\nformat ascii 1.0\nelement vertex %d\n", n;
-    printf "property float x\nproperty float y\nproperty float z\nend_header\n";
-    for (i = 0; i < n; i++) {
-        y = 1 - 2 * (i + 0.5) / n; r = sqrt(1 - y * y); a = g * i;
-        for (k = 0; k < 3; k++) e[k] = s * sqrt(-2 * log(1 - rand())) * cos(2 * pi * rand());
-        printf "%.6f %.6f %.6f\n", 0.1 * r * cos(a) + e[0], 0.1 * y + e[1], 0.1 * r * sin(a) + e[2];
-    }
-}' >noisy.ply
+awk -v n=2000 -v seed=3 -v s=0.002 -f "$SRC/tests/data/noisy_sphere.awk" >noisy.ply
 if expect_ok "build a noisy cloud" build noisy.ply --max-height 6 -o noisy.vmap --backend cpu; then
     if grep -qE '^vmap build: surface noise: 0\.00(1[6-9]|2)[0-9]* \(.*do not occlude' err.txt &&
         run info noisy.vmap && grep -qE '^predicate: .*roughness 0\.00[89]' out.txt; then

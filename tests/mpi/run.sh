@@ -75,16 +75,7 @@ done
 
 # A noisy scan: rank 0 alone reads it and measures its roughness, which the other ranks take
 # (a roughness left at 0 on rank 1 would differ: the check of the inputs fails the job).
-awk 'BEGIN {
-    srand(5); n = 1500; pi = 3.14159265358979; g = pi * (3 - sqrt(5)); s = 0.002;
-    printf "ply\nformat ascii 1.0\nelement vertex %d\n", n;
-    printf "property float x\nproperty float y\nproperty float z\nend_header\n";
-    for (i = 0; i < n; i++) {
-        y = 1 - 2 * (i + 0.5) / n; r = sqrt(1 - y * y); a = g * i;
-        for (k = 0; k < 3; k++) e[k] = s * sqrt(-2 * log(1 - rand())) * cos(2 * pi * rand());
-        printf "%.6f %.6f %.6f\n", 0.1 * r * cos(a) + e[0], 0.1 * y + e[1], 0.1 * r * sin(a) + e[2];
-    }
-}' > "$tmp/noisy.ply"
+awk -v n=1500 -v seed=5 -v s=0.002 -f "$src/tests/data/noisy_sphere.awk" > "$tmp/noisy.ply"
 check "noisy cloud: single-process build" "$vmap" -q build "$tmp/noisy.ply" --max-height 6 \
     --backend cpu -o "$tmp/noisy-1.vmap"
 check "noisy cloud: np 2 byte-identical, its roughness shared" bash -c "${mpi[*]} -np 2 '$vmap' -q \

@@ -368,6 +368,19 @@ if expect_ok "build a noisy cloud with --roughness 0" \
         show info rough0.vmap
     fi
 fi
+# Noise of about a sample spacing: the build warns.
+awk -v n=2000 -v seed=4 -v s=0.008 -f "$SRC/tests/data/noisy_sphere.awk" >heavy.ply
+if expect_ok "build a very noisy cloud" build heavy.ply --max-height 5 -o heavy.vmap --backend cpu
+then
+    if grep -q '^vmap build: warning: the points scatter .* sample spacings off their surfaces' \
+        err.txt && ! grep -q 'scatter' <(run build noisy.ply --max-height 5 -o n2.vmap \
+        --backend cpu; cat err.txt); then
+        ok "a very noisy cloud's build warns; a quarter spacing's does not"
+    else
+        fail "no warning for a cloud noisy by about a spacing, or one for a quarter"
+        show build heavy.ply --max-height 5
+    fi
+fi
 expect_usage_error "--roughness below 0" build noisy.ply --roughness -1
 expect_input_error "--roughness on a .vmap" noisy.vmap render noisy.vmap --roughness 1 -o r.png
 expect_input_error "--normals flip on a cloud without normals" sphere.ply \

@@ -638,6 +638,7 @@ class SegmentPacket {
         const __m512 dd = _mm512_set1_ps(x.delta * x.delta);
         const __m512 rough_ = _mm512_set1_ps(vp.roughness),
                      sheet_cos = _mm512_set1_ps(kSameSheetCos);
+        const bool rough_on = vp.roughness > 0;
         const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K);
         const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
         int left = 0;
@@ -690,17 +691,21 @@ class SegmentPacket {
             const __mmask16 plane_near =
                 __mmask16(~((near_a & (no_plane_a_ >> o)) | (~near_a & (no_plane_b_ >> o))));
             // ... or, on a rough sheet, an end behind x's plane by less than the roughness
-            // with x's normal near that end's (negation is exact: -back < r as in the scalar)
-            const __m512 same = dot_zmm(nx, ny, nz,
-                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[0] + o),
-                                                             _mm512_load_ps(na_[0] + o)),
-                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[1] + o),
-                                                             _mm512_load_ps(na_[1] + o)),
-                                        _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[2] + o),
-                                                             _mm512_load_ps(na_[2] + o)));
-            const __mmask16 rough =
-                _mm512_cmp_ps_mask(_mm512_sub_ps(zero, back), rough_, _CMP_LT_OQ) &
-                _mm512_cmp_ps_mask(same, sheet_cos, _CMP_GT_OQ);
+            // with x's normal near that end's (negation is exact: -back < r as in the scalar).
+            // Without a roughness no lane passes -back < 0 where back < 0: skipped.
+            __mmask16 rough = 0;
+            if (rough_on) {
+                const __m512 same =
+                    dot_zmm(nx, ny, nz,
+                            _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[0] + o),
+                                                 _mm512_load_ps(na_[0] + o)),
+                            _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[1] + o),
+                                                 _mm512_load_ps(na_[1] + o)),
+                            _mm512_mask_blend_ps(near_a, _mm512_load_ps(nb_[2] + o),
+                                                 _mm512_load_ps(na_[2] + o)));
+                rough = _mm512_cmp_ps_mask(_mm512_sub_ps(zero, back), rough_, _CMP_LT_OQ) &
+                        _mm512_cmp_ps_mask(same, sheet_cos, _CMP_GT_OQ);
+            }
             const __mmask16 exits = plane_near & _mm512_cmp_ps_mask(back, zero, _CMP_LT_OQ) &
                                     (_mm512_cmp_ps_mask(from_end, hd, _CMP_LT_OQ) | rough);
             const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),

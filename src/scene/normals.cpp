@@ -1135,9 +1135,12 @@ std::optional<NoiseProbe> probe_noise(const std::vector<Vec3>& pts, const uint32
     };
     const std::optional<double> whole = sigma_of(keep, m);
     if (!whole) return std::nullopt;
-    bool near[K];
+    bool near[K];  // the nearest K / 2 of the point's sheet (nb is nearest first)
     size_t h = 0;
-    for (size_t j = 0; j < K; ++j) h += near[j] = keep[j] && h < K / 2;
+    for (size_t j = 0; j < K; ++j) {
+        near[j] = keep[j] && h < K / 2;
+        h += near[j];
+    }
     const std::optional<double> half = sigma_of(near, h);
     if (!half) return std::nullopt;
     return NoiseProbe{*whole, *half};

@@ -65,8 +65,10 @@ void add_sample_options(CLI::App* c) {
                   "Split nodes with more points than this (default: the scene's)")
         ->check(leaf_points_check());
     cli::add_predicate_options(c, opt.vp.visibility);
-    cli::add_choice(c, "--occluders", opt.vp.occluders, "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid (grid walk of "
-                  "[7], CPU only)");
+    cli::add_choice(c, "--occluders", opt.vp.occluders,
+                    "Potential occluders: boxes (walk of the octree, pruned by node boxes) or grid "
+                    "(grid walk of "
+                    "[7], CPU only)");
     cli::add_choice(c, "--backend", opt.vp.backend, "V-map build backend: auto, cpu or cuda");
 }
 
@@ -97,17 +99,27 @@ void add_predict_options(CLI::App* c) {
     c->add_option("--eye-seed", opt.vp.eye_seed, "Seed of the eyes")->capture_default_str();
     c->add_option("--as-cloud", opt.vp.as_cloud,
                   "Build from the samples as a raw cloud: normals (true normals, radii "
-                  "estimated) or bare (normals and radii estimated, as for a scan)")
-        ->check(CLI::IsMember({"normals", "bare"}));
+                  "estimated), bare (normals and radii estimated, as for a scan) or, with "
+                  "--scan, sensors (bare, with each point's scanner position in the file)")
+        ->check(CLI::IsMember({"normals", "bare", "sensors"}));
+    c->add_option("--scan", opt.vp.scan,
+                  "Score a simulated scan instead of the scene's samples: this many scanners in "
+                  "the room sweep an equal-angle grid of beams (about --points hits in all; "
+                  "shadows, density falling with distance); built as --as-cloud says (default "
+                  "bare)")
+        ->check(CLI::Range(1u, 64u));
+    c->add_option("--scan-seed", opt.vp.scan_seed, "Seed of the scanners' positions")
+        ->capture_default_str();
     c->add_option("--roughness", opt.roughness,
                   "The predicate's roughness (scene units): an occluder of a point's own sheet "
                   "raised above it by less than this does not occlude; default: a raw cloud's "
                   "measured noise (--as-cloud, --cloud), 0 for the scene's samples")
         ->check(CLI::Range(0.f, 1e30f));
-    c->add_option("--noise", opt.vp.noise,
-                  "With --as-cloud: move each point of the cloud by Gaussian noise of this many "
-                  "sample spacings per axis, as a scanner's range noise (the truth keeps the exact "
-                  "points)")
+    c->add_option(
+         "--noise", opt.vp.noise,
+         "With --as-cloud or --scan: move each point of the cloud by Gaussian noise of this many "
+         "sample spacings per axis, as a scanner's range noise (the truth keeps the exact "
+         "points)")
         ->check(CLI::Range(0.0, 10.0));
     c->add_option("--cloud", opt.vp.cloud,
                   "Score this cloud file (PLY/OFF) against the scene's triangles instead of the "
@@ -153,7 +165,7 @@ Command add_validate_command(CLI::App& app) {
           "--backend",  "--predict",    "--delta-scale",  "--splat-floor",  "--ray-offset",
           "--md",       "--json",       "--runs",         "--embree-pairs", "--eyes",
           "--eye-seed", "--as-cloud",   "--cloud",        "--dump-eyes",    "--roughness",
-          "--noise"})
+          "--noise",    "--scan",       "--scan-seed"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return {c, [] { return run_validate_command(); }, true};
 }

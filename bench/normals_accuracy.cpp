@@ -1,6 +1,6 @@
 // normals_accuracy: how well raw-cloud normals and splat radii are recovered.
 //
-//   normals_accuracy [--objects-only] [--per-surface] [--points N] [--noise F]
+//   normals_accuracy [--objects-only] [--per-surface] [--points N] [--noise F] [--scan N]
 //                    [--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...
 //   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
 //                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
@@ -14,7 +14,8 @@
 // sqrt 8 over all neighbours). --objects-only drops the room (a lone object or several).
 // --write-ply writes the stripped cloud, for `vmap build`. --per-surface adds on stderr, per
 // surface: its points, the share signed right, and where the wrong ones lie (hidden, thin, near
-// another surface, elsewhere).
+// another surface, elsewhere). --scan N scores a simulated scan from N scanners (scan_scene, as
+// `vmap validate --scan`) instead of the scene's samples.
 //
 // --angles prints instead the unsigned angle between each estimated normal's axis and the true
 // one (so orientation is left out: it orients outward unless --orientation is given, which is
@@ -45,6 +46,7 @@
 #include "vmap/normals.h"
 #include "vmap/parallel.h"
 #include "vmap/scene.h"
+#include "vmap/validate.h"
 
 namespace {
 
@@ -54,6 +56,7 @@ struct Options {
     bool objects_only = false;
     bool angles = false, floor = false;
     bool orientation_given = false;
+    uint32_t scan = 0;           // --scan N: a simulated scan from N scanners, not the samples
     bool per_surface = false;    // --per-surface: a sign count per mesh on stderr
     double noise = 0;            // Gaussian, in sample spacings
     NormalEstimationParams fit;  // --fit-neighbours, --refits
@@ -331,8 +334,19 @@ void run_scene(const std::string& path, const Options& o) {
         std::erase_if(sc.surfaces, [](const SceneSurface& s) { return is_room(s.name); });
     if (o.points) sc.points = o.points;
     if (o.uniform) sc.pattern = SamplePattern::kUniform;
-    const PointSet truth = sample_scene(sc);
-    const std::vector<uint32_t> surf = surface_of(sc);
+    PointSet truth;
+    std::vector<uint32_t> surf;
+    if (o.scan) {  // a simulated scan (vmap validate --scan): its points and true sides
+        const ExactVisibility exact(sc.surfaces, path);
+        ScanPoints scan = scan_scene(sc, exact, o.scan, sc.points, 1, path);
+        for (const Vec3& s : scan.scanners)
+            fmt::print(stderr, "{}: scanner at ({:.3f}, {:.3f}, {:.3f})\n", sc.name, s.x, s.y, s.z);
+        truth = std::move(scan.points);
+        surf = std::move(scan.surface);
+    } else {
+        truth = sample_scene(sc);
+        surf = surface_of(sc);
+    }
     if (o.angles) return run_angles(path, sc, truth, surf, o);
     const std::vector<uint8_t> thin = thin_parts(truth, surf);
     const std::vector<uint8_t> inside = buried(truth);
@@ -384,7 +398,7 @@ void run_scene(const std::string& path, const Options& o) {
 
 int usage() {
     fmt::print(stderr,
-               "usage: normals_accuracy [--objects-only] [--per-surface] [--points N] "
+               "usage: normals_accuracy [--objects-only] [--per-surface] [--points N] [--scan N] "
                "[--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...\n"
                "       normals_accuracy --angles [--noise F] [--floor] [--objects-only] "
                "[--points N] [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...\n");
@@ -416,6 +430,8 @@ int main(int argc, char** argv) {
             o.points = std::stoull(argv[++i]);
         } else if (a == "--mix" && more) {
             o.mix_dir = argv[++i];
+        } else if (a == "--scan" && more) {
+            o.scan = uint32_t(std::stoul(argv[++i]));
         } else if (a == "--uniform") {
             o.uniform = true;
         } else if (a == "--write-ply" && more) {

@@ -583,6 +583,20 @@ else
     fail "validate --time-embree"
     show validate "$BLOCK" --time-embree --heights 4 --embree-pairs 20000 --runs 1
 fi
+run validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --eyes 2 --points 4000 \
+    --scan 2 --as-cloud sensors
+if [ "$rc" -eq 0 ] && grep -q 'simulated scan from 2 scanners' out.txt &&
+    grep -q 'scanner positions' out.txt; then
+    ok "validate --scan scores a simulated scan with its scanner positions"
+else
+    fail "validate --scan"
+    show validate "$BLOCK" --pairs 3000 --heights 4 --predict direct --eyes 2 --points 4000 \
+        --scan 2 --as-cloud sensors
+fi
+expect_input_error "validate --as-cloud sensors without --scan" "$BLOCK" \
+    validate "$BLOCK" --heights 4 --as-cloud sensors
+expect_usage_error "validate --scan 0" validate "$BLOCK" --scan 0
+expect_usage_error "validate --scan 65" validate "$BLOCK" --scan 65
 expect_input_error "validate a missing scene" no_such_scene.json validate no_such_scene.json
 expect_input_error "validate a point cloud" "$DATA/nan.ply" validate "$DATA/nan.ply"
 expect_input_error "validate --splat-floor without --predict direct" "$BLOCK" \

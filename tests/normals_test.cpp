@@ -478,6 +478,43 @@ TEST(Orientation, OpenRoomScannedFromInsideFacesInward) {
     EXPECT_GT(share_right(ps, truth, 0, ps.size()), 0.995);
 }
 
+// A scan's shadows: a table top scanned from above only (a bare sheet of points; the scanner on
+// a tripod beside it, higher), and the floor and walls less what the table hid from the
+// scanner. Rays from the sheet's lower, unseen side slip through those holes; they count as
+// meeting nothing seen (as behind a wall), not as travelling into open space, so the sheet faces
+// up, toward the scanner. (Escaping through the holes into open space, the lower side won.)
+TEST(Orientation, ASheetScannedFromOneSideFacesAwayFromItsShadow) {
+    std::mt19937 rng(41);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    const Vec3 scanner{0.15f, 0.7f, 0.45f};
+    const float table = 0.4f;
+    auto shadowed = [&](Vec3 p) {
+        if (!(p.y < table)) return false;
+        const Vec3 q = scanner + (p - scanner) * ((scanner.y - table) / (scanner.y - p.y));
+        return q.x > 0.3f && q.x < 0.7f && q.z > 0.3f && q.z < 0.7f;
+    };
+    PointSet ps;
+    std::vector<Vec3> truth;
+    auto add = [&](Vec3 p, Vec3 n) {
+        if (shadowed(p)) return;
+        ps.positions.push_back(p);
+        truth.push_back(n);
+    };
+    for (size_t i = 0; i < 3000; ++i) {
+        add({u(rng), 0, u(rng)}, {0, 1, 0});   // floor
+        add({u(rng), 1, u(rng)}, {0, -1, 0});  // ceiling
+        add({0, u(rng), u(rng)}, {1, 0, 0});   // x = 0
+        add({1, u(rng), u(rng)}, {-1, 0, 0});
+        add({u(rng), u(rng), 1}, {0, 0, -1});  // back; the front z = 0 is open
+    }
+    const size_t sheet = ps.size();
+    for (size_t i = 0; i < 1200; ++i)
+        add({0.3f + 0.4f * u(rng), table, 0.3f + 0.4f * u(rng)}, {0, 1, 0});
+    estimate_normals(ps);
+    EXPECT_GT(share_right(ps, truth, sheet, ps.size()), 0.95);
+    EXPECT_GT(share_right(ps, truth, 0, sheet), 0.99);  // the room stays right
+}
+
 TEST(Orientation, AFewPointsOutsideTheRoomDoNotTurnItsWalls) {
     // A small speck of points beyond a corner of an open room (a stray return past a window, a
     // registration outlier) pushes the cloud's bounds out on three sides. The walls there no
@@ -1187,7 +1224,7 @@ TEST(RawCloud, BuildWithoutRadiiEstimatesThemAndSaysSo) {
     BuildStats st;
     const VisibilityMap vm = build_vmap(ps, bp, &st, "room");
     ASSERT_TRUE(vm.points().has_radii());
-    const float r = std::sqrt(5.0f / (kPi * float(ps.size())));  // five unit walls
+    const float r = std::sqrt(5.0f / (kPi * float(ps.size())));         // five unit walls
     EXPECT_NEAR(median(points_in_input_order(vm).radii), r, 0.1f * r);  // input units
     ASSERT_EQ(st.warnings.size(), 1u);
     EXPECT_NE(st.warnings[0].find("radii"), std::string::npos) << st.warnings[0];

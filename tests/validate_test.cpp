@@ -265,6 +265,98 @@ TEST(Validate, SamplesAsARawCloudScoreTheirNormals) {
     EXPECT_THROW(validate_scene(kBlock, p), Error);
 }
 
+// A simulated scan: every point lies on a triangle, was seen by its scanner (nothing between
+// them, the normal on the scanner's side), the count is near the one asked for, and the same
+// seed gives the same scan.
+TEST(Scan, PointsLieOnSurfacesTheirScannerSees) {
+    const Scene sc = load_scene(kBlock);
+    ExactVisibility ex(sc.surfaces, kBlock);
+    const ScanPoints s = scan_scene(sc, ex, 2, 20000, 7, kBlock);
+    const size_t n = s.points.size();
+    ASSERT_EQ(s.scanners.size(), 2u);
+    EXPECT_GT(n, 16000u);
+    EXPECT_LT(n, 24000u);
+    ASSERT_EQ(s.sensors.size(), n);
+    ASSERT_EQ(s.surface.size(), n);
+    ASSERT_EQ(s.points.normals.size(), n);
+    ASSERT_EQ(s.points.radii.size(), n);
+    size_t from_each[2] = {0, 0}, on_model = 0;
+    for (size_t i = 0; i < n; i += 7) {
+        const Vec3 p = s.points.positions[i], o = s.sensors[i], nrm = s.points.normals[i];
+        from_each[o == s.scanners[0] ? 0 : 1]++;
+        EXPECT_TRUE(o == s.scanners[0] || o == s.scanners[1]);
+        EXPECT_GT(dot(nrm, o - p), 0.f) << i;  // faces its scanner
+        EXPECT_NEAR(length(nrm), 1.f, 1e-5f);
+        // Nothing between the scanner and the point (the last millimetre left out).
+        const float len = length(p - o);
+        EXPECT_FALSE(ex.occluded(o, p, 0.f, 1.f - 1e-3f / len)) << i;
+        // On the surface hit: a ray from just off the point back along its normal hits it.
+        const ExactVisibility::Hit h = ex.intersect(p + nrm * 1e-3f, nrm * -1.f, 0.f, 2e-3f);
+        EXPECT_EQ(h.surface, int32_t(s.surface[i])) << i;
+        on_model += sc.surfaces[s.surface[i]].is_model;
+        // Inside the room.
+        EXPECT_GE(p.y, -1e-4f);
+        EXPECT_LE(p.y, sc.room_size.y + 1e-4f);
+    }
+    EXPECT_GT(from_each[0], 0u);
+    EXPECT_GT(from_each[1], 0u);
+    EXPECT_GT(on_model, 0u);
+    // Scanners on tripods: at 40-70% of the room's height, not over the block.
+    Vec3 lo{1e30f, 1e30f, 1e30f}, hi{-1e30f, -1e30f, -1e30f};
+    for (const SceneSurface& surf : sc.surfaces)
+        if (surf.is_model)
+            for (const Vec3& v : surf.mesh.vertices)
+                lo = {std::min(lo.x, v.x), std::min(lo.y, v.y), std::min(lo.z, v.z)},
+                hi = {std::max(hi.x, v.x), std::max(hi.y, v.y), std::max(hi.z, v.z)};
+    for (const Vec3& o : s.scanners) {
+        EXPECT_GE(o.y, 0.4f * sc.room_size.y);
+        EXPECT_LE(o.y, 0.7f * sc.room_size.y);
+        EXPECT_FALSE(o.x > lo.x && o.x < hi.x && o.z > lo.z && o.z < hi.z);
+    }
+    const ScanPoints again = scan_scene(sc, ex, 2, 20000, 7, kBlock);
+    ASSERT_EQ(again.points.size(), n);
+    EXPECT_EQ(
+        std::memcmp(again.points.positions.data(), s.points.positions.data(), n * sizeof(Vec3)), 0);
+    const ScanPoints other = scan_scene(sc, ex, 2, 20000, 8, kBlock);
+    EXPECT_FALSE(other.scanners[0] == s.scanners[0]);
+    EXPECT_THROW(scan_scene(sc, ex, 0, 20000, 7, kBlock), Error);
+    EXPECT_THROW(scan_scene(sc, ex, 65, 20000, 7, kBlock), Error);
+}
+
+// `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the
+// estimated normals take their scanner's side, as the truth's do; bad combinations are errors.
+TEST(Validate, AScanIsScoredThroughTheRawCloudPath) {
+    ValidateParams p;
+    p.pairs = 3000;
+    p.heights = {5};
+    p.eyes = 2;
+    p.predict = "direct";
+    p.scan = 2;
+    p.points = 6000;
+    p.as_cloud = "normals";
+    const ValidationReport kept = validate_scene(kBlock, p);
+    EXPECT_EQ(kept.normal_agreement, 1.0);
+    EXPECT_NE(kept.source.find("simulated scan from 2 scanners"), std::string::npos);
+    EXPECT_GT(kept.points, 4500u);
+    EXPECT_GT(kept.rows[0].all.agreement(), 0.85);
+    p.as_cloud = "sensors";
+    const ValidationReport sensed = validate_scene(kBlock, p);
+    EXPECT_EQ(sensed.points, kept.points);
+    EXPECT_GT(sensed.normal_agreement, 0.999);
+    p.as_cloud = "";  // bare by default
+    EXPECT_NE(validate_scene(kBlock, p).source.find("bare"), std::string::npos);
+    ValidateParams q = p;
+    q.scan = 0;
+    q.as_cloud = "sensors";
+    EXPECT_THROW(validate_scene(kBlock, q), Error);  // no scanners to take
+    q = p;
+    q.cloud = kBlock;
+    EXPECT_THROW(validate_scene(kBlock, q), Error);
+    q = p;
+    q.scan = 65;
+    EXPECT_THROW(validate_scene(kBlock, q), Error);
+}
+
 // A cloud file scored against the scene it came from: each point's truth normal is the nearest
 // dense sample's, so the file's own (true) normals agree with it almost everywhere.
 TEST(Validate, ACloudFileIsScoredAgainstTheScenesTriangles) {
@@ -385,8 +477,8 @@ TEST(Npz, MalformedHeadersShapesAndEntriesAreErrors) {
         }
         return false;
     };
-    EXPECT_TRUE(refused(npy("{'descr': '<f4', 'fortran_order': False, 'shape': ,}", ""),
-                        "bad shape"));
+    EXPECT_TRUE(
+        refused(npy("{'descr': '<f4', 'fortran_order': False, 'shape': ,}", ""), "bad shape"));
     EXPECT_TRUE(refused(npy("{'descr': <f4, 'fortran_order': False, 'shape': (1,),}", "abcd"),
                         "bad 'descr'"));
     // 2^32 x 2^32 elements multiply out to 0 in 64 bits: not the empty body's match.
@@ -395,11 +487,11 @@ TEST(Npz, MalformedHeadersShapesAndEntriesAreErrors) {
                             ""),
                         "body: 0 bytes"));
     // An empty dimension with an empty body is an array.
-    EXPECT_EQ(detail::parse_npy(npy("{'descr': '<u4', 'fortran_order': False, 'shape': (0, 3), }",
-                                    ""),
-                                "a", "a.npy")
-                  .count(),
-              0u);
+    EXPECT_EQ(
+        detail::parse_npy(npy("{'descr': '<u4', 'fortran_order': False, 'shape': (0, 3), }", ""),
+                          "a", "a.npy")
+            .count(),
+        0u);
     // A central directory entry cut before its name: the end record follows 10 bytes of it (a
     // signature and nothing more).
     test::ScratchDir dir;

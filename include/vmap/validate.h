@@ -44,13 +44,13 @@ struct Confusion {
 };
 
 struct ValidateParams {
-    uint64_t points = 0;                          // 0: the scene's own count
-    std::string sampling;  // "uniform" or "blue-noise": the samples' pattern; "": the scene's
-    uint64_t pairs = 200000;                      // random point pairs (i != j), 1..1e9
-    uint64_t pair_seed = 1;                       // seed of the pair sample
+    uint64_t points = 0;      // 0: the scene's own count
+    std::string sampling;     // "uniform" or "blue-noise": the samples' pattern; "": the scene's
+    uint64_t pairs = 200000;  // random point pairs (i != j), 1..1e9
+    uint64_t pair_seed = 1;   // seed of the pair sample
     std::vector<int> heights{5, 6, 7, 8, 9, 10};  // octree max_height values, 1..21
-    int leaf_points = 0;                // 0: the scene's octree.leaf_points, else the default
-    VisibilityParams visibility;        // K, eps, tolerances of the predicate
+    int leaf_points = 0;          // 0: the scene's octree.leaf_points, else the default
+    VisibilityParams visibility;  // K, eps, tolerances of the predicate
     OccluderSearch occluders = OccluderSearch::kBoxes;
     Backend backend = Backend::kCpu;  // for the V-map build
     // "vmap": build the V-map and query it (the real thing). "direct": evaluate the leaf-pair
@@ -78,11 +78,18 @@ struct ValidateParams {
     // normals, splat radii from the sampling). "normals": the same points as a raw cloud with
     // their true normals and no radii; "bare": positions only (normals and radii estimated, as
     // for a scan). Either goes through load_point_cloud, as `vmap build cloud.ply` would.
+    // "sensors" (with scan only): positions and each point's scanner position, as a scanner's
+    // file holds them (normals estimated, then turned toward their scanner).
     std::string as_cloud;
     // With as_cloud: Gaussian noise of this many sample spacings (sqrt(pi) x the true splat
     // radius) per axis moves each point of the cloud the prediction is built from, as a
     // scanner's range noise would; the truth keeps the exact points on the surfaces. 0: none.
     double noise = 0;
+    // Score a simulated scan (scan_scene) from this many scanner positions (seed scan_seed)
+    // instead of the scene's samples: about `points` (or the scene's count) hits, through the
+    // raw-cloud path as_cloud (default bare). 0: none.
+    uint32_t scan = 0;
+    uint64_t scan_seed = 1;
     // Raw clouds (as_cloud, cloud): the predicate's roughness from the cloud's measured noise
     // (estimate_surface_noise, roughness_of), as `vmap build` takes it; false: visibility's.
     bool measure_roughness = true;
@@ -138,9 +145,9 @@ struct ValidationReport {
     // The occluder discs' floor the octrees were built with: splat_floor when given, else the
     // scene's (scene_octree), or OctreeParams::kDefaultDeltaFloor for the raw-cloud modes.
     float delta_floor = 0;
-    uint64_t model_pairs = 0;     // pairs of the model-pair sample (as many as `pairs`)
-    uint64_t eyes = 0;            // eyes per set (0 when the scene has no model points)
-    std::string source;           // what the prediction was built from, in words
+    uint64_t model_pairs = 0;  // pairs of the model-pair sample (as many as `pairs`)
+    uint64_t eyes = 0;         // eyes per set (0 when the scene has no model points)
+    std::string source;        // what the prediction was built from, in words
     // Of the prediction's points: the fraction (by count) whose normal points to the side of the
     // true one, over all points and over model points (1 when the normals are the true ones).
     double normal_agreement = 1, normal_agreement_model = 1;
@@ -203,6 +210,29 @@ class ExactVisibility {
     uint64_t triangles_ = 0;
     std::vector<int32_t> surface_of_geometry_;  // Embree geometry id -> surface index
 };
+
+// ---- a simulated scan ------------------------------------------------------------------------
+
+// What scanners standing in the scene record (src/validate/scan.cpp): each sweeps its beam over
+// an equal-angle grid (elevation from nadir to zenith, azimuth all round, one angular step) and
+// keeps the first triangle each beam hits.
+struct ScanPoints {
+    PointSet points;  // the hits: exact positions on the triangles, the normal of the side hit
+                      // (the triangle's, turned toward the scanner), and a nominal splat radius
+                      // sqrt(area / (pi * hits)) for all (the spacing an even sample would have)
+    std::vector<Vec3> sensors;      // per point: the scanner that recorded it
+    std::vector<uint32_t> surface;  // per point: its index into the scene's surfaces
+    std::vector<Vec3> scanners;     // the scanners' positions
+    double step = 0;                // the angular step, radians
+};
+
+// `scanners` seeded positions (1..64): in a room, on a tripod in its middle (15-85% of width and
+// depth, 40-70% of height), the column below clear of every model's bounding box by 2% of the
+// room; without a room, around the surfaces at 1.5 times their bounding box's diagonal. The step is
+// chosen so that all scanners together record about `points` hits. Throws vmap::Error naming
+// `source` when no position is clear of the models or nothing is hit.
+ScanPoints scan_scene(const Scene& sc, const ExactVisibility& exact, uint32_t scanners,
+                      uint64_t points, uint64_t seed, const std::string& source);
 
 // ---- the practitioner's alternative: Embree rays for leaf-centroid segments -------------------
 

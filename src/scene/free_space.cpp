@@ -255,11 +255,15 @@ int free_parity(const Nesting& n, const Regions& r, const std::vector<uint64_t>&
 class DiscCaster {
   public:
     // b: every point's bounds (the cell grid); walls: the box whose faces count as the scene's
-    // bounds for escaping rays (wall_box).
+    // bounds for escaping rays (wall_box), walled: which of its faces hold a room's wall.
     DiscCaster(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-               const std::vector<float>& radii, const Bounds& b, const Bounds& walls, float r_med,
-               float immediate)
-        : pts_(pts), normals_(normals), box_(walls), immediate_(immediate),
+               const std::vector<float>& radii, const Bounds& b, const Bounds& walls,
+               const std::array<bool, 6>& walled, float r_med, float immediate)
+        : pts_(pts),
+          normals_(normals),
+          box_(walls),
+          walled_(walled),
+          immediate_(immediate),
           far_(8 * max_extent(b)) {
         // Discs twice the splat radius: samples' discs of one radius cover a surface only once
         // on average (gaps where rays would slip through); doubled, gaps are about 2%.
@@ -272,8 +276,9 @@ class DiscCaster {
 
     // Mean distance rays from point i travel into the hemisphere of `side` before meeting
     // another disc. A ray that meets none escapes into unbounded free space (it counts as
-    // travelling far), unless it leaves the bounding box at once: the outer side of a room's
-    // wall, which lies on the box, sees nothing.
+    // travelling far), unless it leaves the bounding box at once (the outer side of a room's
+    // wall, which lies on the box, sees nothing) or through a face that holds a room's wall
+    // (escape).
     struct Depth {
         float mean = 0;  // over the rays
         int hits = 0;    // rays that met a disc
@@ -379,10 +384,18 @@ class DiscCaster {
         return best;
     }
 
-    // How far an escaping ray counts as travelling.
+    // How far an escaping ray counts as travelling: to the box when it leaves at once (a
+    // wall's outer side), unboundedly far through an open side of the scene, and nowhere
+    // through a face that holds a room's wall. There it slipped through a hole in the wall: a
+    // gap between discs, or in a scan a shadow, wall that no scanner saw. A surface seen from
+    // one side only (a table top scanned from below) casts its shadow behind itself, so its
+    // back's rays find the holes while its front's meet the scanned walls: the hole counts as
+    // what lies behind a wall, where nothing was seen either. (Counted as travelling to the
+    // wall, the shadowed side of such a sheet won as often as not: docs/validation.md "Scans".)
     float escape(uint32_t self, Vec3 d) const {
         const float t_box = box_exit(pts_[self], d);
-        return t_box > immediate_ ? far_ : t_box;
+        if (t_box <= immediate_) return t_box;
+        return walled_[size_t(exit_face(box_, pts_[self], d))] ? 0.f : far_;
     }
 
     // Distance to the first disc along the ray (3D DDA over the cells), or -1 if none.
@@ -417,6 +430,7 @@ class DiscCaster {
     const std::vector<Vec3>& pts_;
     const std::vector<Vec3>& normals_;
     Bounds box_;
+    std::array<bool, 6> walled_;
     float immediate_, far_;
     std::vector<float> rad_;
     Grid grid_;
@@ -460,15 +474,17 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
 // on that side outward. From each face inward, over slabs two splat radii thick: the first slab
 // whose points facing along the axis (|n| component over 0.9) number at least kWallPoints and
 // span at least half the cloud's core extent (2nd-98th percentile) in both other axes is a
-// wall; the face moves to it if at most kStrayShare of the points lie beyond it. A face with no
-// wall near it (an open side, a lone object) keeps its place. In the room's frame (vote_sides),
-// where walls are perpendicular to the axes.
+// wall; the face moves to it if at most kStrayShare of the points lie beyond it, and counts as
+// walled (`walled`, by face: axis * 2 + (side > 0)). A face with no wall near it (an open side, a
+// lone object) keeps its place. In the room's frame (vote_sides), where walls are perpendicular
+// to the axes.
 constexpr double kStrayShare = 0.02;
 constexpr float kFaceNoiseSigmas = 8;
 constexpr size_t kWallPoints = 64;
 
 Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, const Bounds& full,
-                float r_med) {
+                float r_med, std::array<bool, 6>& walled) {
+    walled.fill(false);
     auto at = [](const Vec3& v, int a) { return a == 0 ? v.x : a == 1 ? v.y : v.z; };
     auto set = [](Vec3& v, int a, float x) { (a == 0 ? v.x : a == 1 ? v.y : v.z) = x; };
     const size_t n = pts.size();
@@ -517,6 +533,7 @@ Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, 
         for (size_t k = slabs; k-- > 0 && beyond <= stray;) {
             if (is_wall(k)) {
                 if (beyond > 0) set(b.hi, a, span[6 * k + 5]);
+                walled[size_t(2 * a + 1)] = true;
                 break;
             }
             beyond += all[k];
@@ -525,6 +542,7 @@ Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, 
         for (size_t k = 0; k < slabs && beyond <= stray; ++k) {
             if (is_wall(k)) {
                 if (beyond > 0) set(b.lo, a, span[6 * k + 4]);
+                walled[size_t(2 * a)] = true;
                 break;
             }
             beyond += all[k];
@@ -677,13 +695,14 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     const Grid g = make_grid(b, std::max(kSpacing * r_med, max_extent(b) / kMaxCells), kPad);
     const FreeSpace fs = free_space(pts, normals, radii, g, r_med);
     v.method = fs.method;
-    const Bounds walls = wall_box(pts, normals, b, r_med);
+    std::array<bool, 6> walled{};
+    const Bounds walls = wall_box(pts, normals, b, r_med, walled);
     // A point lies on the box's face when its side leaves the box within half a splat radius,
     // and on a noisy wall within the noise's reach too: the face is the wall's outermost point,
     // about 4 sigma out, and the wall's points scatter about as far in (kFaceNoiseSigmas). A ray
     // that leaves the box within two cells (and that reach) has left "at once".
     const float on_face = 0.5f * r_med + kFaceNoiseSigmas * noise;
-    const DiscCaster caster(pts, normals, radii, b, walls, r_med,
+    const DiscCaster caster(pts, normals, radii, b, walls, walled, r_med,
                             2 * g.h + kFaceNoiseSigmas * noise);
     const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, on_face);
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <chrono>
 #include <filesystem>
+#include <fstream>
 #include <nanoflann.hpp>
 #include <nlohmann/json.hpp>
 #include <random>
@@ -67,15 +68,23 @@ void ValidateParams::check(const std::string& src) const {
             fmt::format("{}: bury distance {} out of range [0, 0.1]", src, p.bury_distance));
     if (!(p.ray_offset > 0 && p.ray_offset <= 0.01))
         throw Error(fmt::format("{}: ray offset {} out of range (0, 0.01]", src, p.ray_offset));
-    if (!p.as_cloud.empty() && p.as_cloud != "normals" && p.as_cloud != "bare")
-        throw Error(fmt::format("{}: as_cloud: unknown mode '{}' (expected normals or bare)",
-                                src, p.as_cloud));
+    if (!p.as_cloud.empty() && p.as_cloud != "normals" && p.as_cloud != "bare" &&
+        p.as_cloud != "sensors")
+        throw Error(fmt::format(
+            "{}: as_cloud: unknown mode '{}' (expected normals, bare or, with scan, sensors)", src,
+            p.as_cloud));
+    if (p.as_cloud == "sensors" && !p.scan)
+        throw Error(fmt::format("{}: as_cloud sensors needs scan (the scanners' positions)", src));
+    if (p.scan > 64)
+        throw Error(fmt::format("{}: scan: {} scanners out of range (0..64)", src, p.scan));
+    if (p.scan && !p.cloud.empty())
+        throw Error(fmt::format("{}: give scan or cloud, not both", src));
     if (!p.as_cloud.empty() && !p.cloud.empty())
         throw Error(fmt::format("{}: give as_cloud or cloud, not both", src));
     if (!(p.noise >= 0 && p.noise <= 10))
         throw Error(fmt::format("{}: noise {} out of range [0, 10] sample spacings", src, p.noise));
-    if (p.noise > 0 && p.as_cloud.empty())
-        throw Error(fmt::format("{}: noise needs as_cloud (normals or bare)", src));
+    if (p.noise > 0 && p.as_cloud.empty() && !p.scan)
+        throw Error(fmt::format("{}: noise needs as_cloud (normals or bare) or scan", src));
     if (p.eyes > 10000)
         throw Error(fmt::format("{}: eyes {} out of range (0..10000)", src, p.eyes));
     p.visibility.check(src);
@@ -144,12 +153,37 @@ struct ScoredPoints {
     std::vector<uint32_t> surface;  // the scene surface each point lies on (kNoSurface: none)
 };
 
+// A binary PLY of positions, normals when there are any, and per-point scanner positions.
+void write_sensor_ply(const std::string& file, const PointSet& pts,
+                      const std::vector<Vec3>& sensors) {
+    const bool nrm = pts.has_normals();
+    std::string out = fmt::format(
+        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
+        "property float y\nproperty float z\n{}property float sensor_x\nproperty float "
+        "sensor_y\nproperty float sensor_z\nend_header\n",
+        pts.size(), nrm ? "property float nx\nproperty float ny\nproperty float nz\n" : "");
+    auto put = [&](Vec3 v) {
+        const float f[3] = {v.x, v.y, v.z};
+        out.append(reinterpret_cast<const char*>(f), sizeof f);
+    };
+    for (size_t i = 0; i < pts.size(); ++i) {
+        put(pts.positions[i]);
+        if (nrm) put(pts.normals[i]);
+        put(sensors[i]);
+    }
+    std::ofstream f(file, std::ios::binary);
+    f.write(out.data(), std::streamsize(out.size()));
+    if (!f) throw Error(fmt::format("{}: cannot write", file));
+}
+
 // Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
 // raw-cloud path, as `vmap build cloud.ply` would.
 // With noise > 0 each position first moves by Gaussian noise of `noise` sample spacings per
 // axis (seeded, the same for every run).
+// With `sensors`, the file carries each point's scanner position (sensor_x, sensor_y, sensor_z),
+// as a scanner's export does.
 PointSet through_cloud_path(const PointSet& pts, bool normals, double noise,
-                            const std::string& path) {
+                            const std::string& path, const std::vector<Vec3>* sensors = nullptr) {
     PointSet bare;
     bare.positions = pts.positions;
     if (noise > 0) {
@@ -165,7 +199,10 @@ PointSet through_cloud_path(const PointSet& pts, bool normals, double noise,
         (std::filesystem::temp_directory_path() /
          fmt::format("vmap-validate-{}-{}.ply", ::getpid(), std::hash<std::string>{}(path)))
             .string();
-    write_ply(tmp, bare);
+    if (sensors)
+        write_sensor_ply(tmp, bare, *sensors);
+    else
+        write_ply(tmp, bare);
     PointSet out;
     try {
         out = load_point_cloud(tmp);
@@ -224,8 +261,27 @@ ScoredPoints cloud_file_points(const Scene& scene, const std::string& cloud) {
     return sp;
 }
 
-ScoredPoints scored_points(const Scene& sc, const ValidateParams& p, const std::string& path) {
+// A simulated scan's points (scan_scene), the prediction's through the raw-cloud path.
+ScoredPoints scan_points(const Scene& sc, const ExactVisibility& exact, const ValidateParams& p,
+                         const std::string& path) {
+    ScanPoints scan =
+        scan_scene(sc, exact, p.scan, p.points ? p.points : sc.points, p.scan_seed, path);
+    ScoredPoints sp;
+    sp.truth = std::move(scan.points);
+    sp.surface = std::move(scan.surface);
+    sp.on_model.resize(sp.surface.size());
+    for (size_t i = 0; i < sp.surface.size(); ++i)
+        sp.on_model[i] = sc.surfaces[sp.surface[i]].is_model;
+    const bool sensors = p.as_cloud == "sensors";
+    sp.pred = through_cloud_path(sp.truth, p.as_cloud == "normals", p.noise, path,
+                                 sensors ? &scan.sensors : nullptr);
+    return sp;
+}
+
+ScoredPoints scored_points(const Scene& sc, const ExactVisibility& exact, const ValidateParams& p,
+                           const std::string& path) {
     if (!p.cloud.empty()) return cloud_file_points(sc, p.cloud);
+    if (p.scan) return scan_points(sc, exact, p, path);
     ScoredPoints sp;
     std::vector<uint32_t> surf;
     sp.truth = sample_scene(sc, &surf);
@@ -290,10 +346,11 @@ std::vector<uint8_t> predict_pairs(const Predictor& pr, const std::vector<Pair>&
         WorkCounters& wc = counters.local();
         for (size_t k = rg.begin(); k < rg.end(); ++k) out[k] = pr(pairs[k].i, pairs[k].j, &wc);
     });
-    if (work) *work = counters.combine([](WorkCounters x, const WorkCounters& y) {
-        x += y;
-        return x;
-    });
+    if (work)
+        *work = counters.combine([](WorkCounters x, const WorkCounters& y) {
+            x += y;
+            return x;
+        });
     return out;
 }
 
@@ -419,10 +476,12 @@ void build_predictor(HeightPredictor& hp, HeightResult& row, const PointSet& pre
         apply_delta_rule(hp.t, copy, params.delta_scale, op.delta_floor);
     hp.inverse.resize(order.size());
     for (uint32_t k = 0; k < order.size(); ++k) hp.inverse[order[k]] = k;
-    if (params.occluders == OccluderSearch::kGridWalk) hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
+    if (params.occluders == OccluderSearch::kGridWalk)
+        hp.grid = std::make_unique<detail::LeafGrid>(hp.t);
     row.height = hp.t.height();
     row.leaves = hp.t.num_leaves();
-    row.backend = params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk" : "direct, cpu boxes";
+    row.backend = params.occluders == OccluderSearch::kGridWalk ? "direct, cpu grid walk"
+                                                                : "direct, cpu boxes";
     hp.direct = std::make_unique<DirectPredictor>(
         DirectPredictor{hp.t, in_octree_frame(params.visibility, hp.t.scale()), hp.grid.get()});
     hp.pr.tree = &hp.t, hp.pr.inverse = &hp.inverse, hp.pr.direct = hp.direct.get();
@@ -557,11 +616,19 @@ ValidationReport report_header(const Scene& sc, const ScoredPoints& sp, const st
     r.points = sp.truth.size();
     r.pairs = params.pairs;
     r.params = params;
+    const std::string what =
+        params.scan ? fmt::format("a simulated scan from {} scanner{} (seed {})", params.scan,
+                                  params.scan > 1 ? "s" : "", params.scan_seed)
+                    : "the samples";
     r.source = !params.cloud.empty()          ? "the cloud " + params.cloud
-               : params.as_cloud == "normals" ? "the samples as a raw cloud with true normals"
-               : params.as_cloud == "bare"    ? "the samples as a bare raw cloud (normals and "
-                                                "radii estimated)"
-                                              : "the scene's samples";
+               : params.as_cloud == "normals" ? what + " as a raw cloud with true normals"
+               : params.as_cloud == "bare"
+                   ? what + " as a bare raw cloud (normals and radii estimated)"
+               : params.as_cloud == "sensors"
+                   ? what +
+                         " as a raw cloud with its scanner positions (normals estimated and "
+                         "turned toward them, radii estimated)"
+                   : "the scene's samples";
     if (params.noise > 0)
         r.source += fmt::format(", moved by noise of {} sample spacings per axis", params.noise);
     if (!r.params.leaf_points)
@@ -603,14 +670,15 @@ PairSets sample_truth(const ExactVisibility& exact, const ScoredPoints& sp,
 
 ValidationReport validate_scene(const std::string& path, const ValidateParams& given) {
     ValidateParams params = given;
+    if (params.scan && params.as_cloud.empty()) params.as_cloud = "bare";
     const Scene sc = validation_scene(path, params);
-    ScoredPoints sp = scored_points(sc, params, path);
+    const auto t0 = Clock::now();
+    ExactVisibility exact(sc.surfaces, path);
+    ScoredPoints sp = scored_points(sc, exact, params, path);
     // A raw cloud's predicate takes the roughness of its measured noise, as `vmap build` does.
     if (params.measure_roughness && (!params.as_cloud.empty() || !params.cloud.empty()))
         params.visibility.roughness = roughness_of(estimate_surface_noise(sp.pred));
     const float room = std::max({sc.room_size.x, sc.room_size.y, sc.room_size.z});
-    const auto t0 = Clock::now();
-    ExactVisibility exact(sc.surfaces, path);
     const double offset = params.ray_offset * room, bury = params.bury_distance * room;
     // What not sampling covered surface would give: the same points less the buried ones.
     const uint64_t dropped =

@@ -9,13 +9,16 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <array>
 #include <cfloat>
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <mutex>
 #include <numeric>
 #include <optional>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "geom/morton.h"
@@ -707,10 +710,10 @@ size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radi
 // through its opening while its convex side meets a wall nearby. What a modeller's winding
 // says there is the convention "outward": away from what the sheet wraps around (the share of
 // the area facing away from the mesh's own centroid, scripts/mesh-winding.py: 1.000 for the
-// open box, 0.95 for the helmet, 0.89 for the mushroom and the lion mask). So the open points are joined into sheets
-// over same-surface links, and a sheet that wraps around its centroid votes each point's side
-// away from it, weighted by how squarely the point faces it, |(p - c) . n| / rms |p - c|, in
-// place of its rays. Left to the rays:
+// open box, 0.95 for the helmet, 0.89 for the mushroom and the lion mask). So the open points are
+// joined into sheets over same-surface links, and a sheet that wraps around its centroid votes each
+// point's side away from it, weighted by how squarely the point faces it, |(p - c) . n| / rms |p -
+// c|, in place of its rays. Left to the rays:
 // - sheets too flat for their centroid to say anything: the "wrap", mean |(p - c) . n| / rms
 //   (the weight before its cap at 1), below kMinWrap (a plate's face or a table's top wraps an
 //   order of magnitude less on the test scenes, the open meshes about twice as much or more; a
@@ -1146,7 +1149,9 @@ std::optional<NoiseProbe> probe_noise(const std::vector<Vec3>& pts, const uint32
     return NoiseProbe{*whole, *half};
 }
 
-SurfaceNoise estimate_surface_noise(const PointSet& points) {
+namespace {
+
+SurfaceNoise measure_surface_noise(const PointSet& points) {
     const std::vector<Vec3>& pts = points.positions;
     const size_t n = pts.size();
     SurfaceNoise out;
@@ -1189,8 +1194,40 @@ SurfaceNoise estimate_surface_noise(const PointSet& points) {
     // whole^2) / (a^2 - b^2), which leaves shape alone at 0 and noise alone whole.
     const double whole = median(sigma), half = median(sigma_half);
     const double a2 = kHalfNoiseRatio * kHalfNoiseRatio, b2 = kHalfShapeRatio * kHalfShapeRatio;
-    out.sigma = std::min(whole, std::sqrt(std::max(0.0, (half * half - b2 * whole * whole) / (a2 - b2))));
+    out.sigma =
+        std::min(whole, std::sqrt(std::max(0.0, (half * half - b2 * whole * whole) / (a2 - b2))));
     out.spacing = std::sqrt(median(spacing2));
+    return out;
+}
+
+}  // namespace
+
+SurfaceNoise estimate_surface_noise(const PointSet& points) {
+    // A pure function of the positions, which a raw cloud's build asks for several times (the
+    // normals' fits, the radii, the disc floor's share, the input's report; about 0.05 s each
+    // for 40,000 points): the last answers are kept, keyed by the positions' count and a 64-bit
+    // hash of their bytes (a copy of them would hold a large cloud's memory for nothing).
+    struct Memo {
+        size_t n = 0;
+        size_t hash = 0;
+        SurfaceNoise noise;
+    };
+    static std::mutex mutex;
+    static std::array<Memo, 2> memo;
+    static size_t next = 0;
+    const std::vector<Vec3>& pts = points.positions;
+    const size_t n = pts.size();
+    const size_t hash = std::hash<std::string_view>{}(
+        std::string_view(reinterpret_cast<const char*>(pts.data()), n * sizeof(Vec3)));
+    {
+        const std::lock_guard<std::mutex> lock(mutex);
+        for (const Memo& m : memo)
+            if (n > 0 && m.n == n && m.hash == hash) return m.noise;
+    }
+    const SurfaceNoise out = measure_surface_noise(points);
+    const std::lock_guard<std::mutex> lock(mutex);
+    memo[next] = {n, hash, out};
+    next = (next + 1) % memo.size();
     return out;
 }
 

@@ -219,12 +219,7 @@ std::vector<Vec3> dense_fit_normals(Scene sc, const PointSet& truth) {
 
 // Gaussian noise of `f` sample spacings (sqrt(pi) * the true splat radius) per axis, seeded.
 void add_noise(PointSet& ps, const PointSet& truth, double f) {
-    std::mt19937_64 rng(12345);
-    std::normal_distribution<float> g(0.f, 1.f);
-    for (size_t i = 0; i < ps.size(); ++i) {
-        const float s = float(f * std::sqrt(M_PI)) * truth.radii[i];
-        ps.positions[i] += Vec3{g(rng), g(rng), g(rng)} * s;
-    }
+    add_surface_noise(ps.positions, truth.radii, f, 12345);
 }
 
 // For `vmap validate --cloud`: the estimated normals (and with --floor the smooth surface's),

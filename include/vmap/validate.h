@@ -211,6 +211,12 @@ class ExactVisibility {
     std::vector<int32_t> surface_of_geometry_;  // Embree geometry id -> surface index
 };
 
+// Moves each position by Gaussian noise of `spacings` sample spacings per axis, point i's
+// spacing being sqrt(pi) radii[i] (the side of a square of its disc's area): a scanner's range
+// noise, the same for a seed on every machine (ValidateParams::noise, normals_accuracy --noise).
+void add_surface_noise(std::vector<Vec3>& positions, const std::vector<float>& radii,
+                       double spacings, uint64_t seed);
+
 // ---- a simulated scan ------------------------------------------------------------------------
 
 // What scanners standing in the scene record (src/validate/scan.cpp): each sweeps its beam over

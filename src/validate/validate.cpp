@@ -142,6 +142,16 @@ struct DirectPredictor {
 
 }  // namespace
 
+void add_surface_noise(std::vector<Vec3>& positions, const std::vector<float>& radii,
+                       double spacings, uint64_t seed) {
+    std::mt19937_64 rng(seed);
+    std::normal_distribution<float> g(0.f, 1.f);
+    for (size_t i = 0; i < positions.size(); ++i) {
+        const float s = float(spacings * std::sqrt(M_PI)) * radii[i];
+        positions[i] += Vec3{g(rng), g(rng), g(rng)} * s;
+    }
+}
+
 namespace {
 
 // The points a validation scores: the truth's (true positions, normals, model flags) and the
@@ -186,14 +196,7 @@ PointSet through_cloud_path(const PointSet& pts, bool normals, double noise,
                             const std::string& path, const std::vector<Vec3>* sensors = nullptr) {
     PointSet bare;
     bare.positions = pts.positions;
-    if (noise > 0) {
-        std::mt19937_64 rng(0x5ca90015eULL);
-        std::normal_distribution<float> g(0.f, 1.f);
-        for (size_t i = 0; i < bare.size(); ++i) {
-            const float s = float(noise * std::sqrt(M_PI)) * pts.radii[i];
-            bare.positions[i] += Vec3{g(rng), g(rng), g(rng)} * s;
-        }
-    }
+    if (noise > 0) add_surface_noise(bare.positions, pts.radii, noise, 0x5ca90015eULL);
     if (normals) bare.normals = pts.normals;
     const std::string tmp =
         (std::filesystem::temp_directory_path() /

@@ -321,6 +321,7 @@ TEST(Scan, PointsLieOnSurfacesTheirScannerSees) {
     EXPECT_FALSE(other.scanners[0] == s.scanners[0]);
     EXPECT_THROW(scan_scene(sc, ex, 0, 20000, 7, kBlock), Error);
     EXPECT_THROW(scan_scene(sc, ex, 65, 20000, 7, kBlock), Error);
+    EXPECT_THROW(scan_scene(sc, ex, 2, 5, 7, kBlock), Error);  // too few hits to fit anything
 }
 
 // `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the

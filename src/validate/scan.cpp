@@ -130,6 +130,13 @@ ScanPoints scan_scene(const Scene& sc, const ExactVisibility& exact, uint32_t sc
     if (hits == 0) throw Error(fmt::format("{}: scan: the scanners' beams hit nothing", source));
     const double step = pilot * std::sqrt(double(hits) / double(points));
     ScanPoints out = sweep(exact, at, step, seed);
+    // Normals and radii are estimated from neighbours: a handful of hits says nothing.
+    constexpr size_t kMinHits = 16;
+    if (out.points.size() < kMinHits)
+        throw Error(
+            fmt::format("{}: scan: {} hits for points {}, fewer than {}: ask for more "
+                        "points",
+                        source, out.points.size(), points, kMinHits));
     out.scanners = at;
     out.step = step;
     // Every point's disc as if the scan's points covered the surfaces evenly: the "sample

@@ -236,7 +236,9 @@ struct ScanPoints {
 // depth, 40-70% of height), the column below clear of every model's bounding box by 2% of the
 // room; without a room, around the surfaces at 1.5 times their bounding box's diagonal. The step is
 // chosen so that all scanners together record about `points` hits. Throws vmap::Error naming
-// `source` when no position is clear of the models or nothing is hit.
+// `source` for scanners out of range or points < 2, when no position is clear of the models,
+// when the scanners would need over 4e9 beams (they see too little), or when fewer than 16
+// points are hit (too few to estimate normals from).
 ScanPoints scan_scene(const Scene& sc, const ExactVisibility& exact, uint32_t scanners,
                       uint64_t points, uint64_t seed, const std::string& source);
 

@@ -310,11 +310,12 @@ class DiscCaster {
     float first_hit(uint32_t i, Vec3 d, float tmin) const { return travel(i, d, tmin); }
 
     // Distance from o along d to the cloud's bounding box.
-    float box_exit(Vec3 o, Vec3 d) const {
+    float box_exit(Vec3 o, Vec3 d) const { return box_exit(box_, o, d); }
+    static float box_exit(const Bounds& box, Vec3 o, Vec3 d) {
         float t = std::numeric_limits<float>::max();
         const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
-        const float lo[3] = {box_.lo.x, box_.lo.y, box_.lo.z};
-        const float hi[3] = {box_.hi.x, box_.hi.y, box_.hi.z};
+        const float lo[3] = {box.lo.x, box.lo.y, box.lo.z};
+        const float hi[3] = {box.hi.x, box.hi.y, box.hi.z};
         for (int a = 0; a < 3; ++a) {
             if (dd[a] > 0) t = std::min(t, (hi[a] - oo[a]) / dd[a]);
             if (dd[a] < 0) t = std::min(t, (lo[a] - oo[a]) / dd[a]);
@@ -475,12 +476,15 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
 // whose points facing along the axis (|n| component over 0.9) number at least kWallPoints and
 // span at least half the cloud's core extent (2nd-98th percentile) in both other axes is a
 // wall; the face moves to it if at most kStrayShare of the points lie beyond it, and counts as
-// walled (`walled`, by face: axis * 2 + (side > 0)). A face with no wall near it (an open side, a
+// walled (`walled`, by face: axis * 2 + (side > 0)) when the wall covers at least kWallCover
+// of the face. A face with no wall near it (an open side, a
 // lone object) keeps its place. In the room's frame (vote_sides), where walls are perpendicular
 // to the axes.
 constexpr double kStrayShare = 0.02;
 constexpr float kFaceNoiseSigmas = 8;
 constexpr size_t kWallPoints = 64;
+constexpr int kWallCells = 16;      // the face's grid for its cover (wall_box's `walled`)
+constexpr double kWallCover = 0.5;  // the share of its cells a room's wall covers at least
 
 Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, const Bounds& full,
                 float r_med, std::array<bool, 6>& walled) {
@@ -527,13 +531,36 @@ Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, 
             return wall[k] >= kWallPoints && sp[1] - sp[0] >= 0.5f * core[u] &&
                    sp[3] - sp[2] >= 0.5f * core[w];
         };
+        // Whether the wall points of slab k cover most of the face (kWallCells squared cells
+        // over the cloud's bounds in the other two axes): a room's floor or wall does, less its
+        // shadows in a scan; objects standing on one level (their feet, a lone object's base)
+        // make a "wall" of a few cells.
+        auto covers = [&](size_t k) {
+            constexpr int kCells = kWallCells;
+            std::vector<uint8_t> cell(size_t(kCells) * kCells, 0);
+            const float u0 = at(full.lo, u), w0 = at(full.lo, w);
+            const float du = (at(full.hi, u) - u0) / kCells, dw = (at(full.hi, w) - w0) / kCells;
+            if (!(du > 0) || !(dw > 0)) return false;
+            for (size_t i = 0; i < n; ++i) {
+                if (!(std::fabs(at(normals[i], a)) > 0.9f)) continue;
+                const size_t ki = std::min(
+                    slabs - 1, size_t((at(pts[i], a) - lo) / ext * float(slabs - 1) + 0.5f));
+                if (ki != k) continue;
+                const int cu = std::clamp(int((at(pts[i], u) - u0) / du), 0, kCells - 1);
+                const int cw = std::clamp(int((at(pts[i], w) - w0) / dw), 0, kCells - 1);
+                cell[size_t(cu) * kCells + size_t(cw)] = 1;
+            }
+            size_t marked = 0;
+            for (uint8_t c : cell) marked += c;
+            return double(marked) >= kWallCover * double(cell.size());
+        };
         // From the high face down, then from the low face up; the face moves to the wall's
         // outermost point.
         size_t beyond = 0;
         for (size_t k = slabs; k-- > 0 && beyond <= stray;) {
             if (is_wall(k)) {
                 if (beyond > 0) set(b.hi, a, span[6 * k + 5]);
-                walled[size_t(2 * a + 1)] = true;
+                walled[size_t(2 * a + 1)] = covers(k);
                 break;
             }
             beyond += all[k];
@@ -542,7 +569,7 @@ Bounds wall_box(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, 
         for (size_t k = 0; k < slabs && beyond <= stray; ++k) {
             if (is_wall(k)) {
                 if (beyond > 0) set(b.lo, a, span[6 * k + 4]);
-                walled[size_t(2 * a)] = true;
+                walled[size_t(2 * a)] = covers(k);
                 break;
             }
             beyond += all[k];
@@ -656,13 +683,13 @@ float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float
 // both sides (the room's air, and the padding beyond the face, one region through the room's
 // opening). A lone object's faces or extreme points have solid on their inner side.
 std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>& pts,
-                                    const std::vector<Vec3>& normals, const DiscCaster& caster,
-                                    const Bounds& b, float on_face) {
+                                    const std::vector<Vec3>& normals, const Bounds& b,
+                                    float on_face) {
     std::array<uint64_t, 6> on{}, both{};
     for (size_t i = 0; i < pts.size(); ++i) {
         const bool free2 = fs.state(fs.sides[i][0]) == 1 && fs.state(fs.sides[i][1]) == 1;
         for (const Vec3 d : {normals[i], -normals[i]}) {
-            if (caster.box_exit(pts[i], d) > on_face) continue;
+            if (DiscCaster::box_exit(b, pts[i], d) > on_face) continue;
             const size_t f = size_t(DiscCaster::exit_face(b, pts[i], d));
             ++on[f];
             both[f] += free2;
@@ -702,9 +729,13 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     // about 4 sigma out, and the wall's points scatter about as far in (kFaceNoiseSigmas). A ray
     // that leaves the box within two cells (and that reach) has left "at once".
     const float on_face = 0.5f * r_med + kFaceNoiseSigmas * noise;
+    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, walls, on_face);
+    // Holes count as walls only in a room's walls (free on both sides: the room's air, and the
+    // padding beyond, one region through the room's opening or the holes themselves): a lone
+    // object's flat face lies on the box too, and its far side is the object's own inside.
+    for (size_t f = 0; f < 6; ++f) walled[f] = walled[f] && room_wall[f];
     const DiscCaster caster(pts, normals, radii, b, walls, walled, r_med,
                             2 * g.h + kFaceNoiseSigmas * noise);
-    const std::array<bool, 6> room_wall = room_wall_faces(fs, pts, normals, caster, walls, on_face);
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
             const int plus = fs.state(fs.sides[i][0]), minus = fs.state(fs.sides[i][1]);

@@ -129,6 +129,14 @@ ScanPoints scan_scene(const Scene& sc, const ExactVisibility& exact, uint32_t sc
     const size_t hits = sweep(exact, at, pilot, seed).points.size();
     if (hits == 0) throw Error(fmt::format("{}: scan: the scanners' beams hit nothing", source));
     const double step = pilot * std::sqrt(double(hits) / double(points));
+    // The beams the step asks for: a scene the pilot barely hits, with many points asked,
+    // would take billions.
+    const double beams = double(at.size()) * (M_PI / step) * (2 * M_PI / step);
+    if (beams > 4e9)
+        throw Error(
+            fmt::format("{}: scan: {:.3g} beams for {} points ({} pilot hits): the "
+                        "scanners see too little of the scene",
+                        source, beams, points, hits));
     ScanPoints out = sweep(exact, at, step, seed);
     // Normals and radii are estimated from neighbours: a handful of hits says nothing.
     constexpr size_t kMinHits = 16;

@@ -102,14 +102,17 @@ void add_predict_options(CLI::App* c) {
                   "estimated), bare (normals and radii estimated, as for a scan) or, with "
                   "--scan, sensors (bare, with each point's scanner position in the file)")
         ->check(CLI::IsMember({"normals", "bare", "sensors"}));
-    c->add_option("--scan", opt.vp.scan,
-                  "Score a simulated scan instead of the scene's samples: this many scanners in "
-                  "the room sweep an equal-angle grid of beams (about --points hits in all; "
-                  "shadows, density falling with distance); built as --as-cloud says (default "
-                  "bare)")
-        ->check(CLI::Range(1u, 64u));
+    CLI::Option* scan =
+        c->add_option(
+             "--scan", opt.vp.scan,
+             "Score a simulated scan instead of the scene's samples: this many scanners in "
+             "the room sweep an equal-angle grid of beams (about --points hits in all; "
+             "shadows, density falling with distance); built as --as-cloud says (default "
+             "bare)")
+            ->check(CLI::Range(1u, 64u));
     c->add_option("--scan-seed", opt.vp.scan_seed, "Seed of the scanners' positions")
-        ->capture_default_str();
+        ->capture_default_str()
+        ->needs(scan);
     c->add_option("--roughness", opt.roughness,
                   "The predicate's roughness (scene units): an occluder of a point's own sheet "
                   "raised above it by less than this does not occlude; default: a raw cloud's "

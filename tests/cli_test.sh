@@ -597,6 +597,7 @@ expect_input_error "validate --as-cloud sensors without --scan" "$BLOCK" \
     validate "$BLOCK" --heights 4 --as-cloud sensors
 expect_usage_error "validate --scan 0" validate "$BLOCK" --scan 0
 expect_usage_error "validate --scan 65" validate "$BLOCK" --scan 65
+expect_usage_error "validate --scan-seed without --scan" validate "$BLOCK" --scan-seed 3
 expect_input_error "validate a missing scene" no_such_scene.json validate no_such_scene.json
 expect_input_error "validate a point cloud" "$DATA/nan.ply" validate "$DATA/nan.ply"
 expect_input_error "validate --splat-floor without --predict direct" "$BLOCK" \

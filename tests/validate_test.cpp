@@ -3,6 +3,7 @@
 #include "vmap/validate.h"
 
 #include <gtest/gtest.h>
+#include <tbb/task_arena.h>
 
 #include <cmath>
 #include <cstring>
@@ -317,6 +318,15 @@ TEST(Scan, PointsLieOnSurfacesTheirScannerSees) {
     ASSERT_EQ(again.points.size(), n);
     EXPECT_EQ(
         std::memcmp(again.points.positions.data(), s.points.positions.data(), n * sizeof(Vec3)), 0);
+    {  // the same on one thread
+        tbb::task_arena one(1);
+        const ScanPoints serial =
+            one.execute([&] { return scan_scene(sc, ex, 2, 20000, 7, kBlock); });
+        ASSERT_EQ(serial.points.size(), n);
+        EXPECT_EQ(std::memcmp(serial.points.positions.data(), s.points.positions.data(),
+                              n * sizeof(Vec3)),
+                  0);
+    }
     const ScanPoints other = scan_scene(sc, ex, 2, 20000, 8, kBlock);
     EXPECT_FALSE(other.scanners[0] == s.scanners[0]);
     EXPECT_THROW(scan_scene(sc, ex, 0, 20000, 7, kBlock), Error);
@@ -361,6 +371,9 @@ TEST(Validate, AScanIsScoredThroughTheRawCloudPath) {
     EXPECT_THROW(validate_scene(kBlock, q), Error);
     q = p;
     q.scan = 65;
+    EXPECT_THROW(validate_scene(kBlock, q), Error);
+    q = p;
+    q.sampling = "uniform";  // the beams make the points
     EXPECT_THROW(validate_scene(kBlock, q), Error);
 }
 

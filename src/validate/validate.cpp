@@ -79,6 +79,11 @@ void ValidateParams::check(const std::string& src) const {
         throw Error(fmt::format("{}: scan: {} scanners out of range (0..64)", src, p.scan));
     if (p.scan && !p.cloud.empty())
         throw Error(fmt::format("{}: give scan or cloud, not both", src));
+    if (p.scan && !p.sampling.empty())
+        throw Error(
+            fmt::format("{}: sampling: a scan's points come from its beams, not a sample "
+                        "pattern (give scan or sampling, not both)",
+                        src));
     if (!p.as_cloud.empty() && !p.cloud.empty())
         throw Error(fmt::format("{}: give as_cloud or cloud, not both", src));
     if (!(p.noise >= 0 && p.noise <= 10))

@@ -87,6 +87,9 @@ struct Scene {
 // ("scenes/x.json: meshes[0].file: ../models/nope.off: no such file"; "scan.xyz: has no faces").
 Scene load_scene(const std::string& path);
 
+// The total area of the scene's surfaces (room, light and meshes), in squared scene units.
+double scene_area(const Scene& sc);
+
 // Whether `vmap build/render/gi/validate` take the file as a scene: a .json file, or a mesh
 // file (model_has_faces) unless `as_points` asks for its vertices as a point cloud.
 bool is_scene_input(const std::string& path, bool as_points = false);

@@ -388,7 +388,7 @@ class DiscCaster {
     // How far an escaping ray counts as travelling: to the box when it leaves at once (a
     // wall's outer side), unboundedly far through an open side of the scene, and nowhere
     // through a face that holds a room's wall. There it slipped through a hole in the wall: a
-    // gap between discs, or in a scan a shadow, wall that no scanner saw. A surface seen from
+    // gap between discs, or in a scan a shadow: wall that no scanner saw. A surface seen from
     // one side only (a table top scanned from below) casts its shadow behind itself, so its
     // back's rays find the holes while its front's meet the scanned walls: the hole counts as
     // what lies behind a wall, where nothing was seen either. (Counted as travelling to the
@@ -477,9 +477,8 @@ std::optional<Vec3> dominant_axis(const std::vector<Vec3>& normals, Usable usabl
 // span at least half the cloud's core extent (2nd-98th percentile) in both other axes is a
 // wall; the face moves to it if at most kStrayShare of the points lie beyond it, and counts as
 // walled (`walled`, by face: axis * 2 + (side > 0)) when the wall covers at least kWallCover
-// of the face. A face with no wall near it (an open side, a
-// lone object) keeps its place. In the room's frame (vote_sides), where walls are perpendicular
-// to the axes.
+// of the face. A face with no wall near it (an open side, a lone object) keeps its place. In
+// the room's frame (vote_sides), where walls are perpendicular to the axes.
 constexpr double kStrayShare = 0.02;
 constexpr float kFaceNoiseSigmas = 8;
 constexpr size_t kWallPoints = 64;

@@ -329,13 +329,7 @@ void read_sampling(const Ctx& cx, const json& j, Scene& sc) {
     if (sampling.contains("points"))
         sc.points = uint64_t(cx.number(sampling["points"], "sampling.points", 1, 5e7));
     if (sampling.contains("density")) {
-        double area = 0;
-        for (const auto& s : sc.surfaces)
-            for (const auto& t : s.mesh.triangles) {
-                const Vec3 a = s.mesh.vertices[t[0]], b = s.mesh.vertices[t[1]],
-                           c = s.mesh.vertices[t[2]];
-                area += 0.5 * length(cross(b - a, c - a));
-            }
+        const double area = scene_area(sc);
         const double dens = cx.number(sampling["density"], "sampling.density", 1e-6, 1e12);
         const double n = std::ceil(dens * area);
         if (n > 5e7) cx.fail("sampling.density", fmt::format("gives {} points (at most 5e7)", n));
@@ -349,7 +343,8 @@ void read_sampling(const Ctx& cx, const json& j, Scene& sc) {
             sc.pattern = parse<SamplePattern>(p, "sampling.pattern");
         } catch (const Error&) {
             cx.fail("sampling.pattern", fmt::format("unknown value '{}' (expected uniform or "
-                                                    "blue-noise)", p));
+                                                    "blue-noise)",
+                                                    p));
         }
     }
 }
@@ -364,8 +359,8 @@ void read_octree(const Ctx& cx, const json& j, Scene& sc) {
     if (o.contains("leaf_points"))
         op.leaf_points = int(cx.number(o["leaf_points"], "octree.leaf_points", 1, 1e6));
     if (o.contains("delta_floor"))
-        sc.delta_floor = float(cx.number(o["delta_floor"], "octree.delta_floor", 0,
-                                         OctreeParams::kDeltaFloorLimit));
+        sc.delta_floor = float(
+            cx.number(o["delta_floor"], "octree.delta_floor", 0, OctreeParams::kDeltaFloorLimit));
     sc.octree = op;
 }
 
@@ -480,6 +475,17 @@ Scene load_scene(const std::string& path) {
     read_camera(cx, j, sc);
     if (!sc.has_room) set_extent(path, sc);
     return sc;
+}
+
+double scene_area(const Scene& sc) {
+    double area = 0;
+    for (const SceneSurface& s : sc.surfaces)
+        for (const auto& t : s.mesh.triangles) {
+            const Vec3 a = s.mesh.vertices[t[0]], b = s.mesh.vertices[t[1]],
+                       c = s.mesh.vertices[t[2]];
+            area += 0.5 * length(cross(b - a, c - a));
+        }
+    return area;
 }
 
 }  // namespace vmap

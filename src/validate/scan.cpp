@@ -149,13 +149,7 @@ ScanPoints scan_scene(const Scene& sc, const ExactVisibility& exact, uint32_t sc
     out.step = step;
     // Every point's disc as if the scan's points covered the surfaces evenly: the "sample
     // spacing" that --noise counts in.
-    double area = 0;
-    for (const SceneSurface& s : sc.surfaces)
-        for (const auto& t : s.mesh.triangles) {
-            const Vec3 a = s.mesh.vertices[t[0]], b = s.mesh.vertices[t[1]],
-                       c = s.mesh.vertices[t[2]];
-            area += 0.5 * double(length(cross(b - a, c - a)));
-        }
+    const double area = scene_area(sc);
     const size_t n = out.points.size();
     out.points.radii.assign(n, float(std::sqrt(area / (M_PI * double(std::max<size_t>(n, 1))))));
     return out;

@@ -386,8 +386,9 @@ void run_scene(const std::string& path, const Options& o) {
         thn.signs() + fmt::format(" ({})", thn.n), Tally::median(all.ratio),
         Tally::median(all.old_ratio), Tally::median(obj.ratio), Tally::median(obj.old_ratio),
         Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
-    fmt::print(stderr, "{}: {}; {} by space, {} by rays, {} by shape, {} by neighbours\n", sc.name,
-               rep.method, rep.by_space, rep.by_rays, rep.by_shape, rep.by_neighbours);
+    fmt::print(stderr, "{}: {}; {} by space, {} by view, {} by rays, {} by shape, {} by neighbours\n",
+               sc.name, rep.method, rep.by_space, rep.by_view, rep.by_rays, rep.by_shape,
+               rep.by_neighbours);
     if (o.per_surface) print_per_surface(sc, truth, raw, surf, inside, thin);
 }
 

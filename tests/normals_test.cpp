@@ -515,6 +515,116 @@ TEST(Orientation, ASheetScannedFromOneSideFacesAwayFromItsShadow) {
     EXPECT_GT(share_right(ps, truth, 0, sheet), 0.99);  // the room stays right
 }
 
+// What a scanner on a tripod records: beams on an equal-angle grid (elevation and azimuth in
+// steps of `step` degrees) from `at`, each keeping its first hit among the room's walls
+// (x, y in [0, 1], the back z = 1; the front z = 0 open; only with `walls`) and a trough: half
+// a cylinder along x (radius 0.15, axis at y = 0.35, z = 0.7, x in [0.2, 0.8]), its open side
+// toward the scanner, so that the scanner sees only its concave inside. truth: the side hit,
+// toward the scanner. trough_begin: where the trough's points start (they come last).
+struct Scanned {
+    PointSet points;
+    std::vector<Vec3> truth;
+    size_t trough_begin = 0;
+};
+
+Scanned scan_trough(Vec3 at, float step, bool walls) {
+    constexpr float kPi = 3.14159265f, r = 0.15f, yc = 0.35f, zc = 0.7f;
+    Scanned out;
+    std::vector<Vec3> tp, tn;
+    const int rows = int(180 / step), cols = int(360 / step);
+    for (int i = 1; i < rows; ++i) {
+        const float el = (-90 + step * float(i)) * kPi / 180;
+        for (int j = 0; j < cols; ++j) {
+            const float az = step * float(j) * kPi / 180;
+            const Vec3 d{std::cos(el) * std::cos(az), std::sin(el), std::cos(el) * std::sin(az)};
+            float best = std::numeric_limits<float>::max();
+            Vec3 n{};
+            bool trough = false;
+            if (walls) {
+                const float o[3] = {at.x, at.y, at.z}, v[3] = {d.x, d.y, d.z};
+                for (int a = 0; a < 3; ++a)
+                    for (const float plane : {0.0f, 1.0f}) {
+                        if (a == 2 && plane == 0) continue;  // the open front
+                        const float t = v[a] != 0 ? (plane - o[a]) / v[a] : -1;
+                        const Vec3 p = at + d * t;
+                        const float e = 1e-4f;  // the walls end at the room's edges
+                        if (!(t > 0 && t < best) || p.x < -e || p.x > 1 + e || p.y < -e ||
+                            p.y > 1 + e || p.z < -e || p.z > 1 + e)
+                            continue;
+                        best = t;
+                        n = {a == 0 ? (plane == 0 ? 1.f : -1.f) : 0.f,
+                             a == 1 ? (plane == 0 ? 1.f : -1.f) : 0.f, a == 2 ? -1.f : 0.f};
+                    }
+            }
+            // (at.y + t d.y - yc)^2 + (at.z + t d.z - zc)^2 = r^2
+            const float py = at.y - yc, pz = at.z - zc;
+            const float qa = d.y * d.y + d.z * d.z, qb = 2 * (py * d.y + pz * d.z),
+                        qc = py * py + pz * pz - r * r, disc = qb * qb - 4 * qa * qc;
+            if (qa > 0 && disc >= 0)
+                for (const float sg : {-1.0f, 1.0f}) {
+                    const float t = (-qb + sg * std::sqrt(disc)) / (2 * qa);
+                    const Vec3 p = at + d * t;
+                    if (!(t > 0 && t < best) || p.x < 0.2f || p.x > 0.8f || p.z < zc) continue;
+                    best = t;
+                    n = Vec3{0, yc - p.y, zc - p.z} / r;  // the inside, which the scanner sees
+                    trough = true;
+                }
+            if (best == std::numeric_limits<float>::max()) continue;
+            const Vec3 p = at + d * best;
+            (trough ? tp : out.points.positions).push_back(p);
+            (trough ? tn : out.truth).push_back(n);
+        }
+    }
+    out.trough_begin = out.points.size();
+    out.points.positions.insert(out.points.positions.end(), tp.begin(), tp.end());
+    out.truth.insert(out.truth.end(), tn.begin(), tn.end());
+    return out;
+}
+
+// A scan from inside a room: the place that sees the most points stands in for the scanner
+// (whose position the file does not give), and a sheet scanned from one side takes the side
+// that place sees. The trough's concave inside, which the shape rule (face away from what the
+// sheet wraps around) turns outward: none of it right without the view.
+TEST(Orientation, AScanFromInsideARoomFacesWhereItsScannerStood) {
+    Scanned scan = scan_trough({0.5f, 0.6f, 0.3f}, 1.5f, true);
+    ASSERT_GT(scan.points.size() - scan.trough_begin, 500u);
+    OrientationReport rep;
+    estimate_normals(scan.points, {}, "scan", &rep);
+    EXPECT_GT(rep.by_view, scan.points.size() / 2);
+    EXPECT_NE(rep.method.find("a scan from inside a room"), std::string::npos) << rep.method;
+    EXPECT_GT(share_right(scan.points, scan.truth, scan.trough_begin, scan.points.size()), 0.95);
+    EXPECT_GT(share_right(scan.points, scan.truth, 0, scan.trough_begin), 0.99);
+    // The view's search counts and chooses the same on one thread.
+    PointSet one = scan.points;
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 1);
+    tbb::task_arena arena(1);
+    arena.execute([&] { estimate_normals(one); });
+    for (size_t i = 0; i < one.size(); ++i) ASSERT_EQ(one.normals[i], scan.points.normals[i]) << i;
+}
+
+// Not a scan from inside a room: the trough scanned without a room around it (nothing fixes
+// where its scanner stood: a sheet looks the same from either side), and the room and the
+// trough sampled evenly (a sampler's spacing, spread over no range). No view signs them.
+TEST(Orientation, OnlyAScanFromInsideARoomIsSignedByWhereItsScannerStood) {
+    Scanned scan = scan_trough({0.5f, 0.6f, 0.3f}, 1.5f, false);
+    ASSERT_GT(scan.points.size(), 500u);
+    OrientationReport rep;
+    estimate_normals(scan.points, {}, "lone scan", &rep);
+    EXPECT_EQ(rep.by_view, 0u) << rep.method;
+
+    std::vector<Vec3> truth;
+    PointSet even = room(true, truth, 43, 3000);
+    std::mt19937 rng(44);
+    std::uniform_real_distribution<float> u(0.0f, 1.0f);
+    for (int i = 0; i < 2000; ++i) {
+        const float a = 3.14159265f * u(rng), x = 0.2f + 0.6f * u(rng);
+        even.positions.push_back({x, 0.35f + 0.15f * std::cos(a), 0.7f + 0.15f * std::sin(a)});
+        truth.push_back({0, std::cos(a), std::sin(a)});  // the winding: outward
+    }
+    estimate_normals(even, {}, "samples", &rep);
+    EXPECT_EQ(rep.by_view, 0u) << rep.method;
+}
+
 TEST(Orientation, AFewPointsOutsideTheRoomDoNotTurnItsWalls) {
     // A small speck of points beyond a corner of an open room (a stray return past a window, a
     // registration outlier) pushes the cloud's bounds out on three sides. The walls there no

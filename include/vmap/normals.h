@@ -44,6 +44,8 @@ struct OrientationReport {
     size_t by_rays = 0;        // points decided by casting rays (both sides free or unknown)
     size_t by_shape = 0;       // points of open sheets decided by the sheet's shape (both sides
                                // free: the side away from what the sheet wraps around)
+    size_t by_view = 0;        // points seen from one side only from the viewpoints that the
+                               // points' visibility implies (where a scanner could have stood)
     size_t by_neighbours = 0;  // voted points turned to agree with their surface (the
                                // neighbour check of ray votes, then the votes' spread)
 };

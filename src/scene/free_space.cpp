@@ -309,6 +309,15 @@ class DiscCaster {
     // Distance from point i along d to the first disc beyond tmin, or -1 if it meets none.
     float first_hit(uint32_t i, Vec3 d, float tmin) const { return travel(i, d, tmin); }
 
+    // Whether point i sees the place v: no disc between them past tmin.
+    bool sees(uint32_t i, Vec3 v, float tmin) const {
+        const Vec3 to = v - pts_[i];
+        const float dist = length(to);
+        if (!(dist > tmin)) return false;
+        const float t = travel(i, to / dist, tmin, dist);
+        return t < 0;
+    }
+
     // Distance from o along d to the cloud's bounding box.
     float box_exit(Vec3 o, Vec3 d) const { return box_exit(box_, o, d); }
     static float box_exit(const Bounds& box, Vec3 o, Vec3 d) {
@@ -399,8 +408,10 @@ class DiscCaster {
         return walled_[size_t(exit_face(box_, pts_[self], d))] ? 0.f : far_;
     }
 
-    // Distance to the first disc along the ray (3D DDA over the cells), or -1 if none.
-    float travel(uint32_t self, Vec3 d, float tmin) const {
+    // Distance to the first disc along the ray (3D DDA over the cells) before tmax, or -1 if
+    // none.
+    float travel(uint32_t self, Vec3 d, float tmin,
+                 float tmax = std::numeric_limits<float>::max()) const {
         const Vec3 o = pts_[self];
         std::array<int, 3> c;
         if (!grid_.cell(o, c)) return -1;
@@ -415,15 +426,14 @@ class DiscCaster {
             t_next[a] = std::fabs(edge - oo[a]) * inv;
             t_delta[a] = grid_.h * inv;
         }
-        float best = std::numeric_limits<float>::max();
+        float best = tmax;
         for (;;) {
             best = hit_in_cell(grid_.at(c[0], c[1], c[2]), self, o, d, tmin, best);
             const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2)
                                                 : (t_next[1] < t_next[2] ? 1 : 2);
-            if (best <= t_next[a]) return best;
+            if (best <= t_next[a]) return best < tmax ? best : -1;
             c[a] += step[a];
-            if (c[a] < 0 || c[a] >= grid_.n[a])
-                return best < std::numeric_limits<float>::max() ? best : -1;
+            if (c[a] < 0 || c[a] >= grid_.n[a]) return best < tmax ? best : -1;
             t_next[a] += t_delta[a];
         }
     }
@@ -600,6 +610,7 @@ std::vector<Vec3> in_frame(const std::vector<Vec3>& v, const std::array<Vec3, 3>
 
 // Which region each point's two sides face, and which regions are free.
 struct FreeSpace {
+    std::vector<int32_t> label;                 // per cell: Regions::label
     std::vector<std::array<int32_t, 2>> sides;  // per point: the region along +n, along -n
     Nesting nesting;
     int parity = 0;  // regions of this nesting-depth parity are free
@@ -613,7 +624,7 @@ struct FreeSpace {
 
 FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
                      const std::vector<float>& radii, const Grid& g, float r_med) {
-    const Regions regions = flood_fill(g, occupancy(pts, normals, radii, 6 * r_med, g));
+    Regions regions = flood_fill(g, occupancy(pts, normals, radii, 6 * r_med, g));
     FreeSpace fs;
     const size_t n = pts.size();
     fs.sides.resize(n);
@@ -628,6 +639,7 @@ FreeSpace free_space(const std::vector<Vec3>& pts, const std::vector<Vec3>& norm
         for (int32_t region : sd)
             if (region >= 0) ++faces[region];
     fs.parity = free_parity(fs.nesting, regions, faces, n, fs.method);
+    fs.label = std::move(regions.label);
     return fs;
 }
 
@@ -699,6 +711,185 @@ std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>
     return wall;
 }
 
+// Where the scanner stood (step 6 of vote_sides). A scanner records only what it sees, from the
+// side it faces, so from where it stood it sees every point it recorded: the free place that
+// sees the most points finds it, or a place that sees as much. Candidates are the cells of a
+// kViewLattice lattice over the room's box whose neighbourhood (kViewClear cells each way) is
+// free space, clear of every surface, and places 1.5 diagonals from the box's centre in 26
+// directions, beyond faces that are not a room's walls (its open side): the outer side of a
+// wall is not free. The best candidate is then refined by steps along the axes toward more
+// points seen, halved down to a cell. As far as the points tell, the scanner stood anywhere that
+// sees within kViewTolerance as many: the view's region (the box of such candidates and of the
+// places probed around the refined one, in 26 directions at doubling distances), which a point's
+// tangent plane must not cut for the view to sign it.
+//
+// Only where the cloud is a scan from inside a room (scanned_room): in a sampler's cloud every
+// surface is there, the backs of open meshes too, and their sides follow the modeller's winding
+// (the shape rule), not the side a place in the room sees; and a lone object scanned from one
+// side looks the same from inside its cap as from outside.
+constexpr int kViewLattice = 6;
+constexpr int kViewClear = 2;
+constexpr size_t kViewSamples = 1024;    // the points that choose the view
+constexpr float kViewMinCos = 0.1f;      // not grazing: about 6 degrees off the tangent plane
+constexpr double kViewTolerance = 0.01;  // places this close in coverage may be the scanner's
+
+// A scan's spacing follows the scanner's distance and obliquity (the beams' angular step times
+// the range, over the cosine), over a factor of several in a room; a sampler's does not: the
+// standard deviation of the log of the splat radii is 0.07-0.10 on the test scenes' even
+// samples, 0.23-0.25 on uniform ones, 0.64-0.91 on scans of their rooms from one to four
+// scanners (docs/validation.md, "Scans: where the scanner stood").
+constexpr double kScanSpread = 0.4;
+// ... and a room around the scanner fixes where it stood: its walls on at least this many faces.
+constexpr int kScanRoomFaces = 3;
+
+bool scanned_room(const std::vector<float>& radii, const std::array<bool, 6>& room_wall) {
+    if (std::count(room_wall.begin(), room_wall.end(), true) < kScanRoomFaces) return false;
+    double sum = 0, sum2 = 0, count = 0;
+    for (const float r : radii) {
+        if (!(r > 0)) continue;
+        const double l = std::log(double(r));
+        sum += l, sum2 += l * l, count += 1;
+    }
+    if (count < 2) return false;
+    const double mean = sum / count;
+    return std::sqrt(std::max(0.0, sum2 / count - mean * mean)) >= kScanSpread;
+}
+
+std::vector<Vec3> view_candidates(const Grid& g, const FreeSpace& fs, const Bounds& box,
+                                  const std::array<bool, 6>& room_wall) {
+    std::vector<Vec3> out;
+    const Vec3 ext = box.hi - box.lo;
+    auto clear = [&](const std::array<int, 3>& c) {
+        for (int dz = -kViewClear; dz <= kViewClear; ++dz)
+            for (int dy = -kViewClear; dy <= kViewClear; ++dy)
+                for (int dx = -kViewClear; dx <= kViewClear; ++dx) {
+                    const int x = c[0] + dx, y = c[1] + dy, z = c[2] + dz;
+                    if (x < 0 || y < 0 || z < 0 || x >= g.n[0] || y >= g.n[1] || z >= g.n[2])
+                        return false;
+                    if (fs.state(fs.label[g.at(x, y, z)]) != 1) return false;
+                }
+        return true;
+    };
+    const auto at = [](int m) { return (float(m) + 0.5f) / float(kViewLattice); };
+    for (int k = 0; k < kViewLattice; ++k)
+        for (int j = 0; j < kViewLattice; ++j)
+            for (int i = 0; i < kViewLattice; ++i) {
+                const Vec3 p{box.lo.x + ext.x * at(i), box.lo.y + ext.y * at(j),
+                             box.lo.z + ext.z * at(k)};
+                std::array<int, 3> c;
+                if (g.cell(p, c) && clear(c)) out.push_back(p);
+            }
+    const Vec3 mid = (box.lo + box.hi) * 0.5f;
+    const float reach = 1.5f * length(ext);
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+                if (dx == 0 && dy == 0 && dz == 0) continue;
+                Vec3 d{float(dx), float(dy), float(dz)};
+                d = d / length(d);
+                if (!room_wall[size_t(DiscCaster::exit_face(box, mid, d))])
+                    out.push_back(mid + d * reach);
+            }
+    return out;
+}
+
+// The place the scanner stood, as far as the points tell: `at`, the refined place that sees
+// the most of them, and `region`, the box of the places that see about as many.
+struct View {
+    Vec3 at;
+    Bounds region;
+    size_t seen = 0, samples = 0;  // of kViewSamples points at a fixed stride
+};
+
+// Ties go to the lower candidate and the first step tried, so the view does not depend on the
+// number of threads. step0: the lattice's spacing; h: the voxel grid's cell.
+std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                              const std::vector<float>& radii, float r_med, float noise,
+                              const std::vector<Vec3>& cand, float step0, float h) {
+    const size_t n = pts.size(), m = std::min(n, kViewSamples), c = cand.size();
+    if (c == 0 || m == 0) return std::nullopt;
+    auto sample = [&](size_t j) { return uint32_t(j * n / m); };
+    auto sees = [&](size_t j, Vec3 x) {
+        const uint32_t i = sample(j);
+        return caster.sees(i, x, ray_start(radii[i], r_med, noise));
+    };
+    // How many samples x sees.
+    auto seen_from = [&](Vec3 x) {
+        std::atomic<size_t> count{0};
+        parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
+            size_t local = 0;
+            for (size_t j = chunk_begin; j < chunk_end; ++j) local += sees(j, x);
+            count += local;
+        });
+        return count.load();
+    };
+    std::vector<std::atomic<size_t>> gain(c);
+    parallel_for_range<size_t>(c * m, 256, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t k = chunk_begin; k < chunk_end; ++k)
+            if (sees(k % m, cand[k / m])) gain[k / m].fetch_add(1, std::memory_order_relaxed);
+    });
+    size_t best = 0;
+    for (size_t v = 1; v < c; ++v)
+        if (gain[v] > gain[best]) best = v;
+    Vec3 x = cand[best];
+    size_t g = gain[best];
+    for (float step = 0.5f * step0; step >= h;) {
+        Vec3 next = x;
+        size_t next_seen = g;
+        for (int a = 0; a < 6; ++a) {
+            Vec3 d{0, 0, 0};
+            (a / 2 == 0 ? d.x : a / 2 == 1 ? d.y : d.z) = a % 2 ? -step : step;
+            const size_t s = seen_from(x + d);
+            if (s > next_seen) next = x + d, next_seen = s;
+        }
+        if (next_seen > g) {
+            x = next, g = next_seen;
+        } else {
+            step *= 0.5f;
+        }
+    }
+    const size_t near = g - std::min(g, std::max<size_t>(2, size_t(kViewTolerance * double(g))));
+    View view{x, {x, x}, g, m};
+    auto extend = [&](Vec3 q) {
+        Bounds& r = view.region;
+        r.lo = {std::min(r.lo.x, q.x), std::min(r.lo.y, q.y), std::min(r.lo.z, q.z)};
+        r.hi = {std::max(r.hi.x, q.x), std::max(r.hi.y, q.y), std::max(r.hi.z, q.z)};
+    };
+    for (size_t v = 0; v < c; ++v)
+        if (gain[v] >= near) extend(cand[v]);
+    for (int dz = -1; dz <= 1; ++dz)
+        for (int dy = -1; dy <= 1; ++dy)
+            for (int dx = -1; dx <= 1; ++dx) {
+                if (dx == 0 && dy == 0 && dz == 0) continue;
+                Vec3 d{float(dx), float(dy), float(dz)};
+                d = d / length(d);
+                for (float s = h; s <= 2 * step0; s *= 2) {
+                    if (seen_from(x + d * s) < near) break;
+                    extend(x + d * s);
+                }
+            }
+    return view;
+}
+
+// The side of point i (+1 along its normal, -1 against it) that the view sees it from: 0 when
+// it does not see it, sees it grazing, or the point's tangent plane cuts the view's region (the
+// scanner may have stood on either side).
+int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
+              const std::vector<Vec3>& normals, uint32_t i, const View& v, float tmin) {
+    const Vec3 p = pts[i], n = normals[i], to = v.at - p;
+    const float dist = length(to);
+    if (!(dist > 0)) return 0;
+    const float c = dot(n, to) / dist;
+    if (!(std::fabs(c) >= kViewMinCos)) return 0;
+    const float s = c > 0 ? 1.0f : -1.0f;
+    for (int k = 0; k < 8; ++k) {
+        const Vec3 q{k & 1 ? v.region.hi.x : v.region.lo.x, k & 2 ? v.region.hi.y : v.region.lo.y,
+                     k & 4 ? v.region.hi.z : v.region.lo.z};
+        if (!(s * dot(n, q - p) > 0)) return 0;
+    }
+    return caster.sees(i, v.at, tmin) ? int(s) : 0;
+}
+
 }  // namespace
 
 SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>& world_normals,
@@ -767,6 +958,27 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             v.weight[i] = cue == SideCue::kSpace ? 2.0f : std::fabs(side);
         }
     });
+    if (!scanned_room(radii, room_wall)) return v;
+    const std::optional<View> view =
+        find_view(caster, pts, radii, r_med, noise, view_candidates(g, fs, walls, room_wall),
+                  max_extent(walls) / float(kViewLattice), g.h);
+    if (!view) return v;
+    parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
+            if (v.cue[i] == SideCue::kSpace) continue;
+            const int side = view_side(caster, pts, normals, uint32_t(i), *view,
+                                       ray_start(radii[i], r_med, noise));
+            if (side == 0) continue;
+            v.sign[i] = int8_t(side);
+            v.cue[i] = SideCue::kView;
+            v.weight[i] = 2.0f;
+        }
+    });
+    const Vec3 at = frame[0] * view->at.x + frame[1] * view->at.y + frame[2] * view->at.z;
+    v.view = at;
+    v.method += fmt::format("; a scan from inside a room, its scanner at about ({:.4g}, {:.4g}, "
+                            "{:.4g}) (sees {} of {} points sampled)",
+                            at.x, at.y, at.z, view->seen, view->samples);
     return v;
 }
 

@@ -782,7 +782,7 @@ size_t shape_votes(const std::vector<Vec3>& pts, const Graph& g,
         if (wrap / count < kMinWrap * rms) continue;
         for (const uint32_t m : sheet) {
             const double off = ddot(to_d(pts[m]) - c, to_d(normals[m]));
-            if (off == 0) continue;
+            if (off == 0 || votes.cue[m] == detail::SideCue::kView) continue;
             votes.sign[m] = int8_t(off > 0 ? 1 : -1);
             votes.cue[m] = detail::SideCue::kShape;
             votes.weight[m] = float(std::min(1.0, std::fabs(off) / rms));
@@ -877,6 +877,7 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 fixed[i] = 1;
                 ++(votes.cue[i] == detail::SideCue::kSpace  ? rep.by_space
                    : votes.cue[i] == detail::SideCue::kRays ? rep.by_rays
+                   : votes.cue[i] == detail::SideCue::kView ? rep.by_view
                                                             : rep.by_shape);
             }
             rep.by_neighbours = agree_with_neighbours(pts, fits, votes, normals);

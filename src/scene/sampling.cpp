@@ -263,12 +263,14 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
         : estimate      ? "plane, then jet fits"
                         : "as given",
         rep.method);
-    const size_t voted = rep.by_space + rep.by_rays + rep.by_shape;
+    const size_t voted = rep.by_space + rep.by_rays + rep.by_shape + rep.by_view;
     if (!sensed && voted > 0)
         line += fmt::format(
-            "; {} points by free space, {} by rays, {} by their open sheet's shape ({} of those "
-            "then turned by their neighbours' votes), {} from their neighbours",
-            rep.by_space, rep.by_rays, rep.by_shape, rep.by_neighbours, ps.size() - voted);
+            "; {} points by free space, {} by viewpoints, {} by rays, {} by their open sheet's "
+            "shape ({} of those then turned by their neighbours' votes), {} from their "
+            "neighbours",
+            rep.by_space, rep.by_view, rep.by_rays, rep.by_shape, rep.by_neighbours,
+            ps.size() - voted);
     return line;
 }
 

@@ -592,6 +592,11 @@ TEST(Orientation, AScanFromInsideARoomFacesWhereItsScannerStood) {
     estimate_normals(scan.points, {}, "scan", &rep);
     EXPECT_GT(rep.by_view, scan.points.size() / 2);
     EXPECT_NE(rep.method.find("a scan from inside a room"), std::string::npos) << rep.method;
+    // In the room, in front of the trough's opening (it sees the inside).
+    ASSERT_TRUE(rep.scanner.has_value());
+    EXPECT_TRUE(rep.scanner->x > 0 && rep.scanner->x < 1 && rep.scanner->y > 0 &&
+                rep.scanner->y < 1 && rep.scanner->z < 0.7f)
+        << rep.scanner->x << " " << rep.scanner->y << " " << rep.scanner->z;
     EXPECT_GT(share_right(scan.points, scan.truth, scan.trough_begin, scan.points.size()), 0.95);
     EXPECT_GT(share_right(scan.points, scan.truth, 0, scan.trough_begin), 0.99);
     // The view's search counts and chooses the same on one thread.

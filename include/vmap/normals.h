@@ -4,6 +4,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -44,8 +45,9 @@ struct OrientationReport {
     size_t by_rays = 0;        // points decided by casting rays (both sides free or unknown)
     size_t by_shape = 0;       // points of open sheets decided by the sheet's shape (both sides
                                // free: the side away from what the sheet wraps around)
-    size_t by_view = 0;        // points seen from one side only from the viewpoints that the
-                               // points' visibility implies (where a scanner could have stood)
+    size_t by_view = 0;        // points signed toward where the scanner stood (a bare scan
+                               // from inside a room: the free place that sees the most points)
+    std::optional<Vec3> scanner;  // that place, when the cloud is such a scan
     size_t by_neighbours = 0;  // voted points turned to agree with their surface (the
                                // neighbour check of ray votes, then the votes' spread)
 };

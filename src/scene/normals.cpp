@@ -884,6 +884,7 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
             rep.by_neighbours +=
                 spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals, fits.slack);
             rep.method = votes.method;
+            rep.scanner = votes.view;
             propagate(pts, centroid, g, fits.degenerate, fixed, normals, fits.slack);
             return;
         }

@@ -296,6 +296,32 @@ TEST(Ply, PointCloudsRoundTripExactlyThroughWriterInBothEncodings) {
     }
 }
 
+// A scan's per-point scanner positions (sensor_x/y/z) go out and come back, in both encodings;
+// a count that does not match the points, or a non-finite one, is refused with no file left.
+TEST(Ply, SensorPositionsRoundTripThroughWriter) {
+    ScratchDir dir;
+    const PointSet points = sample_points(300, true, false, false);
+    std::vector<Vec3> sensors(points.size());
+    for (size_t i = 0; i < sensors.size(); ++i)
+        sensors[i] = {0.25f * float(i % 4), 1.5f, -0.125f * float(i % 3)};
+    for (bool binary : {true, false}) {
+        SCOPED_TRACE(binary ? "binary" : "ascii");
+        const std::string path = dir.path("sensors.ply");
+        write_ply(path, points, binary, sensors);
+        const ModelData m = read_ply(path);
+        expect_same_points(points, m.points);
+        ASSERT_EQ(m.sensors.size(), sensors.size());
+        for (size_t i = 0; i < sensors.size(); ++i) EXPECT_EQ(m.sensors[i], sensors[i]) << i;
+    }
+    const std::string bad = dir.path("bad.ply");
+    std::vector<Vec3> short_list(sensors.begin(), sensors.end() - 1);
+    EXPECT_THROW(write_ply(bad, points, true, short_list), Error);
+    std::vector<Vec3> nan_list = sensors;
+    nan_list[7].y = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_THROW(write_ply(bad, points, true, nan_list), Error);
+    EXPECT_FALSE(std::filesystem::exists(bad));
+}
+
 // The writer only writes little-endian; flipping every value of its output by hand gives a
 // big-endian file that must read back the same.
 TEST(Ply, BigEndianBinaryRoundTripsThroughWriter) {

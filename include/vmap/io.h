@@ -105,8 +105,10 @@ bool model_has_faces(const std::string& path);
 
 // Writes a binary little-endian PLY point cloud with x,y,z, nx,ny,nz when present, and
 // red,green,blue (uchar) when present, a float "radius" when present, and float
-// emission_r,emission_g,emission_b when some point emits. Written to a
-// temporary name and renamed, so a failure leaves no half-written file.
-void write_ply(const std::string& path, const PointSet& points, bool binary = true);
+// emission_r,emission_g,emission_b when some point emits, and sensor_x,sensor_y,sensor_z when
+// `sensors` gives one per point (a scan's per-point scanner positions, in the points'
+// coordinates). Written to a temporary name and renamed, so a failure leaves no half-written file.
+void write_ply(const std::string& path, const PointSet& points, bool binary = true,
+               const std::vector<Vec3>& sensors = {});
 
 }  // namespace vmap

@@ -868,7 +868,8 @@ namespace {
 
 // Refuses what read_ply would refuse, so that every file written can be read back; returns
 // whether any point emits (the emission columns are written only then).
-bool check_writable(const std::string& path, const PointSet& points) {
+bool check_writable(const std::string& path, const PointSet& points,
+                    const std::vector<Vec3>& sensors) {
     const size_t n = points.size();
     auto check_size = [&](size_t size, const char* what) {
         if (size != 0 && size != n) {
@@ -878,6 +879,7 @@ bool check_writable(const std::string& path, const PointSet& points) {
     check_size(points.normals.size(), "normals");
     check_size(points.colors.size(), "colours");
     check_size(points.radii.size(), "radii");
+    check_size(sensors.size(), "sensor positions");
     check_size(points.emission.size(), "emission values");
     bool emits = false;
     for (const Vec3& e : points.emission) emits |= e.x > 0 || e.y > 0 || e.z > 0;
@@ -886,6 +888,9 @@ bool check_writable(const std::string& path, const PointSet& points) {
         if (!is_finite(points.positions[i])) fail(path, "point ", i, ": non-finite position");
         if (points.has_normals() && !is_finite(points.normals[i])) {
             fail(path, "point ", i, ": non-finite normal");
+        }
+        if (!sensors.empty() && !is_finite(sensors[i])) {
+            fail(path, "point ", i, ": non-finite sensor position");
         }
         if (points.has_radii() && !(points.radii[i] >= 0 && std::isfinite(points.radii[i]))) {
             fail(path, "point ", i, ": invalid radius ", points.radii[i]);
@@ -902,7 +907,7 @@ bool check_writable(const std::string& path, const PointSet& points) {
 
 bool shifted(const PointSet& points) { return points.has_origin(); }
 
-std::string ply_header(const PointSet& points, bool binary, bool emits) {
+std::string ply_header(const PointSet& points, bool binary, bool emits, bool sensed) {
     const size_t n = points.size();
     std::string header = "ply\nformat ";
     header += binary ? "binary_little_endian" : "ascii";
@@ -921,13 +926,18 @@ std::string ply_header(const PointSet& points, bool binary, bool emits) {
             "property float emission_r\nproperty float emission_g\n"
             "property float emission_b\n";
     }
+    if (sensed) {
+        header += shifted(points)
+                      ? "property double sensor_x\nproperty double sensor_y\nproperty double sensor_z\n"
+                      : "property float sensor_x\nproperty float sensor_y\nproperty float sensor_z\n";
+    }
     header += "end_header\n";
     return header;
 }
 
-// Point i's columns in the binary (little-endian) encoding.
-void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
-    const Vec3 p = points.positions[i];
+// A position in the binary (little-endian) encoding: back in the file's coordinates, in double,
+// when the points have an origin.
+void put_binary_position(std::string& chunk, const PointSet& points, Vec3 p) {
     if (shifted(points)) {
         const std::array<double, 3>& o = points.origin;
         put_le(chunk, double(p.x) + o[0]);
@@ -938,6 +948,12 @@ void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool
         put_le(chunk, p.y);
         put_le(chunk, p.z);
     }
+}
+
+// Point i's columns in the binary (little-endian) encoding.
+void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool emits,
+                      const std::vector<Vec3>& sensors) {
+    put_binary_position(chunk, points, points.positions[i]);
     if (points.has_normals()) {
         const Vec3 q = points.normals[i];
         put_le(chunk, q.x);
@@ -956,11 +972,11 @@ void put_binary_point(std::string& chunk, const PointSet& points, size_t i, bool
         put_le(chunk, points.emission[i].y);
         put_le(chunk, points.emission[i].z);
     }
+    if (!sensors.empty()) put_binary_position(chunk, points, sensors[i]);
 }
 
-// Point i's line in the ASCII encoding.
-void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool emits) {
-    const Vec3 p = points.positions[i];
+// A position in the ASCII encoding (in the file's coordinates, as put_binary_position).
+void put_text_position(std::string& chunk, const PointSet& points, Vec3 p) {
     if (shifted(points)) {
         const std::array<double, 3>& o = points.origin;
         put_text(chunk, double(p.x) + o[0]);
@@ -975,6 +991,12 @@ void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool e
         chunk += ' ';
         put_text(chunk, p.z);
     }
+}
+
+// Point i's line in the ASCII encoding.
+void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool emits,
+                    const std::vector<Vec3>& sensors) {
+    put_text_position(chunk, points, points.positions[i]);
     if (points.has_normals()) {
         const Vec3 q = points.normals[i];
         for (float f : {q.x, q.y, q.z}) {
@@ -1000,23 +1022,28 @@ void put_text_point(std::string& chunk, const PointSet& points, size_t i, bool e
             put_text(chunk, f);
         }
     }
+    if (!sensors.empty()) {
+        chunk += ' ';
+        put_text_position(chunk, points, sensors[i]);
+    }
     chunk += '\n';
 }
 
 }  // namespace
 
-void write_ply(const std::string& path, const PointSet& points, bool binary) {
-    const bool emits = check_writable(path, points);
+void write_ply(const std::string& path, const PointSet& points, bool binary,
+               const std::vector<Vec3>& sensors) {
+    const bool emits = check_writable(path, points, sensors);
     io::AtomicFile file(path);
-    file.write(ply_header(points, binary, emits));
+    file.write(ply_header(points, binary, emits, !sensors.empty()));
     std::string chunk;
     constexpr size_t kChunk = 1 << 20;
     chunk.reserve(kChunk + 256);
     for (size_t i = 0; i < points.size(); ++i) {
         if (binary) {
-            put_binary_point(chunk, points, i, emits);
+            put_binary_point(chunk, points, i, emits, sensors);
         } else {
-            put_text_point(chunk, points, i, emits);
+            put_text_point(chunk, points, i, emits, sensors);
         }
         if (chunk.size() >= kChunk) {
             file.write(chunk);

@@ -171,29 +171,6 @@ struct ScoredPoints {
     std::vector<uint32_t> surface;  // the scene surface each point lies on (kNoSurface: none)
 };
 
-// A binary PLY of positions, normals when there are any, and per-point scanner positions.
-void write_sensor_ply(const std::string& file, const PointSet& pts,
-                      const std::vector<Vec3>& sensors) {
-    const bool nrm = pts.has_normals();
-    std::string out = fmt::format(
-        "ply\nformat binary_little_endian 1.0\nelement vertex {}\nproperty float x\n"
-        "property float y\nproperty float z\n{}property float sensor_x\nproperty float "
-        "sensor_y\nproperty float sensor_z\nend_header\n",
-        pts.size(), nrm ? "property float nx\nproperty float ny\nproperty float nz\n" : "");
-    auto put = [&](Vec3 v) {
-        const float f[3] = {v.x, v.y, v.z};
-        out.append(reinterpret_cast<const char*>(f), sizeof f);
-    };
-    for (size_t i = 0; i < pts.size(); ++i) {
-        put(pts.positions[i]);
-        if (nrm) put(pts.normals[i]);
-        put(sensors[i]);
-    }
-    std::ofstream f(file, std::ios::binary);
-    f.write(out.data(), std::streamsize(out.size()));
-    if (!f) throw Error(fmt::format("{}: cannot write", file));
-}
-
 // Writes `pts` (positions, and normals when `normals`) as a PLY and reads it back through the
 // raw-cloud path, as `vmap build cloud.ply` would.
 // With noise > 0 each position first moves by Gaussian noise of `noise` sample spacings per
@@ -210,10 +187,7 @@ PointSet through_cloud_path(const PointSet& pts, bool normals, double noise,
         (std::filesystem::temp_directory_path() /
          fmt::format("vmap-validate-{}-{}.ply", ::getpid(), std::hash<std::string>{}(path)))
             .string();
-    if (sensors)
-        write_sensor_ply(tmp, bare, *sensors);
-    else
-        write_ply(tmp, bare);
+    write_ply(tmp, bare, true, sensors ? *sensors : std::vector<Vec3>{});
     PointSet out;
     try {
         out = load_point_cloud(tmp);

@@ -755,6 +755,23 @@ bool scanned_room(const std::vector<float>& radii, const std::array<bool, 6>& ro
     return std::sqrt(std::max(0.0, sum2 / count - mean * mean)) >= kScanSpread;
 }
 
+// The 26 directions to a cube's faces, edges and corners from its centre, unit length.
+const std::array<Vec3, 26>& around() {
+    static const std::array<Vec3, 26> dirs = [] {
+        std::array<Vec3, 26> out{};
+        size_t k = 0;
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    if (dx == 0 && dy == 0 && dz == 0) continue;
+                    const Vec3 d{float(dx), float(dy), float(dz)};
+                    out[k++] = d / length(d);
+                }
+        return out;
+    }();
+    return dirs;
+}
+
 std::vector<Vec3> view_candidates(const Grid& g, const FreeSpace& fs, const Bounds& box,
                                   const std::array<bool, 6>& room_wall) {
     std::vector<Vec3> out;
@@ -781,15 +798,8 @@ std::vector<Vec3> view_candidates(const Grid& g, const FreeSpace& fs, const Boun
             }
     const Vec3 mid = (box.lo + box.hi) * 0.5f;
     const float reach = 1.5f * length(ext);
-    for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dx = -1; dx <= 1; ++dx) {
-                if (dx == 0 && dy == 0 && dz == 0) continue;
-                Vec3 d{float(dx), float(dy), float(dz)};
-                d = d / length(d);
-                if (!room_wall[size_t(DiscCaster::exit_face(box, mid, d))])
-                    out.push_back(mid + d * reach);
-            }
+    for (const Vec3 d : around())
+        if (!room_wall[size_t(DiscCaster::exit_face(box, mid, d))]) out.push_back(mid + d * reach);
     return out;
 }
 
@@ -857,17 +867,11 @@ std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>&
     };
     for (size_t v = 0; v < c; ++v)
         if (gain[v] >= near) extend(cand[v]);
-    for (int dz = -1; dz <= 1; ++dz)
-        for (int dy = -1; dy <= 1; ++dy)
-            for (int dx = -1; dx <= 1; ++dx) {
-                if (dx == 0 && dy == 0 && dz == 0) continue;
-                Vec3 d{float(dx), float(dy), float(dz)};
-                d = d / length(d);
-                for (float s = h; s <= 2 * step0; s *= 2) {
-                    if (seen_from(x + d * s) < near) break;
-                    extend(x + d * s);
-                }
-            }
+    for (const Vec3 d : around())
+        for (float s = h; s <= 2 * step0; s *= 2) {
+            if (seen_from(x + d * s) < near) break;
+            extend(x + d * s);
+        }
     return view;
 }
 

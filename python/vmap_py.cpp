@@ -347,6 +347,62 @@ void def_build(py::module_& m) {
         "or 'uniform') when given, its octree defaults, the disc floor by the sampling) or a "
         "point cloud (.ply/.off); options as build().");
     m.def(
+        "estimate_normals",
+        [](const Array<float>& points, std::optional<Array<float>> radii,
+           std::optional<Array<float>> viewpoint, std::optional<Array<float>> sensors) {
+            PointSet ps;
+            ps.positions = vec3s(points, "points");
+            const auto n = py::ssize_t(ps.size());
+            if (n == 0) throw Error("points: the point set is empty");
+            if (radii) {
+                if (radii->ndim() != 1 || radii->shape(0) != n)
+                    throw Error(fmt::format("radii: expected {} values (one per point)", n));
+                ps.radii.assign(radii->data(), radii->data() + n);
+            }
+            NormalEstimationParams params;
+            if (viewpoint) {
+                if (viewpoint->size() != 3)
+                    throw Error("viewpoint: expected 3 values (x, y, z)");
+                const float* v = viewpoint->data();
+                params.orientation = Orientation::kViewpoint;
+                params.viewpoint = {v[0], v[1], v[2]};
+            }
+            std::vector<Vec3> sensed;
+            if (sensors) {
+                if (viewpoint) throw Error("sensors: give a viewpoint or sensors, not both");
+                sensed = vec3s(*sensors, "sensors", n);
+                params.orientation = Orientation::kOutward;  // replaced by the sensors below
+            }
+            OrientationReport rep;
+            {
+                py::gil_scoped_release nogil;
+                estimate_normals(ps, params, "points", &rep);
+                if (!sensed.empty()) orient_toward(ps, sensed, "points");
+            }
+            py::array_t<float> normals({n, py::ssize_t(3)});
+            float* o = normals.mutable_data();
+            for (size_t k = 0; k < ps.size(); ++k)
+                o[3 * k] = ps.normals[k].x, o[3 * k + 1] = ps.normals[k].y,
+                o[3 * k + 2] = ps.normals[k].z;
+            py::dict d;
+            d["normals"] = normals;
+            d["method"] = sensed.empty() ? rep.method : std::string("toward each point's sensor");
+            d["scanner"] = rep.scanner ? py::object(py::make_tuple(rep.scanner->x, rep.scanner->y,
+                                                                   rep.scanner->z))
+                                       : py::object(py::none());
+            d["by_space"] = rep.by_space, d["by_view"] = rep.by_view, d["by_rays"] = rep.by_rays,
+            d["by_shape"] = rep.by_shape, d["by_neighbours"] = rep.by_neighbours;
+            return d;
+        },
+        py::arg("points"), py::arg("radii") = py::none(), py::arg("viewpoint") = py::none(),
+        py::arg("sensors") = py::none(),
+        "Normals of a raw cloud, points N x 3, as build() estimates them: {'normals': N x 3, "
+        "'method': how they were signed, in words, 'scanner': where a bare scan from inside a "
+        "room was taken from, as far as its points tell (None otherwise), and the points signed "
+        "by each cue: 'by_space', 'by_view', 'by_rays', 'by_shape', 'by_neighbours'}. "
+        "viewpoint (x, y, z) signs every normal toward it; sensors N x 3 each toward its own "
+        "scanner position; radii N (splat radii) are estimated when None.");
+    m.def(
         "surface_noise",
         [](const Array<float>& points) {
             PointSet ps;

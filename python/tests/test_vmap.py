@@ -237,3 +237,39 @@ def test_a_cloud_far_from_its_files_zero_keeps_its_coordinates(small, tmp_path):
     assert vm.origin == (512345.0, 4123456.0, 210.0)
     np.testing.assert_allclose(vm.points + np.array(vm.origin), pts, rtol=0, atol=1e-6)
     assert small.origin == (0.0, 0.0, 0.0)
+
+
+def test_estimate_normals_signs_toward_a_viewpoint_sensors_and_a_scanner():
+    rng = np.random.default_rng(5)
+    # A room seen from inside, as a scanner on a tripod records it: beams on an equal-angle grid
+    # from (0.5, 0.6, 0.4) to the walls of the unit cube (its front z = 0 open).
+    at = np.array([0.5, 0.6, 0.4], np.float32)
+    el, az = np.meshgrid(np.radians(np.arange(-88.5, 90, 1.5)), np.radians(np.arange(0, 360, 1.5)))
+    d = np.stack([np.cos(el) * np.cos(az), np.sin(el), np.cos(el) * np.sin(az)], -1).reshape(-1, 3)
+    t = np.full(len(d), np.inf)
+    for axis, plane in [(0, 0), (0, 1), (1, 0), (1, 1), (2, 1)]:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ta = (plane - at[axis]) / d[:, axis]
+            hit = at + d * ta[:, None]
+        inside = np.all((hit > -1e-4) & (hit < 1 + 1e-4), axis=1)
+        t = np.where((ta > 0) & inside & (ta < t), ta, t)
+    pts = (at + d[np.isfinite(t)] * t[np.isfinite(t), None]).astype(np.float32)
+    r = vmap.estimate_normals(pts)
+    assert r["normals"].shape == pts.shape
+    assert np.allclose(np.linalg.norm(r["normals"], axis=1), 1, atol=1e-4)
+    assert r["scanner"] is not None and "a scan from inside a room" in r["method"]
+    assert all(0 < c < 1 for c in r["scanner"])
+    # The walls face the room.
+    assert np.mean(np.sum(r["normals"] * (np.float32(0.5) - pts), axis=1) > 0) > 0.99
+    vp = vmap.estimate_normals(pts, viewpoint=(0.5, 0.5, 2.0))
+    assert np.all(np.sum(vp["normals"] * (np.array([0.5, 0.5, 2.0]) - pts), axis=1) >= 0)
+    assert vp["scanner"] is None
+    sensors = rng.uniform(-1, 2, pts.shape).astype(np.float32)
+    sn = vmap.estimate_normals(pts, sensors=sensors)
+    assert np.all(np.sum(sn["normals"] * (sensors - pts), axis=1) >= 0)
+    with pytest.raises(vmap.Error, match="sensors"):
+        vmap.estimate_normals(pts, sensors=sensors[:-1])
+    with pytest.raises(vmap.Error, match="viewpoint"):
+        vmap.estimate_normals(pts, viewpoint=(1.0, 2.0))
+    with pytest.raises(vmap.Error, match="points"):
+        vmap.estimate_normals(np.zeros((0, 3), np.float32))

@@ -49,12 +49,15 @@ struct Bounds {
     Vec3 lo, hi;
 };
 
+// Grows b to hold p.
+void grow(Bounds& b, Vec3 p) {
+    b.lo = {std::min(b.lo.x, p.x), std::min(b.lo.y, p.y), std::min(b.lo.z, p.z)};
+    b.hi = {std::max(b.hi.x, p.x), std::max(b.hi.y, p.y), std::max(b.hi.z, p.z)};
+}
+
 Bounds bounds_of(const std::vector<Vec3>& pts) {
     Bounds b{pts[0], pts[0]};
-    for (const Vec3& p : pts) {
-        b.lo = {std::min(b.lo.x, p.x), std::min(b.lo.y, p.y), std::min(b.lo.z, p.z)};
-        b.hi = {std::max(b.hi.x, p.x), std::max(b.hi.y, p.y), std::max(b.hi.z, p.z)};
-    }
+    for (const Vec3& p : pts) grow(b, p);
     return b;
 }
 
@@ -860,17 +863,12 @@ std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>&
     }
     const size_t near = g - std::min(g, std::max<size_t>(2, size_t(kViewTolerance * double(g))));
     View view{x, {x, x}, g, m};
-    auto extend = [&](Vec3 q) {
-        Bounds& r = view.region;
-        r.lo = {std::min(r.lo.x, q.x), std::min(r.lo.y, q.y), std::min(r.lo.z, q.z)};
-        r.hi = {std::max(r.hi.x, q.x), std::max(r.hi.y, q.y), std::max(r.hi.z, q.z)};
-    };
     for (size_t v = 0; v < c; ++v)
-        if (gain[v] >= near) extend(cand[v]);
+        if (gain[v] >= near) grow(view.region, cand[v]);
     for (const Vec3 d : around())
         for (float s = h; s <= 2 * step0; s *= 2) {
             if (seen_from(x + d * s) < near) break;
-            extend(x + d * s);
+            grow(view.region, x + d * s);
         }
     return view;
 }

@@ -79,7 +79,8 @@ struct BuildArgs {
     std::optional<float> delta_floor;
     int K = VisibilityParams{}.K;
     float eps = VisibilityParams{}.eps, facing_tol = VisibilityParams{}.facing_tol,
-          parallel_tol = VisibilityParams{}.parallel_tol, end_window = VisibilityParams{}.end_window;
+          parallel_tol = VisibilityParams{}.parallel_tol,
+          end_window = VisibilityParams{}.end_window;
     std::optional<float> roughness;  // None: a cloud's measured noise (0 for a scene file)
     std::string backend = "auto", occluders = "spheres";
     int threads = 0;
@@ -361,8 +362,7 @@ void def_build(py::module_& m) {
             }
             NormalEstimationParams params;
             if (viewpoint) {
-                if (viewpoint->size() != 3)
-                    throw Error("viewpoint: expected 3 values (x, y, z)");
+                if (viewpoint->size() != 3) throw Error("viewpoint: expected 3 values (x, y, z)");
                 const float* v = viewpoint->data();
                 params.orientation = Orientation::kViewpoint;
                 params.viewpoint = {v[0], v[1], v[2]};
@@ -381,15 +381,18 @@ void def_build(py::module_& m) {
             }
             py::array_t<float> normals({n, py::ssize_t(3)});
             float* o = normals.mutable_data();
-            for (size_t k = 0; k < ps.size(); ++k)
-                o[3 * k] = ps.normals[k].x, o[3 * k + 1] = ps.normals[k].y,
+            for (size_t k = 0; k < ps.size(); ++k) {
+                o[3 * k] = ps.normals[k].x;
+                o[3 * k + 1] = ps.normals[k].y;
                 o[3 * k + 2] = ps.normals[k].z;
+            }
             py::dict d;
             d["normals"] = normals;
             d["method"] = sensed.empty() ? rep.method : std::string("toward each point's sensor");
-            d["scanner"] = rep.scanner ? py::object(py::make_tuple(rep.scanner->x, rep.scanner->y,
-                                                                   rep.scanner->z))
-                                       : py::object(py::none());
+            d["scanner"] =
+                rep.scanner
+                    ? py::object(py::make_tuple(rep.scanner->x, rep.scanner->y, rep.scanner->z))
+                    : py::object(py::none());
             d["by_space"] = rep.by_space, d["by_view"] = rep.by_view, d["by_rays"] = rep.by_rays,
             d["by_shape"] = rep.by_shape, d["by_neighbours"] = rep.by_neighbours;
             return d;

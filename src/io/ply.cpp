@@ -927,9 +927,10 @@ std::string ply_header(const PointSet& points, bool binary, bool emits, bool sen
             "property float emission_b\n";
     }
     if (sensed) {
-        header += shifted(points)
-                      ? "property double sensor_x\nproperty double sensor_y\nproperty double sensor_z\n"
-                      : "property float sensor_x\nproperty float sensor_y\nproperty float sensor_z\n";
+        header +=
+            shifted(points)
+                ? "property double sensor_x\nproperty double sensor_y\nproperty double sensor_z\n"
+                : "property float sensor_x\nproperty float sensor_y\nproperty float sensor_z\n";
     }
     header += "end_header\n";
     return header;

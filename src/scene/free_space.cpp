@@ -978,9 +978,10 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     });
     const Vec3 at = frame[0] * view->at.x + frame[1] * view->at.y + frame[2] * view->at.z;
     v.view = at;
-    v.method += fmt::format("; a scan from inside a room, its scanner at about ({:.4g}, {:.4g}, "
-                            "{:.4g}) (sees {} of {} points sampled)",
-                            at.x, at.y, at.z, view->seen, view->samples);
+    v.method += fmt::format(
+        "; a scan from inside a room, its scanner at about ({:.4g}, {:.4g}, "
+        "{:.4g}) (sees {} of {} points sampled)",
+        at.x, at.y, at.z, view->seen, view->samples);
     return v;
 }
 

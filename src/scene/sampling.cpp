@@ -150,8 +150,7 @@ std::vector<uint64_t> eliminate(const std::vector<Vec3>& pos, const std::vector<
                               "cpu (" + cpu_threads() + ")");
     const double rmax = std::sqrt(area / (2 * std::sqrt(3.0) * double(keep)));
     const double rmin = 0.65 * rmax * (1 - std::pow(double(keep) / double(M), 1.5));
-    const detail::NeighbourLists lists =
-        detail::same_side_neighbours(pos, nrm, 2 * rmax, 2 * rmin);
+    const detail::NeighbourLists lists = detail::same_side_neighbours(pos, nrm, 2 * rmax, 2 * rmin);
     progress.throw_if_cancelled();
     std::vector<uint64_t> kept = detail::eliminate(lists, keep, &progress);
     progress.finish();
@@ -266,7 +265,8 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
     const size_t voted = rep.by_space + rep.by_rays + rep.by_shape + rep.by_view;
     if (!sensed && voted > 0)
         line += fmt::format(
-            "; {} points by free space, {} by viewpoints, {} by rays, {} by their open sheet's "
+            "; {} points by free space, {} toward the scanner's place, {} by rays, {} by their "
+            "open sheet's "
             "shape ({} of those then turned by their neighbours' votes), {} from their "
             "neighbours",
             rep.by_space, rep.by_view, rep.by_rays, rep.by_shape, rep.by_neighbours,

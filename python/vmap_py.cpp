@@ -393,6 +393,9 @@ void def_build(py::module_& m) {
                 rep.scanner
                     ? py::object(py::make_tuple(rep.scanner->x, rep.scanner->y, rep.scanner->z))
                     : py::object(py::none());
+            py::list scanners;
+            for (const Vec3& x : rep.scanners) scanners.append(py::make_tuple(x.x, x.y, x.z));
+            d["scanners"] = scanners;
             d["by_space"] = rep.by_space, d["by_view"] = rep.by_view, d["by_rays"] = rep.by_rays,
             d["by_shape"] = rep.by_shape, d["by_neighbours"] = rep.by_neighbours;
             return d;
@@ -401,7 +404,9 @@ void def_build(py::module_& m) {
         py::arg("sensors") = py::none(),
         "Normals of a raw cloud, points N x 3, as build() estimates them: {'normals': N x 3, "
         "'method': how they were signed, in words, 'scanner': where a bare scan from inside a "
-        "room was taken from, as far as its points tell (None otherwise), and the points signed "
+        "room was taken from, as far as its points tell (None otherwise), 'scanners': the places "
+        "a bare scan's spacing shows its scanners stood at (a list of (x, y, z), empty when it "
+        "does not tell), and the points signed "
         "by each cue: 'by_space', 'by_view', 'by_rays', 'by_shape', 'by_neighbours'}. "
         "viewpoint (x, y, z) signs every normal toward it; sensors N x 3 each toward its own "
         "scanner position; radii N (splat radii) are estimated when None.");

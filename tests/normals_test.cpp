@@ -607,15 +607,61 @@ TEST(Orientation, AScanFromInsideARoomFacesWhereItsScannerStood) {
     for (size_t i = 0; i < one.size(); ++i) ASSERT_EQ(one.normals[i], scan.points.normals[i]) << i;
 }
 
-// Not a scan from inside a room: the trough scanned without a room around it (nothing fixes
-// where its scanner stood: a sheet looks the same from either side), and the room and the
-// trough sampled evenly (a sampler's spacing, spread over no range). No view signs them.
+// An equal-angle scan (turning about y, steps of `step` degrees) from `at` of a lone bowl: the
+// far half (z >= 0.7) of a sphere of radius 0.15 about (0.5, 0.35, 0.7), its inside seen.
+Scanned scan_bowl(Vec3 at, float step) {
+    constexpr float kPi = 3.14159265f, r = 0.15f;
+    const Vec3 c{0.5f, 0.35f, 0.7f};
+    Scanned out;
+    const int rows = int(180 / step), cols = int(360 / step);
+    for (int i = 1; i < rows; ++i) {
+        const float el = (-90 + step * float(i)) * kPi / 180;
+        for (int j = 0; j < cols; ++j) {
+            const float az = step * float(j) * kPi / 180;
+            const Vec3 d{std::cos(el) * std::cos(az), std::sin(el), std::cos(el) * std::sin(az)};
+            const Vec3 o = at - c;
+            const float qb = 2 * dot(o, d), qc = dot(o, o) - r * r, disc = qb * qb - 4 * qc;
+            if (disc < 0) continue;
+            for (const float sg : {-1.0f, 1.0f}) {
+                const float t = (-qb + sg * std::sqrt(disc)) / 2;
+                const Vec3 p = at + d * t;
+                if (!(t > 0) || p.z < c.z) continue;
+                out.points.positions.push_back(p);
+                out.truth.push_back((c - p) / r);  // the inside, which the scanner sees
+                break;
+            }
+        }
+    }
+    return out;
+}
+
+// A scan of a lone object from one side: no room fixes where the scanner stood, but the
+// spacing does (an equal-angle scanner's patch grows with range and slant, shrinks toward the
+// poles of its turning axis). The trough's concave inside, which the shape rule turns outward.
+TEST(Orientation, ALoneScanFacesWhereItsSpacingShowsItsScannerStood) {
+    const Vec3 at{0.5f, 0.6f, 0.3f};
+    Scanned scan = scan_bowl(at, 0.5f);
+    ASSERT_GT(scan.points.size(), 500u);
+    OrientationReport rep;
+    estimate_normals(scan.points, {}, "lone scan", &rep);
+    EXPECT_GT(share_right(scan.points, scan.truth, 0, scan.points.size()), 0.95);
+    EXPECT_NE(rep.method.find("by the points' spacing (turning axis: y)"), std::string::npos)
+        << rep.method;
+    ASSERT_EQ(rep.scanners.size(), 1u) << rep.method;
+    EXPECT_LT(length(rep.scanners[0] - at), 0.01f)
+        << rep.scanners[0].x << " " << rep.scanners[0].y << " " << rep.scanners[0].z;
+}
+
+// Not a scan from inside a room: the trough scanned without a room around it (the most-seen
+// place does not fix where its scanner stood: a sheet looks the same from either side; only
+// the spacing may), and the room and the trough sampled at random (a sampler's spacing, which
+// follows no place's range and slant). Neither the view nor a scanner signs the samples.
 TEST(Orientation, OnlyAScanFromInsideARoomIsSignedByWhereItsScannerStood) {
     Scanned scan = scan_trough({0.5f, 0.6f, 0.3f}, 1.5f, false);
     ASSERT_GT(scan.points.size(), 500u);
     OrientationReport rep;
     estimate_normals(scan.points, {}, "lone scan", &rep);
-    EXPECT_EQ(rep.by_view, 0u) << rep.method;
+    EXPECT_FALSE(rep.scanner.has_value()) << rep.method;
 
     std::vector<Vec3> truth;
     PointSet even = room(true, truth, 43, 3000);
@@ -628,6 +674,7 @@ TEST(Orientation, OnlyAScanFromInsideARoomIsSignedByWhereItsScannerStood) {
     }
     estimate_normals(even, {}, "samples", &rep);
     EXPECT_EQ(rep.by_view, 0u) << rep.method;
+    EXPECT_TRUE(rep.scanners.empty()) << rep.method;
 }
 
 TEST(Orientation, AFewPointsOutsideTheRoomDoNotTurnItsWalls) {

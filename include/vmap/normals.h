@@ -45,9 +45,11 @@ struct OrientationReport {
     size_t by_rays = 0;        // points decided by casting rays (both sides free or unknown)
     size_t by_shape = 0;       // points of open sheets decided by the sheet's shape (both sides
                                // free: the side away from what the sheet wraps around)
-    size_t by_view = 0;        // points signed toward where the scanner stood (a bare scan
-                               // from inside a room: the free place that sees the most points)
-    std::optional<Vec3> scanner;  // that place, when the cloud is such a scan
+    size_t by_view = 0;        // points signed toward where a scanner stood (a bare scan: the
+                               // places its spacing tells, or inside a room the free place
+                               // that sees the most points)
+    std::vector<Vec3> scanners;   // the places the points' spacing tells, when it does
+    std::optional<Vec3> scanner;  // the place that sees the most, in a scan from inside a room
     size_t by_neighbours = 0;  // voted points turned to agree with their surface (the
                                // neighbour check of ray votes, then the votes' spread)
 };

@@ -273,3 +273,28 @@ def test_estimate_normals_signs_toward_a_viewpoint_sensors_and_a_scanner():
         vmap.estimate_normals(pts, viewpoint=(1.0, 2.0))
     with pytest.raises(vmap.Error, match="points"):
         vmap.estimate_normals(np.zeros((0, 3), np.float32))
+
+
+def test_estimate_normals_finds_a_lone_scans_scanner_by_its_spacing():
+    # A lone bowl (the far half of a sphere) scanned from one side on an equal-angle grid
+    # turning about y: no room, but the points' spacing tells where the scanner stood.
+    at = np.array([0.5, 0.6, 0.3], np.float32)
+    c, radius = np.array([0.5, 0.35, 0.7], np.float32), 0.15
+    el, az = np.meshgrid(np.radians(np.arange(-89.5, 90, 0.5)), np.radians(np.arange(0, 360, 0.5)))
+    d = np.stack([np.cos(el) * np.cos(az), np.sin(el), np.cos(el) * np.sin(az)], -1).reshape(-1, 3)
+    o = at - c
+    b = d @ o
+    disc = b * b - (o @ o - radius * radius)
+    t = np.full(len(d), np.nan)
+    for sg in (1, -1):  # the nearer hit on the far half wins
+        ts = -b + sg * np.sqrt(np.maximum(disc, 0))
+        z = at[2] + d[:, 2] * ts
+        t = np.where((disc >= 0) & (ts > 0) & (z >= c[2]), ts, t)
+    pts = (at + d * t[:, None])[np.isfinite(t)].astype(np.float32)
+    assert len(pts) > 1000
+    r = vmap.estimate_normals(pts)
+    assert len(r["scanners"]) == 1, r["method"]
+    assert np.linalg.norm(np.array(r["scanners"][0]) - at) < 0.01
+    assert "by the points' spacing" in r["method"]
+    # The bowl's inside, which the scanner saw, faces it.
+    assert np.mean(np.sum(r["normals"] * (c - pts), axis=1) > 0) > 0.95

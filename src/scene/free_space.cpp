@@ -745,17 +745,22 @@ constexpr double kScanSpread = 0.4;
 // ... and a room around the scanner fixes where it stood: its walls on at least this many faces.
 constexpr int kScanRoomFaces = 3;
 
-bool scanned_room(const std::vector<float>& radii, const std::array<bool, 6>& room_wall) {
-    if (std::count(room_wall.begin(), room_wall.end(), true) < kScanRoomFaces) return false;
+// The spread (standard deviation) of the log of the splat radii.
+double log_spread(const std::vector<float>& radii) {
     double sum = 0, sum2 = 0, count = 0;
     for (const float r : radii) {
         if (!(r > 0)) continue;
         const double l = std::log(double(r));
         sum += l, sum2 += l * l, count += 1;
     }
-    if (count < 2) return false;
+    if (count < 2) return 0;
     const double mean = sum / count;
-    return std::sqrt(std::max(0.0, sum2 / count - mean * mean)) >= kScanSpread;
+    return std::sqrt(std::max(0.0, sum2 / count - mean * mean));
+}
+
+bool scanned_room(const std::vector<float>& radii, const std::array<bool, 6>& room_wall) {
+    return std::count(room_wall.begin(), room_wall.end(), true) >= kScanRoomFaces &&
+           log_spread(radii) >= kScanSpread;
 }
 
 // The 26 directions to a cube's faces, edges and corners from its centre, unit length.
@@ -892,6 +897,303 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
     return caster.sees(i, v.at, tmin) ? int(s) : 0;
 }
 
+// Where the scanners stood, from the points' spacing (step 6 of vote_sides, before the view).
+// A terrestrial scanner turns about an upright axis and steps its beam by equal angles in
+// azimuth and elevation, so a point it made at range r, seen at cosine c off its normal and at
+// sine s off the turning axis, lies in a patch about (a r s) by (a r / c): its splat radius is
+// k r sqrt(s / c), one k per scanner. From the true place the residual
+//     log(radius) - log(r) + 0.5 log(c) - 0.5 log(s)
+// is the same constant for all its points (within about 0.01 on a simulated scan); a few
+// centimetres off, or from a place that sees the points through an unscanned side (inside an
+// object's cap), it spreads over 0.05-0.12. A scanner far from what it scans sees little change
+// of s, so the axis may also be left out (-1); else it is one of the frame's axes (room_frame
+// turns the walls onto them), whichever fits best.
+//
+// The search: from every candidate (the view's, and places around the box at 0.75 and 3
+// diagonals too), Gauss-Newton steps on the points it sees move the place and k until their
+// residuals agree, weighted by a kernel about their peak that narrows from 4 to 1 times
+// kSpacingSigma; the best few settled places are then scored with visibility. The best is a
+// scanner when the points it explains (within 2 sigma) are most of those it sees, at least 1 in
+// 20 of the sampled points, and spread in spacing (log radius) by kExplainedSpread or more: a
+// sampler's even spacing is "explained" by a far place beyond a flat face, a scanner's is not
+// even. Its points leave the sample and the search runs again for the next scanner.
+//
+// Where two scanners' points interleave, the splat radius follows their summed density, which
+// neither place explains alone: a scan from several places overlapping everywhere finds no
+// scanner and keeps the view (step 7) and the other rules.
+constexpr float kSpacingSigma = 0.03f;   // the width of a scanner's residual peak (log units)
+constexpr size_t kMaxScanners = 8;
+constexpr size_t kMinScannerPoints = 24;  // of the sampled points, explained by one place
+constexpr size_t kScannerStarts = 6;      // settled places scored with visibility
+constexpr size_t kLocatePoints = 256;     // the points a start's steps use, at most
+constexpr double kExplainedSpread = 0.1;  // a scanner's points' spread of log radius, at least
+constexpr double kMinSpread = 0.15;       // the cloud's; below it no scanner is sought
+
+struct Fit {
+    double score = 0;  // the kernel summed over the residuals
+    float centre = 0;  // log k
+    size_t inliers = 0, seen = 0;
+};
+
+// Point i's residual from the place x (NaN where x sees it grazing or near the axis's poles);
+// axis: the scanner's turning axis, unit length, or zero for none.
+float spacing_residual(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                       const std::vector<float>& radii, uint32_t i, Vec3 x, Vec3 axis) {
+    const Vec3 u = x - pts[i];
+    const float dist = length(u);
+    if (!(dist > 0) || !(radii[i] > 0)) return std::numeric_limits<float>::quiet_NaN();
+    const float c = std::fabs(dot(normals[i], u)) / dist;
+    if (!(c >= kViewMinCos)) return std::numeric_limits<float>::quiet_NaN();
+    const float e = std::log(radii[i]) - std::log(dist) + 0.5f * std::log(c);
+    if (axis == Vec3{0, 0, 0}) return e;
+    const float along = dot(u, axis);
+    const float perp = std::sqrt(std::max(0.0f, dist * dist - along * along));
+    if (!(perp >= kViewMinCos * dist)) return std::numeric_limits<float>::quiet_NaN();
+    return e - 0.5f * std::log(perp / dist);
+}
+
+// The middle of the window of width 4 sigma holding the most of the residuals v (sorted here).
+float residual_peak(std::vector<float>& v, float sigma) {
+    std::sort(v.begin(), v.end());
+    size_t best = 0, lo = 0, at = 0;
+    for (size_t hi = 0; hi < v.size(); ++hi) {
+        while (v[hi] - v[lo] > 4 * sigma) ++lo;
+        if (hi - lo + 1 > best) best = hi - lo + 1, at = lo;
+    }
+    double sum = 0;
+    for (size_t j = at; j < at + best; ++j) sum += v[j];
+    return best ? float(sum / double(best)) : 0.0f;
+}
+
+Fit fit_residuals(std::vector<float>& e) {
+    Fit f;
+    f.seen = e.size();
+    if (e.empty()) return f;
+    f.centre = residual_peak(e, kSpacingSigma);
+    for (const float v : e) {
+        const double z = (v - f.centre) / kSpacingSigma;
+        f.score += std::exp(-0.5 * z * z);
+        f.inliers += std::fabs(z) < 2;
+    }
+    return f;
+}
+
+// Solves the 4 x 4 system A s = g by elimination with partial pivoting; false if singular.
+bool solve4(double A[4][4], double g[4], double s[4]) {
+    for (int c = 0; c < 4; ++c) {
+        int r = c;
+        for (int q = c + 1; q < 4; ++q)
+            if (std::fabs(A[q][c]) > std::fabs(A[r][c])) r = q;
+        if (!(std::fabs(A[r][c]) > 0)) return false;
+        std::swap(A[r], A[c]);
+        std::swap(g[r], g[c]);
+        for (int q = c + 1; q < 4; ++q) {
+            const double f = A[q][c] / A[c][c];
+            for (int k = c; k < 4; ++k) A[q][k] -= f * A[c][k];
+            g[q] -= f * g[c];
+        }
+    }
+    for (int c = 3; c >= 0; --c) {
+        double t = g[c];
+        for (int k = c + 1; k < 4; ++k) t -= A[c][k] * s[k];
+        s[c] = t / A[c][c];
+    }
+    return true;
+}
+
+// Weighted Gauss-Newton steps for the place x and log k that make the residuals of the points
+// idx agree. With u = x - p, the residual's gradient in x is -1.5 u / |u|^2 + 0.5 n / (n . u),
+// plus 0.5 (u / |u|^2 - u_perp / |u_perp|^2) with an axis (u_perp: u off the axis). Steps are
+// capped at a quarter of `scale` (the box's extent). Serial and arithmetic only: visibility is
+// judged once the place has settled.
+Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+            const std::vector<float>& radii, const std::vector<uint32_t>& idx, Vec3 x,
+            float scale, Vec3 axis) {
+    const size_t m = idx.size();
+    std::vector<float> e(m), v;
+    for (const float sigma : {4 * kSpacingSigma, 2 * kSpacingSigma, kSpacingSigma}) {
+        for (int it = 0; it < 10; ++it) {
+            v.clear();
+            for (size_t j = 0; j < m; ++j) {
+                e[j] = spacing_residual(pts, normals, radii, idx[j], x, axis);
+                if (!std::isnan(e[j])) v.push_back(e[j]);
+            }
+            if (v.size() < kMinScannerPoints) return x;
+            const double centre = residual_peak(v, sigma);
+            double A[4][4] = {}, g[4] = {};
+            for (size_t j = 0; j < m; ++j) {
+                if (std::isnan(e[j])) continue;
+                const double z = (e[j] - centre) / sigma;
+                if (std::fabs(z) > 3) continue;
+                const double w = std::exp(-0.5 * z * z);
+                const Vec3 u = x - pts[idx[j]], n = normals[idx[j]];
+                const double uu = double(dot(u, u)), nu = double(dot(n, u));
+                double J[4] = {-1.5 * u.x / uu + 0.5 * n.x / nu, -1.5 * u.y / uu + 0.5 * n.y / nu,
+                               -1.5 * u.z / uu + 0.5 * n.z / nu, -1.0};
+                if (!(axis == Vec3{0, 0, 0})) {
+                    const Vec3 q = u - axis * dot(u, axis);
+                    const double qq = std::max(double(dot(q, q)), 1e-30);
+                    J[0] += 0.5 * (u.x / uu - q.x / qq);
+                    J[1] += 0.5 * (u.y / uu - q.y / qq);
+                    J[2] += 0.5 * (u.z / uu - q.z / qq);
+                }
+                const double r = e[j] - centre;
+                for (int a = 0; a < 4; ++a) {
+                    g[a] -= w * J[a] * r;
+                    for (int b = 0; b < 4; ++b) A[a][b] += w * J[a] * J[b];
+                }
+            }
+            for (int a = 0; a < 4; ++a) A[a][a] = A[a][a] * (1.0 + 1e-3) + 1e-12;
+            double step[4];
+            if (!solve4(A, g, step)) break;
+            Vec3 dx{float(step[0]), float(step[1]), float(step[2])};
+            const float len = length(dx), cap = 0.25f * scale;
+            if (!(len == len)) break;
+            if (len > cap) dx = dx * (cap / len);
+            x = x + dx;
+            if (len < 1e-4f * scale) break;
+        }
+    }
+    return x;
+}
+
+struct Scanners {
+    std::vector<Vec3> at;
+    Vec3 axis{0, 0, 0};
+    double score = 0;  // the first scanner's
+};
+
+// The scanners for one axis model, given what each candidate sees of the m sampled points.
+Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                           const std::vector<Vec3>& normals, const std::vector<float>& radii,
+                           float r_med, float noise, const std::vector<Vec3>& cand,
+                           const std::vector<uint8_t>& seen, size_t m, float scale, Vec3 axis) {
+    const size_t n = pts.size(), c = cand.size();
+    Scanners out;
+    out.axis = axis;
+    auto sample = [&](size_t j) { return uint32_t(j * n / m); };
+    auto residual = [&](uint32_t i, Vec3 x) {
+        if (!caster.sees(i, x, ray_start(radii[i], r_med, noise)))
+            return std::numeric_limits<float>::quiet_NaN();
+        return spacing_residual(pts, normals, radii, i, x, axis);
+    };
+    std::vector<uint8_t> explained(m, 0);
+    std::vector<Vec3> settled(c);
+    std::vector<std::pair<double, size_t>> ranked(c);
+    std::vector<float> e;
+    while (out.at.size() < kMaxScanners) {
+        // From every candidate, the place that the points it sees (and no scanner explains yet)
+        // settle on, ranked by their fit without visibility; the best few then with it.
+        parallel_for_range<size_t>(c, 1, [&](size_t chunk_begin, size_t chunk_end) {
+            std::vector<uint32_t> idx, few;
+            std::vector<float> r;
+            for (size_t v = chunk_begin; v < chunk_end; ++v) {
+                idx.clear(), few.clear(), r.clear();
+                for (size_t j = 0; j < m; ++j)
+                    if (!explained[j] && seen[v * m + j]) idx.push_back(sample(j));
+                const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
+                for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
+                settled[v] = locate(pts, normals, radii, few, cand[v], scale, axis);
+                for (const uint32_t i : idx) {
+                    const float x = spacing_residual(pts, normals, radii, i, settled[v], axis);
+                    if (!std::isnan(x)) r.push_back(x);
+                }
+                ranked[v] = {-fit_residuals(r).score, v};
+            }
+        });
+        std::sort(ranked.begin(), ranked.end());
+        Vec3 best_at{};
+        Fit best;
+        for (size_t t = 0; t < std::min(kScannerStarts, c); ++t) {
+            const Vec3 x = settled[ranked[t].second];
+            e.assign(m, std::numeric_limits<float>::quiet_NaN());
+            parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
+                for (size_t j = chunk_begin; j < chunk_end; ++j)
+                    if (!explained[j]) e[j] = residual(sample(j), x);
+            });
+            e.erase(std::remove_if(e.begin(), e.end(), [](float r) { return std::isnan(r); }),
+                    e.end());
+            const Fit f = fit_residuals(e);
+            if (f.score > best.score) best = f, best_at = x;
+        }
+        if (out.at.empty()) out.score = best.score;
+        if (best.inliers < std::max(kMinScannerPoints, m / 20) || 2 * best.inliers < best.seen)
+            break;
+        std::vector<uint32_t> mine;
+        for (size_t j = 0; j < m; ++j) {
+            if (explained[j]) continue;
+            const float r = residual(sample(j), best_at);
+            if (!std::isnan(r) && std::fabs(r - best.centre) < 2 * kSpacingSigma)
+                mine.push_back(uint32_t(j));
+        }
+        std::vector<float> theirs;
+        for (const uint32_t j : mine) theirs.push_back(radii[sample(j)]);
+        if (mine.size() < kMinScannerPoints || log_spread(theirs) < kExplainedSpread) break;
+        for (const uint32_t j : mine) explained[j] = 1;
+        out.at.push_back(best_at);
+    }
+    return out;
+}
+
+// The scanners of the axis model whose first scanner fits best.
+Scanners find_scanners(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                       const std::vector<Vec3>& normals, const std::vector<float>& radii,
+                       float r_med, float noise, const std::vector<Vec3>& cand, float scale,
+                       const std::array<Vec3, 3>& frame) {
+    const size_t n = pts.size(), m = std::min(n, kViewSamples), c = cand.size();
+    if (c == 0 || m == 0) return {};
+    std::vector<uint8_t> seen(c * m);
+    parallel_for_range<size_t>(c * m, 256, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t k = chunk_begin; k < chunk_end; ++k) {
+            const uint32_t i = uint32_t((k % m) * n / m);
+            seen[k] = caster.sees(i, cand[k / m], ray_start(radii[i], r_med, noise));
+        }
+    });
+    // No axis; the frame's axes (a room's walls put its upright on one); the cloud's own (a lone
+    // object's frame follows its faces, the cloud's up is the file's), where not the same.
+    std::vector<Vec3> axes{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
+    for (int k = 0; k < 3; ++k) {
+        const Vec3 e{k == 0 ? 1.0f : 0.0f, k == 1 ? 1.0f : 0.0f, k == 2 ? 1.0f : 0.0f};
+        const Vec3 a{dot(frame[0], e), dot(frame[1], e), dot(frame[2], e)};
+        if (std::max({std::fabs(a.x), std::fabs(a.y), std::fabs(a.z)}) < 0.9998f) axes.push_back(a);
+    }
+    Scanners best;
+    for (const Vec3 axis : axes) {
+        Scanners s = scanners_for_axis(caster, pts, normals, radii, r_med, noise, cand, seen, m,
+                                       scale, axis);
+        if (s.score > best.score) best = std::move(s);
+    }
+    return best;
+}
+
+// The turning axis in words, in the cloud's coordinates.
+std::string axis_words(const std::array<Vec3, 3>& frame, Vec3 a) {
+    if (a == Vec3{0, 0, 0}) return "none seen";
+    const Vec3 w = frame[0] * a.x + frame[1] * a.y + frame[2] * a.z;
+    for (int k = 0; k < 3; ++k)
+        if (std::fabs(k == 0 ? w.x : k == 1 ? w.y : w.z) > 0.9998f) return std::string(1, "xyz"[k]);
+    return fmt::format("({:.3f}, {:.3f}, {:.3f})", w.x, w.y, w.z);
+}
+
+// The side of point i that every found scanner seeing it (not grazing) sees it from; 0 when none
+// sees it or they disagree.
+int scanners_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                  const std::vector<Vec3>& normals, uint32_t i, const std::vector<Vec3>& at,
+                  float tmin) {
+    int side = 0;
+    for (const Vec3 x : at) {
+        const Vec3 to = x - pts[i];
+        const float dist = length(to);
+        if (!(dist > 0)) continue;
+        const float cs = dot(normals[i], to) / dist;
+        if (!(std::fabs(cs) >= kViewMinCos) || !caster.sees(i, x, tmin)) continue;
+        const int s = cs > 0 ? 1 : -1;
+        if (side != 0 && s != side) return 0;
+        side = s;
+    }
+    return side;
+}
+
 }  // namespace
 
 SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>& world_normals,
@@ -960,6 +1262,39 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             v.weight[i] = cue == SideCue::kSpace ? 2.0f : std::fabs(side);
         }
     });
+    if (log_spread(radii) >= kMinSpread) {
+        std::vector<Vec3> cand = view_candidates(g, fs, walls, room_wall);
+        const Vec3 mid = (walls.lo + walls.hi) * 0.5f;
+        for (const float f : {0.75f, 3.0f})
+            for (const Vec3 d : around())
+                if (!room_wall[size_t(DiscCaster::exit_face(walls, mid, d))])
+                    cand.push_back(mid + d * (f * length(walls.hi - walls.lo)));
+        const Scanners found =
+            find_scanners(caster, pts, normals, radii, r_med, noise, cand, max_extent(walls), frame);
+        if (!found.at.empty()) {
+            parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+                for (size_t i = chunk_begin; i < chunk_end; ++i) {
+                    if (v.cue[i] == SideCue::kSpace) continue;
+                    const int side = scanners_side(caster, pts, normals, uint32_t(i), found.at,
+                                                   ray_start(radii[i], r_med, noise));
+                    if (side == 0) continue;
+                    v.sign[i] = int8_t(side);
+                    v.cue[i] = SideCue::kView;
+                    v.weight[i] = 2.0f;
+                }
+            });
+            for (const Vec3 x : found.at)
+                v.scanners.push_back(frame[0] * x.x + frame[1] * x.y + frame[2] * x.z);
+            std::string places;
+            for (const Vec3 x : v.scanners)
+                places += fmt::format("{}({:.4g}, {:.4g}, {:.4g})", places.empty() ? "" : ", ",
+                                      x.x, x.y, x.z);
+            v.method += fmt::format(
+                "; a scan, its scanner{} at {} by the points' spacing (turning axis: {})",
+                found.at.size() == 1 ? "" : "s", places,
+                axis_words(frame, found.axis));
+        }
+    }
     if (!scanned_room(radii, room_wall)) return v;
     const std::optional<View> view =
         find_view(caster, pts, radii, r_med, noise, view_candidates(g, fs, walls, room_wall),
@@ -967,7 +1302,7 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     if (!view) return v;
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
-            if (v.cue[i] == SideCue::kSpace) continue;
+            if (v.cue[i] == SideCue::kSpace || v.cue[i] == SideCue::kView) continue;
             const int side = view_side(caster, pts, normals, uint32_t(i), *view,
                                        ray_start(radii[i], r_med, noise));
             if (side == 0) continue;

@@ -17,7 +17,7 @@ enum class SideCue : uint8_t {
     kRays,   // both sides free (or unknown): the side that sees surface farther away
     kShape,  // an open sheet that wraps around something: the side away from what it wraps
              // (set by the caller: see SideVotes::open)
-    kView,   // the side that the place the scanner stood sees (SideVotes::view)
+    kView,   // the side that where the scanner stood sees (SideVotes::scanners, ::view)
 };
 
 struct SideVotes {
@@ -35,9 +35,12 @@ struct SideVotes {
     // graph, may replace them by the sheet's shape (SideCue::kShape).
     std::vector<uint8_t> open;
     std::string method;  // the free-space verdict, in words
-    // Where the scanner stood, as far as the points tell (step 6 below), in the cloud's
+    // Where the scanner stood, as far as the points tell (step 7 below), in the cloud's
     // coordinates; none unless the cloud is a scan from inside a room.
     std::optional<Vec3> view;
+    // Where the scanners stood by the points' spacing (step 6 below), in the cloud's
+    // coordinates; empty unless the cloud is a scan whose spacing tells.
+    std::vector<Vec3> scanners;
 };
 
 // For points with unoriented normals and splat radii (all of one length, radii > 0 somewhere),
@@ -59,12 +62,17 @@ struct SideVotes {
 //    travel clearly farther before meeting surface is free (a ray that escapes travels without
 //    end, unless it leaves the bounding box at once: a room's walls lie on the box and see
 //    nothing outside it). No surface seen, or no clear margin: no vote;
-// 6. in a scan from inside a room (its spacing spread over a factor of several, as a scanner's
+// 6. in a scan (its spacing spread): where its scanners stood, from the spacing an equal-angle
+//    scanner gives its points (its splat radius grows with the range and with the slant, and
+//    shrinks toward the poles of its turning axis): places from which the points' spacing
+//    follows that law. A point that a found scanner sees squarely, and no other found scanner
+//    sees from its other side, takes that side, unless the voxels decided it (4);
+// 7. in a scan from inside a room (its spacing spread over a factor of several, as a scanner's
 //    range makes it; walls on three faces or more): the free place that sees the most points,
 //    where the scanner stood. A point that it sees squarely, and whose tangent plane leaves every
 //    place that sees about as many on that same side, takes that side, unless the voxels
-//    decided it (4): the side of a sheet scanned from one side (a table top, the cap of an
-//    object) that the shadows and the shape cannot tell.
+//    decided it (4) or the scanners found by spacing did (6): the side of a sheet scanned from
+//    one side (a table top, the cap of an object) that the shadows and the shape cannot tell.
 // `noise`: the points' scatter off their surfaces (estimate_surface_noise's sigma; 0 for exact
 // samples): a noisy wall's points lie up to a few sigma inside the bounding box's face.
 SideVotes vote_sides(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,

@@ -885,6 +885,7 @@ void orient_fits(const std::vector<Vec3>& pts, Dvec centroid, LocalFits& fits,
                 spread_votes(pts, radii, g, fits.degenerate, votes, fixed, normals, fits.slack);
             rep.method = votes.method;
             rep.scanner = votes.view;
+            rep.scanners = votes.scanners;
             propagate(pts, centroid, g, fits.degenerate, fixed, normals, fits.slack);
             return;
         }

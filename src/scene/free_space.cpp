@@ -912,15 +912,20 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // The search: from every candidate (the view's, and places around the box at 0.75 and 3
 // diagonals too), Gauss-Newton steps on the points it sees move the place and k until their
 // residuals agree, weighted by a kernel about their peak that narrows from 4 to 1 times
-// kSpacingSigma; the best few settled places are then scored with visibility. The best is a
-// scanner when the points it explains (within 2 sigma) are most of those it sees, at least 1 in
-// 20 of the sampled points, and spread in spacing (log radius) by kExplainedSpread or more: a
-// sampler's even spacing is "explained" by a far place beyond a flat face, a scanner's is not
-// even. Its points leave the sample and the search runs again for the next scanner.
-//
-// Where two scanners' points interleave, the splat radius follows their summed density, which
-// neither place explains alone: a scan from several places overlapping everywhere finds no
-// scanner and keeps the view (step 7) and the other rules.
+// kSpacingSigma; the best few settled places are then scored with visibility. Scanners only
+// add points, so where several overlap the spacing is finer than any one of them makes it,
+// never coarser. The best place is a scanner when
+// - the points it explains (within 2 sigma) are at least 1 in 20 of the sampled points;
+// - at most a tenth of the points it sees are coarser than it makes them (by 3 sigma or more:
+//   the edges of a scan, where the nearest neighbours lie on one side; a place that sees an
+//   object through its unscanned back spreads both ways);
+// - at most a tenth of the earlier scanners' points (at their own spacing, so made by them
+//   alone) lie where this place would have added a seventh or more to their density;
+// - its points spread in spacing (log radius) by kExplainedSpread or more: a sampler's even
+//   spacing is "explained" by a far place beyond a flat face, a scanner's is not even.
+// Its points leave the sample and the search runs again for the next scanner. Where several
+// scanners overlap almost everywhere (four or more around one object) no place explains enough
+// points alone: the scan keeps the view (step 7) and the other rules.
 constexpr float kSpacingSigma = 0.03f;   // the width of a scanner's residual peak (log units)
 constexpr size_t kMaxScanners = 8;
 constexpr size_t kMinScannerPoints = 24;  // of the sampled points, explained by one place
@@ -933,6 +938,7 @@ struct Fit {
     double score = 0;  // the kernel summed over the residuals
     float centre = 0;  // log k
     size_t inliers = 0, seen = 0;
+    size_t sparser = 0;  // residuals above the peak by more than 3 sigma
 };
 
 // Point i's residual from the place x (NaN where x sees it grazing or near the axis's poles);
@@ -974,6 +980,7 @@ Fit fit_residuals(std::vector<float>& e) {
         const double z = (v - f.centre) / kSpacingSigma;
         f.score += std::exp(-0.5 * z * z);
         f.inliers += std::fabs(z) < 2;
+        f.sparser += z > 3;
     }
     return f;
 }
@@ -1117,7 +1124,17 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
             if (f.score > best.score) best = f, best_at = x;
         }
         if (out.at.empty()) out.score = best.score;
-        if (best.inliers < std::max(kMinScannerPoints, m / 20) || 2 * best.inliers < best.seen)
+        // Where the earlier scanners' points bunch at their own spacing, this place would have
+        // added points of its own (its density at least a seventh of theirs): conflicts.
+        size_t conflicts = 0, earlier = 0;
+        for (size_t j = 0; j < m; ++j) {
+            if (!explained[j]) continue;
+            ++earlier;
+            const float r = residual(sample(j), best_at);
+            conflicts += !std::isnan(r) && r < best.centre + 1.0f;
+        }
+        if (best.inliers < std::max(kMinScannerPoints, m / 20) ||
+            10 * best.sparser > best.seen || 10 * conflicts > earlier)
             break;
         std::vector<uint32_t> mine;
         for (size_t j = 0; j < m; ++j) {

@@ -527,54 +527,63 @@ struct Scanned {
     size_t trough_begin = 0;
 };
 
-Scanned scan_trough(Vec3 at, float step, bool walls) {
-    constexpr float kPi = 3.14159265f, r = 0.15f, yc = 0.35f, zc = 0.7f;
-    Scanned out;
-    std::vector<Vec3> tp, tn;
+// Calls f(d) for each beam direction of an equal-angle scanner turning about y, `step` degrees
+// apart in elevation (poles left out) and azimuth.
+template <class F>
+void for_each_beam(float step, F&& f) {
+    constexpr float kPi = 3.14159265f;
     const int rows = int(180 / step), cols = int(360 / step);
     for (int i = 1; i < rows; ++i) {
         const float el = (-90 + step * float(i)) * kPi / 180;
         for (int j = 0; j < cols; ++j) {
             const float az = step * float(j) * kPi / 180;
-            const Vec3 d{std::cos(el) * std::cos(az), std::sin(el), std::cos(el) * std::sin(az)};
-            float best = std::numeric_limits<float>::max();
-            Vec3 n{};
-            bool trough = false;
-            if (walls) {
-                const float o[3] = {at.x, at.y, at.z}, v[3] = {d.x, d.y, d.z};
-                for (int a = 0; a < 3; ++a)
-                    for (const float plane : {0.0f, 1.0f}) {
-                        if (a == 2 && plane == 0) continue;  // the open front
-                        const float t = v[a] != 0 ? (plane - o[a]) / v[a] : -1;
-                        const Vec3 p = at + d * t;
-                        const float e = 1e-4f;  // the walls end at the room's edges
-                        if (!(t > 0 && t < best) || p.x < -e || p.x > 1 + e || p.y < -e ||
-                            p.y > 1 + e || p.z < -e || p.z > 1 + e)
-                            continue;
-                        best = t;
-                        n = {a == 0 ? (plane == 0 ? 1.f : -1.f) : 0.f,
-                             a == 1 ? (plane == 0 ? 1.f : -1.f) : 0.f, a == 2 ? -1.f : 0.f};
-                    }
-            }
-            // (at.y + t d.y - yc)^2 + (at.z + t d.z - zc)^2 = r^2
-            const float py = at.y - yc, pz = at.z - zc;
-            const float qa = d.y * d.y + d.z * d.z, qb = 2 * (py * d.y + pz * d.z),
-                        qc = py * py + pz * pz - r * r, disc = qb * qb - 4 * qa * qc;
-            if (qa > 0 && disc >= 0)
-                for (const float sg : {-1.0f, 1.0f}) {
-                    const float t = (-qb + sg * std::sqrt(disc)) / (2 * qa);
-                    const Vec3 p = at + d * t;
-                    if (!(t > 0 && t < best) || p.x < 0.2f || p.x > 0.8f || p.z < zc) continue;
-                    best = t;
-                    n = Vec3{0, yc - p.y, zc - p.z} / r;  // the inside, which the scanner sees
-                    trough = true;
-                }
-            if (best == std::numeric_limits<float>::max()) continue;
-            const Vec3 p = at + d * best;
-            (trough ? tp : out.points.positions).push_back(p);
-            (trough ? tn : out.truth).push_back(n);
+            f(Vec3{std::cos(el) * std::cos(az), std::sin(el), std::cos(el) * std::sin(az)});
         }
     }
+}
+
+Scanned scan_trough(Vec3 at, float step, bool walls) {
+    constexpr float r = 0.15f, yc = 0.35f, zc = 0.7f;
+    Scanned out;
+    std::vector<Vec3> tp, tn;
+    for_each_beam(step, [&](Vec3 d) {
+        float best = std::numeric_limits<float>::max();
+        Vec3 n{};
+        bool trough = false;
+        if (walls) {
+            const float o[3] = {at.x, at.y, at.z}, v[3] = {d.x, d.y, d.z};
+            for (int a = 0; a < 3; ++a)
+                for (const float plane : {0.0f, 1.0f}) {
+                    if (a == 2 && plane == 0) continue;  // the open front
+                    const float t = v[a] != 0 ? (plane - o[a]) / v[a] : -1;
+                    const Vec3 p = at + d * t;
+                    const float e = 1e-4f;  // the walls end at the room's edges
+                    if (!(t > 0 && t < best) || p.x < -e || p.x > 1 + e || p.y < -e ||
+                        p.y > 1 + e || p.z < -e || p.z > 1 + e)
+                        continue;
+                    best = t;
+                    n = {a == 0 ? (plane == 0 ? 1.f : -1.f) : 0.f,
+                         a == 1 ? (plane == 0 ? 1.f : -1.f) : 0.f, a == 2 ? -1.f : 0.f};
+                }
+        }
+        // (at.y + t d.y - yc)^2 + (at.z + t d.z - zc)^2 = r^2
+        const float py = at.y - yc, pz = at.z - zc;
+        const float qa = d.y * d.y + d.z * d.z, qb = 2 * (py * d.y + pz * d.z),
+                    qc = py * py + pz * pz - r * r, disc = qb * qb - 4 * qa * qc;
+        if (qa > 0 && disc >= 0)
+            for (const float sg : {-1.0f, 1.0f}) {
+                const float t = (-qb + sg * std::sqrt(disc)) / (2 * qa);
+                const Vec3 p = at + d * t;
+                if (!(t > 0 && t < best) || p.x < 0.2f || p.x > 0.8f || p.z < zc) continue;
+                best = t;
+                n = Vec3{0, yc - p.y, zc - p.z} / r;  // the inside, which the scanner sees
+                trough = true;
+            }
+        if (best == std::numeric_limits<float>::max()) return;
+        const Vec3 p = at + d * best;
+        (trough ? tp : out.points.positions).push_back(p);
+        (trough ? tn : out.truth).push_back(n);
+    });
     out.trough_begin = out.points.size();
     out.points.positions.insert(out.points.positions.end(), tp.begin(), tp.end());
     out.truth.insert(out.truth.end(), tn.begin(), tn.end());
@@ -610,28 +619,22 @@ TEST(Orientation, AScanFromInsideARoomFacesWhereItsScannerStood) {
 // An equal-angle scan (turning about y, steps of `step` degrees) from `at` of a lone bowl: the
 // far half (z >= 0.7) of a sphere of radius 0.15 about (0.5, 0.35, 0.7), its inside seen.
 Scanned scan_bowl(Vec3 at, float step) {
-    constexpr float kPi = 3.14159265f, r = 0.15f;
+    constexpr float r = 0.15f;
     const Vec3 c{0.5f, 0.35f, 0.7f};
     Scanned out;
-    const int rows = int(180 / step), cols = int(360 / step);
-    for (int i = 1; i < rows; ++i) {
-        const float el = (-90 + step * float(i)) * kPi / 180;
-        for (int j = 0; j < cols; ++j) {
-            const float az = step * float(j) * kPi / 180;
-            const Vec3 d{std::cos(el) * std::cos(az), std::sin(el), std::cos(el) * std::sin(az)};
-            const Vec3 o = at - c;
-            const float qb = 2 * dot(o, d), qc = dot(o, o) - r * r, disc = qb * qb - 4 * qc;
-            if (disc < 0) continue;
-            for (const float sg : {-1.0f, 1.0f}) {
-                const float t = (-qb + sg * std::sqrt(disc)) / 2;
-                const Vec3 p = at + d * t;
-                if (!(t > 0) || p.z < c.z) continue;
-                out.points.positions.push_back(p);
-                out.truth.push_back((c - p) / r);  // the inside, which the scanner sees
-                break;
-            }
+    for_each_beam(step, [&](Vec3 d) {
+        const Vec3 o = at - c;
+        const float qb = 2 * dot(o, d), qc = dot(o, o) - r * r, disc = qb * qb - 4 * qc;
+        if (disc < 0) return;
+        for (const float sg : {-1.0f, 1.0f}) {
+            const float t = (-qb + sg * std::sqrt(disc)) / 2;
+            const Vec3 p = at + d * t;
+            if (!(t > 0) || p.z < c.z) continue;
+            out.points.positions.push_back(p);
+            out.truth.push_back((c - p) / r);  // the inside, which the scanner sees
+            break;
         }
-    }
+    });
     return out;
 }
 

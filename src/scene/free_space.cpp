@@ -16,6 +16,7 @@
 #include <numeric>
 #include <optional>
 
+#include "util/small_solve.h"
 #include "vmap/parallel.h"
 
 namespace vmap::detail {
@@ -714,7 +715,7 @@ std::array<bool, 6> room_wall_faces(const FreeSpace& fs, const std::vector<Vec3>
     return wall;
 }
 
-// Where the scanner stood (step 6 of vote_sides). A scanner records only what it sees, from the
+// Where the scanner stood (step 7 of vote_sides). A scanner records only what it sees, from the
 // side it faces, so from where it stood it sees every point it recorded: the free place that
 // sees the most points finds it, or a place that sees as much. Candidates are the cells of a
 // kViewLattice lattice over the room's box whose neighbourhood (kViewClear cells each way) is
@@ -926,7 +927,7 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // Its points leave the sample and the search runs again for the next scanner. Where several
 // scanners overlap almost everywhere (four or more around one object) no place explains enough
 // points alone: the scan keeps the view (step 7) and the other rules.
-constexpr float kSpacingSigma = 0.03f;   // the width of a scanner's residual peak (log units)
+constexpr float kSpacingSigma = 0.03f;  // the width of a scanner's residual peak (log units)
 constexpr size_t kMaxScanners = 8;
 constexpr size_t kMinScannerPoints = 24;  // of the sampled points, explained by one place
 constexpr size_t kScannerStarts = 6;      // settled places scored with visibility
@@ -985,37 +986,14 @@ Fit fit_residuals(std::vector<float>& e) {
     return f;
 }
 
-// Solves the 4 x 4 system A s = g by elimination with partial pivoting; false if singular.
-bool solve4(double A[4][4], double g[4], double s[4]) {
-    for (int c = 0; c < 4; ++c) {
-        int r = c;
-        for (int q = c + 1; q < 4; ++q)
-            if (std::fabs(A[q][c]) > std::fabs(A[r][c])) r = q;
-        if (!(std::fabs(A[r][c]) > 0)) return false;
-        std::swap(A[r], A[c]);
-        std::swap(g[r], g[c]);
-        for (int q = c + 1; q < 4; ++q) {
-            const double f = A[q][c] / A[c][c];
-            for (int k = c; k < 4; ++k) A[q][k] -= f * A[c][k];
-            g[q] -= f * g[c];
-        }
-    }
-    for (int c = 3; c >= 0; --c) {
-        double t = g[c];
-        for (int k = c + 1; k < 4; ++k) t -= A[c][k] * s[k];
-        s[c] = t / A[c][c];
-    }
-    return true;
-}
-
 // Weighted Gauss-Newton steps for the place x and log k that make the residuals of the points
 // idx agree. With u = x - p, the residual's gradient in x is -1.5 u / |u|^2 + 0.5 n / (n . u),
 // plus 0.5 (u / |u|^2 - u_perp / |u_perp|^2) with an axis (u_perp: u off the axis). Steps are
 // capped at a quarter of `scale` (the box's extent). Serial and arithmetic only: visibility is
 // judged once the place has settled.
 Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-            const std::vector<float>& radii, const std::vector<uint32_t>& idx, Vec3 x,
-            float scale, Vec3 axis) {
+            const std::vector<float>& radii, const std::vector<uint32_t>& idx, Vec3 x, float scale,
+            Vec3 axis) {
     const size_t m = idx.size();
     std::vector<float> e(m), v;
     for (const float sigma : {4 * kSpacingSigma, 2 * kSpacingSigma, kSpacingSigma}) {
@@ -1051,9 +1029,8 @@ Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
                 }
             }
             for (int a = 0; a < 4; ++a) A[a][a] = A[a][a] * (1.0 + 1e-3) + 1e-12;
-            double step[4];
-            if (!solve4(A, g, step)) break;
-            Vec3 dx{float(step[0]), float(step[1]), float(step[2])};
+            if (!solve_small(A, g)) break;
+            Vec3 dx{float(g[0]), float(g[1]), float(g[2])};
             const float len = length(dx), cap = 0.25f * scale;
             if (!(len == len)) break;
             if (len > cap) dx = dx * (cap / len);
@@ -1133,8 +1110,8 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
             const float r = residual(sample(j), best_at);
             conflicts += !std::isnan(r) && r < best.centre + 1.0f;
         }
-        if (best.inliers < std::max(kMinScannerPoints, m / 20) ||
-            10 * best.sparser > best.seen || 10 * conflicts > earlier)
+        if (best.inliers < std::max(kMinScannerPoints, m / 20) || 10 * best.sparser > best.seen ||
+            10 * conflicts > earlier)
             break;
         std::vector<uint32_t> mine;
         for (size_t j = 0; j < m; ++j) {
@@ -1286,8 +1263,8 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             for (const Vec3 d : around())
                 if (!room_wall[size_t(DiscCaster::exit_face(walls, mid, d))])
                     cand.push_back(mid + d * (f * length(walls.hi - walls.lo)));
-        const Scanners found =
-            find_scanners(caster, pts, normals, radii, r_med, noise, cand, max_extent(walls), frame);
+        const Scanners found = find_scanners(caster, pts, normals, radii, r_med, noise, cand,
+                                             max_extent(walls), frame);
         if (!found.at.empty()) {
             parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
                 for (size_t i = chunk_begin; i < chunk_end; ++i) {
@@ -1304,12 +1281,11 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
                 v.scanners.push_back(frame[0] * x.x + frame[1] * x.y + frame[2] * x.z);
             std::string places;
             for (const Vec3 x : v.scanners)
-                places += fmt::format("{}({:.4g}, {:.4g}, {:.4g})", places.empty() ? "" : ", ",
-                                      x.x, x.y, x.z);
+                places += fmt::format("{}({:.4g}, {:.4g}, {:.4g})", places.empty() ? "" : ", ", x.x,
+                                      x.y, x.z);
             v.method += fmt::format(
                 "; a scan, its scanner{} at {} by the points' spacing (turning axis: {})",
-                found.at.size() == 1 ? "" : "s", places,
-                axis_words(frame, found.axis));
+                found.at.size() == 1 ? "" : "s", places, axis_words(frame, found.axis));
         }
     }
     if (!scanned_room(radii, room_wall)) return v;
@@ -1331,8 +1307,8 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     const Vec3 at = frame[0] * view->at.x + frame[1] * view->at.y + frame[2] * view->at.z;
     v.view = at;
     v.method += fmt::format(
-        "; a scan from inside a room, its scanner at about ({:.4g}, {:.4g}, "
-        "{:.4g}) (sees {} of {} points sampled)",
+        "; a scan from inside a room, the place that sees the most of it at about ({:.4g}, "
+        "{:.4g}, {:.4g}) (sees {} of {} points sampled)",
         at.x, at.y, at.z, view->seen, view->samples);
     return v;
 }

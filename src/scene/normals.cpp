@@ -24,6 +24,7 @@
 #include "geom/morton.h"
 #include "scene/cloud_knn.h"
 #include "scene/free_space.h"
+#include "util/small_solve.h"
 #include "vmap/error.h"
 #include "vmap/parallel.h"
 
@@ -286,36 +287,6 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
     });
 }
 
-// Solves the 6 x 6 system a x = b in place (Gaussian elimination, partial pivoting); false when
-// a pivot is negligible against the matrix's scale.
-bool solve6(double a[6][6], double b[6]) {
-    double big = 0;
-    for (int r = 0; r < 6; ++r)
-        for (int k = 0; k < 6; ++k) big = std::max(big, std::fabs(a[r][k]));
-    if (!(big > 0)) return false;
-    for (int col = 0; col < 6; ++col) {
-        int piv = col;
-        for (int r = col + 1; r < 6; ++r)
-            if (std::fabs(a[r][col]) > std::fabs(a[piv][col])) piv = r;
-        if (std::fabs(a[piv][col]) <= 1e-12 * big) return false;
-        if (piv != col) {
-            for (int k = 0; k < 6; ++k) std::swap(a[col][k], a[piv][k]);
-            std::swap(b[col], b[piv]);
-        }
-        for (int r = col + 1; r < 6; ++r) {
-            const double f = a[r][col] / a[col][col];
-            for (int k = col; k < 6; ++k) a[r][k] -= f * a[col][k];
-            b[r] -= f * b[col];
-        }
-    }
-    for (int col = 5; col >= 0; --col) {
-        double v = b[col];
-        for (int k = col + 1; k < 6; ++k) v -= a[col][k] * b[k];
-        b[col] = v / a[col][col];
-    }
-    return true;
-}
-
 // Jet fits (a second-order height function over the tangent plane, Cazals and Pouget 2005): in
 // the frame of the point's sheet normal, z = a x^2 + b xy + c y^2 + d x + e y + f by weighted
 // least squares over the candidates on its sheet, and the normal is the surface's at the point,
@@ -367,7 +338,7 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
                 }
                 kept += nb[j] != i;
             }
-            if (kept < kJetMinNeighbours || !solve6(a, b)) continue;
+            if (kept < kJetMinNeighbours || !detail::solve_small(a, b)) continue;
             const double gx = b[3], gy = b[4];
             if (gx * gx + gy * gy > 1.0) continue;
             const Vec3 m = nz - u * float(gx) - v * float(gy);
@@ -1027,7 +998,7 @@ bool jet_through(const double (&xyz)[K][3], const bool (&keep)[K], double (&coef
             for (int c = 0; c < 6; ++c) a[r][c] += phi[r] * phi[c];
         }
     }
-    return solve6(a, coef);
+    return detail::solve_small(a, coef);
 }
 template <size_t K>
 void jet_residuals(const double (&xyz)[K][3], const double (&c)[6], double (&res)[K]) {

@@ -265,7 +265,7 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
     const size_t voted = rep.by_space + rep.by_rays + rep.by_shape + rep.by_view;
     if (!sensed && voted > 0)
         line += fmt::format(
-            "; {} points by free space, {} toward the scanner's place, {} by rays, {} by their "
+            "; {} points by free space, {} toward where a scanner stood, {} by rays, {} by their "
             "open sheet's "
             "shape ({} of those then turned by their neighbours' votes), {} from their "
             "neighbours",

@@ -655,6 +655,23 @@ TEST(Orientation, ALoneScanFacesWhereItsSpacingShowsItsScannerStood) {
         << rep.scanners[0].x << " " << rep.scanners[0].y << " " << rep.scanners[0].z;
 }
 
+// The same with a scan's noise (a quarter of the beams' spacing on the bowl, per axis): the radii
+// scatter as well, the residuals' peak widens with the measured noise, and the place is still
+// found.
+TEST(Orientation, ANoisyLoneScanStillShowsWhereItsScannerStood) {
+    const Vec3 at{0.5f, 0.6f, 0.3f};
+    Scanned scan = scan_bowl(at, 0.5f);
+    std::mt19937 rng(9);
+    std::normal_distribution<float> g(0.0f, 0.25f * 0.45f * 0.5f * 3.14159265f / 180);
+    for (Vec3& p : scan.points.positions) p = p + Vec3{g(rng), g(rng), g(rng)};
+    OrientationReport rep;
+    estimate_normals(scan.points, {}, "noisy lone scan", &rep);
+    EXPECT_GT(share_right(scan.points, scan.truth, 0, scan.points.size()), 0.95);
+    ASSERT_EQ(rep.scanners.size(), 1u) << rep.method;
+    EXPECT_LT(length(rep.scanners[0] - at), 0.05f)
+        << rep.scanners[0].x << " " << rep.scanners[0].y << " " << rep.scanners[0].z;
+}
+
 // Not a scan from inside a room: the trough scanned without a room around it (the most-seen
 // place does not fix where its scanner stood: a sheet looks the same from either side; only
 // the spacing may), and the room and the trough sampled at random (a sampler's spacing, which

@@ -907,15 +907,15 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // is the same constant for all its points (within about 0.01 on a simulated scan); a few
 // centimetres off, or from a place that sees the points through an unscanned side (inside an
 // object's cap), it spreads over 0.05-0.12. A scanner far from what it scans sees little change
-// of s, so the axis may also be left out (-1); else it is one of the frame's axes (room_frame
-// turns the walls onto them), whichever fits best.
+// of s, so the axis may also be left out; else it is one of the frame's axes (room_frame turns
+// the walls onto them) or of the cloud's own, whichever fits best.
 //
 // The search: from every candidate (the view's, and places around the box at 0.75 and 3
 // diagonals too), Gauss-Newton steps on the points it sees move the place and k until their
-// residuals agree, weighted by a kernel about their peak that narrows from 4 to 1 times
-// kSpacingSigma; the best few settled places are then scored with visibility. Scanners only
-// add points, so where several overlap the spacing is finer than any one of them makes it,
-// never coarser. The best place is a scanner when
+// residuals agree, weighted by a kernel about their peak that narrows from 4 to 1 times sigma
+// (kSpacingSigma, widened by the scan's noise); the best few settled places are then scored
+// with visibility. Scanners only add points, so where several overlap the spacing is finer
+// than any one of them makes it, never coarser. The best place is a scanner when
 // - the points it explains (within 2 sigma) are at least 1 in 20 of the sampled points;
 // - at most a tenth of the points it sees are coarser than it makes them (by 3 sigma or more:
 //   the edges of a scan, where the nearest neighbours lie on one side; a place that sees an
@@ -928,6 +928,12 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // scanners overlap almost everywhere (four or more around one object) no place explains enough
 // points alone: the scan keeps the view (step 7) and the other rules.
 constexpr float kSpacingSigma = 0.03f;  // the width of a scanner's residual peak (log units)
+// A scan's noise scatters the radii too: by about 0.3 noise / radius in the log (0.09 at a tenth
+// of a spacing per axis, measured on held-lone at the scanner's place); the peak widens so. Past
+// kMaxSpacingSigma the spacing no longer tells the scanner's place from a place that sees the
+// points through an object's unscanned back (their residuals spread by about 0.11 noise-free).
+constexpr float kNoiseSpacing = 0.3f;
+constexpr float kMaxSpacingSigma = 0.1f;
 constexpr size_t kMaxScanners = 8;
 constexpr size_t kMinScannerPoints = 24;  // of the sampled points, explained by one place
 constexpr size_t kScannerStarts = 6;      // settled places scored with visibility
@@ -972,13 +978,13 @@ float residual_peak(std::vector<float>& v, float sigma) {
     return best ? float(sum / double(best)) : 0.0f;
 }
 
-Fit fit_residuals(std::vector<float>& e) {
+Fit fit_residuals(std::vector<float>& e, float sigma) {
     Fit f;
     f.seen = e.size();
     if (e.empty()) return f;
-    f.centre = residual_peak(e, kSpacingSigma);
+    f.centre = residual_peak(e, sigma);
     for (const float v : e) {
-        const double z = (v - f.centre) / kSpacingSigma;
+        const double z = (v - f.centre) / sigma;
         f.score += std::exp(-0.5 * z * z);
         f.inliers += std::fabs(z) < 2;
         f.sparser += z > 3;
@@ -993,10 +999,10 @@ Fit fit_residuals(std::vector<float>& e) {
 // judged once the place has settled.
 Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
             const std::vector<float>& radii, const std::vector<uint32_t>& idx, Vec3 x, float scale,
-            Vec3 axis) {
+            Vec3 axis, float sigma0) {
     const size_t m = idx.size();
     std::vector<float> e(m), v;
-    for (const float sigma : {4 * kSpacingSigma, 2 * kSpacingSigma, kSpacingSigma}) {
+    for (const float sigma : {4 * sigma0, 2 * sigma0, sigma0}) {
         for (int it = 0; it < 10; ++it) {
             v.clear();
             for (size_t j = 0; j < m; ++j) {
@@ -1051,7 +1057,8 @@ struct Scanners {
 Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pts,
                            const std::vector<Vec3>& normals, const std::vector<float>& radii,
                            float r_med, float noise, const std::vector<Vec3>& cand,
-                           const std::vector<uint8_t>& seen, size_t m, float scale, Vec3 axis) {
+                           const std::vector<uint8_t>& seen, size_t m, float scale, Vec3 axis,
+                           float sigma) {
     const size_t n = pts.size(), c = cand.size();
     Scanners out;
     out.axis = axis;
@@ -1077,12 +1084,12 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
                     if (!explained[j] && seen[v * m + j]) idx.push_back(sample(j));
                 const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
                 for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
-                settled[v] = locate(pts, normals, radii, few, cand[v], scale, axis);
+                settled[v] = locate(pts, normals, radii, few, cand[v], scale, axis, sigma);
                 for (const uint32_t i : idx) {
                     const float x = spacing_residual(pts, normals, radii, i, settled[v], axis);
                     if (!std::isnan(x)) r.push_back(x);
                 }
-                ranked[v] = {-fit_residuals(r).score, v};
+                ranked[v] = {-fit_residuals(r, sigma).score, v};
             }
         });
         std::sort(ranked.begin(), ranked.end());
@@ -1097,7 +1104,7 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
             });
             e.erase(std::remove_if(e.begin(), e.end(), [](float r) { return std::isnan(r); }),
                     e.end());
-            const Fit f = fit_residuals(e);
+            const Fit f = fit_residuals(e, sigma);
             if (f.score > best.score) best = f, best_at = x;
         }
         if (out.at.empty()) out.score = best.score;
@@ -1117,7 +1124,7 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         for (size_t j = 0; j < m; ++j) {
             if (explained[j]) continue;
             const float r = residual(sample(j), best_at);
-            if (!std::isnan(r) && std::fabs(r - best.centre) < 2 * kSpacingSigma)
+            if (!std::isnan(r) && std::fabs(r - best.centre) < 2 * sigma)
                 mine.push_back(uint32_t(j));
         }
         std::vector<float> theirs;
@@ -1135,7 +1142,9 @@ Scanners find_scanners(const DiscCaster& caster, const std::vector<Vec3>& pts,
                        float r_med, float noise, const std::vector<Vec3>& cand, float scale,
                        const std::array<Vec3, 3>& frame) {
     const size_t n = pts.size(), m = std::min(n, kViewSamples), c = cand.size();
-    if (c == 0 || m == 0) return {};
+    const float t = kNoiseSpacing * noise / r_med;
+    const float sigma = std::sqrt(kSpacingSigma * kSpacingSigma + t * t);
+    if (c == 0 || m == 0 || !(sigma <= kMaxSpacingSigma)) return {};
     std::vector<uint8_t> seen(c * m);
     parallel_for_range<size_t>(c * m, 256, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t k = chunk_begin; k < chunk_end; ++k) {
@@ -1154,7 +1163,7 @@ Scanners find_scanners(const DiscCaster& caster, const std::vector<Vec3>& pts,
     Scanners best;
     for (const Vec3 axis : axes) {
         Scanners s = scanners_for_axis(caster, pts, normals, radii, r_med, noise, cand, seen, m,
-                                       scale, axis);
+                                       scale, axis, sigma);
         if (s.score > best.score) best = std::move(s);
     }
     return best;

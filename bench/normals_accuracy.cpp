@@ -1,6 +1,7 @@
 // normals_accuracy: how well raw-cloud normals and splat radii are recovered.
 //
 //   normals_accuracy [--objects-only] [--per-surface] [--points N] [--noise F] [--scan N]
+//                    [--scan-seed S]
 //                    [--orientation auto|outward|inward] [--write-ply DIR] SCENE.json...
 //   normals_accuracy --angles [--noise F] [--floor] [--objects-only] [--points N]
 //                    [--fit-neighbours N] [--refits N] [--write-ply DIR] SCENE.json...
@@ -57,6 +58,7 @@ struct Options {
     bool angles = false, floor = false;
     bool orientation_given = false;
     uint32_t scan = 0;           // --scan N: a simulated scan from N scanners, not the samples
+    uint64_t scan_seed = 1;      // --scan-seed S: where they stand
     bool per_surface = false;    // --per-surface: a sign count per mesh on stderr
     double noise = 0;            // Gaussian, in sample spacings
     NormalEstimationParams fit;  // --fit-neighbours, --refits
@@ -333,7 +335,7 @@ void run_scene(const std::string& path, const Options& o) {
     std::vector<uint32_t> surf;
     if (o.scan) {  // a simulated scan (vmap validate --scan): its points and true sides
         const ExactVisibility exact(sc.surfaces, path);
-        ScanPoints scan = scan_scene(sc, exact, o.scan, sc.points, 1, path);
+        ScanPoints scan = scan_scene(sc, exact, o.scan, sc.points, o.scan_seed, path);
         for (const Vec3& s : scan.scanners)
             fmt::print(stderr, "{}: scanner at ({:.3f}, {:.3f}, {:.3f})\n", sc.name, s.x, s.y, s.z);
         truth = std::move(scan.points);
@@ -386,7 +388,8 @@ void run_scene(const std::string& path, const Options& o) {
         thn.signs() + fmt::format(" ({})", thn.n), Tally::median(all.ratio),
         Tally::median(all.old_ratio), Tally::median(obj.ratio), Tally::median(obj.old_ratio),
         Tally::median(thn.ratio), Tally::median(thn.old_ratio), sn, sr);
-    fmt::print(stderr, "{}: {}; {} by space, {} by view, {} by rays, {} by shape, {} by neighbours\n",
+    fmt::print(stderr,
+               "{}: {}; {} by space, {} by view, {} by rays, {} by shape, {} by neighbours\n",
                sc.name, rep.method, rep.by_space, rep.by_view, rep.by_rays, rep.by_shape,
                rep.by_neighbours);
     if (o.per_surface) print_per_surface(sc, truth, raw, surf, inside, thin);
@@ -428,6 +431,8 @@ int main(int argc, char** argv) {
             o.mix_dir = argv[++i];
         } else if (a == "--scan" && more) {
             o.scan = uint32_t(std::stoul(argv[++i]));
+        } else if (a == "--scan-seed" && more) {
+            o.scan_seed = std::stoull(argv[++i]);
         } else if (a == "--uniform") {
             o.uniform = true;
         } else if (a == "--write-ply" && more) {

@@ -917,9 +917,10 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // with visibility. Scanners only add points, so where several overlap the spacing is finer
 // than any one of them makes it, never coarser. The best place is a scanner when
 // - the points it explains (within 2 sigma) are at least 1 in 20 of the sampled points;
-// - at most a tenth of the points it sees are coarser than it makes them (by 3 sigma or more:
-//   the edges of a scan, where the nearest neighbours lie on one side; a place that sees an
-//   object through its unscanned back spreads both ways);
+// - at most kSparserShare of the points it sees are coarser than it makes them (by 3 sigma or
+//   more: the edges of a scan, where the nearest neighbours lie on one side, 6-12% of a
+//   one-scanner scan of an object; a place that sees an object through its unscanned back, or
+//   one among several overlapping scanners, spreads both ways: 15-44% on the scans measured);
 // - at most a tenth of the earlier scanners' points (at their own spacing, so made by them
 //   alone) lie where this place would have added a seventh or more to their density;
 // - its points spread in spacing (log radius) by kExplainedSpread or more: a sampler's even
@@ -939,6 +940,7 @@ constexpr size_t kMinScannerPoints = 24;  // of the sampled points, explained by
 constexpr size_t kScannerStarts = 6;      // settled places scored with visibility
 constexpr size_t kLocatePoints = 256;     // the points a start's steps use, at most
 constexpr double kExplainedSpread = 0.1;  // a scanner's points' spread of log radius, at least
+constexpr double kSparserShare = 0.15;    // of what a scanner sees, coarser than it makes it
 constexpr double kMinSpread = 0.15;       // the cloud's; below it no scanner is sought
 
 struct Fit {
@@ -1117,8 +1119,8 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
             const float r = residual(sample(j), best_at);
             conflicts += !std::isnan(r) && r < best.centre + 1.0f;
         }
-        if (best.inliers < std::max(kMinScannerPoints, m / 20) || 10 * best.sparser > best.seen ||
-            10 * conflicts > earlier)
+        if (best.inliers < std::max(kMinScannerPoints, m / 20) ||
+            double(best.sparser) > kSparserShare * double(best.seen) || 10 * conflicts > earlier)
             break;
         std::vector<uint32_t> mine;
         for (size_t j = 0; j < m; ++j) {

@@ -820,11 +820,30 @@ struct View {
     size_t seen = 0, samples = 0;  // of kViewSamples points at a fixed stride
 };
 
+// Whether each candidate sees each of the min(n, kViewSamples) points at a fixed stride
+// (candidate-major): the table both the view (find_view) and the scanners by spacing
+// (find_scanners) start from.
+std::vector<uint8_t> sampled_views(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                                   const std::vector<float>& radii, float r_med, float noise,
+                                   const std::vector<Vec3>& cand) {
+    const size_t n = pts.size(), m = std::min(n, kViewSamples);
+    std::vector<uint8_t> seen(cand.size() * m);
+    parallel_for_range<size_t>(seen.size(), 256, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t k = chunk_begin; k < chunk_end; ++k) {
+            const uint32_t i = uint32_t((k % m) * n / m);
+            seen[k] = caster.sees(i, cand[k / m], ray_start(radii[i], r_med, noise));
+        }
+    });
+    return seen;
+}
+
 // Ties go to the lower candidate and the first step tried, so the view does not depend on the
-// number of threads. step0: the lattice's spacing; h: the voxel grid's cell.
+// number of threads. seen: sampled_views of cand (the first cand.size() rows are used); step0:
+// the lattice's spacing; h: the voxel grid's cell.
 std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>& pts,
                               const std::vector<float>& radii, float r_med, float noise,
-                              const std::vector<Vec3>& cand, float step0, float h) {
+                              const std::vector<Vec3>& cand, const std::vector<uint8_t>& seen,
+                              float step0, float h) {
     const size_t n = pts.size(), m = std::min(n, kViewSamples), c = cand.size();
     if (c == 0 || m == 0) return std::nullopt;
     auto sample = [&](size_t j) { return uint32_t(j * n / m); };
@@ -842,11 +861,9 @@ std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>&
         });
         return count.load();
     };
-    std::vector<std::atomic<size_t>> gain(c);
-    parallel_for_range<size_t>(c * m, 256, [&](size_t chunk_begin, size_t chunk_end) {
-        for (size_t k = chunk_begin; k < chunk_end; ++k)
-            if (sees(k % m, cand[k / m])) gain[k / m].fetch_add(1, std::memory_order_relaxed);
-    });
+    std::vector<size_t> gain(c);
+    for (size_t v = 0; v < c; ++v)
+        gain[v] = size_t(std::count(seen.begin() + v * m, seen.begin() + (v + 1) * m, 1));
     size_t best = 0;
     for (size_t v = 1; v < c; ++v)
         if (gain[v] > gain[best]) best = v;
@@ -1097,6 +1114,7 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         std::sort(ranked.begin(), ranked.end());
         Vec3 best_at{};
         Fit best;
+        std::vector<float> best_e;  // the best place's residual per sample (NaN: not counted)
         for (size_t t = 0; t < std::min(kScannerStarts, c); ++t) {
             const Vec3 x = settled[ranked[t].second];
             e.assign(m, std::numeric_limits<float>::quiet_NaN());
@@ -1104,10 +1122,11 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
                 for (size_t j = chunk_begin; j < chunk_end; ++j)
                     if (!explained[j]) e[j] = residual(sample(j), x);
             });
-            e.erase(std::remove_if(e.begin(), e.end(), [](float r) { return std::isnan(r); }),
-                    e.end());
-            const Fit f = fit_residuals(e, sigma);
-            if (f.score > best.score) best = f, best_at = x;
+            std::vector<float> counted;
+            for (const float r : e)
+                if (!std::isnan(r)) counted.push_back(r);
+            const Fit f = fit_residuals(counted, sigma);
+            if (f.score > best.score) best = f, best_at = x, best_e.swap(e);
         }
         if (out.at.empty()) out.score = best.score;
         // Where the earlier scanners' points bunch at their own spacing, this place would have
@@ -1122,38 +1141,35 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         if (best.inliers < std::max(kMinScannerPoints, m / 20) ||
             double(best.sparser) > kSparserShare * double(best.seen) || 10 * conflicts > earlier)
             break;
+        // Its points (best.inliers of them).
         std::vector<uint32_t> mine;
-        for (size_t j = 0; j < m; ++j) {
-            if (explained[j]) continue;
-            const float r = residual(sample(j), best_at);
-            if (!std::isnan(r) && std::fabs(r - best.centre) < 2 * sigma)
+        for (size_t j = 0; j < m; ++j)
+            if (!std::isnan(best_e[j]) && std::fabs(best_e[j] - best.centre) < 2 * sigma)
                 mine.push_back(uint32_t(j));
-        }
         std::vector<float> theirs;
         for (const uint32_t j : mine) theirs.push_back(radii[sample(j)]);
-        if (mine.size() < kMinScannerPoints || log_spread(theirs) < kExplainedSpread) break;
+        if (log_spread(theirs) < kExplainedSpread) break;
         for (const uint32_t j : mine) explained[j] = 1;
         out.at.push_back(best_at);
     }
     return out;
 }
 
-// The scanners of the axis model whose first scanner fits best.
+// The peak's width for a scan with this noise (kNoiseSpacing); past kMaxSpacingSigma the
+// spacing is not searched.
+float spacing_sigma(float noise, float r_med) {
+    const float t = kNoiseSpacing * noise / r_med;
+    return std::sqrt(kSpacingSigma * kSpacingSigma + t * t);
+}
+
+// The scanners of the axis model whose first scanner fits best. seen: sampled_views of cand.
 Scanners find_scanners(const DiscCaster& caster, const std::vector<Vec3>& pts,
                        const std::vector<Vec3>& normals, const std::vector<float>& radii,
-                       float r_med, float noise, const std::vector<Vec3>& cand, float scale,
+                       float r_med, float noise, const std::vector<Vec3>& cand,
+                       const std::vector<uint8_t>& seen, float scale, float sigma,
                        const std::array<Vec3, 3>& frame) {
-    const size_t n = pts.size(), m = std::min(n, kViewSamples), c = cand.size();
-    const float t = kNoiseSpacing * noise / r_med;
-    const float sigma = std::sqrt(kSpacingSigma * kSpacingSigma + t * t);
-    if (c == 0 || m == 0 || !(sigma <= kMaxSpacingSigma)) return {};
-    std::vector<uint8_t> seen(c * m);
-    parallel_for_range<size_t>(c * m, 256, [&](size_t chunk_begin, size_t chunk_end) {
-        for (size_t k = chunk_begin; k < chunk_end; ++k) {
-            const uint32_t i = uint32_t((k % m) * n / m);
-            seen[k] = caster.sees(i, cand[k / m], ray_start(radii[i], r_med, noise));
-        }
-    });
+    const size_t m = std::min(pts.size(), kViewSamples);
+    if (cand.empty() || m == 0) return {};
     // No axis; the frame's axes (a room's walls put its upright on one); the cloud's own (a lone
     // object's frame follows its faces, the cloud's up is the file's), where not the same.
     std::vector<Vec3> axes{{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1}};
@@ -1267,42 +1283,50 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             v.weight[i] = cue == SideCue::kSpace ? 2.0f : std::fabs(side);
         }
     });
-    if (log_spread(radii) >= kMinSpread) {
-        std::vector<Vec3> cand = view_candidates(g, fs, walls, room_wall);
+    // Steps 6 and 7 start from one table of what the candidate places see.
+    const float sigma = spacing_sigma(noise, r_med);
+    const bool spaced = log_spread(radii) >= kMinSpread && sigma <= kMaxSpacingSigma;
+    const bool room_scan = scanned_room(radii, room_wall);
+    if (!spaced && !room_scan) return v;
+    std::vector<Vec3> cand = view_candidates(g, fs, walls, room_wall);
+    const size_t view_cand = cand.size();
+    if (spaced) {
         const Vec3 mid = (walls.lo + walls.hi) * 0.5f;
         for (const float f : {0.75f, 3.0f})
             for (const Vec3 d : around())
                 if (!room_wall[size_t(DiscCaster::exit_face(walls, mid, d))])
                     cand.push_back(mid + d * (f * length(walls.hi - walls.lo)));
-        const Scanners found = find_scanners(caster, pts, normals, radii, r_med, noise, cand,
-                                             max_extent(walls), frame);
-        if (!found.at.empty()) {
-            parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
-                for (size_t i = chunk_begin; i < chunk_end; ++i) {
-                    if (v.cue[i] == SideCue::kSpace) continue;
-                    const int side = scanners_side(caster, pts, normals, uint32_t(i), found.at,
-                                                   ray_start(radii[i], r_med, noise));
-                    if (side == 0) continue;
-                    v.sign[i] = int8_t(side);
-                    v.cue[i] = SideCue::kView;
-                    v.weight[i] = 2.0f;
-                }
-            });
-            for (const Vec3 x : found.at)
-                v.scanners.push_back(frame[0] * x.x + frame[1] * x.y + frame[2] * x.z);
-            std::string places;
-            for (const Vec3 x : v.scanners)
-                places += fmt::format("{}({:.4g}, {:.4g}, {:.4g})", places.empty() ? "" : ", ", x.x,
-                                      x.y, x.z);
-            v.method += fmt::format(
-                "; a scan, its scanner{} at {} by the points' spacing (turning axis: {})",
-                found.at.size() == 1 ? "" : "s", places, axis_words(frame, found.axis));
-        }
     }
-    if (!scanned_room(radii, room_wall)) return v;
-    const std::optional<View> view =
-        find_view(caster, pts, radii, r_med, noise, view_candidates(g, fs, walls, room_wall),
-                  max_extent(walls) / float(kViewLattice), g.h);
+    const std::vector<uint8_t> seen = sampled_views(caster, pts, radii, r_med, noise, cand);
+    const Scanners found = spaced ? find_scanners(caster, pts, normals, radii, r_med, noise, cand,
+                                                  seen, max_extent(walls), sigma, frame)
+                                  : Scanners{};
+    if (!found.at.empty()) {
+        parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+            for (size_t i = chunk_begin; i < chunk_end; ++i) {
+                if (v.cue[i] == SideCue::kSpace) continue;
+                const int side = scanners_side(caster, pts, normals, uint32_t(i), found.at,
+                                               ray_start(radii[i], r_med, noise));
+                if (side == 0) continue;
+                v.sign[i] = int8_t(side);
+                v.cue[i] = SideCue::kView;
+                v.weight[i] = 2.0f;
+            }
+        });
+        for (const Vec3 x : found.at)
+            v.scanners.push_back(frame[0] * x.x + frame[1] * x.y + frame[2] * x.z);
+        std::string places;
+        for (const Vec3 x : v.scanners)
+            places += fmt::format("{}({:.4g}, {:.4g}, {:.4g})", places.empty() ? "" : ", ", x.x,
+                                  x.y, x.z);
+        v.method +=
+            fmt::format("; a scan, its scanner{} at {} by the points' spacing (turning axis: {})",
+                        found.at.size() == 1 ? "" : "s", places, axis_words(frame, found.axis));
+    }
+    if (!room_scan) return v;
+    cand.resize(view_cand);
+    const std::optional<View> view = find_view(caster, pts, radii, r_med, noise, cand, seen,
+                                               max_extent(walls) / float(kViewLattice), g.h);
     if (!view) return v;
     parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
         for (size_t i = chunk_begin; i < chunk_end; ++i) {

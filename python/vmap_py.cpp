@@ -398,6 +398,7 @@ void def_build(py::module_& m) {
             d["scanners"] = scanners;
             d["by_space"] = rep.by_space, d["by_view"] = rep.by_view, d["by_rays"] = rep.by_rays,
             d["by_shape"] = rep.by_shape, d["by_neighbours"] = rep.by_neighbours;
+            d["at_creases"] = rep.at_creases;
             return d;
         },
         py::arg("points"), py::arg("radii") = py::none(), py::arg("viewpoint") = py::none(),
@@ -407,7 +408,9 @@ void def_build(py::module_& m) {
         "room was taken from, as far as its points tell (None otherwise), 'scanners': the places "
         "a bare scan's spacing shows its scanners stood at (a list of (x, y, z), empty when it "
         "does not tell), and the points signed "
-        "by each cue: 'by_space', 'by_view', 'by_rays', 'by_shape', 'by_neighbours'}. "
+        "by each cue: 'by_space', 'by_view', 'by_rays', 'by_shape', 'by_neighbours', and "
+        "'at_creases': the points at a crease whose normal is the plane through them that holds "
+        "the most of their neighbours}. "
         "viewpoint (x, y, z) signs every normal toward it; sensors N x 3 each toward its own "
         "scanner position; radii N (splat radii) are estimated when None.");
     m.def(

@@ -1073,6 +1073,43 @@ TEST(Fit, BoxEdgesKeepTheirFacesNormals) {
     // between the faces (p90 59 degrees, 47 before): both faces pass their test equally.
 }
 
+// The crease pass (NormalEstimationParams::creases): right at a box's edges, where the k nearest
+// reach onto the other face and every fit leans, a point takes the plane through it that holds
+// the most of its neighbours; away from the edges nothing changes.
+TEST(Fit, PointsRightAtABoxsEdgesTakeTheirOwnFacesPlane) {
+    const Vec3 h{1.0f, 0.6f, 0.8f};
+    const PointSet box = box_surface(h, 20000, 5);
+    NormalEstimationParams without = axes_only();
+    without.creases = false;
+    PointSet a = box, b = box;
+    estimate_normals(a, axes_only());
+    estimate_normals(b, without);
+    const std::vector<Vec3> face = face_normals(box, h);
+    PointSet edge_a, edge_b;
+    std::vector<Vec3> truth;
+    size_t far_changed = 0;
+    for (size_t i = 0; i < box.size(); ++i) {
+        // From a tenth to half a spacing off an edge. Nearer, both faces' planes through the
+        // point hold their own face within the tolerance, and the larger share wins.
+        if (near_an_edge(box.positions[i], h, 0.015f) &&
+            !near_an_edge(box.positions[i], h, 0.003f)) {
+            edge_a.positions.push_back(a.positions[i]);
+            edge_a.normals.push_back(a.normals[i]);
+            edge_b.positions.push_back(b.positions[i]);
+            edge_b.normals.push_back(b.normals[i]);
+            truth.push_back(face[i]);
+        } else if (!near_an_edge(box.positions[i], h, 0.1f)) {
+            far_changed += angle_deg(a.normals[i], b.normals[i]) > 1e-3f &&
+                           angle_deg(a.normals[i], -b.normals[i]) > 1e-3f;
+        }
+    }
+    ASSERT_GT(truth.size(), 300u);
+    const float with90 = axis_error(edge_a, truth, 0.9), without90 = axis_error(edge_b, truth, 0.9);
+    EXPECT_GT(without90, 30.0f);
+    EXPECT_LT(with90, 0.2f * without90) << "with " << with90 << ", without " << without90;
+    EXPECT_EQ(far_changed, 0u);
+}
+
 TEST(Fit, ASmallSphereFollowsItsCurve) {
     // Radius 5 sample spacings (300 points): neighbours two spacings away have turned by 23
     // degrees, which a test against the point's own tangent plane alone would drop.

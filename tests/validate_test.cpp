@@ -15,6 +15,7 @@
 #include "validate/npz.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
+#include "vmap/normals.h"
 #include "vmap/scene.h"
 
 namespace vmap {
@@ -338,6 +339,34 @@ TEST(Scan, PointsLieOnSurfacesTheirScannerSees) {
         EXPECT_NE(std::string(e.what()).find(kBlock), std::string::npos) << e.what();
         EXPECT_NE(std::string(e.what()).find("fewer than 16"), std::string::npos) << e.what();
     }
+}
+
+// The crease pass (NormalEstimationParams::creases) on a scan: test-tight's one-scanner scan,
+// bare. A scan's points lie in lines, and a line of them holds every plane through it, so a
+// plane is taken only where the points it holds make a patch (without that, 13 points of the
+// bull, where its facets leave the jet a residual, took a plane across their scan line and the
+// wrong sign: objects 99.1% -> 98.4% right).
+TEST(Scan, CreasesKeepABareScansObjectsSigns) {
+    const std::string path = std::string(VMAP_SOURCE_DIR) + "/scenes/test/test-tight.json";
+    const Scene sc = load_scene(path);
+    const ExactVisibility ex(sc.surfaces, path);
+    const ScanPoints s = scan_scene(sc, ex, 1, sc.points, 1, path);
+    PointSet raw;
+    raw.positions = s.points.positions;
+    OrientationReport rep;
+    estimate_normals(raw, {}, path.c_str(), &rep);
+    EXPECT_GT(rep.at_creases, 0u);
+    size_t objects = 0, right = 0;
+    for (size_t i = 0; i < raw.size(); ++i) {
+        const std::string& name = sc.surfaces[s.surface[i]].name;
+        if (name == "floor" || name == "back" || name == "ceiling" || name == "left" ||
+            name == "right" || name == "light")
+            continue;
+        ++objects;
+        right += dot(raw.normals[i], s.points.normals[i]) > 0;
+    }
+    ASSERT_GT(objects, 1000u);
+    EXPECT_GT(double(right) / double(objects), 0.988) << right << " of " << objects;
 }
 
 // `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the

@@ -34,6 +34,10 @@ struct NormalEstimationParams {
     // its normal at the point taken (src/scene/normals.cpp jet_pass): closer on curved parts and
     // on noisy samples than the plane (docs/validation.md "Jet fits"). false: the plane's.
     bool jet = true;
+    // Then a point whose neighbourhood a quadric cannot follow (a crease: a CAD part's edge, a
+    // box's corner) takes the plane through it that holds the most of its neighbours, of those
+    // its neighbours' normals give (src/scene/normals.cpp crease_pass; noise-free clouds only).
+    bool creases = true;
     Orientation orientation = Orientation::kAuto;
     Vec3 viewpoint{};  // for Orientation::kViewpoint
 };
@@ -52,6 +56,8 @@ struct OrientationReport {
     std::optional<Vec3> scanner;  // the place that sees the most, in a scan from inside a room
     size_t by_neighbours = 0;  // voted points turned to agree with their surface (the
                                // neighbour check of ray votes, then the votes' spread)
+    size_t at_creases = 0;     // points at a crease that took the plane through them that holds
+                               // the most of their neighbours (NormalEstimationParams::creases)
 };
 
 // Fills points.normals: a local plane fit of the nearest neighbours (nanoflann k-d tree; see

@@ -19,6 +19,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <utility>
 #include <vector>
 
 #include "geom/morton.h"
@@ -188,12 +189,14 @@ struct LocalFits {
     // roughness_of sees one, else 0) and the slack off the tangent plane that the same-sheet
     // tests allow for it (the roughness, 3 sqrt 2 sigma).
     float noise = 0, slack = 0;
+    size_t at_creases = 0;  // points the crease pass gave a plane through them
 };
 
 // The weighted least-squares plane normal of the given points (weights w, or all 1 when null),
-// or nothing if they span no plane.
+// or nothing if they span no plane, or if their spread across their main direction is under
+// min_aspect of the spread along it (a strip or a line, not a patch).
 std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* idx, size_t m,
-                                 const float* w = nullptr) {
+                                 const float* w = nullptr, double min_aspect = 0) {
     Dvec mean;
     double scale = 0, wsum = 0;
     for (size_t j = 0; j < m; ++j) {
@@ -223,6 +226,7 @@ std::optional<Vec3> plane_normal(const std::vector<Vec3>& pts, const uint32_t* i
     // rounding noise they lie on a line or coincide, and the smallest eigenvector is arbitrary.
     const double across = std::sqrt(std::max(e.values[1], 0.0) / wsum);
     if (across <= kRoundingUlps * scale) return std::nullopt;
+    if (e.values[1] < min_aspect * e.values[2]) return std::nullopt;
     const Dvec v = e.vectors[0];
     return Vec3{float(v.x), float(v.y), float(v.z)};
 }
@@ -297,6 +301,27 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
 // three); a point with fewer than kJetMinNeighbours on its sheet, a singular system or a
 // surface steeper than 45 degrees in that frame keeps its plane normal.
 constexpr size_t kJetBandwidthNeighbour = 12;
+
+// Two unit vectors (u, v) that make a right-handed frame with the unit normal nz: u across the
+// normal's smallest component.
+std::pair<Vec3, Vec3> tangent_frame(Vec3 nz) {
+    const Vec3 ax = std::fabs(nz.x) <= std::fabs(nz.y) && std::fabs(nz.x) <= std::fabs(nz.z)
+                        ? Vec3{1, 0, 0}
+                    : std::fabs(nz.y) <= std::fabs(nz.z) ? Vec3{0, 1, 0}
+                                                         : Vec3{0, 0, 1};
+    Vec3 u = ax - nz * dot(ax, nz);
+    u = u / length(u);
+    return {u, Vec3{nz.y * u.z - nz.z * u.y, nz.z * u.x - nz.x * u.z, nz.x * u.y - nz.y * u.x}};
+}
+
+// Adds w * (x^2, xy, y^2, x, y, 1) z to the normal equations of a quadric height fit.
+void add_quadric_row(double (&a)[6][6], double (&b)[6], double w, double x, double y, double z) {
+    const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
+    for (int r = 0; r < 6; ++r) {
+        b[r] += w * phi[r] * z;
+        for (int k = 0; k < 6; ++k) a[r][k] += w * phi[r] * phi[k];
+    }
+}
 constexpr size_t kJetMinNeighbours = 10;
 
 void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
@@ -312,14 +337,7 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
             out[i] = nz;
             const float h2 = d2[i * c + band];
             if (fits.degenerate[i] || !(h2 > 0)) continue;
-            // A frame (u, v, nz): u across the normal's smallest component.
-            const Vec3 ax = std::fabs(nz.x) <= std::fabs(nz.y) && std::fabs(nz.x) <= std::fabs(nz.z)
-                                ? Vec3{1, 0, 0}
-                            : std::fabs(nz.y) <= std::fabs(nz.z) ? Vec3{0, 1, 0}
-                                                                 : Vec3{0, 0, 1};
-            Vec3 u = ax - nz * dot(ax, nz);
-            u = u / length(u);
-            const Vec3 v{nz.y * u.z - nz.z * u.y, nz.z * u.x - nz.x * u.z, nz.x * u.y - nz.y * u.x};
+            const auto [u, v] = tangent_frame(nz);
             const double s = 1.0 / std::sqrt(double(h2));  // coordinates in bandwidths
             double a[6][6] = {}, b[6] = {};
             size_t kept = 0;
@@ -331,11 +349,7 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
                 const double w = std::exp(-double(d2[i * c + j]) / double(h2));
                 const Vec3 d = pts[nb[j]] - pts[i];
                 const double x = s * dot(d, u), y = s * dot(d, v), z = s * dot(d, nz);
-                const double phi[6] = {x * x, x * y, y * y, x, y, 1.0};
-                for (int r = 0; r < 6; ++r) {
-                    b[r] += w * phi[r] * z;
-                    for (int k = 0; k < 6; ++k) a[r][k] += w * phi[r] * phi[k];
-                }
+                add_quadric_row(a, b, w, x, y, z);
                 kept += nb[j] != i;
             }
             if (kept < kJetMinNeighbours || !detail::solve_small(a, b)) continue;
@@ -346,6 +360,94 @@ void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
         }
     });
     fits.sheet_normals.swap(out);
+}
+
+// Creases. On a surface with a crease (a CAD part's edge, a box's corner, a rim turned sharply)
+// every fit above leans: the candidates on the far side of the crease pull the plane, and the
+// quadric cannot follow a kink, while the re-fits' same-sheet test keeps the far face whenever
+// the leaning normals sit within its angle of both faces. A point on one face lies exactly in
+// that face's plane, and so do the candidates on its side: so where the quadric over all the
+// candidates (weighted as the plane fits, in the frame of the point's normal) misses them by
+// more than kCreaseResidual bandwidths RMS, the point takes, among its candidates' normals (its
+// own among them), the plane through itself that holds the most weight within kCreaseTolerance
+// bandwidths, re-fitted on the candidates it holds, if that plane holds at least kCreaseShare of
+// the weight: on a crease the point's own face holds about half of it or more. A smooth curve,
+// sampled finely enough for the quadric to follow it, stays as it was, and so does a point
+// whose own plane holds the most, or a faceted curve (faces about as wide as the spacing, as on
+// low-poly animals), where no plane through the point holds that much.
+// Noisy clouds are left out: there a point is not on its plane, and the tolerance would
+// have to grow with the noise until it held both faces (docs/validation.md "Raw clouds:
+// creases").
+constexpr double kCreaseResidual = 0.05;
+constexpr double kCreaseTolerance = 0.03;
+constexpr double kCreaseShare = 0.45;
+constexpr size_t kCreaseMinInliers = 5;
+// ... and the points it holds must make a patch, not a strip: their spread across their main
+// direction at least this share of the spread along it (in variance; a half disc gives about
+// 0.36). A scan's points lie in lines, and a line of them holds every plane through it.
+constexpr double kCreaseMinAspect = 0.1;
+
+void crease_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
+                 const std::vector<float>& d2, size_t c, LocalFits& fits) {
+    if (fits.noise > 0) return;
+    const size_t n = pts.size(), band = std::min(c - 1, kBandwidthNeighbour);
+    std::vector<Vec3> out = fits.sheet_normals;
+    std::vector<uint8_t> moved(n, 0);
+    parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
+        std::vector<float> w(c);
+        std::vector<Vec3> d(c);
+        std::vector<uint32_t> inliers(c);
+        std::vector<float> wi(c);
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
+            const float h2 = d2[i * c + band];
+            if (fits.degenerate[i] || !(h2 > 0)) continue;
+            const Vec3 nz = fits.sheet_normals[i];
+            const auto [u, v] = tangent_frame(nz);
+            const double s = 1.0 / std::sqrt(double(h2));  // coordinates in bandwidths
+            const uint32_t* nb = &cand[i * c];
+            double a[6][6] = {}, b[6] = {}, wsum = 0;
+            for (size_t j = 0; j < c; ++j) {
+                w[j] = std::exp(-d2[i * c + j] / h2);
+                d[j] = pts[nb[j]] - pts[i];
+                add_quadric_row(a, b, w[j], s * dot(d[j], u), s * dot(d[j], v), s * dot(d[j], nz));
+                wsum += w[j];
+            }
+            if (!detail::solve_small(a, b)) continue;
+            double r2 = 0;
+            for (size_t j = 0; j < c; ++j) {
+                const double x = s * dot(d[j], u), y = s * dot(d[j], v), z = s * dot(d[j], nz);
+                const double r =
+                    z - (b[0] * x * x + b[1] * x * y + b[2] * y * y + b[3] * x + b[4] * y + b[5]);
+                r2 += w[j] * r * r;
+            }
+            if (r2 <= kCreaseResidual * kCreaseResidual * wsum) continue;
+            const float tol = float(kCreaseTolerance / s);
+            auto held = [&](Vec3 nj) {
+                double score = 0;
+                for (size_t q = 0; q < c; ++q)
+                    if (std::fabs(dot(d[q], nj)) < tol) score += w[q];
+                return score;
+            };
+            double best = held(nz);
+            size_t pick = c;
+            for (size_t j = 0; j < c; ++j) {
+                if (nb[j] == i || fits.degenerate[nb[j]]) continue;
+                const double score = held(fits.sheet_normals[nb[j]]);
+                if (score > best) best = score, pick = j;
+            }
+            if (pick == c || best < kCreaseShare * wsum) continue;
+            const Vec3 nj = fits.sheet_normals[nb[pick]];
+            size_t m = 0;
+            for (size_t q = 0; q < c; ++q)
+                if (std::fabs(dot(d[q], nj)) < tol) inliers[m] = nb[q], wi[m++] = w[q];
+            if (m < kCreaseMinInliers) continue;
+            if (const auto normal =
+                    plane_normal(pts, inliers.data(), m, wi.data(), kCreaseMinAspect))
+                out[i] = *normal, moved[i] = 1;
+        }
+    });
+    fits.sheet_normals.swap(out);
+    fits.at_creases = size_t(std::count(moved.begin(), moved.end(), uint8_t(1)));
 }
 
 // The k nearest neighbours of every point (fits.neighbours: the graph orientation runs on)
@@ -395,6 +497,7 @@ LocalFits fit_local_planes(const std::vector<Vec3>& pts, const NormalEstimationP
         fits.sheet_normals.swap(next);
     }
     if (params.jet) jet_pass(pts, cand, d2, c, fits);
+    if (params.creases) crease_pass(pts, cand, d2, c, fits);
     return fits;
 }
 
@@ -922,6 +1025,7 @@ void estimate_normals(PointSet& points, const NormalEstimationParams& params, co
     const std::vector<Vec3> sorted = permuted(pts, order);
     LocalFits fits = fit_local_planes(sorted, params);
     OrientationReport rep;
+    rep.at_creases = fits.at_creases;
     if (params.orientation == Orientation::kAuto)
         orient_fits(sorted, centroid, fits, permuted(points.radii, order), params, rep);
     points.normals.resize(n);

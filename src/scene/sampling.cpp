@@ -255,11 +255,16 @@ std::string complete_normals(PointSet& ps, const std::vector<Vec3>& sensors, con
         orient_toward(ps, sensors, path.c_str());
         rep.method = "toward the file's per-point sensor positions";
     }
+    const std::string fits =
+        rep.at_creases > 0
+            ? fmt::format("plane, then jet fits, {} points at creases on a plane through them",
+                          rep.at_creases)
+            : std::string("plane, then jet fits");
     std::string line = fmt::format(
         "normals: {} ({}), oriented {}",
         estimate ? "estimated from the 24 nearest on each point's own sheet" : "the file's axes",
-        estimate && had ? "the file's replaced; plane, then jet fits"
-        : estimate      ? "plane, then jet fits"
+        estimate && had ? "the file's replaced; " + fits
+        : estimate      ? fits
                         : "as given",
         rep.method);
     const size_t voted = rep.by_space + rep.by_rays + rep.by_shape + rep.by_view;

@@ -358,10 +358,7 @@ TEST(Scan, CreasesKeepABareScansObjectsSigns) {
     EXPECT_GT(rep.at_creases, 0u);
     size_t objects = 0, right = 0;
     for (size_t i = 0; i < raw.size(); ++i) {
-        const std::string& name = sc.surfaces[s.surface[i]].name;
-        if (name == "floor" || name == "back" || name == "ceiling" || name == "left" ||
-            name == "right" || name == "light")
-            continue;
+        if (!sc.surfaces[s.surface[i]].is_model) continue;
         ++objects;
         right += dot(raw.normals[i], s.points.normals[i]) > 0;
     }

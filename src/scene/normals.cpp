@@ -291,17 +291,6 @@ void fit_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
     });
 }
 
-// Jet fits (a second-order height function over the tangent plane, Cazals and Pouget 2005): in
-// the frame of the point's sheet normal, z = a x^2 + b xy + c y^2 + d x + e y + f by weighted
-// least squares over the candidates on its sheet, and the normal is the surface's at the point,
-// (-d, -e, 1). A plane fit leans toward the side with more neighbours on a curve (a rim, a
-// thin leg or horn sampled by a few points across, a neighbourhood cut by a crease), where a
-// quadric follows the curve. Weights as the plane fit's with the bandwidth of the
-// kJetBandwidthNeighbour-th nearest (six unknowns need more points in reach than a plane's
-// three); a point with fewer than kJetMinNeighbours on its sheet, a singular system or a
-// surface steeper than 45 degrees in that frame keeps its plane normal.
-constexpr size_t kJetBandwidthNeighbour = 12;
-
 // Two unit vectors (u, v) that make a right-handed frame with the unit normal nz: u across the
 // normal's smallest component.
 std::pair<Vec3, Vec3> tangent_frame(Vec3 nz) {
@@ -322,6 +311,17 @@ void add_quadric_row(double (&a)[6][6], double (&b)[6], double w, double x, doub
         for (int k = 0; k < 6; ++k) a[r][k] += w * phi[r] * phi[k];
     }
 }
+
+// Jet fits (a second-order height function over the tangent plane, Cazals and Pouget 2005): in
+// the frame of the point's sheet normal, z = a x^2 + b xy + c y^2 + d x + e y + f by weighted
+// least squares over the candidates on its sheet, and the normal is the surface's at the point,
+// (-d, -e, 1). A plane fit leans toward the side with more neighbours on a curve (a rim, a
+// thin leg or horn sampled by a few points across, a neighbourhood cut by a crease), where a
+// quadric follows the curve. Weights as the plane fit's with the bandwidth of the
+// kJetBandwidthNeighbour-th nearest (six unknowns need more points in reach than a plane's
+// three); a point with fewer than kJetMinNeighbours on its sheet, a singular system or a
+// surface steeper than 45 degrees in that frame keeps its plane normal.
+constexpr size_t kJetBandwidthNeighbour = 12;
 constexpr size_t kJetMinNeighbours = 10;
 
 void jet_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand,
@@ -395,7 +395,8 @@ void crease_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand
     std::vector<uint8_t> moved(n, 0);
     parallel_for_range<size_t>(n, 256, [&](size_t chunk_begin, size_t chunk_end) {
         std::vector<float> w(c);
-        std::vector<Vec3> d(c);
+        std::vector<Vec3> d(c);                   // offsets from the point
+        std::vector<std::array<double, 3>> l(c);  // the same in bandwidths, in its frame
         std::vector<uint32_t> inliers(c);
         std::vector<float> wi(c);
         for (size_t i = chunk_begin; i < chunk_end; ++i) {
@@ -409,13 +410,14 @@ void crease_pass(const std::vector<Vec3>& pts, const std::vector<uint32_t>& cand
             for (size_t j = 0; j < c; ++j) {
                 w[j] = std::exp(-d2[i * c + j] / h2);
                 d[j] = pts[nb[j]] - pts[i];
-                add_quadric_row(a, b, w[j], s * dot(d[j], u), s * dot(d[j], v), s * dot(d[j], nz));
+                l[j] = {s * dot(d[j], u), s * dot(d[j], v), s * dot(d[j], nz)};
+                add_quadric_row(a, b, w[j], l[j][0], l[j][1], l[j][2]);
                 wsum += w[j];
             }
             if (!detail::solve_small(a, b)) continue;
             double r2 = 0;
             for (size_t j = 0; j < c; ++j) {
-                const double x = s * dot(d[j], u), y = s * dot(d[j], v), z = s * dot(d[j], nz);
+                const auto [x, y, z] = l[j];
                 const double r =
                     z - (b[0] * x * x + b[1] * x * y + b[2] * y * y + b[3] * x + b[4] * y + b[5]);
                 r2 += w[j] * r * r;

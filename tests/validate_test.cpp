@@ -366,6 +366,32 @@ TEST(Scan, CreasesKeepABareScansObjectsSigns) {
     EXPECT_GT(double(right) / double(objects), 0.988) << right << " of " << objects;
 }
 
+// Shells opened by shadows: held-lone's bull scanned from four places, bare. Their patterns
+// overlap, so the spacing finds no scanner, and the bull's shadows (its underside, between its
+// legs) let the voxels' free space into it: its whole skin is an "open" sheet. Away from its
+// centroid alone, the concave parts (belly, the insides of the legs) took the wrong side: 79.2%
+// of its points right; with the rays' vote added to the shape's, 93.8%.
+TEST(Scan, ShellsOpenedByShadowsAddTheRaysToTheShape) {
+    const std::string path = std::string(VMAP_SOURCE_DIR) + "/scenes/test/held/held-lone.json";
+    const Scene sc = load_scene(path);
+    const ExactVisibility ex(sc.surfaces, path);
+    const ScanPoints s = scan_scene(sc, ex, 4, sc.points, 1, path);
+    PointSet raw;
+    raw.positions = s.points.positions;
+    OrientationReport rep;
+    estimate_normals(raw, {}, path.c_str(), &rep);
+    EXPECT_TRUE(rep.scanners.empty());
+    EXPECT_GT(rep.by_shape, 10000u);
+    size_t objects = 0, right = 0;
+    for (size_t i = 0; i < raw.size(); ++i) {
+        if (!sc.surfaces[s.surface[i]].is_model) continue;
+        ++objects;
+        right += dot(raw.normals[i], s.points.normals[i]) > 0;
+    }
+    ASSERT_GT(objects, 20000u);
+    EXPECT_GT(double(right) / double(objects), 0.90) << right << " of " << objects;
+}
+
 // `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the
 // estimated normals take their scanner's side, as the truth's do; bad combinations are errors.
 TEST(Validate, AScanIsScoredThroughTheRawCloudPath) {

@@ -25,7 +25,8 @@ struct SideVotes {
     std::vector<SideCue> cue;
     // How sure each vote is, for weighing votes against each other: 2 for kSpace; for kRays the
     // depth contrast (far - near) / (far + near) of the two sides' mean ray travel, in (0, 1];
-    // for kShape how squarely the point faces away from its sheet's centroid, in [0, 1].
+    // for kShape how squarely the point faces away from its sheet's centroid, in [0, 1] (in a
+    // scan of shells, that added to the rays' signed weight: in [0, 2]).
     std::vector<float> weight;
     // Points of an open sheet inside the scene: both sides free by the voxels, and neither side
     // the bounding box's face (a room's walls, floor and ceiling lie on it): 1, or 2 where the
@@ -34,6 +35,10 @@ struct SideVotes {
     // for every other point. Their votes are the rays'; the caller, which has the neighbour
     // graph, may replace them by the sheet's shape (SideCue::kShape).
     std::vector<uint8_t> open;
+    // The points' spacing spreads as a scanner's does (kScanSpread in free_space.cpp) and the
+    // noise lets it be read (the scanners were searched for by it): a scan, whose shadows open
+    // the surfaces of closed objects (SideVotes::open on a closed shell).
+    bool scanned = false;
     std::string method;  // the free-space verdict, in words
     // Where the scanner stood, as far as the points tell (step 7 below), in the cloud's
     // coordinates; none unless the cloud is a scan from inside a room.

@@ -341,29 +341,40 @@ TEST(Scan, PointsLieOnSurfacesTheirScannerSees) {
     }
 }
 
+// A scene (path under the source tree) scanned bare from `scanners` places (seed 1), its
+// normals estimated: the report, and how many of the objects' points took their true side.
+struct BareScanSigns {
+    OrientationReport rep;
+    size_t objects = 0, right = 0;
+    double share() const { return objects ? double(right) / double(objects) : 0.0; }
+};
+BareScanSigns bare_scan_signs(const std::string& scene, uint32_t scanners) {
+    const std::string path = std::string(VMAP_SOURCE_DIR) + "/" + scene;
+    const Scene sc = load_scene(path);
+    const ExactVisibility ex(sc.surfaces, path);
+    const ScanPoints s = scan_scene(sc, ex, scanners, sc.points, 1, path);
+    PointSet raw;
+    raw.positions = s.points.positions;
+    BareScanSigns out;
+    estimate_normals(raw, {}, path.c_str(), &out.rep);
+    for (size_t i = 0; i < raw.size(); ++i) {
+        if (!sc.surfaces[s.surface[i]].is_model) continue;
+        ++out.objects;
+        out.right += dot(raw.normals[i], s.points.normals[i]) > 0;
+    }
+    return out;
+}
+
 // The crease pass (NormalEstimationParams::creases) on a scan: test-tight's one-scanner scan,
 // bare. A scan's points lie in lines, and a line of them holds every plane through it, so a
 // plane is taken only where the points it holds make a patch (without that, 13 points of the
 // bull, where its facets leave the jet a residual, took a plane across their scan line and the
 // wrong sign: objects 99.1% -> 98.4% right).
 TEST(Scan, CreasesKeepABareScansObjectsSigns) {
-    const std::string path = std::string(VMAP_SOURCE_DIR) + "/scenes/test/test-tight.json";
-    const Scene sc = load_scene(path);
-    const ExactVisibility ex(sc.surfaces, path);
-    const ScanPoints s = scan_scene(sc, ex, 1, sc.points, 1, path);
-    PointSet raw;
-    raw.positions = s.points.positions;
-    OrientationReport rep;
-    estimate_normals(raw, {}, path.c_str(), &rep);
-    EXPECT_GT(rep.at_creases, 0u);
-    size_t objects = 0, right = 0;
-    for (size_t i = 0; i < raw.size(); ++i) {
-        if (!sc.surfaces[s.surface[i]].is_model) continue;
-        ++objects;
-        right += dot(raw.normals[i], s.points.normals[i]) > 0;
-    }
-    ASSERT_GT(objects, 1000u);
-    EXPECT_GT(double(right) / double(objects), 0.988) << right << " of " << objects;
+    const BareScanSigns b = bare_scan_signs("scenes/test/test-tight.json", 1);
+    EXPECT_GT(b.rep.at_creases, 0u);
+    ASSERT_GT(b.objects, 1000u);
+    EXPECT_GT(b.share(), 0.988) << b.right << " of " << b.objects;
 }
 
 // Shells opened by shadows: held-lone's bull scanned from four places, bare. Their patterns
@@ -372,24 +383,11 @@ TEST(Scan, CreasesKeepABareScansObjectsSigns) {
 // centroid alone, the concave parts (belly, the insides of the legs) took the wrong side: 79.2%
 // of its points right; with the rays' vote added to the shape's, 93.8%.
 TEST(Scan, ShellsOpenedByShadowsAddTheRaysToTheShape) {
-    const std::string path = std::string(VMAP_SOURCE_DIR) + "/scenes/test/held/held-lone.json";
-    const Scene sc = load_scene(path);
-    const ExactVisibility ex(sc.surfaces, path);
-    const ScanPoints s = scan_scene(sc, ex, 4, sc.points, 1, path);
-    PointSet raw;
-    raw.positions = s.points.positions;
-    OrientationReport rep;
-    estimate_normals(raw, {}, path.c_str(), &rep);
-    EXPECT_TRUE(rep.scanners.empty());
-    EXPECT_GT(rep.by_shape, 10000u);
-    size_t objects = 0, right = 0;
-    for (size_t i = 0; i < raw.size(); ++i) {
-        if (!sc.surfaces[s.surface[i]].is_model) continue;
-        ++objects;
-        right += dot(raw.normals[i], s.points.normals[i]) > 0;
-    }
-    ASSERT_GT(objects, 20000u);
-    EXPECT_GT(double(right) / double(objects), 0.90) << right << " of " << objects;
+    const BareScanSigns b = bare_scan_signs("scenes/test/held/held-lone.json", 4);
+    EXPECT_TRUE(b.rep.scanners.empty());
+    EXPECT_GT(b.rep.by_shape, 10000u);
+    ASSERT_GT(b.objects, 20000u);
+    EXPECT_GT(b.share(), 0.90) << b.right << " of " << b.objects;
 }
 
 // `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the

@@ -1285,8 +1285,9 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
     });
     // Steps 6 and 7 start from one table of what the candidate places see.
     const float sigma = spacing_sigma(noise, r_med);
-    const bool spaced = log_spread(radii) >= kMinSpread && sigma <= kMaxSpacingSigma;
-    v.scanned = spaced && log_spread(radii) >= kScanSpread;
+    const double spread = log_spread(radii);
+    const bool spaced = spread >= kMinSpread && sigma <= kMaxSpacingSigma;
+    v.scanned = spaced && spread >= kScanSpread;
     const bool room_scan = scanned_room(radii, room_wall);
     if (!spaced && !room_scan) return v;
     std::vector<Vec3> cand = view_candidates(g, fs, walls, room_wall);

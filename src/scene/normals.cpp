@@ -812,8 +812,9 @@ size_t spread_votes(const std::vector<Vec3>& pts, const std::vector<float>& radi
 // (docs/validation.md "Scans: shells opened by shadows"). Where a scanner was found, or in samples,
 // the open sheets are open meshes, for which the rays are wrong on the concave side that sees out
 // through the opening: the shape alone (the sum cost test-many and test-tight four points each on
-// their even samples). Serial (the sheets are found in index order and summed in it), so the result
-// does not depend on the number of threads. Returns the points it decided.
+// their even samples).
+// Serial (the sheets are found in index order and summed in it), so the result does not
+// depend on the number of threads. Returns the points it decided.
 constexpr double kMinWrap = 0.25;
 constexpr double kMaxThinShare = 0.5;
 constexpr size_t kMinSheet = size_t(kVoteRounds) * kVoteRounds;

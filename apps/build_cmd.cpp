@@ -87,6 +87,7 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
     j["links"] = st.links;
     j["links_kept"] = !o.count_links;
     j["batches"] = st.batches;
+    j["lanes"] = st.lanes;
     j["seconds"] = {{"input", input_s},
                     {"total", st.seconds_total},
                     {"octree", st.seconds_octree},
@@ -117,9 +118,11 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double i
         input_s, st.seconds_octree, st.seconds_visibility, st.batches);
     fmt::print(
         "            plan and node tests {:.3f} s, waiting on backend {:.3f} s, link extraction "
-        "{:.3f} s, "
+        "{:.3f} s{}, "
         "link arrays {:.3f} s; saving {:.3f} s\n",
-        st.seconds_plan, st.seconds_wait, st.seconds_extract, st.seconds_links, save_s);
+        st.seconds_plan, st.seconds_wait, st.seconds_extract,
+        st.lanes > 1 ? fmt::format(" (summed over {} lanes)", st.lanes) : std::string(),
+        st.seconds_links, save_s);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
     fmt::print(
         "throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
@@ -301,6 +304,12 @@ Command add_build_command(CLI::App& app) {
         ->add_option("--walk-pairs", bo->params.walk_pairs,
                      "Undecided node pairs of at most this many leaf pairs are walked, not split "
                      "(0: the backend's choice)")
+        ->capture_default_str();
+    build
+        ->add_option("--lanes", bo->params.lanes,
+                     "Frontiers driving the backend at once: one's host work overlaps the "
+                     "others' GPU batches (0: the backend's choice; the same V-map)")
+        ->check(CLI::Range(0, 16))
         ->capture_default_str();
     build->add_flag("--count-links", bo->count_links,
                     "Count the links without keeping them and write no file: sizes a V-map "

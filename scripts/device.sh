@@ -12,7 +12,8 @@
 #        construction  issue 15's targets: cornell-dragon h10 at CONS_LEAF_POINTS (default 8 4 1),
 #                  CONS_RUNS runs each (default 3), end to end with the saved file, with
 #                  --construction CONS_METHOD (default: the build's own, auto) and
-#                  --walk-pairs CONS_WALK_PAIRS (default: the backend's); for the
+#                  --walk-pairs CONS_WALK_PAIRS (default: the backend's) and --lanes
+#                  CONS_LANES (default: the backend's); for the
 #                  leaf_points in CONS_ORACLE also once with --construction leaf-pairs, and the
 #                  two files compared; growth over CONS_POINTS (lp 1, h 12, --count-links);
 #                  the 1.1M-point --count-links run when CONS_BIG=1 (stopped after
@@ -231,7 +232,8 @@ if [[ "$cmd" == run ]]; then
                     rm -f /tmp/dragon.vmap
                 done ;;
             construction)
-                meth=(${CONS_METHOD:+--construction "$CONS_METHOD"} ${CONS_WALK_PAIRS:+--walk-pairs "$CONS_WALK_PAIRS"})
+                meth=(${CONS_METHOD:+--construction "$CONS_METHOD"} ${CONS_WALK_PAIRS:+--walk-pairs "$CONS_WALK_PAIRS"}
+                      ${CONS_LANES:+--lanes "$CONS_LANES"})
                 cons() {  # name, then vmap build arguments: one log per run, wall seconds too
                     local name=$1; shift
                     for r in $(seq "${CONS_RUNS:-3}"); do

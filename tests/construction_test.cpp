@@ -200,6 +200,9 @@ TEST_P(NodeConstruction, RandomScenesGiveTheLeafPairVmap) {
         bp.walk_pairs = std::array<uint64_t, 4>{1, 16, 256, 4096}[r() % 4];
         // Frontier slices of a few pairs: pairs settled across slices and levels.
         bp.max_level_pairs = std::array<uint64_t, 4>{1, 7, 64, 1u << 20}[r() % 4];
+        // Lanes (one to three frontiers taking a split's slices at once), from a stream of
+        // their own.
+        bp.lanes = 1 + int(std::mt19937_64(seed * 49979687)() % 3);
         BuildStats st;
         expect_same_vmap(ps, bp, "seed " + std::to_string(seed), &st);
         if (HasFailure()) return;
@@ -208,26 +211,70 @@ TEST_P(NodeConstruction, RandomScenesGiveTheLeafPairVmap) {
     EXPECT_GT(decided_scenes, 150u) << "the node tests should decide something in most scenes";
 }
 
-// The frontier held a pair at a time per level (the bound on memory) gives the same V-map and
-// the same counts as the frontier held whole, on both constructions.
-TEST_P(NodeConstruction, SlicedFrontierGivesTheSameVmap) {
+// Two builds of one scene that must agree: the same links, and the same work counted.
+void expect_same_build(const VisibilityMap& a, const BuildStats& sa, const VisibilityMap& b,
+                       const BuildStats& sb, const std::string& what) {
+    EXPECT_EQ(b.link_offsets(), a.link_offsets()) << what;
+    EXPECT_TRUE(std::ranges::equal(b.link_targets(), a.link_targets())) << what;
+    EXPECT_EQ(sb.leaf_pairs_walked, sa.leaf_pairs_walked) << what;
+    EXPECT_EQ(sb.node_pairs_tested, sa.node_pairs_tested) << what;
+    EXPECT_EQ(sb.shaft_node_tests, sa.shaft_node_tests) << what;
+    EXPECT_EQ(sb.work.pairs, sa.work.pairs) << what;
+    EXPECT_EQ(sb.work.facing_pairs, sa.work.facing_pairs) << what;
+    EXPECT_EQ(sb.work.visible_pairs, sa.work.visible_pairs) << what;
+    EXPECT_EQ(sb.work.node_tests, sa.work.node_tests) << what;
+    EXPECT_EQ(sb.leaf_walked, sa.leaf_walked) << what;
+    ASSERT_EQ(sb.levels.size(), sa.levels.size()) << what;
+    for (size_t k = 0; k < sa.levels.size(); ++k) {
+        EXPECT_EQ(sb.levels[k].pairs, sa.levels[k].pairs) << what << ", level " << k;
+        EXPECT_EQ(sb.levels[k].visible, sa.levels[k].visible) << what << ", level " << k;
+        EXPECT_EQ(sb.levels[k].walked, sa.levels[k].walked) << what << ", level " << k;
+        EXPECT_EQ(sb.levels[k].leaf_pairs_walked, sa.levels[k].leaf_pairs_walked)
+            << what << ", level " << k;
+    }
+}
+
+// The frontier held a pair at a time per level (the bound on memory), and lanes (three
+// frontiers with backends of their own taking a split's slices at once, over slices of 50
+// pairs), give the same V-map and the same counts as one frontier held whole, on both
+// constructions.
+TEST_P(NodeConstruction, SlicedFrontierAndLanesGiveTheSameVmap) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2500, 4);
     for (const Construction method : {Construction::kLeafPairs, Construction::kNodes}) {
         BuildParams bp = build_params(7, 2);
         bp.construction = method;
         bp.walk_pairs = 64;
-        BuildStats ws, ss;
+        BuildStats ws, ss, ls;
         const VisibilityMap whole = build_vmap(ps, bp, &ws);
         bp.max_level_pairs = 1;
         const VisibilityMap sliced = build_vmap(ps, bp, &ss);
-        EXPECT_EQ(sliced.link_offsets(), whole.link_offsets()) << name_of(method);
-        EXPECT_TRUE(std::ranges::equal(sliced.link_targets(), whole.link_targets())) << name_of(method);
-        EXPECT_EQ(ss.leaf_pairs_walked, ws.leaf_pairs_walked) << name_of(method);
-        EXPECT_EQ(ss.node_pairs_tested, ws.node_pairs_tested) << name_of(method);
-        EXPECT_EQ(ss.work.visible_pairs, ws.work.visible_pairs) << name_of(method);
-        EXPECT_EQ(ss.leaf_walked, ws.leaf_walked) << name_of(method);
+        bp.max_level_pairs = 50;
+        bp.lanes = 3;
+        const VisibilityMap laned = build_vmap(ps, bp, &ls);
+        expect_same_build(whole, ws, sliced, ss, name_of(method) + std::string(", sliced"));
         EXPECT_GT(ss.batches, ws.batches) << name_of(method);
+        expect_same_build(whole, ws, laned, ls, name_of(method) + std::string(", 3 lanes"));
+        EXPECT_EQ(ws.lanes, 1u);
+        EXPECT_EQ(ls.lanes, 3u) << name_of(method);
     }
+}
+
+// BuildParams::lanes out of range is refused, naming the field.
+TEST(Construction, LanesOutOfRangeAreRefused) {
+    BuildParams bp;
+    bp.lanes = 17;
+    EXPECT_THROW(
+        {
+            try {
+                bp.check("lanes.test");
+            } catch (const Error& e) {
+                EXPECT_NE(std::string(e.what()).find("lanes"), std::string::npos);
+                throw;
+            }
+        },
+        Error);
+    bp.lanes = -1;
+    EXPECT_THROW(bp.check("lanes.test"), Error);
 }
 
 // decide_node_pair for `pairs` on the backend, a byte per pair (PairDecision): on the device

@@ -48,6 +48,12 @@ struct BuildParams {
     // Node pairs of one level of the construction's frontier held at once (vmap/frontier.h):
     // bounds the memory of the node-pair decisions; any value gives the same V-map.
     uint64_t max_level_pairs = uint64_t(1) << 18;
+    // Frontiers driving the backend at once (vmap/frontier.h, lanes): one lane's host work
+    // (node tests, link extraction, settling) overlaps the other lanes' batches on the device,
+    // which one lane leaves idle meanwhile. 0: the backend's choice (one lane: on the CPU one
+    // frontier keeps every core busy). Any value gives the same V-map. The MPI build
+    // (top_pairs) runs one.
+    int lanes = 0;
     // The CUDA device (an index among those CUDA_VISIBLE_DEVICES leaves visible); -1: device 0
     // (under mpirun, src/mpi/ sets the local rank's). Out of range: vmap::Error.
     int device = -1;
@@ -94,6 +100,7 @@ struct BuildStats {
     double seconds_links = 0;    // merging links into the compact per-node arrays
     uint64_t links = 0;          // links of the V-map (also when they were not kept)
     uint64_t batches = 0;
+    uint32_t lanes = 1;  // frontiers that drove the backend at once (BuildParams::lanes)
     uint64_t peak_device_bytes = 0;
     std::string construction;        // nodes | leaf-pairs
     uint64_t leaf_pairs = 0;         // all unordered leaf pairs

@@ -64,6 +64,11 @@ class Backend {
                         uint64_t* /*shaft_node_tests*/) {
         return false;
     }
+    // Another backend on the same device for a lane of the construction (vmap/frontier.h): its
+    // own streams and buffers, the tree and node context of this one (after prepare and
+    // set_node_context), its kernel time and device memory counted with this one's. nullptr
+    // where lanes do not pay (the CPU: one frontier already keeps every core busy).
+    virtual std::unique_ptr<Backend> lane() { return nullptr; }
     // Whether the backend itself adds evaluated leaf pairs to the progress while a batch runs.
     virtual bool counts_progress() const { return false; }
     // Leaf pairs per second to expect, for the estimate reported before the work starts (0:

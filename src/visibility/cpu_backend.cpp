@@ -1,6 +1,7 @@
 // Leaf-pair visibility on all CPU cores (oneTBB), the predicate from leaf_pair.h.
 #include <tbb/task_arena.h>
 
+#include <memory>
 #include <string>
 #include <utility>
 
@@ -25,6 +26,14 @@ class CpuBackend final : public HostBackend<CpuBackend> {
         columns_ = LeafColumns(view_);
         parent_ = tree.parent().data();
         vp_ = vp;
+    }
+
+    // A lane (Backend::lane): the same tree and bounds, batch buffers of its own. Only when
+    // asked for (BuildParams::lanes): on the CPU one frontier already keeps every core busy.
+    std::unique_ptr<Backend> lane() override {
+        auto l = std::make_unique<CpuBackend>(*this);
+        l->start_lane();
+        return l;
     }
 
     // With node bounds (construction "nodes"), a job of at least kShaftPairs leaf pairs walks

@@ -260,6 +260,15 @@ class HostBackend : public Backend {
         }
     };
 
+  protected:
+    // A copy made for a lane starts with no batches and no time of its own.
+    void start_lane() {
+        busy_ = 0;
+        for (auto& b : buf_) b = {};
+        for (auto& p : pending_) p = {};
+    }
+
+  private:
     double busy_ = 0;
     std::vector<uint32_t> buf_[2];
     WorkCounters pending_[2];

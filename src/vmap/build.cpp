@@ -138,10 +138,17 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     st.seconds_plan = seconds_since(t1);
     auto fr = std::make_unique<detail::Frontier>(t, nt.on ? &nt.ctx : nullptr, *backend, params,
                                                  fp, st);
-    if (params.top_pairs)
+    if (params.top_pairs) {
         fr->run(given_pairs(params, t));
-    else
+    } else {
+        const int lanes = params.lanes > 0 ? params.lanes : 1;
+        std::vector<std::unique_ptr<detail::Backend>> more;
+        for (int k = 1; k < lanes; ++k)
+            if (std::unique_ptr<detail::Backend> b = backend->lane()) more.push_back(std::move(b));
+        fr->add_lanes(std::move(more));
         fr->run(sibling_pairs(t));
+    }
+    st.lanes = uint32_t(fr->lanes());
     st.seconds_plan += st.seconds_decide;  // "plan and node tests"
     st.peak_device_bytes = backend->peak_device_bytes();
     st.seconds_backend = backend->busy_seconds();

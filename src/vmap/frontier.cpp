@@ -4,11 +4,14 @@
 #include <fmt/format.h>
 #include <tbb/combinable.h>
 #include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <exception>
 #include <numeric>
+#include <thread>
 #include <utility>
 
 #include "vmap/error.h"
@@ -51,9 +54,52 @@ Frontier::Frontier(const Octree& t, const NodePairContext* ctx, Backend& backend
       params_(params),
       fp_(fp),
       st_(st),
+      lead_(this),
       leafy_(leafy_nodes(t)),
       walked_diff_(size_t(t.num_leaves()) + 1, 0) {
     fp_.max_level_pairs = std::max<size_t>(fp_.max_level_pairs, 1);
+}
+
+Frontier::Frontier(Frontier& lead, std::unique_ptr<Backend> backend)
+    : arrays(0),
+      own_backend_(std::move(backend)),
+      t_(lead.t_),
+      ctx_(lead.ctx_),
+      backend_(*own_backend_),
+      params_(lead.params_),
+      fp_(lead.fp_),
+      st_(own_st_),
+      lead_(&lead),
+      leafy_(lead.leafy_) {}
+
+Frontier::~Frontier() = default;
+
+void Frontier::add_lanes(std::vector<std::unique_ptr<Backend>> backends) {
+    for (auto& b : backends)
+        if (b) helpers_.push_back(std::unique_ptr<Frontier>(new Frontier(*this, std::move(b))));
+}
+
+// A helper's counters, links and backend time into the lead's (after the last slice).
+void Frontier::absorb(Frontier& h) {
+    const BuildStats& o = h.st_;
+    for (size_t k = 0; k < o.levels.size() && k < st_.levels.size(); ++k) {
+        ConstructionLevel& l = st_.levels[k];
+        const ConstructionLevel& x = o.levels[k];
+        l.pairs += x.pairs, l.tested += x.tested, l.visible += x.visible;
+        l.invisible += x.invisible, l.split += x.split, l.walked += x.walked;
+        l.leaf_pairs_decided += x.leaf_pairs_decided;
+        l.leaf_pairs_visible += x.leaf_pairs_visible;
+        l.leaf_pairs_walked += x.leaf_pairs_walked;
+    }
+    st_.work += o.work;
+    st_.batches += o.batches;
+    st_.shaft_node_tests += o.shaft_node_tests;
+    st_.seconds_decide += o.seconds_decide;
+    st_.seconds_wait += o.seconds_wait;
+    st_.seconds_extract += o.seconds_extract;
+    for (auto& p : h.pieces) pieces.push_back(std::move(p));
+    h.pieces.clear();
+    counted_links += h.counted_links;
 }
 
 uint32_t Frontier::num_kids(NodePairRef p) const {
@@ -77,6 +123,11 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
                       rate > 0 ? double(st_.leaf_pairs) / rate : 0.0);
     progress_ = &progress;
     backend_.set_progress(&progress);
+    for (auto& h : helpers_) {
+        h->st_.levels.assign(st_.levels.size(), {});
+        h->progress_ = &progress;
+        h->backend_.set_progress(&progress);
+    }
     for (std::vector<NodePairRef> roots; !(roots = next()).empty();)
         for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
             const std::vector<NodePairRef> slice(
@@ -92,6 +143,11 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
     finish_extraction(1);
     backend_.set_progress(nullptr);
     progress_ = nullptr;
+    for (auto& h : helpers_) {
+        h->backend_.set_progress(nullptr);
+        h->progress_ = nullptr;
+        absorb(*h);
+    }
     progress.finish();
     st_.leaf_walked.resize(t_.num_leaves());
     int64_t run = 0;
@@ -204,7 +260,7 @@ std::vector<PairJob> Frontier::make_jobs(const std::vector<NodePairRef>& level,
             j.row0 = t_.leaf_begin()[j.a], j.rows = t_.leaf_end()[j.a] - j.row0;
             j.col0 = t_.leaf_begin()[j.b], j.cols = t_.leaf_end()[j.b] - j.col0;
             auto add = [&](int32_t at, int64_t v) {
-                std::atomic_ref<int64_t>(walked_diff_[at]).fetch_add(v, std::memory_order_relaxed);
+                std::atomic_ref<int64_t>(lead_->walked_diff_[at]).fetch_add(v, std::memory_order_relaxed);
             };
             add(j.row0, j.cols), add(j.row0 + j.rows, -j.cols);
             add(j.col0, j.rows), add(j.col0 + j.cols, -j.rows);
@@ -303,7 +359,7 @@ void Frontier::collect_sinks(Sinks& sinks) {
     if (params_.keep_links) {
         std::vector<std::span<const Link>> fresh;
         for (size_t c = first; c < pieces.size(); ++c) fresh.emplace_back(pieces[c]);
-        arrays.count(fresh);
+        lead_->arrays.count(fresh);
     } else {
         for (size_t c = first; c < pieces.size(); ++c) counted_links += pieces[c].size();
         pieces.resize(first);
@@ -311,42 +367,102 @@ void Frontier::collect_sinks(Sinks& sinks) {
 }
 
 // The split pairs' children, a slice of at most about max_level_pairs children at a time
-// (the children of one pair are never cut apart), each slice resolved and then settled.
+// (the children of one pair are never cut apart), each slice resolved and then settled. With
+// lanes, the lead hands a split's slices to all lanes at once (a helper's own splits stay
+// with it).
 void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
                      std::vector<uint8_t>& full) {
-    std::vector<size_t> parents;
-    std::vector<uint64_t> first{0};
-    auto flush = [&] {
-        if (parents.empty()) return;
-        std::vector<NodePairRef> kids(first.back());
-        tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
-            NodePairRef* out = kids.data() + first[k];
-            for_each_child_pair(t_, level[parents[k]].a, level[parents[k]].b,
-                                [&](int32_t x, int32_t y) { *out++ = NodePairRef{x, y}; });
-        });
-        const std::vector<uint8_t> kid_full = resolve(kids);
-        settle(kids, kid_full, parents, first, full);
-        parents.clear();
-        first.assign(1, 0);
-    };
     std::vector<uint8_t> nks(level.size(), 0);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, level.size(), 4096), [&](const auto& r) {
         for (size_t i = r.begin(); i < r.end(); ++i)
             if (kinds[i] == Kind::kSplit) nks[i] = uint8_t(num_kids(level[i]));
     });
+    std::vector<size_t> parents;     // the split pairs, slice after slice
+    std::vector<size_t> starts{0};   // slice s: parents[starts[s], starts[s + 1])
+    uint64_t kids = 0;
     for (size_t i = 0; i < level.size(); ++i) {
         if (kinds[i] != Kind::kSplit) continue;
-        const uint32_t nk = nks[i];
-        if (first.back() + nk > fp_.max_level_pairs) flush();
+        if (kids > 0 && kids + nks[i] > fp_.max_level_pairs) starts.push_back(parents.size()), kids = 0;
         parents.push_back(i);
-        first.push_back(first.back() + nk);
+        kids += nks[i];
     }
-    flush();
+    if (parents.empty()) return;
+    starts.push_back(parents.size());
+    const size_t slices = starts.size() - 1;
+    auto one = [&](Frontier& lane, size_t s) {
+        lane.resolve_slice(level, std::span<const size_t>(parents).subspan(starts[s], starts[s + 1] - starts[s]),
+                           nks, full);
+    };
+    if (slices > 1 && !helpers_.empty() && !on_lanes_)
+        on_lanes(slices, one);
+    else
+        for (size_t s = 0; s < slices; ++s) one(*this, s);
+}
+
+// The children of `parents` (pairs of `level`), resolved, then their parents settled.
+void Frontier::resolve_slice(const std::vector<NodePairRef>& level, std::span<const size_t> parents,
+                             const std::vector<uint8_t>& nks, std::vector<uint8_t>& full) {
+    std::vector<uint64_t> first(parents.size() + 1, 0);
+    for (size_t k = 0; k < parents.size(); ++k) first[k + 1] = first[k] + nks[parents[k]];
+    std::vector<NodePairRef> kids(first.back());
+    tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
+        NodePairRef* out = kids.data() + first[k];
+        for_each_child_pair(t_, level[parents[k]].a, level[parents[k]].b,
+                            [&](int32_t x, int32_t y) { *out++ = NodePairRef{x, y}; });
+    });
+    const std::vector<uint8_t> kid_full = resolve(kids);
+    settle(kids, kid_full, parents, first, full);
+}
+
+// one(lane, s) for every slice s, the lead and each helper lane taking the next slice until
+// none is left; each helper on a thread of its own, in an arena of its own (so that no lane's
+// waiting thread runs another lane's slice: each lane's batches stay in its own order). A
+// helper's background extraction ends with its share. The first error stops the others'
+// next slices and is thrown.
+void Frontier::on_lanes(size_t slices, const std::function<void(Frontier&, size_t)>& one) {
+    std::atomic<size_t> next{0};
+    auto share = [&](Frontier& lane) {
+        for (size_t s; (s = next.fetch_add(1)) < slices;) one(lane, s);
+    };
+    on_lanes_ = true;
+    const int threads = tbb::this_task_arena::max_concurrency();
+    std::vector<std::exception_ptr> errors(helpers_.size() + 1);
+    std::vector<std::thread> lanes;
+    for (size_t k = 0; k < helpers_.size(); ++k)
+        lanes.emplace_back([&, k] {
+            Frontier& h = *helpers_[k];
+            try {
+                tbb::task_arena arena(threads);
+                arena.execute([&] {
+                    try {
+                        share(h);
+                    } catch (...) {
+                        errors[k + 1] = std::current_exception();
+                        next = slices;
+                    }
+                    h.finish_extraction(0);
+                    h.finish_extraction(1);
+                });
+            } catch (...) {
+                if (!errors[k + 1]) errors[k + 1] = std::current_exception();
+                next = slices;
+            }
+        });
+    try {
+        share(*this);
+    } catch (...) {
+        errors[0] = std::current_exception();
+        next = slices;
+    }
+    for (std::thread& th : lanes) th.join();
+    on_lanes_ = false;
+    for (const std::exception_ptr& e : errors)
+        if (e) std::rethrow_exception(e);
 }
 
 // A split pair is full when all its children are; otherwise each full child makes its link.
 void Frontier::settle(const std::vector<NodePairRef>& kids, const std::vector<uint8_t>& kid_full,
-                      const std::vector<size_t>& parents, const std::vector<uint64_t>& first,
+                      std::span<const size_t> parents, const std::vector<uint64_t>& first,
                       std::vector<uint8_t>& full) {
     tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
         bool f = true;

@@ -15,6 +15,8 @@
 
 #include <cstdint>
 #include <functional>
+#include <memory>
+#include <span>
 #include <vector>
 
 #include "util/progress.h"
@@ -37,17 +39,29 @@ class Frontier {
     // ctx: the node tests (nullptr: none, every pair is split down to walks: leaf-pairs).
     Frontier(const Octree& t, const NodePairContext* ctx, Backend& backend,
              const BuildParams& params, const FrontierParams& fp, BuildStats& st);
+    ~Frontier();
     // Resolves every leaf pair under the roots (the sibling pairs), making their links.
     void run(const std::vector<NodePairRef>& roots);
     // The same for root lists pulled from `next` until it gives an empty one (the MPI build's
     // chunks, one octree and one backend for all of them).
     void run(const std::function<std::vector<NodePairRef>()>& next);
+    // Lanes: more backends on the same device (Backend::lane), each driving frontier work of its
+    // own. Where a split makes several slices of child pairs, the lanes take the slices
+    // (each resolves its slice depth first, as the lead does), so one lane's node tests, link
+    // extraction and settling on the host overlap the others' batches on the device, which
+    // otherwise waits for them. The links are the same (the arrays sort each node's targets);
+    // the lanes' counters are added to the lead's. Called before run.
+    void add_lanes(std::vector<std::unique_ptr<Backend>> backends);
+    size_t lanes() const { return 1 + helpers_.size(); }
     // The links made (blocks that were counted into arrays), and arrays counting their ends.
     std::vector<std::vector<Link>> pieces;
     LinkArrays arrays;
     uint64_t counted_links = 0;  // when the links are not kept
 
   private:
+    // A helper lane of `lead`: its own backend, batches, sinks and counters; the lead's link
+    // arrays and per-leaf walked counts.
+    Frontier(Frontier& lead, std::unique_ptr<Backend> backend);
     enum class Kind : uint8_t { kFull, kEmpty, kSplit, kJob };
     std::vector<uint8_t> resolve(const std::vector<NodePairRef>& level);
     std::vector<Kind> classify(const std::vector<NodePairRef>& level);
@@ -62,9 +76,13 @@ class Frontier {
     void finish_extraction(int slot);
     void split(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
                std::vector<uint8_t>& full);
+    void resolve_slice(const std::vector<NodePairRef>& level, std::span<const size_t> parents,
+                       const std::vector<uint8_t>& nks, std::vector<uint8_t>& full);
+    void on_lanes(size_t slices, const std::function<void(Frontier&, size_t)>& one);
     void settle(const std::vector<NodePairRef>& kids, const std::vector<uint8_t>& kid_full,
-                const std::vector<size_t>& parents, const std::vector<uint64_t>& first,
+                std::span<const size_t> parents, const std::vector<uint64_t>& first,
                 std::vector<uint8_t>& full);
+    void absorb(Frontier& helper);
     void collect_sinks(Sinks& sinks);
     uint64_t area(NodePairRef p) const {
         return uint64_t(t_.leaf_end()[p.a] - t_.leaf_begin()[p.a]) *
@@ -72,14 +90,21 @@ class Frontier {
     }
     uint32_t num_kids(NodePairRef p) const;
 
+    // A helper's own (the lead's are the caller's).
+    std::unique_ptr<Backend> own_backend_;
+    BuildStats own_st_;
+
     const Octree& t_;
     const NodePairContext* ctx_;
     Backend& backend_;
     const BuildParams& params_;
     FrontierParams fp_;
     BuildStats& st_;
+    Frontier* lead_;  // this, or the lane's lead
     std::vector<uint8_t> leafy_;
-    std::vector<int64_t> walked_diff_;  // per leaf, the walked leaf pairs (difference array)
+    std::vector<int64_t> walked_diff_;  // per leaf, the walked leaf pairs (difference array; the lead's)
+    std::vector<std::unique_ptr<Frontier>> helpers_;
+    bool on_lanes_ = false;  // the helpers are taking a split's slices
     Sinks sinks_;
     // The links of a batch's partly visible jobs, extracted while the backend evaluates the
     // next batches (and the frontier moves on); the slot's table stays valid until its next

@@ -46,6 +46,9 @@ void BuildParams::check(const std::string& source) const {
     if (max_batch_pairs < 1024)
         throw Error(fmt::format("{}: max_batch_pairs {} is too small (>= 1024)", source,
                                 max_batch_pairs));
+    if (lanes < 0 || lanes > 16)
+        throw Error(fmt::format("{}: lanes {} out of range (0 = the backend's choice, up to 16)",
+                                source, lanes));
     if (threads < 0 || threads > 4096)
         throw Error(fmt::format("{}: threads {} out of range (0 = all cores, up to 4096)", source,
                                 threads));

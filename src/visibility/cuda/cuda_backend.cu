@@ -12,6 +12,8 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -228,17 +230,72 @@ struct PinnedBuffer {
     }
 };
 
+// What the lanes of one build share (Backend::lane): the tree and node bounds on the device,
+// the event kernel times are measured from, and the kernels' intervals (the busy time is their
+// union over all lanes, which run kernels at the same time on their own streams).
+struct DeviceShared {
+    DeviceBuffer<WalkNode> walk;
+    DeviceBuffer<LeafDisc> leaves;
+    DeviceBuffer<NodeBounds> nb;
+    DeviceBuffer<NormalCone> cones;
+    DeviceBuffer<int32_t> skip;
+    DeviceBuffer<int32_t> index;  // per node: its bounds in nb (-1 for a leaf)
+    cudaEvent_t origin = nullptr;  // recorded in prepare(): kernel times are measured from it
+    std::mutex m;
+    std::vector<std::pair<double, double>> busy;  // kernel intervals, ms after origin
+    ~DeviceShared() {
+        if (origin) cudaEventDestroy(origin);
+    }
+    double busy_seconds() {
+        std::lock_guard<std::mutex> lock(m);
+        std::vector<std::pair<double, double>> iv = busy;
+        std::sort(iv.begin(), iv.end());
+        double sum = 0, end = -1e300;
+        for (const auto& [a, b] : iv) {
+            if (b > end) sum += b - std::max(a, end);
+            end = std::max(end, b);
+        }
+        return sum * 1e-3;
+    }
+};
+
 class CudaBackend final : public Backend {
   public:
-    explicit CudaBackend(int device) : device_(device) {
+    explicit CudaBackend(int device) : device_(device), sh_(std::make_shared<DeviceShared>()) {
+        try {
+            init();
+            VMAP_CUDA_CHECK(cudaEventCreate(&sh_->origin));
+        } catch (...) {
+            release();
+            throw;
+        }
+    }
+    // A lane of `lead` (Backend::lane): its own streams and batch buffers, the lead's tree.
+    explicit CudaBackend(const CudaBackend& lead)
+        : device_(lead.device_), sh_(lead.sh_), lanes_(lead.lanes_) {
         try {
             init();
         } catch (...) {
             release();
             throw;
         }
+        variant_ = lead.variant_;
+        vp_ = lead.vp_;
+        view_ = lead.view_;
+        have_ctx_ = lead.have_ctx_;
+        ctx_ = lead.ctx_;
+        if (have_ctx_) {
+            d_shaft_.reserve(1, held_, peak_);
+            h_shaft_.reserve(1);
+        }
+        std::lock_guard<std::mutex> lock(sh_->m);
+        lanes_->push_back(this);
     }
-    ~CudaBackend() override { release(); }
+    ~CudaBackend() override {
+        release();
+        std::lock_guard<std::mutex> lock(sh_->m);
+        std::erase(*lanes_, this);
+    }
 
   private:
     void init() {
@@ -254,7 +311,6 @@ class CudaBackend final : public Backend {
             VMAP_CUDA_CHECK(cudaEventCreate(&s.k0));
             VMAP_CUDA_CHECK(cudaEventCreate(&s.k1));
         }
-        VMAP_CUDA_CHECK(cudaEventCreate(&origin_));
     }
     // Destroys whatever streams and events exist (also after a failed init).
     void release() {
@@ -267,8 +323,6 @@ class CudaBackend final : public Backend {
             s.stream = nullptr;
             s.done = s.k0 = s.k1 = nullptr;
         }
-        if (origin_) cudaEventDestroy(origin_);
-        origin_ = nullptr;
     }
 
   public:
@@ -281,15 +335,17 @@ class CudaBackend final : public Backend {
     void prepare(const Octree& tree, const VisibilityParams& vp, uint64_t) override {
         vp_ = vp;
         cudaStream_t s = slots_[0].stream;
-        walk_.upload(walk_nodes(tree).data(), walk_nodes(tree).size(), s, held_, peak_);
-        leaves_.upload(leaf_discs(tree).data(), leaf_discs(tree).size(), s, held_, peak_);
-        VMAP_CUDA_CHECK(cudaEventRecord(origin_, s));
-        last_end_ = 0;
+        sh_->walk.upload(walk_nodes(tree).data(), walk_nodes(tree).size(), s, held_, peak_);
+        sh_->leaves.upload(leaf_discs(tree).data(), leaf_discs(tree).size(), s, held_, peak_);
+        VMAP_CUDA_CHECK(cudaEventRecord(sh_->origin, s));
+        sh_->busy.clear();
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
-        view_ = OctreeView{walk_.ptr, leaves_.ptr, tree.num_nodes(), tree.num_leaves()};
+        view_ = OctreeView{sh_->walk.ptr, sh_->leaves.ptr, tree.num_nodes(), tree.num_leaves()};
     }
 
     void submit(std::span<const PairJob> jobs, uint64_t words, int slot) override {
+        // A lane runs on a thread of its own, whose current device starts at 0.
+        VMAP_CUDA_CHECK(cudaSetDevice(device_));
         Slot& sl = slots_[slot];
         // The previous batch in this slot has been waited for; its buffers may be reused.
         const size_t nj = jobs.size();
@@ -339,13 +395,16 @@ class CudaBackend final : public Backend {
     const uint32_t* wait(int slot, WorkCounters& wc) override {
         Slot& sl = slots_[slot];
         VMAP_CUDA_CHECK(cudaEventSynchronize(sl.done));
-        // Busy time is the union of the kernels' intervals: the two slots' kernels can run at
-        // the same time (two streams), and summing their lengths would count that twice.
+        // Busy time is the union of the kernels' intervals: the two slots' kernels (and the
+        // other lanes') can run at the same time, and summing their lengths would count that
+        // more than once.
         float start = 0, end = 0;
-        VMAP_CUDA_CHECK(cudaEventElapsedTime(&start, origin_, sl.k0));
-        VMAP_CUDA_CHECK(cudaEventElapsedTime(&end, origin_, sl.k1));
-        busy_ += std::max(0.0, double(end) - std::max(double(start), last_end_)) * 1e-3;
-        last_end_ = std::max(last_end_, double(end));
+        VMAP_CUDA_CHECK(cudaEventElapsedTime(&start, sh_->origin, sl.k0));
+        VMAP_CUDA_CHECK(cudaEventElapsedTime(&end, sh_->origin, sl.k1));
+        {
+            std::lock_guard<std::mutex> lock(sh_->m);
+            sh_->busy.emplace_back(double(start), double(end));
+        }
         const DeviceCounters& c = *sl.h_counters.ptr;
         wc.pairs += c.pairs;
         wc.facing_pairs += c.facing_pairs;
@@ -372,29 +431,30 @@ class CudaBackend final : public Backend {
             inner.push_back(ctx->nb[n]);
         }
         if (inner.empty()) inner.emplace_back();
-        nb_.upload(inner.data(), inner.size(), s, held_, peak_);
-        index_.upload(index.data(), index.size(), s, held_, peak_);
+        sh_->nb.upload(inner.data(), inner.size(), s, held_, peak_);
+        sh_->index.upload(index.data(), index.size(), s, held_, peak_);
         const size_t num_cones = size_t(last.cone_begin) + last.cone_count;
         if (num_cones > 0)
-            cones_.upload(ctx->cones, num_cones, s, held_, peak_);
+            sh_->cones.upload(ctx->cones, num_cones, s, held_, peak_);
         else
-            cones_.reserve(1, held_, peak_);  // every leaf flagged: no cone is ever read
-        skip_.upload(ctx->skip, size_t(nn), s, held_, peak_);
+            sh_->cones.reserve(1, held_, peak_);  // every leaf flagged: no cone is ever read
+        sh_->skip.upload(ctx->skip, size_t(nn), s, held_, peak_);
         d_shaft_.reserve(1, held_, peak_);
         h_shaft_.reserve(1);
         VMAP_CUDA_CHECK(cudaStreamSynchronize(s));
         ctx_ = *ctx;
         ctx_.tree = view_;
-        ctx_.nb = nb_.ptr;
-        ctx_.cones = cones_.ptr;
-        ctx_.skip = skip_.ptr;
-        ctx_.bounds_index = index_.ptr;
+        ctx_.nb = sh_->nb.ptr;
+        ctx_.cones = sh_->cones.ptr;
+        ctx_.skip = sh_->skip.ptr;
+        ctx_.bounds_index = sh_->index.ptr;
         ctx_.leaves_stored = false;  // the device keeps the internal nodes' bounds only
     }
 
     bool decide(std::span<const NodePairRef> pairs, uint8_t* out,
                 uint64_t* shaft_node_tests) override {
         if (!have_ctx_) return false;
+        VMAP_CUDA_CHECK(cudaSetDevice(device_));
         const size_t n = pairs.size();
         if (n == 0) return true;
         // Called between batches (the builder has waited for every batch), so slot 0's stream
@@ -419,8 +479,16 @@ class CudaBackend final : public Backend {
         return true;
     }
 
-    uint64_t peak_device_bytes() const override { return peak_; }
-    double busy_seconds() const override { return busy_; }
+    std::unique_ptr<Backend> lane() override { return std::make_unique<CudaBackend>(*this); }
+    // This backend's peak and its lanes' (alive), added: a bound on what they held at once.
+    uint64_t peak_device_bytes() const override {
+        std::lock_guard<std::mutex> lock(sh_->m);
+        uint64_t p = peak_;
+        for (const CudaBackend* l : *lanes_)
+            if (l != this) p += l->peak_;
+        return p;
+    }
+    double busy_seconds() const override { return sh_->busy_seconds(); }
     // The kernel on one H100 (docs/results.md); link extraction on the host adds to it.
     double expected_pairs_per_second() const override { return 2.5e9; }
 
@@ -443,16 +511,14 @@ class CudaBackend final : public Backend {
     cudaDeviceProp prop_{};
     VisibilityParams vp_;
     OctreeView view_;
-    DeviceBuffer<WalkNode> walk_;
-    DeviceBuffer<LeafDisc> leaves_;
+    std::shared_ptr<DeviceShared> sh_;
+    // The lanes made from this backend (or from its lead), alive: for peak_device_bytes.
+    std::shared_ptr<std::vector<const CudaBackend*>> lanes_ =
+        std::make_shared<std::vector<const CudaBackend*>>();
     Slot slots_[2];
     // The node tests (set_node_context, decide).
     bool have_ctx_ = false;
     NodePairContext ctx_;  // with device pointers
-    DeviceBuffer<NodeBounds> nb_;
-    DeviceBuffer<NormalCone> cones_;
-    DeviceBuffer<int32_t> skip_;
-    DeviceBuffer<int32_t> index_;  // per node: its bounds in nb_ (-1 for a leaf)
     DeviceBuffer<NodePairRef> d_pairs_;
     DeviceBuffer<uint8_t> d_dec_;
     DeviceBuffer<unsigned long long> d_shaft_;
@@ -460,9 +526,6 @@ class CudaBackend final : public Backend {
     PinnedBuffer<uint8_t> h_dec_;
     PinnedBuffer<unsigned long long> h_shaft_;
     uint64_t held_ = 0, peak_ = 0;
-    double busy_ = 0;
-    cudaEvent_t origin_ = nullptr;  // recorded in prepare(): kernel times are measured from it
-    double last_end_ = 0;           // ms after origin_ when the last kernel waited for ended
 };
 
 }  // namespace

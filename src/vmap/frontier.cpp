@@ -11,6 +11,8 @@
 #include <chrono>
 #include <exception>
 #include <numeric>
+#include <condition_variable>
+#include <mutex>
 #include <thread>
 #include <utility>
 
@@ -45,6 +47,34 @@ std::vector<Batch> make_batches(std::vector<PairJob>& jobs, uint64_t batch_words
 
 }  // namespace
 
+// The lanes' pool (the lead's; helpers point to it): slices offered by a lane in split(), taken
+// by whichever lane is free, the offering lane too, depth first inside a slice. A lane that
+// has taken its offer's last slice waits for the others' (taking slices of other offers
+// meanwhile would nest recursions on its stack without bound). Each lane's helper thread runs in an arena
+// of its own, so no thread waiting inside one lane's parallel loop runs another lane's slice.
+struct Frontier::Offer {
+    size_t slices = 0;
+    const std::function<void(Frontier&, size_t)>* one = nullptr;
+    std::atomic<size_t> next{0};  // the next slice to take
+    size_t done = 0;              // slices resolved (under the pool's m)
+    std::exception_ptr error;     // the first slice's error (under m)
+};
+struct Frontier::Pool {
+    std::mutex m;
+    std::condition_variable cv;
+    std::vector<Offer*> open;  // offers with slices left, the latest last
+    bool stop = false;
+    // Under m: the latest offer with a slice left, and that slice taken (an offer outlives its
+    // taken slices: its lane waits until each is done).
+    std::pair<Offer*, size_t> claim() {
+        for (auto it = open.rbegin(); it != open.rend(); ++it) {
+            const size_t s = (*it)->next.fetch_add(1);
+            if (s < (*it)->slices) return {*it, s};
+        }
+        return {nullptr, 0};
+    }
+};
+
 Frontier::Frontier(const Octree& t, const NodePairContext* ctx, Backend& backend,
                    const BuildParams& params, const FrontierParams& fp, BuildStats& st)
     : arrays(t.num_nodes()),
@@ -77,6 +107,11 @@ Frontier::~Frontier() = default;
 void Frontier::add_lanes(std::vector<std::unique_ptr<Backend>> backends) {
     for (auto& b : backends)
         if (b) helpers_.push_back(std::unique_ptr<Frontier>(new Frontier(*this, std::move(b))));
+    if (!helpers_.empty() && !pool_) {
+        own_pool_ = std::make_unique<Pool>();
+        pool_ = own_pool_.get();
+        for (auto& h : helpers_) h->pool_ = pool_;
+    }
 }
 
 // A helper's counters, links and backend time into the lead's (after the last slice).
@@ -128,6 +163,24 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
         h->progress_ = &progress;
         h->backend_.set_progress(&progress);
     }
+    // The helper lanes wait for offered slices on threads of their own until the roots are done.
+    std::vector<std::thread> lanes;
+    auto stop_lanes = [&] {
+        if (lanes.empty()) return;
+        {
+            std::lock_guard<std::mutex> lock(pool_->m);
+            pool_->stop = true;
+        }
+        pool_->cv.notify_all();
+        for (std::thread& th : lanes) th.join();
+        lanes.clear();
+    };
+    if (pool_) {
+        pool_->stop = false;
+        const int threads = tbb::this_task_arena::max_concurrency();
+        for (auto& h : helpers_) lanes.emplace_back([&h, threads] { h->serve(threads); });
+    }
+    try {
     for (std::vector<NodePairRef> roots; !(roots = next()).empty();)
         for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
             const std::vector<NodePairRef> slice(
@@ -139,6 +192,11 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
                 if (full[i]) out.push(slice[i].a, slice[i].b);
             collect_sinks(sinks_);
         }
+    } catch (...) {
+        stop_lanes();
+        throw;
+    }
+    stop_lanes();
     finish_extraction(0);
     finish_extraction(1);
     backend_.set_progress(nullptr);
@@ -377,12 +435,21 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         for (size_t i = r.begin(); i < r.end(); ++i)
             if (kinds[i] == Kind::kSplit) nks[i] = uint8_t(num_kids(level[i]));
     });
+    // Slices offered to the other lanes are smaller: about eight a lane (at least kLaneSlice
+    // kids each), so that the lanes finish together.
+    const bool share = pool_ != nullptr;
+    uint64_t cap = fp_.max_level_pairs;
+    if (share) {
+        uint64_t total = 0;
+        for (size_t i = 0; i < level.size(); ++i) total += nks[i];
+        cap = std::min<uint64_t>(cap, std::max<uint64_t>(kLaneSlice, total / (8 * lanes())));
+    }
     std::vector<size_t> parents;     // the split pairs, slice after slice
     std::vector<size_t> starts{0};   // slice s: parents[starts[s], starts[s + 1])
     uint64_t kids = 0;
     for (size_t i = 0; i < level.size(); ++i) {
         if (kinds[i] != Kind::kSplit) continue;
-        if (kids > 0 && kids + nks[i] > fp_.max_level_pairs) starts.push_back(parents.size()), kids = 0;
+        if (kids > 0 && kids + nks[i] > cap) starts.push_back(parents.size()), kids = 0;
         parents.push_back(i);
         kids += nks[i];
     }
@@ -393,8 +460,8 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         lane.resolve_slice(level, std::span<const size_t>(parents).subspan(starts[s], starts[s + 1] - starts[s]),
                            nks, full);
     };
-    if (slices > 1 && !helpers_.empty() && !on_lanes_)
-        on_lanes(slices, one);
+    if (slices > 1 && share)
+        offer(slices, one);
     else
         for (size_t s = 0; s < slices; ++s) one(*this, s);
 }
@@ -414,50 +481,68 @@ void Frontier::resolve_slice(const std::vector<NodePairRef>& level, std::span<co
     settle(kids, kid_full, parents, first, full);
 }
 
-// one(lane, s) for every slice s, the lead and each helper lane taking the next slice until
-// none is left; each helper on a thread of its own, in an arena of its own (so that no lane's
-// waiting thread runs another lane's slice: each lane's batches stay in its own order). A
-// helper's background extraction ends with its share. The first error stops the others'
-// next slices and is thrown.
-void Frontier::on_lanes(size_t slices, const std::function<void(Frontier&, size_t)>& one) {
-    std::atomic<size_t> next{0};
-    auto share = [&](Frontier& lane) {
-        for (size_t s; (s = next.fetch_add(1)) < slices;) one(lane, s);
-    };
-    on_lanes_ = true;
-    const int threads = tbb::this_task_arena::max_concurrency();
-    std::vector<std::exception_ptr> errors(helpers_.size() + 1);
-    std::vector<std::thread> lanes;
-    for (size_t k = 0; k < helpers_.size(); ++k)
-        lanes.emplace_back([&, k] {
-            Frontier& h = *helpers_[k];
-            try {
-                tbb::task_arena arena(threads);
-                arena.execute([&] {
-                    try {
-                        share(h);
-                    } catch (...) {
-                        errors[k + 1] = std::current_exception();
-                        next = slices;
-                    }
-                    h.finish_extraction(0);
-                    h.finish_extraction(1);
-                });
-            } catch (...) {
-                if (!errors[k + 1]) errors[k + 1] = std::current_exception();
-                next = slices;
-            }
-        });
-    try {
-        share(*this);
-    } catch (...) {
-        errors[0] = std::current_exception();
-        next = slices;
+// Resolves slice s of `o` and the next ones left, reporting each done (the next is taken first,
+// so `o` is never touched after its last slice is reported).
+void Frontier::take(Offer& o, size_t s) {
+    const size_t slices = o.slices;  // (o may be gone once its last slice is reported)
+    while (s < slices) {
+        std::exception_ptr error;
+        try {
+            (*o.one)(*this, s);
+        } catch (...) {
+            error = std::current_exception();
+        }
+        const size_t next = o.next.fetch_add(1);
+        {
+            std::lock_guard<std::mutex> lock(pool_->m);
+            if (error && !o.error) o.error = error;
+            ++o.done;
+        }
+        pool_->cv.notify_all();
+        s = next;
     }
-    for (std::thread& th : lanes) th.join();
-    on_lanes_ = false;
-    for (const std::exception_ptr& e : errors)
-        if (e) std::rethrow_exception(e);
+}
+
+// one(lane, s) for every slice s by this lane and whichever lanes are free; returns when all are
+// done, with the first error thrown.
+void Frontier::offer(size_t slices, const std::function<void(Frontier&, size_t)>& one) {
+    Offer o;
+    o.slices = slices;
+    o.one = &one;
+    {
+        std::lock_guard<std::mutex> lock(pool_->m);
+        pool_->open.push_back(&o);
+    }
+    pool_->cv.notify_all();
+    take(o, o.next.fetch_add(1));
+    std::unique_lock<std::mutex> lock(pool_->m);
+    pool_->cv.wait(lock, [&] { return o.done == slices; });
+    std::erase(pool_->open, &o);
+    lock.unlock();
+    if (o.error) std::rethrow_exception(o.error);
+}
+
+// A helper lane's thread: takes offered slices until the lead stops the pool.
+void Frontier::serve(int threads) {
+    tbb::task_arena arena(threads);
+    arena.execute([&] {
+        std::unique_lock<std::mutex> lock(pool_->m);
+        for (;;) {
+            const auto [o, s] = pool_->claim();
+            if (o) {
+                lock.unlock();
+                take(*o, s);
+                lock.lock();
+            } else if (pool_->stop) {
+                break;
+            } else {
+                pool_->cv.wait(lock);
+            }
+        }
+        lock.unlock();
+        finish_extraction(0);
+        finish_extraction(1);
+    });
 }
 
 // A split pair is full when all its children are; otherwise each full child makes its link.

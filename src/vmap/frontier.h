@@ -78,7 +78,11 @@ class Frontier {
                std::vector<uint8_t>& full);
     void resolve_slice(const std::vector<NodePairRef>& level, std::span<const size_t> parents,
                        const std::vector<uint8_t>& nks, std::vector<uint8_t>& full);
-    void on_lanes(size_t slices, const std::function<void(Frontier&, size_t)>& one);
+    struct Offer;
+    struct Pool;
+    void offer(size_t slices, const std::function<void(Frontier&, size_t)>& one);
+    void take(Offer& o, size_t s);
+    void serve(int threads);
     void settle(const std::vector<NodePairRef>& kids, const std::vector<uint8_t>& kid_full,
                 std::span<const size_t> parents, const std::vector<uint64_t>& first,
                 std::vector<uint8_t>& full);
@@ -104,7 +108,9 @@ class Frontier {
     std::vector<uint8_t> leafy_;
     std::vector<int64_t> walked_diff_;  // per leaf, the walked leaf pairs (difference array; the lead's)
     std::vector<std::unique_ptr<Frontier>> helpers_;
-    bool on_lanes_ = false;  // the helpers are taking a split's slices
+    std::unique_ptr<Pool> own_pool_;  // the lead's, with helpers
+    Pool* pool_ = nullptr;            // the lanes' pool (the lead's), or none
+    static constexpr uint64_t kLaneSlice = 1024;  // the fewest child pairs of an offered slice
     Sinks sinks_;
     // The links of a batch's partly visible jobs, extracted while the backend evaluates the
     // next batches (and the frontier moves on); the slot's table stays valid until its next

@@ -435,15 +435,11 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         for (size_t i = r.begin(); i < r.end(); ++i)
             if (kinds[i] == Kind::kSplit) nks[i] = uint8_t(num_kids(level[i]));
     });
-    // Slices offered to the other lanes are smaller: about eight a lane (at least kLaneSlice
-    // kids each), so that the lanes finish together.
+    // (Smaller slices to share, about eight a lane, made many small levels and batches: on the
+    // GPU each costs a synchronous decide and a launch, and the build took 1.3-1.8x longer:
+    // docs/results.md "Construction lanes".)
     const bool share = pool_ != nullptr;
-    uint64_t cap = fp_.max_level_pairs;
-    if (share) {
-        uint64_t total = 0;
-        for (size_t i = 0; i < level.size(); ++i) total += nks[i];
-        cap = std::min<uint64_t>(cap, std::max<uint64_t>(kLaneSlice, total / (8 * lanes())));
-    }
+    const uint64_t cap = fp_.max_level_pairs;
     std::vector<size_t> parents;     // the split pairs, slice after slice
     std::vector<size_t> starts{0};   // slice s: parents[starts[s], starts[s + 1])
     uint64_t kids = 0;

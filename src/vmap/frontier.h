@@ -110,7 +110,6 @@ class Frontier {
     std::vector<std::unique_ptr<Frontier>> helpers_;
     std::unique_ptr<Pool> own_pool_;  // the lead's, with helpers
     Pool* pool_ = nullptr;            // the lanes' pool (the lead's), or none
-    static constexpr uint64_t kLaneSlice = 1024;  // the fewest child pairs of an offered slice
     Sinks sinks_;
     // The links of a batch's partly visible jobs, extracted while the backend evaluates the
     // next batches (and the frontier moves on); the slot's table stays valid until its next

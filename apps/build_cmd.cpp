@@ -297,7 +297,7 @@ Command add_build_command(CLI::App& app) {
         ->delimiter(',')
         ->expected(3);
     add_choice(build, "--construction", bo->params.construction,
-               "auto (nodes on the CPU, leaf-pairs on the GPU: the faster there), nodes "
+               "auto (nodes: the faster on both backends), nodes "
                "(decide node pairs whole where bounds prove it) or leaf-pairs (walk every "
                "leaf pair: the oracle; the same V-map)");
     build
@@ -308,7 +308,7 @@ Command add_build_command(CLI::App& app) {
     build
         ->add_option("--lanes", bo->params.lanes,
                      "Frontiers driving the backend at once: one's host work overlaps the "
-                     "others' GPU batches (0: the backend's choice; the same V-map)")
+                     "others' GPU batches (0: the backend's choice, 3 on the GPU; the same V-map)")
         ->check(CLI::Range(0, 16))
         ->capture_default_str();
     build->add_flag("--count-links", bo->count_links,

@@ -447,8 +447,7 @@ TEST(Construction, BoxListsHoldTheShaftListsAndGiveTheWholeWalksAnswers) {
     EXPECT_GT(shorter, 1000u) << "the lists should leave out parts of the tree";
 }
 
-// The default picks by backend: node-pair decisions on the CPU (where they pay), the leaf-pair
-// walk on the GPU (gpu_test checks that the two give the same V-map there).
+// The default decides node pairs (gpu_test and the Cuda cases check the same V-map on the GPU).
 TEST(Construction, AutoDecidesNodePairsOnTheCpu) {
     const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 1500, 2);
     BuildParams bp = test::cpu_params(7, 2);

@@ -36,10 +36,9 @@ struct BuildParams {
     // nodes: node pairs decided at node level where the bounds of visibility/node_pair.h prove
     // all or none of their leaf pairs visible (the same V-map, fewer leaf pairs walked);
     // leaf-pairs: every leaf pair walked (the oracle the node path must match byte for byte);
-    // auto: whichever is faster on the backend that runs, by measurement (docs/results.md):
-    // nodes on the CPU (about 3x less work there), leaf-pairs on the GPU (with the node tests
-    // on the device and packed warps the node path ties it on the dragon at lp 1 and is 15%
-    // slower at lp 4, H200, f333ad1).
+    // auto: whichever is faster, by measurement (docs/results.md): nodes on both backends
+    // (on the CPU about 3x less work; on the GPU, with three lanes, the dragon at lp 1 builds in
+    // 15.0 s against 21.7 s for leaf-pairs, H100, "Construction lanes").
     Construction construction = Construction::kAuto;
     // Undecided node pairs with at most this many leaf pairs are walked whole instead of split
     // further; 0: the backend's choice (small on the CPU, wider on the GPU, whose warps take 32
@@ -50,8 +49,8 @@ struct BuildParams {
     uint64_t max_level_pairs = uint64_t(1) << 18;
     // Frontiers driving the backend at once (vmap/frontier.h, lanes): one lane's host work
     // (node tests, link extraction, settling) overlaps the other lanes' batches on the device,
-    // which one lane leaves idle meanwhile. 0: the backend's choice (one lane: on the CPU one
-    // frontier keeps every core busy). Any value gives the same V-map. The MPI build
+    // which one lane leaves idle meanwhile. 0: the backend's choice (3 on the GPU; 1 on the CPU,
+    // where one frontier keeps every core busy). Any value gives the same V-map. The MPI build
     // (top_pairs) runs one.
     int lanes = 0;
     // The CUDA device (an index among those CUDA_VISIBLE_DEVICES leaves visible); -1: device 0

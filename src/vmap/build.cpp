@@ -72,10 +72,10 @@ struct NodeTests {
     detail::NodeBoundsSet nb;
     detail::NodePairContext ctx;
 };
-void prepare_node_tests(const Octree& t, const BuildParams& params, bool gpu, NodeTests& nt) {
+void prepare_node_tests(const Octree& t, const BuildParams& params, NodeTests& nt) {
     // Node-level decisions are proofs about the box walk of leaf_pair.h, not the grid walk.
-    const bool nodes = params.construction == Construction::kNodes ||
-                       (params.construction == Construction::kAuto && !gpu);
+    // auto: nodes on both backends (on the GPU with lanes: docs/results.md "Construction lanes").
+    const bool nodes = params.construction != Construction::kLeafPairs;
     nt.on = nodes && params.occluders == OccluderSearch::kBoxes;
     if (!nt.on) return;
     nt.nb = detail::node_bounds(t);
@@ -130,7 +130,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     st.backend = backend->name();
     st.note = note;
     const bool gpu = st.backend.rfind("cuda", 0) == 0;
-    prepare_node_tests(t, params, gpu, nt);
+    prepare_node_tests(t, params, nt);
     st.construction = nt.on ? "nodes" : "leaf-pairs";
     const detail::FrontierParams fp = frontier_params(params, gpu, nt.on);
     backend->prepare(t, in_octree_frame(params.visibility, t.scale()), fp.batch_words);
@@ -141,7 +141,7 @@ std::unique_ptr<detail::Frontier> frontier_step(const Octree& t, const BuildPara
     if (params.top_pairs) {
         fr->run(given_pairs(params, t));
     } else {
-        const int lanes = params.lanes > 0 ? params.lanes : 1;
+        const int lanes = params.lanes > 0 ? params.lanes : (gpu ? 3 : 1);
         std::vector<std::unique_ptr<detail::Backend>> more;
         for (int k = 1; k < lanes; ++k)
             if (std::unique_ptr<detail::Backend> b = backend->lane()) more.push_back(std::move(b));

@@ -435,17 +435,15 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         for (size_t i = r.begin(); i < r.end(); ++i)
             if (kinds[i] == Kind::kSplit) nks[i] = uint8_t(num_kids(level[i]));
     });
-    // (Smaller slices to share, about eight a lane, made many small levels and batches: on the
-    // GPU each costs a synchronous decide and a launch, and the build took 1.3-1.8x longer:
-    // docs/results.md "Construction lanes".)
-    const bool share = pool_ != nullptr;
-    const uint64_t cap = fp_.max_level_pairs;
+    // (Smaller slices to share among lanes, about eight a lane, made many small levels and
+    // batches: on the GPU each costs a synchronous decide and a launch, and the build took
+    // 1.3-1.8x longer: docs/results.md "Construction lanes".)
     std::vector<size_t> parents;     // the split pairs, slice after slice
     std::vector<size_t> starts{0};   // slice s: parents[starts[s], starts[s + 1])
     uint64_t kids = 0;
     for (size_t i = 0; i < level.size(); ++i) {
         if (kinds[i] != Kind::kSplit) continue;
-        if (kids > 0 && kids + nks[i] > cap) starts.push_back(parents.size()), kids = 0;
+        if (kids > 0 && kids + nks[i] > fp_.max_level_pairs) starts.push_back(parents.size()), kids = 0;
         parents.push_back(i);
         kids += nks[i];
     }
@@ -453,10 +451,10 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
     starts.push_back(parents.size());
     const size_t slices = starts.size() - 1;
     auto one = [&](Frontier& lane, size_t s) {
-        lane.resolve_slice(level, std::span<const size_t>(parents).subspan(starts[s], starts[s + 1] - starts[s]),
-                           nks, full);
+        const std::span<const size_t> slice(parents.data() + starts[s], starts[s + 1] - starts[s]);
+        lane.resolve_slice(level, slice, nks, full);
     };
-    if (slices > 1 && share)
+    if (slices > 1 && pool_)
         offer(slices, one);
     else
         for (size_t s = 0; s < slices; ++s) one(*this, s);

@@ -9,10 +9,10 @@
 #include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <exception>
-#include <numeric>
 #include <condition_variable>
+#include <exception>
 #include <mutex>
+#include <numeric>
 #include <thread>
 #include <utility>
 
@@ -45,13 +45,22 @@ std::vector<Batch> make_batches(std::vector<PairJob>& jobs, uint64_t batch_words
     return batches;
 }
 
+// One level's counters into another's.
+void add_level(ConstructionLevel& o, const ConstructionLevel& x) {
+    o.pairs += x.pairs, o.tested += x.tested, o.visible += x.visible;
+    o.invisible += x.invisible, o.split += x.split, o.walked += x.walked;
+    o.leaf_pairs_decided += x.leaf_pairs_decided;
+    o.leaf_pairs_visible += x.leaf_pairs_visible;
+    o.leaf_pairs_walked += x.leaf_pairs_walked;
+}
+
 }  // namespace
 
-// The lanes' pool (the lead's; helpers point to it): slices offered by a lane in split(), taken
-// by whichever lane is free, the offering lane too, depth first inside a slice. A lane that
-// has taken its offer's last slice waits for the others' (taking slices of other offers
-// meanwhile would nest recursions on its stack without bound). Each lane's helper thread runs in an arena
-// of its own, so no thread waiting inside one lane's parallel loop runs another lane's slice.
+// The lanes' pool (the lead's): slices offered by a lane in split(), taken by whichever lane is
+// free, the offering lane too, depth first inside a slice. A lane that has taken its offer's
+// last slice waits for the others' (taking slices of other offers meanwhile would nest
+// recursions on its stack without bound). Each helper lane's thread runs in an arena of its
+// own, so no thread waiting inside one lane's parallel loop runs another lane's slice.
 struct Frontier::Offer {
     size_t slices = 0;
     const std::function<void(Frontier&, size_t)>* one = nullptr;
@@ -99,33 +108,21 @@ Frontier::Frontier(Frontier& lead, std::unique_ptr<Backend> backend)
       params_(lead.params_),
       fp_(lead.fp_),
       st_(own_st_),
-      lead_(&lead),
-      leafy_(lead.leafy_) {}
+      lead_(&lead) {}
 
 Frontier::~Frontier() = default;
 
 void Frontier::add_lanes(std::vector<std::unique_ptr<Backend>> backends) {
     for (auto& b : backends)
         if (b) helpers_.push_back(std::unique_ptr<Frontier>(new Frontier(*this, std::move(b))));
-    if (!helpers_.empty() && !pool_) {
-        own_pool_ = std::make_unique<Pool>();
-        pool_ = own_pool_.get();
-        for (auto& h : helpers_) h->pool_ = pool_;
-    }
+    if (!helpers_.empty() && !pool_) pool_ = std::make_unique<Pool>();
 }
 
 // A helper's counters, links and backend time into the lead's (after the last slice).
 void Frontier::absorb(Frontier& h) {
     const BuildStats& o = h.st_;
-    for (size_t k = 0; k < o.levels.size() && k < st_.levels.size(); ++k) {
-        ConstructionLevel& l = st_.levels[k];
-        const ConstructionLevel& x = o.levels[k];
-        l.pairs += x.pairs, l.tested += x.tested, l.visible += x.visible;
-        l.invisible += x.invisible, l.split += x.split, l.walked += x.walked;
-        l.leaf_pairs_decided += x.leaf_pairs_decided;
-        l.leaf_pairs_visible += x.leaf_pairs_visible;
-        l.leaf_pairs_walked += x.leaf_pairs_walked;
-    }
+    for (size_t k = 0; k < o.levels.size() && k < st_.levels.size(); ++k)
+        add_level(st_.levels[k], o.levels[k]);
     st_.work += o.work;
     st_.batches += o.batches;
     st_.shaft_node_tests += o.shaft_node_tests;
@@ -168,30 +165,31 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
     auto stop_lanes = [&] {
         if (lanes.empty()) return;
         {
-            std::lock_guard<std::mutex> lock(pool_->m);
-            pool_->stop = true;
+            std::lock_guard<std::mutex> lock(pool()->m);
+            pool()->stop = true;
         }
-        pool_->cv.notify_all();
+        pool()->cv.notify_all();
         for (std::thread& th : lanes) th.join();
         lanes.clear();
     };
-    if (pool_) {
-        pool_->stop = false;
+    if (pool()) {
+        pool()->stop = false;
         const int threads = tbb::this_task_arena::max_concurrency();
         for (auto& h : helpers_) lanes.emplace_back([&h, threads] { h->serve(threads); });
     }
     try {
-    for (std::vector<NodePairRef> roots; !(roots = next()).empty();)
-        for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
-            const std::vector<NodePairRef> slice(
-                roots.begin() + s, roots.begin() + std::min(roots.size(), s + fp_.max_level_pairs));
-            const std::vector<uint8_t> full = resolve(slice);
-            // A root has no parent pair here: a full one is a link.
-            LinkSink& out = sinks_.local();
-            for (size_t i = 0; i < slice.size(); ++i)
-                if (full[i]) out.push(slice[i].a, slice[i].b);
-            collect_sinks(sinks_);
-        }
+        for (std::vector<NodePairRef> roots; !(roots = next()).empty();)
+            for (size_t s = 0; s < roots.size(); s += fp_.max_level_pairs) {
+                const std::vector<NodePairRef> slice(
+                    roots.begin() + s,
+                    roots.begin() + std::min(roots.size(), s + fp_.max_level_pairs));
+                const std::vector<uint8_t> full = resolve(slice);
+                // A root has no parent pair here: a full one is a link.
+                LinkSink& out = sinks_.local();
+                for (size_t i = 0; i < slice.size(); ++i)
+                    if (full[i]) out.push(slice[i].a, slice[i].b);
+                collect_sinks(sinks_);
+            }
     } catch (...) {
         stop_lanes();
         throw;
@@ -209,7 +207,8 @@ void Frontier::run(const std::function<std::vector<NodePairRef>()>& next) {
     progress.finish();
     st_.leaf_walked.resize(t_.num_leaves());
     int64_t run = 0;
-    for (int32_t l = 0; l < t_.num_leaves(); ++l) st_.leaf_walked[l] = uint64_t(run += walked_diff_[l]);
+    for (int32_t l = 0; l < t_.num_leaves(); ++l)
+        st_.leaf_walked[l] = uint64_t(run += walked_diff_[l]);
     for (const ConstructionLevel& l : st_.levels) {
         st_.node_pairs_tested += l.tested;
         st_.leaf_pairs_walked += l.leaf_pairs_walked;
@@ -239,10 +238,10 @@ std::vector<Frontier::Kind> Frontier::classify(const std::vector<NodePairRef>& l
             const uint64_t a = area(level[i]);
             const bool tested = ctx_ && worth_deciding(*ctx_, level[i].a, level[i].b);
             const auto dk = PairDecision(d[i]);
-            kinds[i] = dk == PairDecision::kAllVisible                  ? Kind::kFull
-                       : dk == PairDecision::kNoneVisible               ? Kind::kEmpty
+            kinds[i] = dk == PairDecision::kAllVisible                ? Kind::kFull
+                       : dk == PairDecision::kNoneVisible             ? Kind::kEmpty
                        : a <= (tested ? walk_max : fp_.max_job_pairs) ? Kind::kJob
-                                                                        : Kind::kSplit;
+                                                                      : Kind::kSplit;
         }
     });
     count_level(level, kinds);
@@ -291,14 +290,8 @@ void Frontier::count_level(const std::vector<NodePairRef>& level, const std::vec
     uint64_t decided = 0;
     per_thread.combine_each([&](const Levels& lv) {
         for (size_t k = 0; k < lv.size(); ++k) {
-            ConstructionLevel& o = st_.levels[k];
-            const ConstructionLevel& x = lv[k];
-            o.pairs += x.pairs, o.tested += x.tested, o.visible += x.visible;
-            o.invisible += x.invisible, o.split += x.split, o.walked += x.walked;
-            o.leaf_pairs_decided += x.leaf_pairs_decided;
-            o.leaf_pairs_visible += x.leaf_pairs_visible;
-            o.leaf_pairs_walked += x.leaf_pairs_walked;
-            decided += x.leaf_pairs_decided;
+            add_level(st_.levels[k], lv[k]);
+            decided += lv[k].leaf_pairs_decided;
         }
     });
     if (decided) progress_->add(decided);
@@ -318,7 +311,8 @@ std::vector<PairJob> Frontier::make_jobs(const std::vector<NodePairRef>& level,
             j.row0 = t_.leaf_begin()[j.a], j.rows = t_.leaf_end()[j.a] - j.row0;
             j.col0 = t_.leaf_begin()[j.b], j.cols = t_.leaf_end()[j.b] - j.col0;
             auto add = [&](int32_t at, int64_t v) {
-                std::atomic_ref<int64_t>(lead_->walked_diff_[at]).fetch_add(v, std::memory_order_relaxed);
+                std::atomic_ref<int64_t>(lead_->walked_diff_[at])
+                    .fetch_add(v, std::memory_order_relaxed);
             };
             add(j.row0, j.cols), add(j.row0 + j.rows, -j.cols);
             add(j.col0, j.rows), add(j.col0 + j.cols, -j.rows);
@@ -376,7 +370,8 @@ void Frontier::extract(int slot, const std::vector<PairJob>& jobs, size_t begin,
     tbb::parallel_for(tbb::blocked_range<size_t>(begin, end, 256), [&](const auto& r) {
         for (size_t j = r.begin(); j < r.end(); ++j) {
             const PairJob& job = jobs[j];
-            const uint64_t n = Extractor{t_, leafy_, job, bits + job.word_offset, sinks_}.visible();
+            const uint64_t n =
+                Extractor{t_, lead_->leafy_, job, bits + job.word_offset, sinks_}.visible();
             job_full[j] = n == uint64_t(job.rows) * uint64_t(job.cols);
             partial[j - begin] = n > 0 && !job_full[j];
         }
@@ -391,7 +386,7 @@ void Frontier::extract(int slot, const std::vector<PairJob>& jobs, size_t begin,
     x.group.run([this, &x] {
         tbb::parallel_for(size_t(0), x.jobs.size(), [&](size_t j) {
             const PairJob& job = x.jobs[j];
-            Extractor{t_, leafy_, job, x.bits + job.word_offset, x.sinks}.run();
+            Extractor{t_, lead_->leafy_, job, x.bits + job.word_offset, x.sinks}.run();
         });
     });
 }
@@ -426,8 +421,7 @@ void Frontier::collect_sinks(Sinks& sinks) {
 
 // The split pairs' children, a slice of at most about max_level_pairs children at a time
 // (the children of one pair are never cut apart), each slice resolved and then settled. With
-// lanes, the lead hands a split's slices to all lanes at once (a helper's own splits stay
-// with it).
+// lanes, several slices are offered to all lanes (offer).
 void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Kind>& kinds,
                      std::vector<uint8_t>& full) {
     std::vector<uint8_t> nks(level.size(), 0);
@@ -438,12 +432,13 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
     // (Smaller slices to share among lanes, about eight a lane, made many small levels and
     // batches: on the GPU each costs a synchronous decide and a launch, and the build took
     // 1.3-1.8x longer: docs/results.md "Construction lanes".)
-    std::vector<size_t> parents;     // the split pairs, slice after slice
-    std::vector<size_t> starts{0};   // slice s: parents[starts[s], starts[s + 1])
+    std::vector<size_t> parents;    // the split pairs, slice after slice
+    std::vector<size_t> starts{0};  // slice s: parents[starts[s], starts[s + 1])
     uint64_t kids = 0;
     for (size_t i = 0; i < level.size(); ++i) {
         if (kinds[i] != Kind::kSplit) continue;
-        if (kids > 0 && kids + nks[i] > fp_.max_level_pairs) starts.push_back(parents.size()), kids = 0;
+        if (kids > 0 && kids + nks[i] > fp_.max_level_pairs)
+            starts.push_back(parents.size()), kids = 0;
         parents.push_back(i);
         kids += nks[i];
     }
@@ -454,7 +449,7 @@ void Frontier::split(const std::vector<NodePairRef>& level, const std::vector<Ki
         const std::span<const size_t> slice(parents.data() + starts[s], starts[s + 1] - starts[s]);
         lane.resolve_slice(level, slice, nks, full);
     };
-    if (slices > 1 && pool_)
+    if (slices > 1 && pool())
         offer(slices, one);
     else
         for (size_t s = 0; s < slices; ++s) one(*this, s);
@@ -469,7 +464,9 @@ void Frontier::resolve_slice(const std::vector<NodePairRef>& level, std::span<co
     tbb::parallel_for(size_t(0), parents.size(), [&](size_t k) {
         NodePairRef* out = kids.data() + first[k];
         for_each_child_pair(t_, level[parents[k]].a, level[parents[k]].b,
-                            [&](int32_t x, int32_t y) { *out++ = NodePairRef{x, y}; });
+                            [&](int32_t x, int32_t y) {
+                                *out++ = NodePairRef{x, y};
+                            });
     });
     const std::vector<uint8_t> kid_full = resolve(kids);
     settle(kids, kid_full, parents, first, full);
@@ -488,11 +485,11 @@ void Frontier::take(Offer& o, size_t s) {
         }
         const size_t next = o.next.fetch_add(1);
         {
-            std::lock_guard<std::mutex> lock(pool_->m);
+            std::lock_guard<std::mutex> lock(pool()->m);
             if (error && !o.error) o.error = error;
             ++o.done;
         }
-        pool_->cv.notify_all();
+        pool()->cv.notify_all();
         s = next;
     }
 }
@@ -504,14 +501,14 @@ void Frontier::offer(size_t slices, const std::function<void(Frontier&, size_t)>
     o.slices = slices;
     o.one = &one;
     {
-        std::lock_guard<std::mutex> lock(pool_->m);
-        pool_->open.push_back(&o);
+        std::lock_guard<std::mutex> lock(pool()->m);
+        pool()->open.push_back(&o);
     }
-    pool_->cv.notify_all();
+    pool()->cv.notify_all();
     take(o, o.next.fetch_add(1));
-    std::unique_lock<std::mutex> lock(pool_->m);
-    pool_->cv.wait(lock, [&] { return o.done == slices; });
-    std::erase(pool_->open, &o);
+    std::unique_lock<std::mutex> lock(pool()->m);
+    pool()->cv.wait(lock, [&] { return o.done == slices; });
+    std::erase(pool()->open, &o);
     lock.unlock();
     if (o.error) std::rethrow_exception(o.error);
 }
@@ -520,17 +517,17 @@ void Frontier::offer(size_t slices, const std::function<void(Frontier&, size_t)>
 void Frontier::serve(int threads) {
     tbb::task_arena arena(threads);
     arena.execute([&] {
-        std::unique_lock<std::mutex> lock(pool_->m);
+        std::unique_lock<std::mutex> lock(pool()->m);
         for (;;) {
-            const auto [o, s] = pool_->claim();
+            const auto [o, s] = pool()->claim();
             if (o) {
                 lock.unlock();
                 take(*o, s);
                 lock.lock();
-            } else if (pool_->stop) {
+            } else if (pool()->stop) {
                 break;
             } else {
-                pool_->cv.wait(lock);
+                pool()->cv.wait(lock);
             }
         }
         lock.unlock();

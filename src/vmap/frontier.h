@@ -28,10 +28,10 @@
 namespace vmap::detail {
 
 struct FrontierParams {
-    uint64_t max_job_pairs = 1;    // a pair with more leaf pairs is split, never walked whole
-    uint64_t walk_pairs = 1;       // undecided pairs with at most this many leaf pairs are walked
-    size_t max_level_pairs = 1;    // node pairs of one level held at once (bounds memory)
-    uint64_t batch_words = 1024;   // words of one backend batch
+    uint64_t max_job_pairs = 1;   // a pair with more leaf pairs is split, never walked whole
+    uint64_t walk_pairs = 1;      // undecided pairs with at most this many leaf pairs are walked
+    size_t max_level_pairs = 1;   // node pairs of one level held at once (bounds memory)
+    uint64_t batch_words = 1024;  // words of one backend batch
 };
 
 class Frontier {
@@ -104,12 +104,13 @@ class Frontier {
     const BuildParams& params_;
     FrontierParams fp_;
     BuildStats& st_;
-    Frontier* lead_;  // this, or the lane's lead
-    std::vector<uint8_t> leafy_;
-    std::vector<int64_t> walked_diff_;  // per leaf, the walked leaf pairs (difference array; the lead's)
+    Frontier* lead_;              // this, or the lane's lead
+    std::vector<uint8_t> leafy_;  // (the lead's, for every lane)
+    // Per leaf, the walked leaf pairs (a difference array; the lead's holds every lane's).
+    std::vector<int64_t> walked_diff_;
     std::vector<std::unique_ptr<Frontier>> helpers_;
-    std::unique_ptr<Pool> own_pool_;  // the lead's, with helpers
-    Pool* pool_ = nullptr;            // the lanes' pool (the lead's), or none
+    std::unique_ptr<Pool> pool_;                       // the lead's, with helpers
+    Pool* pool() const { return lead_->pool_.get(); }  // the lanes' pool, or none
     Sinks sinks_;
     // The links of a batch's partly visible jobs, extracted while the backend evaluates the
     // next batches (and the frontier moves on); the slot's table stays valid until its next

@@ -16,6 +16,7 @@
 #include <numeric>
 #include <optional>
 
+#include "scene/cloud_knn.h"
 #include "util/small_solve.h"
 #include "vmap/parallel.h"
 
@@ -24,6 +25,8 @@ namespace {
 
 constexpr int kPad = 3;              // empty cells around the cloud: the outside wraps around it
 constexpr int kMaxCells = 240;       // per axis, so the grid stays below 16 M cells
+// A surface stacked behind another along a probe: their normal axes within 60 degrees.
+constexpr float kStackedCos = 0.5f;
 constexpr int kProbeSteps = 8;       // half-cell steps: out of the surface layer (1-2 cells)
 constexpr float kSpacing = 1.7725f;  // sample spacing / splat radius: sqrt(pi)
 
@@ -310,8 +313,11 @@ class DiscCaster {
         return out;
     }
 
-    // Distance from point i along d to the first disc beyond tmin, or -1 if it meets none.
-    float first_hit(uint32_t i, Vec3 d, float tmin) const { return travel(i, d, tmin); }
+    // Distance from point i along d to the first disc beyond tmin, or -1 if it meets none; the
+    // disc's point in `who` when one is met.
+    float first_hit(uint32_t i, Vec3 d, float tmin, uint32_t* who = nullptr) const {
+        return travel(i, d, tmin, std::numeric_limits<float>::max(), who);
+    }
 
     // Whether point i sees the place v: no disc between them past tmin.
     bool sees(uint32_t i, Vec3 v, float tmin) const {
@@ -380,7 +386,8 @@ class DiscCaster {
     // a neighbour on a curve poking into the hemisphere, not something the point sees: on a
     // tight curve (a tube a few radii thick) such discs would stop the rays on its outer side.
     // The other face of a thin plate lies in front of the plane and stays.
-    float hit_in_cell(size_t c, uint32_t self, Vec3 o, Vec3 d, float tmin, float best) const {
+    float hit_in_cell(size_t c, uint32_t self, Vec3 o, Vec3 d, float tmin, float best,
+                      uint32_t* who) const {
         const Vec3 own = dot(normals_[self], d) >= 0 ? normals_[self] : -normals_[self];
         for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) {
             const uint32_t j = items_[k];
@@ -393,7 +400,10 @@ class DiscCaster {
             if (std::fabs(den) < 1e-6f) continue;
             const float t = dot(n, to) / den;
             if (!(t > tmin && t < best)) continue;
-            if (length2(o + d * t - pts_[j]) <= rad_[j] * rad_[j]) best = t;
+            if (length2(o + d * t - pts_[j]) <= rad_[j] * rad_[j]) {
+                best = t;
+                if (who) *who = j;
+            }
         }
         return best;
     }
@@ -414,8 +424,8 @@ class DiscCaster {
 
     // Distance to the first disc along the ray (3D DDA over the cells) before tmax, or -1 if
     // none.
-    float travel(uint32_t self, Vec3 d, float tmin,
-                 float tmax = std::numeric_limits<float>::max()) const {
+    float travel(uint32_t self, Vec3 d, float tmin, float tmax = std::numeric_limits<float>::max(),
+                 uint32_t* who = nullptr) const {
         const Vec3 o = pts_[self];
         std::array<int, 3> c;
         if (!grid_.cell(o, c)) return -1;
@@ -432,7 +442,7 @@ class DiscCaster {
         }
         float best = tmax;
         for (;;) {
-            best = hit_in_cell(grid_.at(c[0], c[1], c[2]), self, o, d, tmin, best);
+            best = hit_in_cell(grid_.at(c[0], c[1], c[2]), self, o, d, tmin, best, who);
             const int a = t_next[0] < t_next[1] ? (t_next[0] < t_next[2] ? 0 : 2)
                                                 : (t_next[1] < t_next[2] ? 1 : 2);
             if (best <= t_next[a]) return best < tmax ? best : -1;
@@ -691,6 +701,51 @@ float ray_side(const DiscCaster& caster, uint32_t i, Vec3 n, float radius, float
         return 0;
     const float contrast = (p.mean - m.mean) / (p.mean + m.mean);
     return contrast != 0 ? contrast : (p.mean > m.mean ? 1e-6f : -1e-6f);
+}
+
+// A voxel probe walks through occupied cells to the first empty one, so through anything
+// thinner than its reach. The inner wall of a hollow shell thinner than a cell (test-open-hollow:
+// a 0-10 mm gap) is crossed by its outer side's probe, which reaches the outside: the cavity,
+// reached from the outside through one layer of points, counts as one level deep (solid), and the
+// whole inner wall takes the outside for its free side (0% of its signs right). Such a verdict
+// contradicts the surface it faces: the first disc met along its free side, within the probe's
+// reach, is stacked on it (normal axes within 60 degrees) with its own free side, by its own
+// verdict, turned away, so the side facing this point is solid by that surface's verdict. One of
+// the two is wrong; where the rays clearly say this point's other side travels farther (the
+// cavity against the gap), the rays decide. The outer wall keeps its verdict: its rays agree with
+// it. An object a few millimetres from a wall does not contradict: the wall's free side faces
+// the object. Left out: a disc of the point's own sheet (a box's edge, where blended normals
+// meet the other face's), and points whose free side leaves the box within `near_box` (the rays'
+// "at once": a lone object's faces lie on the box, where the rays count the outside as near). Reads a snapshot of the space verdicts, so the result does not depend on the order.
+// Returns the points turned.
+size_t stacked_verdicts(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                        const std::vector<Vec3>& normals, const std::vector<float>& radii,
+                        float r_med, float noise, float reach, float near_box, SideVotes& v) {
+    const size_t n = pts.size();
+    std::vector<int8_t> space_dir(n, 0);
+    for (size_t i = 0; i < n; ++i)
+        if (v.cue[i] == SideCue::kSpace) space_dir[i] = v.sign[i];
+    std::vector<uint8_t> turn(n, 0);
+    parallel_for_range<size_t>(n, 64, [&](size_t chunk_begin, size_t chunk_end) {
+        for (size_t i = chunk_begin; i < chunk_end; ++i) {
+            if (space_dir[i] == 0) continue;
+            const Vec3 d = normals[i] * float(space_dir[i]);
+            uint32_t j = 0;
+            const float t = caster.first_hit(uint32_t(i), d, ray_start(radii[i], r_med, noise), &j);
+            if (t < 0 || t > reach || space_dir[j] == 0 || caster.box_exit(pts[i], d) <= near_box)
+                continue;
+            if (dot(normals[j] * float(space_dir[j]), d) <= kStackedCos ||
+                same_surface(pts[i], normals[i], pts[j], normals[j]))
+                continue;
+            const float side = ray_side(caster, uint32_t(i), normals[i], radii[i], r_med, noise);
+            if (side == 0 || (side > 0) == (space_dir[i] > 0)) continue;
+            v.sign[i] = int8_t(side > 0 ? 1 : -1);
+            v.cue[i] = SideCue::kRays;
+            v.weight[i] = std::fabs(side);
+            turn[i] = 1;
+        }
+    });
+    return size_t(std::count(turn.begin(), turn.end(), uint8_t(1)));
 }
 
 // The faces of the bounding box (axis * 2 + (side > 0)) that are a room's open-air walls: most
@@ -1283,6 +1338,14 @@ SideVotes vote_sides(const std::vector<Vec3>& world_pts, const std::vector<Vec3>
             v.weight[i] = cue == SideCue::kSpace ? 2.0f : std::fabs(side);
         }
     });
+    v.stacked = stacked_verdicts(caster, pts, normals, radii, r_med, noise,
+                                 0.5f * g.h * float(kProbeSteps),
+                                 2 * g.h + kFaceNoiseSigmas * noise, v);
+    if (v.stacked > 0)
+        v.method += fmt::format(
+            "; {} points behind a surface stacked on them (a hollow shell's inner wall) signed by "
+            "the rays",
+            v.stacked);
     // Steps 6 and 7 start from one table of what the candidate places see.
     const float sigma = spacing_sigma(noise, r_med);
     const double spread = log_spread(radii);

@@ -39,6 +39,9 @@ struct SideVotes {
     // noise lets it be read (the scanners were searched for by it): a scan, whose shadows open
     // the surfaces of closed objects (SideVotes::open on a closed shell).
     bool scanned = false;
+    // Space verdicts that contradicted the surface stacked in front of them and that the rays
+    // turned (free_space.cpp, stacked_verdicts: the inner wall of a thin hollow shell).
+    size_t stacked = 0;
     std::string method;  // the free-space verdict, in words
     // Where the scanner stood, as far as the points tell (step 7 below), in the cloud's
     // coordinates; none unless the cloud is a scan from inside a room.

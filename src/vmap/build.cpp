@@ -105,11 +105,12 @@ VisibilityMap octree_step(PointSet points, const BuildParams& params, BuildStats
 }
 
 // The sizes of the frontier: jobs and batches bounded by max_batch_pairs, walks by walk_pairs
-// (the backend's choice when 0: wider on the GPU, whose warps take 32 leaf pairs at once).
+// (the backend's choice when 0: wider on the GPU, whose warps take 32 leaf pairs at once;
+// 2048 measured against 1024, 4096 and 8192 with three lanes: docs/results.md).
 detail::FrontierParams frontier_params(const BuildParams& params, bool gpu, bool nodes) {
     detail::FrontierParams fp;
     fp.max_job_pairs = std::max<uint64_t>(1, params.max_batch_pairs / 16);
-    fp.walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 1024 : 4096);
+    fp.walk_pairs = params.walk_pairs ? params.walk_pairs : (gpu ? 2048 : 4096);
     fp.max_level_pairs = size_t(params.max_level_pairs);
     // Words per batch (a batch's rows are padded to 32 bits); a job with more words than this
     // makes a batch of its own, and the backend's buffers grow to fit it. The node path's

@@ -105,8 +105,8 @@ VisibilityMap octree_step(PointSet points, const BuildParams& params, BuildStats
 }
 
 // The sizes of the frontier: jobs and batches bounded by max_batch_pairs, walks by walk_pairs
-// (the backend's choice when 0: wider on the GPU, whose warps take 32 leaf pairs at once;
-// 2048 measured against 1024, 4096 and 8192 with three lanes: docs/results.md).
+// (the backend's choice when 0: 4096 on the CPU; 2048 on the GPU, measured with three lanes
+// against 256 to 8192 in docs/results.md).
 detail::FrontierParams frontier_params(const BuildParams& params, bool gpu, bool nodes) {
     detail::FrontierParams fp;
     fp.max_job_pairs = std::max<uint64_t>(1, params.max_batch_pairs / 16);

@@ -13,7 +13,8 @@
 #                  CONS_RUNS runs each (default 3), end to end with the saved file, with
 #                  --construction CONS_METHOD (default: the build's own, auto) and
 #                  --walk-pairs CONS_WALK_PAIRS (default: the backend's) and --lanes
-#                  CONS_LANES (default: the backend's); for the
+#                  CONS_LANES (default: the backend's), by each of CONS_BINS (default vmap;
+#                  "vmap vmap-before" interleaves the two runs and compares files); for the
 #                  leaf_points in CONS_ORACLE also once with --construction leaf-pairs, and the
 #                  two files compared; growth over CONS_POINTS (lp 1, h 12, --count-links);
 #                  the 1.1M-point --count-links run when CONS_BIG=1 (stopped after
@@ -235,15 +236,30 @@ if [[ "$cmd" == run ]]; then
                 meth=(${CONS_METHOD:+--construction "$CONS_METHOD"} ${CONS_WALK_PAIRS:+--walk-pairs "$CONS_WALK_PAIRS"}
                       ${CONS_LANES:+--lanes "$CONS_LANES"})
                 cons() {  # name, then vmap build arguments: one log per run, wall seconds too
+                    # CONS_BINS: the binaries of .device/bin to run, interleaved run by run
+                    # (default vmap; e.g. "vmap vmap-before", bundled with BEFORE=); with more
+                    # than one, each run's -o file is compared with the first binary's.
                     local name=$1; shift
+                    local bins=(${CONS_BINS:-vmap})
                     for r in $(seq "${CONS_RUNS:-3}"); do
-                        local t0; t0=$(date +%s.%N)
-                        timeout "${CONS_TIMEOUT:-590}" "$bin/vmap" -v build "$@" > "$OUT/cons-$name-$r.log" 2>&1 ||
-                            { rc=1; echo "FAILED $name (rc $?)"; }
-                        echo "wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{print b - a}')" >> "$OUT/cons-$name-$r.log"
-                        { grep -E "^construction|^time:|^ +plan|^wall|^device|^throughput" "$OUT/cons-$name-$r.log" |
-                            tr '\n' ' '; echo " [$name $r]"; } | tee -a "$OUT/construction.txt"
+                        for vb in "${bins[@]}"; do
+                            local tag=$name t0
+                            [[ ${#bins[@]} -gt 1 ]] && tag=$name-$vb
+                            t0=$(date +%s.%N)
+                            timeout "${CONS_TIMEOUT:-590}" "$bin/$vb" -v build "$@" > "$OUT/cons-$tag-$r.log" 2>&1 ||
+                                { rc=1; echo "FAILED $tag (rc $?)"; }
+                            echo "wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{print b - a}')" >> "$OUT/cons-$tag-$r.log"
+                            { grep -E "^construction|^time:|^ +plan|^wall|^device|^throughput|^leaf pairs:" "$OUT/cons-$tag-$r.log" |
+                                tr '\n' ' '; echo " [$tag $r]"; } | tee -a "$OUT/construction.txt"
+                            if [[ ${#bins[@]} -gt 1 && -f /tmp/cons.vmap ]]; then
+                                if [[ $vb == "${bins[0]}" ]]; then mv /tmp/cons.vmap /tmp/cons-first.vmap
+                                else { cmp /tmp/cons.vmap /tmp/cons-first.vmap && echo "$tag $r: byte-identical to ${bins[0]}" ||
+                                       { rc=1; echo "$tag $r: DIFFERS from ${bins[0]}"; }; } | tee -a "$OUT/construction.txt"
+                                fi
+                            fi
+                        done
                     done
+                    rm -f /tmp/cons-first.vmap
                 }
                 for lp in ${CONS_LEAF_POINTS:-8 4 1}; do
                     cons "lp$lp" scenes/cornell-dragon.json --backend cuda --max-height 10 \

@@ -216,6 +216,23 @@ TEST(GpuBackend, SmallRectanglesPackedIntoWarpsAreBitIdenticalToTheCpu) {
     for (const char* variant : {"packet", "lane"}) expect_same_tables(t, jobs, words, variant);
 }
 
+// A batch large enough that the packet kernel's warps take chunks of 512 pairs (its largest),
+// which end mid-row and mid-word, and queue more than 32 facing pairs from a chunk: the
+// compaction of facing pairs into packets changes no bit and no count.
+TEST(GpuBackend, LargeBatchOfFacingPairsInChunksIsBitIdenticalToTheCpu) {
+    VMAP_REQUIRE_GPU();
+    PointSet ps = test::sample(test::scene_path("cornell-two-models"), 6000, 4);
+    std::vector<uint32_t> order;
+    const Octree t = Octree::build(ps, {8, 1}, order);
+    const int32_t L = t.num_leaves();
+    ASSERT_GT(int64_t(L / 2) * (L - L / 2), int64_t(132) * 32 * 512);  // chunks of 512 on an H100
+    std::vector<detail::PairJob> jobs;
+    uint64_t words = 0;
+    add_job(jobs, words, 0, L / 2 - 3, L / 2 - 3, L - (L / 2 - 3));
+    add_job(jobs, words, L / 2 - 3, 3, L / 2, 77);
+    expect_same_tables(t, jobs, words, "packet");
+}
+
 // decide_node_pair on the device against the host, pair by pair, counts included.
 TEST(GpuBackend, NodeDecisionsOnTheDeviceAreTheHosts) {
     VMAP_REQUIRE_GPU();

@@ -30,6 +30,7 @@ namespace {
 
 struct DeviceCounters {
     unsigned long long pairs, facing_pairs, visible_pairs, node_tests, occluder_tests;
+    unsigned long long next_chunk;  // the packet kernel's next chunk of pairs
 };
 
 constexpr int kWarpsPerBlock = 8;
@@ -124,47 +125,105 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     flush_counters(wc, lane, counters);
 }
 
-// The same walk for the warp as a packet. The 32 lanes hold 32 neighbouring leaf pairs, so
+// The same walk for a warp's 32 lanes as a packet. The lanes hold neighbouring leaf pairs, so
 // their segments form a thin bundle. The warp walks the preorder tree once, entering a node
 // when any lane's own walk would enter it; node and leaf records are then warp-uniform loads
 // (one broadcast instead of 32 gathers). Each lane tests only the nodes on its own path
 // (n >= resume: it has not skipped past the node's subtree), so it makes exactly the tests,
 // counts and answer of leaf_pair_visible, from the same pieces (pair_segment, slab_meets_box,
-// occluder_reached), whichever pairs share the warp.
+// occluder_reached), whichever pairs share the warp. `faces`: the lane's pair faces
+// (pair_faces, computed by the caller); a lane without a pair or whose pair does not face
+// only takes part in the warp's votes.
+__device__ inline void walk_packet(const OctreeView& t, const VisibilityParams& vp,
+                                   const PairPos& at, bool faces, uint32_t* bits,
+                                   SmallCounters& wc) {
+    const int32_t a = at.in ? at.a : 0, b = at.in ? at.b : 0;
+    const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp, faces);
+    bool vis = at.in && s.faces;
+    int occluders = 0;
+    int32_t resume = 0;  // this lane's own walk skipped everything below this index
+    int32_t n = 0;
+    while (n < t.num_nodes && __any_sync(0xffffffffu, vis)) {
+        const WalkNode w = load_walk(t.walk + n);
+        bool hit = false;
+        if (vis && n >= resume) {
+            wc.node_tests++;
+            hit = slab_meets_box(s.ray, Box{w.lo, w.hi}, 0.f);
+            if (!hit) resume = w.skip;
+        }
+        if (hit && occluder_reached<true>(t, s, w.leaf, a, b, vp, occluders, &wc)) vis = false;
+        n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
+    }
+    store_bits(at, vis, bits);
+    wc.visible_pairs += vis;
+}
+
+// The packet walk over facing pairs only (the default kernel). A lane whose pair does not face
+// idles through its warp's whole walk, and a third of the pairs the construction walks do not
+// face (curved nodes, nodes holding two walls). So a warp takes a chunk of consecutive pairs
+// (handed out by an atomic counter, for balance), runs the facing test on them 32 at a time,
+// and queues the facing ones in shared memory in their order; each time 32 are queued it
+// walks them as a packet. The queue's pairs are still neighbours (a chunk's pairs are
+// consecutive), so the bundle stays thin; what is left of the queue at a chunk's end is walked
+// as a partial packet rather than mixed with a distant chunk. The table starts zeroed, so the
+// pairs that do not face need no store. Answers and counts are leaf_pair_visible's.
+constexpr int kQueue = 64;  // a warp's queue: fewer than 32 left over plus 32 new
 __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                              const uint64_t* __restrict__ first, int32_t num_jobs,
-                             uint64_t num_pairs, uint32_t* __restrict__ bits,
-                             DeviceCounters* counters) {
+                             uint64_t num_pairs, uint64_t chunk_pairs,
+                             uint32_t* __restrict__ bits, DeviceCounters* counters) {
+    __shared__ uint64_t queues[kWarpsPerBlock][kQueue];
     const int lane = threadIdx.x & 31;
-    const uint64_t warp = (uint64_t(blockIdx.x) * blockDim.x + threadIdx.x) >> 5;
-    const uint64_t warps = (uint64_t(gridDim.x) * blockDim.x) >> 5;
+    uint64_t* queue = queues[threadIdx.x >> 5];
+    const unsigned below = (1u << lane) - 1u;
+    const uint64_t chunks = (num_pairs + chunk_pairs - 1) / chunk_pairs;
     SmallCounters wc;
-    for (uint64_t wi = warp; wi * 32 < num_pairs; wi += warps) {
-        const PairPos at = locate_pair(jobs, first, num_jobs, wi * 32 + lane, num_pairs);
-        const int32_t a = at.in ? at.a : 0, b = at.in ? at.b : 0;
-        const PairSegment s = pair_segment(t.leaves[a], t.leaves[b], vp);
-        bool vis = at.in && s.faces;
-        wc.pairs += at.in;
-        wc.facing_pairs += vis;
-        int occluders = 0;
-        int32_t resume = 0;  // this lane's own walk skipped everything below this index
-        int32_t n = 0;
-        while (n < t.num_nodes && __any_sync(0xffffffffu, vis)) {
-            const WalkNode w = load_walk(t.walk + n);
-            bool hit = false;
-            if (vis && n >= resume) {
-                wc.node_tests++;
-                hit = slab_meets_box(s.ray, Box{w.lo, w.hi}, 0.f);
-                if (!hit) resume = w.skip;
+    auto walk_queued = [&](int count) {  // the first `count` (<= 32) queued pairs
+        const uint64_t pair = lane < count ? queue[lane] : num_pairs;
+        __syncwarp();
+        const PairPos at = locate_pair(jobs, first, num_jobs, pair, num_pairs);
+        walk_packet(t, vp, at, at.in, bits, wc);
+    };
+    for (;;) {
+        unsigned long long chunk = 0;
+        if (lane == 0) chunk = atomicAdd(&counters->next_chunk, 1ull);
+        chunk = __shfl_sync(0xffffffffu, chunk, 0);
+        if (chunk >= chunks) break;
+        const uint64_t begin = chunk * chunk_pairs;
+        const uint64_t end = begin + chunk_pairs < num_pairs ? begin + chunk_pairs : num_pairs;
+        int queued = 0;
+        for (uint64_t base = begin; base < end; base += 32) {
+            const uint64_t pair = base + uint64_t(lane);
+            const PairPos at = locate_pair(jobs, first, num_jobs, pair, end);
+            const bool faces = at.in && pair_faces(t.leaves[at.a], t.leaves[at.b], vp);
+            wc.pairs += at.in;
+            wc.facing_pairs += faces;
+            const unsigned m = __ballot_sync(0xffffffffu, faces);
+            if (faces) queue[queued + __popc(m & below)] = pair;
+            queued += __popc(m);
+            __syncwarp();
+            if (queued >= 32) {
+                walk_queued(32);
+                queued -= 32;
+                const uint64_t rest = lane < queued ? queue[32 + lane] : 0;
+                __syncwarp();
+                if (lane < queued) queue[lane] = rest;
+                __syncwarp();
             }
-            if (hit && occluder_reached<true>(t, s, w.leaf, a, b, vp, occluders, &wc)) vis = false;
-            n = __any_sync(0xffffffffu, hit) ? n + 1 : w.skip;
         }
-        store_bits(at, vis, bits);
-        wc.visible_pairs += vis;
+        if (queued > 0) walk_queued(queued);
+        __syncwarp();
     }
     flush_counters(wc, lane, counters);
+}
+
+// How many consecutive pairs a warp's chunk holds: up to 512 (a tail of fewer than 32 queued
+// pairs per chunk walks as a partial packet), fewer for a small batch so that its chunks still
+// fill the GPU (32 warps per SM).
+inline uint64_t chunk_pairs_for(uint64_t pairs, int sms) {
+    const uint64_t fill = pairs / (uint64_t(sms) * 32);
+    return std::clamp<uint64_t>(fill / 32 * 32, 32, 512);
 }
 
 // Node-pair decisions (node_pair.h), one thread a pair (those worth_deciding; the others stay
@@ -367,21 +426,27 @@ class CudaBackend final : public Backend {
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k0, sl.stream));
         if (pairs > 0) {
             const int threads = kWarpsPerBlock * 32;
-            const uint64_t warps = (pairs + 31) / 32;
-            const uint64_t want = (warps + kWarpsPerBlock - 1) / kWarpsPerBlock;
-            const int blocks =
-                int(std::min<uint64_t>(want, uint64_t(prop_.multiProcessorCount) * 64));
+            const int sms = prop_.multiProcessorCount;
             // VMAP_CUDA_VARIANT=lane runs the per-lane walk (the on-device oracle; same answers)
             // instead of the default packet walk.
-            auto launch = [&](auto kernel) {
-                kernel<<<blocks, threads, 0, sl.stream>>>(view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr,
-                                                          int32_t(nj), pairs, sl.d_bits.ptr,
-                                                          sl.d_counters.ptr);
-            };
-            if (variant_ == "lane")
-                launch(leaf_pairs_kernel);
-            else
-                launch(leaf_pairs_packet_kernel);
+            if (variant_ == "lane") {
+                const uint64_t warps = (pairs + 31) / 32;
+                const uint64_t want = (warps + kWarpsPerBlock - 1) / kWarpsPerBlock;
+                const int blocks = int(std::min<uint64_t>(want, uint64_t(sms) * 64));
+                leaf_pairs_kernel<<<blocks, threads, 0, sl.stream>>>(
+                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), pairs, sl.d_bits.ptr,
+                    sl.d_counters.ptr);
+            } else {
+                // Warps take chunks from a counter: enough blocks to fill every SM, no more
+                // than there are chunks.
+                const uint64_t chunk = chunk_pairs_for(pairs, sms);
+                const uint64_t chunks = (pairs + chunk - 1) / chunk;
+                const uint64_t want = (chunks + kWarpsPerBlock - 1) / kWarpsPerBlock;
+                const int blocks = int(std::min<uint64_t>(want, uint64_t(sms) * 8));
+                leaf_pairs_packet_kernel<<<blocks, threads, 0, sl.stream>>>(
+                    view_, vp_, sl.d_jobs.ptr, sl.d_first.ptr, int32_t(nj), pairs, chunk,
+                    sl.d_bits.ptr, sl.d_counters.ptr);
+            }
             VMAP_CUDA_CHECK(cudaGetLastError());
         }
         VMAP_CUDA_CHECK(cudaEventRecord(sl.k1, sl.stream));

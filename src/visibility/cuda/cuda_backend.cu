@@ -2,9 +2,10 @@
 // while the host extracts links). The predicate is leaf_pair.h, the same code the CPU runs.
 //
 // Work decomposition: the leaf pairs of a batch are numbered across its jobs (row by row inside
-// a job), and a warp evaluates 32 consecutive ones, a lane per pair, whatever the jobs' shapes
-// (locate_pair). Neighbouring lanes walk nearly the same segment, so the warp walks the tree
-// once for all 32 (leaf_pairs_packet_kernel, the default). The per-lane walk of leaf_pair.h
+// a job), whatever the jobs' shapes (locate_pair); a warp takes a chunk of consecutive ones,
+// keeps those that face, and walks them 32 at a time, a lane per pair. Neighbouring lanes walk
+// nearly the same segment, so the warp walks the tree once for all 32
+// (leaf_pairs_packet_kernel, the default). The per-lane walk of leaf_pair.h
 // (leaf_pairs_kernel, VMAP_CUDA_VARIANT=lane) is kept as the on-device oracle: the GPU tests
 // check that both give the same bits and counts. The node-pair tests of the construction's
 // frontier (node_pair.h, decide_kernel) run here too, one thread a node pair.

@@ -178,42 +178,49 @@ void expect_same_tables(const Octree& t, const std::vector<detail::PairJob>& job
     EXPECT_GT(gpu->peak_device_bytes(), 0u);
 }
 
-void add_job(std::vector<detail::PairJob>& jobs, uint64_t& words, int32_t row0, int32_t rows,
-             int32_t col0, int32_t cols) {
-    detail::PairJob j;
-    j.row0 = row0, j.rows = rows, j.col0 = col0, j.cols = cols;
-    j.word_offset = words;
-    words += detail::job_words(j);
-    jobs.push_back(j);
-}
+// Rectangles of leaf pairs over the octree of a scene sampled at `points` points, in one batch.
+struct Rectangles {
+    Octree t;
+    int32_t L = 0;
+    std::vector<detail::PairJob> jobs;
+    uint64_t words = 0;
+    Rectangles(const char* scene, int points, uint64_t seed, int leaf_points) {
+        PointSet ps = test::sample(test::scene_path(scene), points, seed);
+        std::vector<uint32_t> order;
+        t = Octree::build(ps, {8, leaf_points}, order);
+        L = t.num_leaves();
+    }
+    void add(int32_t row0, int32_t rows, int32_t col0, int32_t cols) {
+        detail::PairJob j;
+        j.row0 = row0, j.rows = rows, j.col0 = col0, j.cols = cols;
+        j.word_offset = words;
+        words += detail::job_words(j);
+        jobs.push_back(j);
+    }
+    void check(const char* variant) const {  // expect_same_tables
+        expect_same_tables(t, jobs, words, variant);
+    }
+};
 
 TEST(GpuBackend, RectanglesAreBitIdenticalToTheCpu) {
     VMAP_REQUIRE_GPU();
-    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 5000, 9);
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(ps, {8, 3}, order);
-    const int32_t L = t.num_leaves();
+    Rectangles r("cornell-bunny", 5000, 9, 3);
     // Odd-sized rectangles, so rows end mid-word and jobs start at odd offsets.
-    std::vector<detail::PairJob> jobs;
-    uint64_t words = 0;
+    const int32_t L = r.L;
     for (int32_t r0 = 0; r0 + 37 < L / 2; r0 += 301)
-        add_job(jobs, words, r0, 37, L / 2 + r0 % 97, std::min(L - (L / 2 + r0 % 97), 1001));
-    expect_same_tables(t, jobs, words, "packet");
+        r.add(r0, 37, L / 2 + r0 % 97, std::min(L - (L / 2 + r0 % 97), 1001));
+    r.check("packet");
 }
 
 // Rectangles of every small shape, packed 32 leaf pairs to a warp across rows and jobs.
 TEST(GpuBackend, SmallRectanglesPackedIntoWarpsAreBitIdenticalToTheCpu) {
     VMAP_REQUIRE_GPU();
-    PointSet ps = test::sample(test::scene_path("cornell-bunny"), 4000, 9);
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(ps, {8, 2}, order);
-    const int32_t L = t.num_leaves();
-    std::vector<detail::PairJob> jobs;
-    uint64_t words = 0;
+    Rectangles r("cornell-bunny", 4000, 9, 2);
+    const int32_t L = r.L;
     int k = 0;
     for (int32_t r0 = 0; r0 + 40 < L / 2; r0 += 13, ++k)
-        add_job(jobs, words, r0, 1 + k % 7, L / 2 + (r0 * 7) % (L / 2 - 70), 1 + (k * 5) % 67);
-    for (const char* variant : {"packet", "lane"}) expect_same_tables(t, jobs, words, variant);
+        r.add(r0, 1 + k % 7, L / 2 + (r0 * 7) % (L / 2 - 70), 1 + (k * 5) % 67);
+    for (const char* variant : {"packet", "lane"}) r.check(variant);
 }
 
 // A batch large enough that the packet kernel's warps take chunks of 512 pairs (its largest),
@@ -221,16 +228,12 @@ TEST(GpuBackend, SmallRectanglesPackedIntoWarpsAreBitIdenticalToTheCpu) {
 // compaction of facing pairs into packets changes no bit and no count.
 TEST(GpuBackend, LargeBatchOfFacingPairsInChunksIsBitIdenticalToTheCpu) {
     VMAP_REQUIRE_GPU();
-    PointSet ps = test::sample(test::scene_path("cornell-two-models"), 6000, 4);
-    std::vector<uint32_t> order;
-    const Octree t = Octree::build(ps, {8, 1}, order);
-    const int32_t L = t.num_leaves();
+    Rectangles r("cornell-two-models", 6000, 4, 1);
+    const int32_t L = r.L;
     ASSERT_GT(int64_t(L / 2) * (L - L / 2), int64_t(132) * 32 * 512);  // chunks of 512 on an H100
-    std::vector<detail::PairJob> jobs;
-    uint64_t words = 0;
-    add_job(jobs, words, 0, L / 2 - 3, L / 2 - 3, L - (L / 2 - 3));
-    add_job(jobs, words, L / 2 - 3, 3, L / 2, 77);
-    expect_same_tables(t, jobs, words, "packet");
+    r.add(0, L / 2 - 3, L / 2 - 3, L - (L / 2 - 3));
+    r.add(L / 2 - 3, 3, L / 2, 77);
+    r.check("packet");
 }
 
 // decide_node_pair on the device against the host, pair by pair, counts included.

@@ -16,6 +16,7 @@
 
 #include "test_files.h"
 #include "test_util.h"
+#include "vmap/build_checks.h"
 #include "vmap/error.h"
 #include "vmap/io.h"
 #include "vmap/render.h"
@@ -1471,6 +1472,27 @@ TEST(RawCloud, BuildWithoutRadiiEstimatesThemAndSaysSo) {
     EXPECT_NE(st.warnings[0].find("radii"), std::string::npos) << st.warnings[0];
 }
 
+// One flat wall: no pair faces whichever way the normals point, so the warning says so and
+// does not tell the user to flip them (which would change nothing).
+TEST(RawCloud, BuildWarnsThatAFlatCloudSeesNothingWithoutSuggestingAFlip) {
+    std::vector<Vec3> truth;
+    std::mt19937 rng(7);
+    PointSet ps;
+    add_rect(ps, truth, {0, 0, 0}, {1, 0, 0}, {0, 0, 1}, {0, 1, 0}, 2000, rng);
+    ps.normals = truth;
+    ps.radii.assign(ps.size(), 0.01f);
+    BuildParams bp;
+    bp.octree.max_height = 5;
+    bp.backend = Backend::kCpu;
+    BuildStats st;
+    const VisibilityMap vm = build_vmap(ps, bp, &st, "wall");
+    EXPECT_EQ(detail::flipped_facing_share(vm.octree(), bp.visibility), 0.0);
+    ASSERT_EQ(st.warnings.size(), 1u);
+    EXPECT_NE(st.warnings[0].find("face each other"), std::string::npos) << st.warnings[0];
+    EXPECT_NE(st.warnings[0].find("flat surface"), std::string::npos) << st.warnings[0];
+    EXPECT_EQ(st.warnings[0].find("--normals flip"), std::string::npos) << st.warnings[0];
+}
+
 TEST(RawCloud, BuildWarnsWhenARoomFacesOutward) {
     std::vector<Vec3> truth;
     PointSet ps = room(true, truth, 52);
@@ -1480,9 +1502,12 @@ TEST(RawCloud, BuildWarnsWhenARoomFacesOutward) {
     bp.octree.max_height = 4;
     bp.backend = Backend::kCpu;
     BuildStats st;
-    build_vmap(ps, bp, &st, "room");
+    const VisibilityMap vm = build_vmap(ps, bp, &st, "room");
     ASSERT_EQ(st.warnings.size(), 1u);
     EXPECT_NE(st.warnings[0].find("face each other"), std::string::npos) << st.warnings[0];
+    // Flipped, they would face: the warning says so and suggests flipping them.
+    EXPECT_NE(st.warnings[0].find("--normals flip"), std::string::npos) << st.warnings[0];
+    EXPECT_GT(detail::flipped_facing_share(vm.octree(), bp.visibility), 0.5);
     // Right normals: no warning.
     ps.normals = truth;
     build_vmap(ps, bp, &st, "room");

@@ -431,7 +431,7 @@ BuildStats reduce_stats(Run& r) {
     st.seconds_backend = t_max[2], st.seconds_extract = t_max[3], st.seconds_links = t_max[4];
     st.peak_device_bytes = uint64_t(t_max[5]);
     st.links = r.links;
-    detail::check_facing(st);
+    detail::check_facing(st, r.vm.octree(), r.params.visibility);
     return st;
 }
 

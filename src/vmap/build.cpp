@@ -186,7 +186,8 @@ VisibilityMap links_in_arena(VisibilityMap vm, const BuildParams& params, BuildS
     links_step(vm, *fr, params, st, raw);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
-    if (!params.top_pairs) detail::check_facing(st);  // a share cannot judge the whole
+    // (A share of the pairs cannot judge the whole.)
+    if (!params.top_pairs) detail::check_facing(st, vm.octree(), params.visibility);
     return vm;
 }
 

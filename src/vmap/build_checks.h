@@ -18,7 +18,17 @@ constexpr double kInconsistent = 0.05;
 // records both in stats.warnings. Points without normals are left to the octree to reject.
 void prepare_points(PointSet& points, BuildStats& stats, const std::string& source);
 
-// Adds a warning when fewer than kFewFacing of the leaf pairs face each other.
-void check_facing(BuildStats& stats);
+// Leaf pairs probed by flipped_facing_share.
+constexpr int kFlipProbePairs = 1 << 16;
+
+// The share of leaf pairs of t that would face each other with every normal flipped, estimated
+// over kFlipProbePairs pairs drawn by a fixed sequence.
+double flipped_facing_share(const Octree& t, const VisibilityParams& vp);
+
+// Adds a warning when fewer than kFewFacing of the leaf pairs face each other: that the normals
+// point away from each other (a room facing out, or a convex object seen from outside) where
+// flipping them would make many more face, else that the surface is flat (nothing to see
+// whichever way the normals point).
+void check_facing(BuildStats& stats, const Octree& t, const VisibilityParams& vp);
 
 }  // namespace vmap::detail

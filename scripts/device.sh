@@ -41,7 +41,9 @@
 #                  LINKS_RUNS runs (default 3); tables in $OUT/links.md
 #   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older
 #   commit), bundled as .device/bin/vmap-before for gi-throughput.
-#      Logs and tables go to $OUT.
+#      Logs and tables go to $OUT. At the end every file in $OUT goes into $OUT/logs.tgz and the
+#      *.log files are deleted (few files come back from the device): redirect a caller's own
+#      output to a name not ending in .log (e.g. $OUT/run.txt), and do not write logs.tgz.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"

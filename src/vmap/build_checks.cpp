@@ -61,21 +61,18 @@ void check_facing(BuildStats& stats, const Octree& t, const VisibilityParams& vp
     // user knows which it is). Where flipping would not help either, the points lie on a flat
     // surface (or an open one bent away from both sides), where flipping is the wrong advice.
     const double flipped = flipped_facing_share(t, vp);
-    if (flipped >= kFewFacing && flipped >= 4 * share) {
-        stats.warnings.push_back(fmt::format(
-            "only {:.2f}% of leaf pairs face each other, and {:.1f}% would with every normal "
-            "flipped: the normals point away from each other, as on a lone convex object seen "
-            "from outside (where nothing sees anything) or on a room whose walls face out (then "
-            "try --normals flip, --normals inward or --viewpoint)",
-            100.0 * share, 100.0 * flipped));
-    } else {
-        stats.warnings.push_back(fmt::format(
-            "only {:.2f}% of leaf pairs face each other, and {:.2f}% would with every normal "
-            "flipped: the points lie on one flat surface (or on open ones turned away from "
-            "each other), where nothing sees anything whichever way the normals point; if the "
-            "scene is not such, check the normals",
-            100.0 * share, 100.0 * flipped));
-    }
+    const char* why =
+        flipped >= kFewFacing && flipped >= 4 * share
+            ? "the normals point away from each other, as on a lone convex object seen from "
+              "outside (where nothing sees anything) or on a room whose walls face out (then try "
+              "--normals flip, --normals inward or --viewpoint)"
+            : "the points lie on one flat surface (or on open ones turned away from each "
+              "other), where nothing sees anything whichever way the normals point; if the "
+              "scene is not such, check the normals";
+    stats.warnings.push_back(fmt::format(
+        "only {:.2f}% of leaf pairs face each other, and {:.2f}% would with every normal "
+        "flipped: {}",
+        100.0 * share, 100.0 * flipped, why));
 }
 
 }  // namespace vmap::detail

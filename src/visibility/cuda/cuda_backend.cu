@@ -169,7 +169,12 @@ __device__ inline void walk_packet(const OctreeView& t, const VisibilityParams& 
 // as a partial packet rather than mixed with a distant chunk. The table starts zeroed, so the
 // pairs that do not face need no store. Answers and counts are leaf_pair_visible's.
 constexpr int kQueue = 64;  // a warp's queue: fewer than 32 left over plus 32 new
-__global__ void __launch_bounds__(kWarpsPerBlock * 32)
+// Four blocks an SM (32 warps) cap the walk at 64 registers (a few bytes spilled); without the
+// cap it took 76 and ran three blocks (24 warps). The walk waits on each node's load, so
+// warps in flight pay: the kernel 21% faster on the dragon at lp 1 and 4 (H100); five blocks
+// (48 registers) spill 240 bytes and lose 7% again (docs/results.md, "Registers").
+constexpr int kPacketBlocksPerSm = 4;
+__global__ void __launch_bounds__(kWarpsPerBlock * 32, kPacketBlocksPerSm)
     leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,
                              const uint64_t* __restrict__ first, int32_t num_jobs,
                              uint64_t num_pairs, uint64_t chunk_pairs,
@@ -232,7 +237,8 @@ inline uint64_t chunk_pairs_for(uint64_t pairs, int sms) {
 struct ShaftCounters {
     unsigned long long shaft_node_tests = 0;
 };
-__global__ void __launch_bounds__(128)
+// Four blocks of 128 an SM cap the node tests at 128 registers (154 without; 3 blocks).
+__global__ void __launch_bounds__(128, 4)
     decide_kernel(NodePairContext c, const NodePairRef* __restrict__ pairs, uint64_t n,
                   uint8_t* __restrict__ out, unsigned long long* shaft_node_tests) {
     const uint64_t i = uint64_t(blockIdx.x) * blockDim.x + threadIdx.x;

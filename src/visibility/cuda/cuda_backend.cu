@@ -180,7 +180,8 @@ constexpr int kQueue = 64;  // a warp's queue: fewer than 32 left over plus 32 n
 // Four blocks an SM (32 warps) cap the walk at 64 registers (a few bytes spilled); without the
 // cap it took 76 and ran three blocks (24 warps). The walk waits on each node's load, so
 // warps in flight pay: the kernel 21% faster on the dragon at lp 1 and 4 (H100); five blocks
-// (48 registers) spill 240 bytes and lose 7% again (docs/results.md, "Registers").
+// (48 registers) spill 240 bytes and lose 7% again (docs/results.md, "Registers and votes in
+// the GPU's packet walk").
 constexpr int kPacketBlocksPerSm = 4;
 __global__ void __launch_bounds__(kWarpsPerBlock * 32, kPacketBlocksPerSm)
     leaf_pairs_packet_kernel(OctreeView t, VisibilityParams vp, const PairJob* __restrict__ jobs,

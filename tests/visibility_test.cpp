@@ -511,8 +511,8 @@ TEST(PacketWalk, AgreesWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
             flagged += (v.leaves[l].flags & kLeafNormalDegenerate) != 0;
         SCOPED_TRACE(seed);
         // Without and with end windows (the vector occluder test of the AVX-512 loop takes
-        // every rule of counts_as_occluder); every lane loop this CPU runs (SSE2, AVX2,
-        // AVX-512), and a packet not a power of 2.
+        // every rule of counts_as_occluder, as the AVX2 loop's does); every lane loop this CPU
+        // runs (SSE2, AVX2, AVX-512), and a packet not a power of 2.
         for (float window : {0.f, 2.f}) {
             vp.end_window = window;
             vp.eps = window > 0 ? 0.005f : 0.01f;

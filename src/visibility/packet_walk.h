@@ -23,7 +23,8 @@
 // (load_faced: pair_segment), and a leaf's occluder test for the lanes that reach it
 // (occluders_zmm: counts_as_occluder for a leaf with a plane; a flagged leaf goes lane by lane).
 // On the default scene this took the CPU's user time from 24 s to about 14 s
-// (docs/results.md, "The CPU walk in vectors").
+// (docs/results.md, "The CPU walk in vectors"). On AVX2 the occluder test is in vectors too
+// (occluders_ymm, 8 lanes; docs/results.md "The CPU walk on a host without AVX-512").
 #pragma once
 
 #include <array>
@@ -502,7 +503,9 @@ class SegmentPacket {
     // The packet's walk; returns the node tests. The same loop compiled for wider vectors
     // (walk_avx2, walk_avx512: the same float operations, FMA contraction is off, so the same
     // bits) where the CPU has them.
-    template <class Counters>
+    // kYmm: the occluder tests of a leaf with a plane 8 lanes at a time (occluders_ymm; only
+    // from walk_avx2).
+    template <bool kYmm = false, class Counters>
     __attribute__((always_inline)) inline int64_t walk_nodes(const OctreeView& t,
                                                              const VisibilityParams& vp, int live,
                                                              Counters* wc) {
@@ -526,7 +529,17 @@ class SegmentPacket {
                 n = w.skip;
                 continue;
             }
-            if (w.leaf >= 0) live -= occluders_at(t, w.leaf, hits, vp, wc);
+            if (w.leaf >= 0) {
+#if VMAP_PACKET_ISA
+                if constexpr (kYmm && W % 8 == 0) {
+                    const LeafDisc& x = t.leaves[w.leaf];
+                    live -= !(x.flags & kLeafNormalDegenerate)
+                                ? occluders_ymm(x, w.leaf, hits, vp, wc)
+                                : occluders_at(t, w.leaf, hits, vp, wc);
+                } else
+#endif
+                    live -= occluders_at(t, w.leaf, hits, vp, wc);
+            }
             ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
         }
         int64_t sum = 0;
@@ -538,7 +551,114 @@ class SegmentPacket {
     __attribute__((target("avx2"), noinline)) int64_t walk_avx2(const OctreeView& t,
                                                                 const VisibilityParams& vp,
                                                                 int live, Counters* wc) {
-        return walk_nodes(t, vp, live, wc);
+        return walk_nodes<true>(t, vp, live, wc);
+    }
+    // occluders_zmm on AVX2 (hosts without AVX-512): counts_as_occluder's float operations in
+    // the same order, 8 lanes at a time, the masks as bits of a word (vmovmskps); the K rule
+    // lane by lane over the lanes whose leaf counts. The same bits as occluders_at.
+    __attribute__((target("avx2"), always_inline)) static inline uint32_t bits_ymm(__m256 v) {
+        return uint32_t(_mm256_movemask_ps(v));
+    }
+    __attribute__((target("avx2"), always_inline)) static inline __m256 ld(const float* f) {
+        return _mm256_load_ps(f);
+    }
+    __attribute__((target("avx2"), always_inline)) static inline __m256 dot_ymm(
+        __m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by, __m256 bz) {
+        return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
+                             _mm256_mul_ps(az, bz));
+    }
+    template <class Counters>
+    __attribute__((target("avx2"), noinline)) int
+    occluders_ymm(const LeafDisc& x, int32_t leaf, uint32_t hits, const VisibilityParams& vp,
+                  Counters* wc) {
+        const __m256 cx = _mm256_set1_ps(x.centroid.x), cy = _mm256_set1_ps(x.centroid.y),
+                     cz = _mm256_set1_ps(x.centroid.z);
+        const __m256 nx = _mm256_set1_ps(x.normal.x), ny = _mm256_set1_ps(x.normal.y),
+                     nz = _mm256_set1_ps(x.normal.z);
+        const __m256 zero = _mm256_setzero_ps(), half = _mm256_set1_ps(0.5f),
+                     one = _mm256_set1_ps(1.f);
+        const __m256 eps = _mm256_set1_ps(vp.eps), eps1 = _mm256_set1_ps(1.f - vp.eps);
+        const __m256 ptol = _mm256_set1_ps(vp.parallel_tol);
+        const __m256 dd = _mm256_set1_ps(x.delta * x.delta);
+        const __m256 rough_ = _mm256_set1_ps(vp.roughness),
+                     sheet_cos = _mm256_set1_ps(kSameSheetCos);
+        const bool rough_on = vp.roughness > 0;
+        const __m256i lf = _mm256_set1_epi32(leaf);
+        const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+        int left = 0;
+        for (int h = 0; h < W / 8; ++h) {
+            const int o = 8 * h;
+            uint32_t m = (hits >> o) & 0xffu;
+            if (!m) continue;
+            const __m256i la = _mm256_load_si256(reinterpret_cast<const __m256i*>(a_ + o));
+            const __m256i lb = _mm256_load_si256(reinterpret_cast<const __m256i*>(b_ + o));
+            m &= ~(bits_ymm(_mm256_castsi256_ps(_mm256_cmpeq_epi32(la, lf))) |
+                   bits_ymm(_mm256_castsi256_ps(_mm256_cmpeq_epi32(lb, lf))));
+            wc->occluder_tests += uint64_t(__builtin_popcount(m));
+            if (!m) continue;
+            const __m256 px = ld(p_[0] + o), py = ld(p_[1] + o), pz = ld(p_[2] + o);
+            const __m256 qx = ld(q_[0] + o), qy = ld(q_[1] + o), qz = ld(q_[2] + o);
+            const __m256 dx = ld(d_[0] + o), dy = ld(d_[1] + o), dz = ld(d_[2] + o);
+            const __m256 len = ld(len_ + o);
+            const uint32_t npa = (no_plane_a_ >> o) & 0xffu, npb = (no_plane_b_ >> o) & 0xffu;
+            // in_front_of_ends
+            const __m256 vx = _mm256_sub_ps(cx, px), vy = _mm256_sub_ps(cy, py),
+                         vz = _mm256_sub_ps(cz, pz);
+            const __m256 fa = dot_ymm(ld(na_[0] + o), ld(na_[1] + o), ld(na_[2] + o), vx, vy, vz);
+            const __m256 fb = dot_ymm(ld(nb_[0] + o), ld(nb_[1] + o), ld(nb_[2] + o),
+                                      _mm256_sub_ps(cx, qx), _mm256_sub_ps(cy, qy),
+                                      _mm256_sub_ps(cz, qz));
+            m &= bits_ymm(_mm256_cmp_ps(fa, zero, _CMP_GT_OQ)) | npa;
+            m &= bits_ymm(_mm256_cmp_ps(fb, zero, _CMP_GT_OQ)) | npb;
+            // is_actual_occluder, x with a plane
+            const __m256 nd = dot_ymm(nx, ny, nz, dx, dy, dz);
+            m &= ~bits_ymm(
+                _mm256_cmp_ps(_mm256_and_ps(nd, absmask), _mm256_mul_ps(ptol, len), _CMP_LE_OQ));
+            const __m256 tt = _mm256_div_ps(dot_ymm(nx, ny, nz, vx, vy, vz), nd);
+            m &= bits_ymm(_mm256_cmp_ps(tt, eps, _CMP_GT_OQ)) &
+                 bits_ymm(_mm256_cmp_ps(tt, eps1, _CMP_LT_OQ));
+            const __m256 ex = _mm256_sub_ps(_mm256_add_ps(px, _mm256_mul_ps(dx, tt)), cx);
+            const __m256 ey = _mm256_sub_ps(_mm256_add_ps(py, _mm256_mul_ps(dy, tt)), cy);
+            const __m256 ez = _mm256_sub_ps(_mm256_add_ps(pz, _mm256_mul_ps(dz, tt)), cz);
+            m &= bits_ymm(_mm256_cmp_ps(dot_ymm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ));
+            if (!m) continue;
+            // exits_at_an_end and beyond_the_end_windows, by the nearer end (blendv takes its
+            // second operand where the mask is set, as mask_blend does)
+            const __m256 near_v = _mm256_cmp_ps(tt, half, _CMP_LT_OQ);
+            const uint32_t near_a = bits_ymm(near_v);
+            const __m256 from_end =
+                _mm256_mul_ps(_mm256_blendv_ps(_mm256_sub_ps(one, tt), tt, near_v), len);
+            const __m256 hd = _mm256_mul_ps(
+                half, _mm256_blendv_ps(ld(delta_b_ + o), ld(delta_a_ + o), near_v));
+            const __m256 ux = _mm256_blendv_ps(qx, px, near_v),
+                         uy = _mm256_blendv_ps(qy, py, near_v),
+                         uz = _mm256_blendv_ps(qz, pz, near_v);
+            const __m256 back = dot_ymm(nx, ny, nz, _mm256_sub_ps(ux, cx), _mm256_sub_ps(uy, cy),
+                                        _mm256_sub_ps(uz, cz));
+            const uint32_t plane_near = ~((near_a & npa) | (~near_a & npb)) & 0xffu;
+            uint32_t rough = 0;
+            if (rough_on) {
+                const __m256 same =
+                    dot_ymm(nx, ny, nz, _mm256_blendv_ps(ld(nb_[0] + o), ld(na_[0] + o), near_v),
+                            _mm256_blendv_ps(ld(nb_[1] + o), ld(na_[1] + o), near_v),
+                            _mm256_blendv_ps(ld(nb_[2] + o), ld(na_[2] + o), near_v));
+                rough = bits_ymm(_mm256_cmp_ps(_mm256_sub_ps(zero, back), rough_, _CMP_LT_OQ)) &
+                        bits_ymm(_mm256_cmp_ps(same, sheet_cos, _CMP_GT_OQ));
+            }
+            const uint32_t exits = plane_near & bits_ymm(_mm256_cmp_ps(back, zero, _CMP_LT_OQ)) &
+                                   (bits_ymm(_mm256_cmp_ps(from_end, hd, _CMP_LT_OQ)) | rough);
+            const __m256 win = _mm256_blendv_ps(ld(win_b_ + o), ld(win_a_ + o), near_v);
+            m &= ~exits & bits_ymm(_mm256_cmp_ps(from_end, win, _CMP_NLT_UQ));
+            // The K rule, lane by lane.
+            for (; m; m &= m - 1) {
+                const int i = o + __builtin_ctz(m);
+                if (++occluders_[i] < vp.K) continue;
+                live_ &= ~(1u << i);
+                resume_[i] = INT_MAX;
+                ++left;
+            }
+        }
+        return left;
     }
     template <class Counters>
     __attribute__((target("avx512f,avx512vl,avx512bw,avx512dq,prefer-vector-width=512"), noinline))

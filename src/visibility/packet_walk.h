@@ -148,6 +148,56 @@ VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafC
     faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
     return faces;
 }
+__attribute__((target("avx2"), always_inline)) inline __m256 dot3(__m256 ax, __m256 ay,
+                                                                  __m256 az, __m256 bx,
+                                                                  __m256 by, __m256 bz) {
+    return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
+                         _mm256_mul_ps(az, bz));
+}
+// facing_mask's lanes on AVX2 (hosts without AVX-512): pair_faces' float operations on 8
+// columns b0 .. b0 + n - 1 (n <= 8) of row a, in the same order as facing_mask_zmm; vsqrtps is
+// IEEE like sqrtf, so the same answers. Masked loads read no column past n.
+__attribute__((target("avx2"))) inline uint32_t facing_row_ymm(const OctreeView& t,
+                                                               const LeafColumns& lc, int32_t a,
+                                                               int32_t b0, int n,
+                                                               const VisibilityParams& vp) {
+    const uint32_t m = n >= 8 ? 0xffu : (1u << n) - 1;
+    const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+    const __m256i mv = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lanes);
+    const LeafDisc& la = t.leaves[a];
+    const __m256 dx = _mm256_sub_ps(_mm256_maskload_ps(lc.c[0].data() + b0, mv),
+                                    _mm256_set1_ps(la.centroid.x));
+    const __m256 dy = _mm256_sub_ps(_mm256_maskload_ps(lc.c[1].data() + b0, mv),
+                                    _mm256_set1_ps(la.centroid.y));
+    const __m256 dz = _mm256_sub_ps(_mm256_maskload_ps(lc.c[2].data() + b0, mv),
+                                    _mm256_set1_ps(la.centroid.z));
+    const __m256 len = _mm256_sqrt_ps(dot3(dx, dy, dz, dx, dy, dz));
+    const __m256 lim = _mm256_mul_ps(_mm256_set1_ps(vp.facing_tol), len);
+    uint32_t faces = m & uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(len, _mm256_setzero_ps(), _CMP_GT_OQ)));
+    if (!(la.flags & kLeafNormalDegenerate)) {
+        const __m256 da = dot3(_mm256_set1_ps(la.normal.x), _mm256_set1_ps(la.normal.y),
+                               _mm256_set1_ps(la.normal.z), dx, dy, dz);
+        faces &= uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(da, lim, _CMP_GT_OQ)));
+    }
+    const __m256 db = dot3(_mm256_maskload_ps(lc.n[0].data() + b0, mv),
+                           _mm256_maskload_ps(lc.n[1].data() + b0, mv),
+                           _mm256_maskload_ps(lc.n[2].data() + b0, mv), dx, dy, dz);
+    const __m256 neg = _mm256_xor_ps(db, _mm256_castsi256_ps(_mm256_set1_epi32(int(0x80000000u))));
+    const __m256i fl = _mm256_maskload_epi32(
+        reinterpret_cast<const int*>(lc.flags.data() + b0), mv);
+    const uint32_t flagged = uint32_t(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_cmpeq_epi32(
+                                 _mm256_and_si256(fl, _mm256_set1_epi32(int(kLeafNormalDegenerate))),
+                                 _mm256_set1_epi32(int(kLeafNormalDegenerate)))))) & m;
+    faces &= flagged | uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(neg, lim, _CMP_GT_OQ)));
+    return faces;
+}
+inline bool has_avx2() {
+    static const bool y = [] {
+        __builtin_cpu_init();
+        return __builtin_cpu_supports("avx2") != 0;
+    }();
+    return y;
+}
 #endif
 
 #if VMAP_PACKET_ISA
@@ -211,6 +261,9 @@ inline uint32_t facing_mask(const OctreeView& t, const LeafColumns& lc, int32_t 
                __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
     }();
     if (zmm) return facing_mask_zmm(t, lc, a, b0, n, vp);
+    if (has_avx2())
+        return facing_row_ymm(t, lc, a, b0, n < 8 ? n : 8, vp) |
+               (n > 8 ? facing_row_ymm(t, lc, a, b0 + 8, n - 8, vp) << 8 : 0u);
 #else
     (void)lc;
 #endif
@@ -279,6 +332,8 @@ inline uint32_t facing_rows(const OctreeView& t, const LeafColumns& lc, int32_t 
                __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq");
     }();
     if (zmm) return facing_rows_zmm(t, lc, a0, a1, b0, n, vp);
+    if (has_avx2())
+        return facing_row_ymm(t, lc, a0, b0, n, vp) | facing_row_ymm(t, lc, a1, b0, n, vp) << 8;
 #endif
     return facing_mask(t, lc, a0, b0, n, vp) | facing_mask(t, lc, a1, b0, n, vp) << 8;
 }

@@ -148,9 +148,10 @@ VMAP_ZMM_TARGET inline uint32_t facing_mask_zmm(const OctreeView& t, const LeafC
     faces &= flagged | _mm512_cmp_ps_mask(neg, lim, _CMP_GT_OQ);
     return faces;
 }
-__attribute__((target("avx2"), always_inline)) inline __m256 dot3(__m256 ax, __m256 ay,
-                                                                  __m256 az, __m256 bx,
-                                                                  __m256 by, __m256 bz) {
+// dot_zmm on AVX2: the same order of operations.
+__attribute__((target("avx2"), always_inline)) inline __m256 dot_ymm(__m256 ax, __m256 ay,
+                                                                     __m256 az, __m256 bx,
+                                                                     __m256 by, __m256 bz) {
     return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
                          _mm256_mul_ps(az, bz));
 }
@@ -171,15 +172,15 @@ __attribute__((target("avx2"))) inline uint32_t facing_row_ymm(const OctreeView&
                                     _mm256_set1_ps(la.centroid.y));
     const __m256 dz = _mm256_sub_ps(_mm256_maskload_ps(lc.c[2].data() + b0, mv),
                                     _mm256_set1_ps(la.centroid.z));
-    const __m256 len = _mm256_sqrt_ps(dot3(dx, dy, dz, dx, dy, dz));
+    const __m256 len = _mm256_sqrt_ps(dot_ymm(dx, dy, dz, dx, dy, dz));
     const __m256 lim = _mm256_mul_ps(_mm256_set1_ps(vp.facing_tol), len);
     uint32_t faces = m & uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(len, _mm256_setzero_ps(), _CMP_GT_OQ)));
     if (!(la.flags & kLeafNormalDegenerate)) {
-        const __m256 da = dot3(_mm256_set1_ps(la.normal.x), _mm256_set1_ps(la.normal.y),
+        const __m256 da = dot_ymm(_mm256_set1_ps(la.normal.x), _mm256_set1_ps(la.normal.y),
                                _mm256_set1_ps(la.normal.z), dx, dy, dz);
         faces &= uint32_t(_mm256_movemask_ps(_mm256_cmp_ps(da, lim, _CMP_GT_OQ)));
     }
-    const __m256 db = dot3(_mm256_maskload_ps(lc.n[0].data() + b0, mv),
+    const __m256 db = dot_ymm(_mm256_maskload_ps(lc.n[0].data() + b0, mv),
                            _mm256_maskload_ps(lc.n[1].data() + b0, mv),
                            _mm256_maskload_ps(lc.n[2].data() + b0, mv), dx, dy, dz);
     const __m256 neg = _mm256_xor_ps(db, _mm256_castsi256_ps(_mm256_set1_epi32(int(0x80000000u))));
@@ -616,11 +617,6 @@ class SegmentPacket {
     }
     __attribute__((target("avx2"), always_inline)) static inline __m256 ld(const float* f) {
         return _mm256_load_ps(f);
-    }
-    __attribute__((target("avx2"), always_inline)) static inline __m256 dot_ymm(
-        __m256 ax, __m256 ay, __m256 az, __m256 bx, __m256 by, __m256 bz) {
-        return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
-                             _mm256_mul_ps(az, bz));
     }
     template <class Counters>
     __attribute__((target("avx2"), noinline)) int

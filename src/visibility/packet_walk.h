@@ -607,7 +607,75 @@ class SegmentPacket {
     __attribute__((target("avx2"), noinline)) int64_t walk_avx2(const OctreeView& t,
                                                                 const VisibilityParams& vp,
                                                                 int live, Counters* wc) {
-        return walk_nodes<true>(t, vp, live, wc);
+        if constexpr (W % 8 == 0)
+            return walk_ymm(t, vp, live, wc);
+        else
+            return walk_nodes<true>(t, vp, live, wc);
+    }
+    // walk_nodes in AVX2 vectors, 8 lanes a register, written out as walk_zmm is: the same
+    // float operations (vminps and vmaxps are min_f and max_f), so the same bits. The lanes'
+    // hits come out of the compares as bits (vmovmskps) where GCC's vectorised loop ORs the
+    // lanes' words together at every node; the resume points stay in registers between
+    // occluder tests; the node tests are counted as the popcount of the lanes on.
+    template <class Counters>
+    __attribute__((target("avx2"), always_inline)) inline int64_t
+    walk_ymm(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
+        constexpr int G = W / 8;
+        __m256i resume[G];
+        for (int h = 0; h < G; ++h)
+            resume[h] = _mm256_load_si256(reinterpret_cast<const __m256i*>(resume_ + 8 * h));
+        int64_t tests = 0;
+        int32_t n = 0;
+        while (n < t.num_nodes && live > 0) {
+            const WalkNode w = t.walk[n];
+            const __m256 lo[3] = {_mm256_set1_ps(w.lo.x), _mm256_set1_ps(w.lo.y),
+                                  _mm256_set1_ps(w.lo.z)};
+            const __m256 hi[3] = {_mm256_set1_ps(w.hi.x), _mm256_set1_ps(w.hi.y),
+                                  _mm256_set1_ps(w.hi.z)};
+            const __m256i at = _mm256_set1_epi32(n), skip = _mm256_set1_epi32(w.skip);
+            uint32_t hits = 0, on_all = 0;  // the lanes whose walks enter node n; test it
+            for (int h = 0; h < G; ++h) {
+                const int o = 8 * h;
+                __m256 tmin = ld(t0_ + o), tmax = ld(t1_ + o);
+                for (int k = 0; k < 3; ++k) {
+                    const __m256 p = ld(p_[k] + o), inv = ld(inv_[k] + o);
+                    const __m256 ta = _mm256_mul_ps(_mm256_sub_ps(lo[k], p), inv);
+                    const __m256 tb = _mm256_mul_ps(_mm256_sub_ps(hi[k], p), inv);
+                    tmin = _mm256_max_ps(tmin, _mm256_min_ps(ta, tb));
+                    tmax = _mm256_min_ps(tmax, _mm256_max_ps(ta, tb));
+                }
+                // on: n >= resume, i.e. not resume > n
+                const __m256i off = _mm256_cmpgt_epi32(resume[h], at);
+                const __m256 hit =
+                    _mm256_andnot_ps(_mm256_castsi256_ps(off), _mm256_cmp_ps(tmin, tmax, _CMP_LE_OQ));
+                // resume = on & !hit ? skip : resume
+                const __m256i miss = _mm256_andnot_si256(
+                    _mm256_or_si256(off, _mm256_castps_si256(hit)), _mm256_set1_epi32(-1));
+                resume[h] = _mm256_blendv_epi8(resume[h], skip, miss);
+                on_all |= (~bits_ymm(_mm256_castsi256_ps(off)) & 0xffu) << o;
+                hits |= bits_ymm(hit) << o;
+            }
+            tests += __builtin_popcount(on_all);
+            if (!hits) {
+                n = w.skip;
+                continue;
+            }
+            if (w.leaf >= 0) {  // the occluder tests read and set resume_
+                for (int h = 0; h < G; ++h)
+                    _mm256_store_si256(reinterpret_cast<__m256i*>(resume_ + 8 * h), resume[h]);
+                const LeafDisc& x = t.leaves[w.leaf];
+                live -= !(x.flags & kLeafNormalDegenerate)
+                            ? occluders_ymm(x, w.leaf, hits, vp, wc)
+                            : occluders_at(t, w.leaf, hits, vp, wc);
+                for (int h = 0; h < G; ++h)
+                    resume[h] =
+                        _mm256_load_si256(reinterpret_cast<const __m256i*>(resume_ + 8 * h));
+            }
+            ++n;  // first child, or (for a leaf, whose skip is n + 1) the next subtree
+        }
+        for (int h = 0; h < G; ++h)
+            _mm256_store_si256(reinterpret_cast<__m256i*>(resume_ + 8 * h), resume[h]);
+        return tests;
     }
     // occluders_zmm on AVX2 (hosts without AVX-512): counts_as_occluder's float operations in
     // the same order, 8 lanes at a time, the masks as bits of a word (vmovmskps); the K rule

@@ -582,9 +582,10 @@ TEST(RoughSheets, NoiseHidesShallowPairsAndTheRoughnessGivesThemBack) {
 }
 
 // The CPU backend's path into the packets: facing_mask over up to 16 columns of a row and
-// facing_rows over 8 columns of two rows (the leaves by field), then packets of facing pairs only through load_faced (AVX-512 where the CPU
-// has it). Every pair of random trees, with and without end windows: the same facing pairs as
-// pair_faces, and the answers, node tests and occluder tests of leaf_pair_visible.
+// facing_rows over 8 columns of two rows (the leaves by field), then packets of facing pairs
+// only through load_faced, with every lane loop the CPU has (scalar, AVX2, AVX-512). Every pair
+// of random trees, with and without end windows: the same facing pairs as pair_faces, and the
+// answers, node tests and occluder tests of leaf_pair_visible.
 TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) {
     uint64_t faced = 0;
     for (uint32_t seed = 21; seed <= 34; ++seed) {
@@ -601,15 +602,20 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
             vp.K = int(1 + seed % 3);
             vp.end_window = window;
             vp.roughness = rough ? kNoisyRoughness : 0.f;
-            WorkCounters want, got;
+            // Every lane loop this CPU has (scalar, AVX2, AVX-512), each with its own counters.
+            const int isas = detail::SegmentPacket<32>::best_isa() + 1;
+            WorkCounters want, got[3];
             detail::SegmentPacket<32> pk;
             int32_t pa[32], pb[32];
             int count = 0;
             uint32_t expect = 0;
             auto flush = [&] {
-                const uint32_t mask =
-                    pk.load_faced(v, pa, pb, count, vp, &got) ? pk.walk(v, vp, &got) : 0u;
-                ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0];
+                for (int isa = 0; isa < isas; ++isa) {
+                    const uint32_t mask = pk.load_faced(v, pa, pb, count, vp, &got[isa], isa)
+                                              ? pk.walk(v, vp, &got[isa], isa)
+                                              : 0u;
+                    ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0] << ", isa " << isa;
+                }
                 count = 0, expect = 0;
             };
             for (int32_t a = 0; a < v.num_leaves; ++a)
@@ -642,9 +648,11 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
                     }
                 }
             if (count > 0) flush();
-            EXPECT_EQ(got.facing_pairs, want.facing_pairs);
-            EXPECT_EQ(got.node_tests, want.node_tests);
-            EXPECT_EQ(got.occluder_tests, want.occluder_tests);
+            for (int isa = 0; isa < isas; ++isa) {
+                EXPECT_EQ(got[isa].facing_pairs, want.facing_pairs) << "isa " << isa;
+                EXPECT_EQ(got[isa].node_tests, want.node_tests) << "isa " << isa;
+                EXPECT_EQ(got[isa].occluder_tests, want.occluder_tests) << "isa " << isa;
+            }
             faced += want.facing_pairs;
         }
     }

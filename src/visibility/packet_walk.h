@@ -155,6 +155,32 @@ __attribute__((target("avx2"), always_inline)) inline __m256 dot_ymm(__m256 ax, 
     return _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(ax, bx), _mm256_mul_ps(ay, by)),
                          _mm256_mul_ps(az, bz));
 }
+// leaf_fields on AVX2: the fields of the leaves idx[i], i < n <= 8 (zero past n), as 8 lanes
+// each (f[0..2] the centroid, f[3] Delta, f[4..6] the normal, f[7] the flags' bits): one leaf a
+// register, the 8 x 8 block transposed.
+__attribute__((target("avx2"), always_inline)) inline void leaf_fields_ymm(const LeafDisc* leaves,
+                                                                           const int32_t* idx,
+                                                                           int n, __m256 f[8]) {
+    static_assert(sizeof(LeafDisc) == 8 * sizeof(float), "a leaf is read as 8 floats");
+    __m256 r[8], t[8], u[8];
+    for (int i = 0; i < 8; ++i)
+        r[i] = i < n ? _mm256_loadu_ps(reinterpret_cast<const float*>(leaves + idx[i]))
+                     : _mm256_setzero_ps();
+    for (int i = 0; i < 8; i += 2) {
+        t[i] = _mm256_unpacklo_ps(r[i], r[i + 1]);
+        t[i + 1] = _mm256_unpackhi_ps(r[i], r[i + 1]);
+    }
+    for (int i = 0; i < 8; i += 4) {
+        u[i] = _mm256_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 1] = _mm256_shuffle_ps(t[i], t[i + 2], _MM_SHUFFLE(3, 2, 3, 2));
+        u[i + 2] = _mm256_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(1, 0, 1, 0));
+        u[i + 3] = _mm256_shuffle_ps(t[i + 1], t[i + 3], _MM_SHUFFLE(3, 2, 3, 2));
+    }
+    for (int k = 0; k < 4; ++k) {
+        f[k] = _mm256_permute2f128_ps(u[k], u[k + 4], 0x20);
+        f[k + 4] = _mm256_permute2f128_ps(u[k], u[k + 4], 0x31);
+    }
+}
 // facing_mask's lanes on AVX2 (hosts without AVX-512): pair_faces' float operations on 8
 // columns b0 .. b0 + n - 1 (n <= 8) of row a, in the same order as facing_mask_zmm; vsqrtps is
 // IEEE like sqrtf, so the same answers. Masked loads read no column past n.
@@ -391,10 +417,23 @@ class SegmentPacket {
     template <class Counters>
     uint32_t load_faced(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
                         const VisibilityParams& vp, Counters* wc) {
-#if VMAP_PACKET_ISA
         static const int isa = best_isa();
+        return load_faced(t, a, b, count, vp, wc, isa);
+    }
+    // `isa` as for walk: 0 the scalar load, 1 AVX2 (load_ymm), 2 AVX-512 (load_zmm), at most
+    // best_isa().
+    template <class Counters>
+    uint32_t load_faced(const OctreeView& t, const int32_t* a, const int32_t* b, int count,
+                        const VisibilityParams& vp, Counters* wc, int isa) {
+        (void)isa;
+#if VMAP_PACKET_ISA
         if (isa == 2 && W == 32) {
             load_zmm(t, a, b, count, vp);
+            wc->facing_pairs += uint64_t(__builtin_popcount(live_));
+            return count > 0;
+        }
+        if (isa == 1 && W % 8 == 0) {
+            load_ymm(t, a, b, count, vp);
             wc->facing_pairs += uint64_t(__builtin_popcount(live_));
             return count > 0;
         }
@@ -542,6 +581,73 @@ class SegmentPacket {
         }
         for (int i = (count + 15) & ~15; i < W; ++i) pad_lane(i);
     }
+    // load_zmm on AVX2, 8 lanes at a time: the same float operations (vsqrtps, vdivps and the
+    // compares are IEEE like their scalar forms), so the same bits.
+    __attribute__((target("avx2"), noinline)) void load_ymm(const OctreeView& t, const int32_t* a,
+                                                            const int32_t* b, int count,
+                                                            const VisibilityParams& vp) {
+        live_ = alone_ = no_plane_a_ = no_plane_b_ = 0;
+        roughness_ = vp.roughness;
+        const __m256 eps = _mm256_set1_ps(vp.eps), half = _mm256_set1_ps(0.5f),
+                     shrink = _mm256_set1_ps(0.999f), one = _mm256_set1_ps(1.f),
+                     window = _mm256_set1_ps(vp.end_window), tiny = _mm256_set1_ps(1e-30f);
+        const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+        const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        const __m256i none = _mm256_set1_epi32(-1), flag = _mm256_set1_epi32(int(kLeafNormalDegenerate));
+        for (int o = 0; o < count; o += 8) {
+            const int n = count - o < 8 ? count - o : 8;
+            const __m256i mv = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lanes);
+            const uint32_t m = n == 8 ? 0xffu : (1u << n) - 1;
+            sti(a_ + o, _mm256_blendv_epi8(none, _mm256_maskload_epi32(a + o, mv), mv));
+            sti(b_ + o, _mm256_blendv_epi8(none, _mm256_maskload_epi32(b + o, mv), mv));
+            __m256 fa[8], fb[8];
+            leaf_fields_ymm(t.leaves, a + o, n, fa);
+            leaf_fields_ymm(t.leaves, b + o, n, fb);
+            const __m256 ax = fa[0], ay = fa[1], az = fa[2], da = fa[3];
+            const __m256 bx = fb[0], by = fb[1], bz = fb[2], db = fb[3];
+            const __m256 dx = _mm256_sub_ps(bx, ax), dy = _mm256_sub_ps(by, ay),
+                         dz = _mm256_sub_ps(bz, az);
+            const __m256 len = _mm256_sqrt_ps(dot_ymm(dx, dy, dz, dx, dy, dz));
+            const __m256 wa = _mm256_mul_ps(window, da), wb = _mm256_mul_ps(window, db);
+            // len > 0 for a facing pair: ta = min(max(eps, wa / len), 0.5), tb alike
+            const __m256 ta = _mm256_min_ps(_mm256_max_ps(eps, _mm256_div_ps(wa, len)), half);
+            const __m256 tb = _mm256_min_ps(_mm256_max_ps(eps, _mm256_div_ps(wb, len)), half);
+            st(t0_ + o, _mm256_mul_ps(ta, shrink));
+            st(t1_ + o, _mm256_sub_ps(one, _mm256_mul_ps(tb, shrink)));
+            const __m256 small_v =
+                _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(dx, absmask), tiny, _CMP_LT_OQ),
+                                          _mm256_cmp_ps(_mm256_and_ps(dy, absmask), tiny, _CMP_LT_OQ)),
+                             _mm256_cmp_ps(_mm256_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
+            const uint32_t small = m & bits_ymm(small_v);
+            live_ |= (m & ~small) << o;
+            alone_ |= small << o;
+            // INT_MAX where no pair or a small lane, else 0
+            const __m256i out = _mm256_or_si256(_mm256_castps_si256(small_v),
+                                                _mm256_xor_si256(mv, none));
+            sti(resume_ + o, _mm256_and_si256(out, _mm256_set1_epi32(INT_MAX)));
+            sti(occluders_ + o, _mm256_setzero_si256());
+            st(p_[0] + o, ax), st(p_[1] + o, ay), st(p_[2] + o, az);
+            st(inv_[0] + o, _mm256_div_ps(one, dx));
+            st(inv_[1] + o, _mm256_div_ps(one, dy));
+            st(inv_[2] + o, _mm256_div_ps(one, dz));
+            st(d_[0] + o, dx), st(d_[1] + o, dy), st(d_[2] + o, dz);
+            st(q_[0] + o, bx), st(q_[1] + o, by), st(q_[2] + o, bz);
+            st(na_[0] + o, fa[4]), st(na_[1] + o, fa[5]), st(na_[2] + o, fa[6]);
+            st(nb_[0] + o, fb[4]), st(nb_[1] + o, fb[5]), st(nb_[2] + o, fb[6]);
+            st(len_ + o, len);
+            st(delta_a_ + o, da), st(delta_b_ + o, db);
+            st(win_a_ + o, wa), st(win_b_ + o, wb);
+            no_plane_a_ |= (flagged_ymm(fa[7], flag) & m) << o;
+            no_plane_b_ |= (flagged_ymm(fb[7], flag) & m) << o;
+        }
+        for (int i = 0; i < count; ++i) lane_[i] = i;
+        // Lanes past count: padding as in pad() (no pair, finite slabs).
+        for (int i = count; i < ((count + 7) & ~7); ++i) {
+            p_[0][i] = p_[1][i] = p_[2][i] = inv_[0][i] = inv_[1][i] = inv_[2][i] = 0.f;
+            t0_[i] = t1_[i] = 0.f;
+        }
+        for (int i = (count + 7) & ~7; i < W; ++i) pad_lane(i);
+    }
 #endif
     void pad_lane(int i) {
         resume_[i] = INT_MAX;
@@ -685,6 +791,18 @@ class SegmentPacket {
     }
     __attribute__((target("avx2"), always_inline)) static inline __m256 ld(const float* f) {
         return _mm256_load_ps(f);
+    }
+    __attribute__((target("avx2"), always_inline)) static inline void st(float* to, __m256 v) {
+        _mm256_store_ps(to, v);
+    }
+    __attribute__((target("avx2"), always_inline)) static inline void sti(int32_t* to, __m256i v) {
+        _mm256_store_si256(reinterpret_cast<__m256i*>(to), v);
+    }
+    // The lanes whose flags' bits (a leaf's eighth float) hold `flag`.
+    __attribute__((target("avx2"), always_inline)) static inline uint32_t flagged_ymm(__m256 bits,
+                                                                                     __m256i flag) {
+        const __m256i f = _mm256_and_si256(_mm256_castps_si256(bits), flag);
+        return ~bits_ymm(_mm256_castsi256_ps(_mm256_cmpeq_epi32(f, _mm256_setzero_si256()))) & 0xffu;
     }
     template <class Counters>
     __attribute__((target("avx2"), noinline)) int

@@ -23,8 +23,9 @@
 // (load_faced: pair_segment), and a leaf's occluder test for the lanes that reach it
 // (occluders_zmm: counts_as_occluder for a leaf with a plane; a flagged leaf goes lane by lane).
 // On the default scene this took the CPU's user time from 24 s to about 14 s
-// (docs/results.md, "The CPU walk in vectors"). On AVX2 the occluder test is in vectors too
-// (occluders_ymm, 8 lanes; docs/results.md "The CPU walk on a host without AVX-512").
+// (docs/results.md, "The CPU walk in vectors"). On AVX2 the same pieces have 8-lane forms:
+// walk_ymm, occluders_ymm, facing_row_ymm, load_ymm (docs/results.md "The CPU walk on a host
+// without AVX-512").
 #pragma once
 
 #include <array>

@@ -787,6 +787,13 @@ class SegmentPacket {
     // occluders_zmm on AVX2 (hosts without AVX-512): counts_as_occluder's float operations in
     // the same order, 8 lanes at a time, the masks as bits of a word (vmovmskps); the K rule
     // lane by lane over the lanes whose leaf counts. The same bits as occluders_at.
+    // Why the 8- and 16-lane forms (load_ymm / load_zmm, occluders_ymm / occluders_zmm,
+    // walk_ymm / walk_zmm) are written twice: one body over a vector-width trait would call
+    // intrinsics wrappers from a function without the ISA's target attribute, which GCC refuses
+    // to inline (target specific option mismatch); one translation unit per ISA (-mavx512f)
+    // would also compile the shared headers' inline functions for AVX-512, and the linker may
+    // keep those copies for every caller, AVX2 hosts included. So each width has its own body,
+    // and the PacketWalk tests hold every one the CPU has to the one-pair walk.
     __attribute__((target("avx2"), always_inline)) static inline uint32_t bits_ymm(__m256 v) {
         return uint32_t(_mm256_movemask_ps(v));
     }

@@ -614,7 +614,8 @@ TEST(PacketWalk, FacedPacketsAgreeWithTheLeafPairWalkOnEveryPairOfRandomScenes) 
                     const uint32_t mask = pk.load_faced(v, pa, pb, count, vp, &got[isa], isa)
                                               ? pk.walk(v, vp, &got[isa], isa)
                                               : 0u;
-                    ASSERT_EQ(mask, expect) << "first pair " << pa[0] << " " << pb[0] << ", isa " << isa;
+                    ASSERT_EQ(mask, expect)
+                        << "first pair " << pa[0] << " " << pb[0] << ", isa " << isa;
                 }
                 count = 0, expect = 0;
             };

@@ -594,7 +594,8 @@ class SegmentPacket {
                      window = _mm256_set1_ps(vp.end_window), tiny = _mm256_set1_ps(1e-30f);
         const __m256 absmask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
         const __m256i lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        const __m256i none = _mm256_set1_epi32(-1), flag = _mm256_set1_epi32(int(kLeafNormalDegenerate));
+        const __m256i none = _mm256_set1_epi32(-1),
+                      flag = _mm256_set1_epi32(int(kLeafNormalDegenerate));
         for (int o = 0; o < count; o += 8) {
             const int n = count - o < 8 ? count - o : 8;
             const __m256i mv = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), lanes);
@@ -615,16 +616,16 @@ class SegmentPacket {
             const __m256 tb = _mm256_min_ps(_mm256_max_ps(eps, _mm256_div_ps(wb, len)), half);
             st(t0_ + o, _mm256_mul_ps(ta, shrink));
             st(t1_ + o, _mm256_sub_ps(one, _mm256_mul_ps(tb, shrink)));
-            const __m256 small_v =
-                _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(dx, absmask), tiny, _CMP_LT_OQ),
-                                          _mm256_cmp_ps(_mm256_and_ps(dy, absmask), tiny, _CMP_LT_OQ)),
-                             _mm256_cmp_ps(_mm256_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
+            const __m256 small_v = _mm256_or_ps(
+                _mm256_or_ps(_mm256_cmp_ps(_mm256_and_ps(dx, absmask), tiny, _CMP_LT_OQ),
+                             _mm256_cmp_ps(_mm256_and_ps(dy, absmask), tiny, _CMP_LT_OQ)),
+                _mm256_cmp_ps(_mm256_and_ps(dz, absmask), tiny, _CMP_LT_OQ));
             const uint32_t small = m & bits_ymm(small_v);
             live_ |= (m & ~small) << o;
             alone_ |= small << o;
             // INT_MAX where no pair or a small lane, else 0
-            const __m256i out = _mm256_or_si256(_mm256_castps_si256(small_v),
-                                                _mm256_xor_si256(mv, none));
+            const __m256i out =
+                _mm256_or_si256(_mm256_castps_si256(small_v), _mm256_xor_si256(mv, none));
             sti(resume_ + o, _mm256_and_si256(out, _mm256_set1_epi32(INT_MAX)));
             sti(occluders_ + o, _mm256_setzero_si256());
             st(p_[0] + o, ax), st(p_[1] + o, ay), st(p_[2] + o, az);
@@ -725,8 +726,8 @@ class SegmentPacket {
     // lanes' words together at every node; the resume points stay in registers between
     // occluder tests; the node tests are counted as the popcount of the lanes on.
     template <class Counters>
-    __attribute__((target("avx2"), always_inline)) inline int64_t
-    walk_ymm(const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
+    __attribute__((target("avx2"), always_inline)) inline int64_t walk_ymm(
+        const OctreeView& t, const VisibilityParams& vp, int live, Counters* wc) {
         constexpr int G = W / 8;
         __m256i resume[G];
         for (int h = 0; h < G; ++h)
@@ -753,8 +754,8 @@ class SegmentPacket {
                 }
                 // on: n >= resume, i.e. not resume > n
                 const __m256i off = _mm256_cmpgt_epi32(resume[h], at);
-                const __m256 hit =
-                    _mm256_andnot_ps(_mm256_castsi256_ps(off), _mm256_cmp_ps(tmin, tmax, _CMP_LE_OQ));
+                const __m256 hit = _mm256_andnot_ps(_mm256_castsi256_ps(off),
+                                                    _mm256_cmp_ps(tmin, tmax, _CMP_LE_OQ));
                 // resume = on & !hit ? skip : resume
                 const __m256i miss = _mm256_andnot_si256(
                     _mm256_or_si256(off, _mm256_castps_si256(hit)), _mm256_set1_epi32(-1));
@@ -771,9 +772,8 @@ class SegmentPacket {
                 for (int h = 0; h < G; ++h)
                     _mm256_store_si256(reinterpret_cast<__m256i*>(resume_ + 8 * h), resume[h]);
                 const LeafDisc& x = t.leaves[w.leaf];
-                live -= !(x.flags & kLeafNormalDegenerate)
-                            ? occluders_ymm(x, w.leaf, hits, vp, wc)
-                            : occluders_at(t, w.leaf, hits, vp, wc);
+                live -= !(x.flags & kLeafNormalDegenerate) ? occluders_ymm(x, w.leaf, hits, vp, wc)
+                                                           : occluders_at(t, w.leaf, hits, vp, wc);
                 for (int h = 0; h < G; ++h)
                     resume[h] =
                         _mm256_load_si256(reinterpret_cast<const __m256i*>(resume_ + 8 * h));
@@ -807,10 +807,11 @@ class SegmentPacket {
         _mm256_store_si256(reinterpret_cast<__m256i*>(to), v);
     }
     // The lanes whose flags' bits (a leaf's eighth float) hold `flag`.
-    __attribute__((target("avx2"), always_inline)) static inline uint32_t flagged_ymm(__m256 bits,
-                                                                                     __m256i flag) {
+    __attribute__((target("avx2"), always_inline)) static inline uint32_t flagged_ymm(
+        __m256 bits, __m256i flag) {
         const __m256i f = _mm256_and_si256(_mm256_castps_si256(bits), flag);
-        return ~bits_ymm(_mm256_castsi256_ps(_mm256_cmpeq_epi32(f, _mm256_setzero_si256()))) & 0xffu;
+        return ~bits_ymm(_mm256_castsi256_ps(_mm256_cmpeq_epi32(f, _mm256_setzero_si256()))) &
+               0xffu;
     }
     template <class Counters>
     __attribute__((target("avx2"), noinline)) int

@@ -5,6 +5,7 @@
 #                                       they load (TBB, fmt, ...) and the compressed models.
 #   scripts/device.sh run [STEP...]     (there; carry .device) unpack, then run the steps:
 #        gpu       the gpu-labelled tests          sanitize  compute-sanitizer memcheck+racecheck
+#                  (each run stopped after SAN_TIMEOUT s, default 150, and said "cut")
 #        cpu       the CPU test executables        bench     vmap bench (Fig. 10 table)
 #        dragon    cornell-dragon at height 10, end to end, GPU (LEAF_POINTS, default 4 8)
 #        ab        kernel variants (VARIANTS) on the dragon, height 9 (AB_LEAF_POINTS, default 8)
@@ -195,25 +196,27 @@ if [[ "$cmd" == run ]]; then
                     echo "variant $v: $(grep -E "PASSED|FAILED" "$OUT/gpu_test-$v.log" | tail -1)"
                 done ;;
             sanitize)
-                "$san" --tool memcheck --error-exitcode 9 "$bin/gpu_test" \
-                    --gtest_filter='GpuBackend.*:*cornell_bunny_h7*:*room_with_block*' \
-                    > "$OUT/memcheck.log" 2>&1 || rc=1
-                tail -5 "$OUT/memcheck.log"
-                "$san" --tool racecheck --error-exitcode 9 "$bin/gpu_test" \
-                    --gtest_filter='GpuBackend.Rect*:GpuBackend.Small*:*cornell_empty*' > "$OUT/racecheck.log" 2>&1 || rc=1
-                tail -5 "$OUT/racecheck.log"
+                # Each run stopped after SAN_TIMEOUT s (default 150: racecheck of the larger
+                # cases has run past a call's 600 s), said as "cut", and counted as a failure.
+                sanitized() {  # log name, tool, test binary, gtest filter
+                    local log=$1 tool=$2 exe=$3 filter=$4 t0 code=0
+                    [[ -x "$bin/$exe" ]] || return 0
+                    t0=$(date +%s)
+                    timeout "${SAN_TIMEOUT:-150}" "$san" --tool "$tool" --error-exitcode 9 "$bin/$exe" \
+                        --gtest_filter="$filter" > "$OUT/$log.log" 2>&1 || code=$?
+                    if [[ $code == 124 ]]; then
+                        rc=1; echo "$log: cut after ${SAN_TIMEOUT:-150} s"
+                    else
+                        [[ $code == 0 ]] || rc=1
+                        echo "$log ($(( $(date +%s) - t0 )) s, exit $code): $(grep -E "ERROR SUMMARY|RACECHECK SUMMARY" "$OUT/$log.log" | tail -1)"
+                    fi
+                }
+                sanitized memcheck memcheck gpu_test 'GpuBackend.*:*cornell_bunny_h7*:*room_with_block*'
+                sanitized racecheck racecheck gpu_test 'GpuBackend.Rect*:GpuBackend.Small*:*cornell_empty*'
                 # parallel_for_device's kernels in a test of their own: the predicate cases.
-                "$san" --tool memcheck --error-exitcode 9 "$bin/visibility_test" \
-                    --gtest_filter='Cuda/Fig7.*:Cuda/Facing.*:Cuda/EndPlanes.*' > "$OUT/predicate-memcheck.log" 2>&1 || rc=1
-                tail -3 "$OUT/predicate-memcheck.log"
-                if [[ -x "$bin/gi_gpu_test" ]]; then
-                    "$san" --tool memcheck --error-exitcode 9 "$bin/gi_gpu_test" \
-                        --gtest_filter='*cornell_empty*' > "$OUT/gi-memcheck.log" 2>&1 || rc=1
-                    tail -3 "$OUT/gi-memcheck.log"
-                    "$san" --tool racecheck --error-exitcode 9 "$bin/gi_gpu_test" \
-                        --gtest_filter='*cornell_empty*' > "$OUT/gi-racecheck.log" 2>&1 || rc=1
-                    tail -3 "$OUT/gi-racecheck.log"
-                fi ;;
+                sanitized predicate-memcheck memcheck visibility_test 'Cuda/Fig7.*:Cuda/Facing.*:Cuda/EndPlanes.*'
+                sanitized gi-memcheck memcheck gi_gpu_test '*cornell_empty*'
+                sanitized gi-racecheck racecheck gi_gpu_test '*cornell_empty*' ;;
             embree)
                 # Embree occlusion rays against the leaf-pair kernel on this machine's cores.
                 "$bin/vmap" validate scenes/cornell-bunny.json scenes/cornell-two-models.json \

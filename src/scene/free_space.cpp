@@ -328,6 +328,19 @@ class DiscCaster {
         return t < 0;
     }
 
+    static constexpr uint32_t kNoSelf = std::numeric_limits<uint32_t>::max();
+    // Of `dirs` rays from the place x, those that meet no disc and leave the box through a face
+    // that holds a room's wall: holes in what x sees (a gap between discs, or a shadow no
+    // scanner saw into).
+    size_t holes_from(Vec3 x, const std::vector<Vec3>& dirs) const {
+        size_t holes = 0;
+        for (const Vec3 d : dirs) {
+            if (travel_from(x, kNoSelf, d, 0.0f) >= 0) continue;
+            holes += walled_[size_t(exit_face(box_, x, d))];
+        }
+        return holes;
+    }
+
     // Distance from o along d to the cloud's bounding box.
     float box_exit(Vec3 o, Vec3 d) const { return box_exit(box_, o, d); }
     static float box_exit(const Bounds& box, Vec3 o, Vec3 d) {
@@ -388,13 +401,16 @@ class DiscCaster {
     // The other face of a thin plate lies in front of the plane and stays.
     float hit_in_cell(size_t c, uint32_t self, Vec3 o, Vec3 d, float tmin, float best,
                       uint32_t* who) const {
-        const Vec3 own = dot(normals_[self], d) >= 0 ? normals_[self] : -normals_[self];
+        const bool placed = self == kNoSelf;
+        const Vec3 own = placed                           ? Vec3{0, 0, 0}
+                         : dot(normals_[self], d) >= 0 ? normals_[self]
+                                                       : -normals_[self];
         for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) {
             const uint32_t j = items_[k];
             if (j == self) continue;
             const Vec3 to = pts_[j] - o;
             const float off = dot(own, to), dist2 = length2(to);
-            if (off < 0 && dist2 < 4 * rad_[j] * rad_[j]) continue;
+            if (!placed && off < 0 && dist2 < 4 * rad_[j] * rad_[j]) continue;
             const Vec3 n = normals_[j];
             const float den = dot(n, d);
             if (std::fabs(den) < 1e-6f) continue;
@@ -426,7 +442,11 @@ class DiscCaster {
     // none.
     float travel(uint32_t self, Vec3 d, float tmin, float tmax = std::numeric_limits<float>::max(),
                  uint32_t* who = nullptr) const {
-        const Vec3 o = pts_[self];
+        return travel_from(pts_[self], self, d, tmin, tmax, who);
+    }
+    float travel_from(Vec3 o, uint32_t self, Vec3 d, float tmin,
+                      float tmax = std::numeric_limits<float>::max(),
+                      uint32_t* who = nullptr) const {
         std::array<int, 3> c;
         if (!grid_.cell(o, c)) return -1;
         const float oo[3] = {o.x - grid_.lo.x, o.y - grid_.lo.y, o.z - grid_.lo.z};
@@ -892,6 +912,21 @@ std::vector<uint8_t> sampled_views(const DiscCaster& caster, const std::vector<V
     return seen;
 }
 
+// kHoleRays directions spread evenly over the sphere (a Fibonacci lattice).
+constexpr int kHoleRays = 256;
+const std::vector<Vec3>& sphere_directions() {
+    static const std::vector<Vec3> dirs = [] {
+        std::vector<Vec3> d;
+        for (int k = 0; k < kHoleRays; ++k) {
+            const float z = 1.0f - 2.0f * (float(k) + 0.5f) / float(kHoleRays);
+            const float r = std::sqrt(1.0f - z * z), a = 2.39996323f * float(k);
+            d.push_back({r * std::cos(a), r * std::sin(a), z});
+        }
+        return d;
+    }();
+    return dirs;
+}
+
 // Ties go to the lower candidate and the first step tried, so the view does not depend on the
 // number of threads. seen: sampled_views of cand (the first cand.size() rows are used); step0:
 // the lattice's spacing; h: the voxel grid's cell.
@@ -941,12 +976,22 @@ std::optional<View> find_view(const DiscCaster& caster, const std::vector<Vec3>&
     }
     const size_t near = g - std::min(g, std::max<size_t>(2, size_t(kViewTolerance * double(g))));
     View view{x, {x, x}, g, m};
+    // The region holds only places that see no more holes than the view itself (holes_from:
+    // gaps between discs, and surface no scanner saw, a shadow): a scanner records all it sees,
+    // so a place that looks onto more unscanned surface than the view is not taken for where
+    // one stood. Behind a sheet scanned from one side lie its shadows; without this, places there
+    // saw about as many points and the region straddled the sheet's plane, leaving it to the
+    // rays, which travel farther through its unscanned back (docs/validation.md "Scans: the
+    // view's region and the shadows").
+    const std::vector<Vec3>& dirs = sphere_directions();
+    const size_t limit = caster.holes_from(x, dirs);
+    auto clear = [&](Vec3 p) { return caster.holes_from(p, dirs) <= limit; };
     for (size_t v = 0; v < c; ++v)
-        if (gain[v] >= near) grow(view.region, cand[v]);
+        if (gain[v] >= near && clear(cand[v])) grow(view.region, cand[v]);
     for (const Vec3 d : around())
         for (float s = h; s <= 2 * step0; s *= 2) {
             if (seen_from(x + d * s) < near) break;
-            grow(view.region, x + d * s);
+            if (clear(x + d * s)) grow(view.region, x + d * s);
         }
     return view;
 }

@@ -401,8 +401,8 @@ class DiscCaster {
     // The other face of a thin plate lies in front of the plane and stays.
     float hit_in_cell(size_t c, uint32_t self, Vec3 o, Vec3 d, float tmin, float best,
                       uint32_t* who) const {
-        const bool placed = self == kNoSelf;
-        const Vec3 own = placed                           ? Vec3{0, 0, 0}
+        // From a place (kNoSelf) there is no own plane: `own` is zero and drops no disc.
+        const Vec3 own = self == kNoSelf                  ? Vec3{0, 0, 0}
                          : dot(normals_[self], d) >= 0 ? normals_[self]
                                                        : -normals_[self];
         for (uint32_t k = start_[c]; k < start_[c + 1]; ++k) {
@@ -410,7 +410,7 @@ class DiscCaster {
             if (j == self) continue;
             const Vec3 to = pts_[j] - o;
             const float off = dot(own, to), dist2 = length2(to);
-            if (!placed && off < 0 && dist2 < 4 * rad_[j] * rad_[j]) continue;
+            if (off < 0 && dist2 < 4 * rad_[j] * rad_[j]) continue;
             const Vec3 n = normals_[j];
             const float den = dot(n, d);
             if (std::fabs(den) < 1e-6f) continue;

@@ -98,6 +98,9 @@ TEST(Off, BadInputIsRejectedNamingTheFileAndField) {
         {"NOFF\n1 0 0\n0 0 0 0 nan 1\n", {"vertex 0", "non-finite normal"}},
         {"COFF\n1 0 0\n0 0 0 1 inf 1\n", {"vertex 0", "non-finite colour"}},
         {"OFF\n4 1 0\n" + square + "4 0 1 2\n", {"face 0 (line 7)", "expected 5 values, found 4"}},
+        // A count at the top of int64's range: the message must not overflow adding the count.
+        {"OFF\n4 1 0\n" + square + "9223372036854775807 0 1 2\n",
+         {"face 0 (line 7)", "expected 9223372036854775808 values, found 4"}},
         {"OFF\n4 1 0\n" + square + "3 0 1 4\n",
          {"face 0 (line 7)", "vertex index 4 out of range (4 vertices)"}},
         {"OFF\n4 1 0\n" + square + "3 0 -1 2\n", {"face 0", "vertex index -1 out of range"}},

@@ -185,7 +185,8 @@ bool read_faces(const std::string& path, const OffHeader& h, LineReader& lines,
         }
         extra |= tokens.size() - 1 > static_cast<uint64_t>(corners);
         if (tokens.size() - 1 < static_cast<uint64_t>(corners)) {
-            fail(path, "face ", f, " (line ", lines.line(), "): expected ", corners + 1,
+            fail(path, "face ", f, " (line ", lines.line(), "): expected ",
+                 static_cast<uint64_t>(corners) + 1,
                  " values, found ", tokens.size());
         }
         uint32_t index[2] = {};

@@ -686,7 +686,7 @@ class SegmentPacket {
                 const int32_t on = n >= resume_[i];
                 const int32_t h = on & (tmin <= tmax);
                 tests[i] += on;
-                resume_[i] = on & !h ? w.skip : resume_[i];
+                resume_[i] = (on & !h) ? w.skip : resume_[i];
                 hits |= (0u - uint32_t(h)) & kBit[i];
             }
             if (!hits) {

@@ -1044,7 +1044,10 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 //   spacing is "explained" by a far place beyond a flat face, a scanner's is not even.
 // Its points leave the sample and the search runs again for the next scanner. Where several
 // scanners overlap almost everywhere (four or more around one object) no place explains enough
-// points alone: the scan keeps the view (step 7) and the other rules.
+// points alone: the scan keeps the view (step 7) and the other rules. Where two overlap, no
+// second place passes those tests (the points both made are finer than either makes them, and
+// the best single place sits between the two), so a pair of places is also fitted to the sum
+// of their densities (pair_search) and replaces the single one when it explains more.
 constexpr float kSpacingSigma = 0.03f;  // the width of a scanner's residual peak (log units)
 // A scan's noise scatters the radii too: by about 0.3 noise / radius in the log (0.09 at a tenth
 // of a spacing per axis, measured on held-lone at the scanner's place); the peak widens so. Past
@@ -1082,6 +1085,56 @@ float spacing_residual(const std::vector<Vec3>& pts, const std::vector<Vec3>& no
     const float perp = std::sqrt(std::max(0.0f, dist * dist - along * along));
     if (!(perp >= kViewMinCos * dist)) return std::numeric_limits<float>::quiet_NaN();
     return e - 0.5f * std::log(perp / dist);
+}
+
+// Two scanners at once. Where both see a point, its density is the sum of theirs, so its residual
+// from either place alone lies below that place's peak: the single place that best fits a
+// two-scanner scan sits between the two (on the test scenes 0.04-0.27 room widths from either),
+// and the second, sought among the points the first leaves, never passes the tests. The pair's
+// residual for point i is log r_i + 0.5 log(D_i), D_i = sum over the places of T_s (T_s =
+// c_s / (dist_s^2 w_s), w_s = perp_s / dist_s with an axis: one place's residual is log r_i +
+// 0.5 log T_s); places that see the point grazing (or near the axis's poles) add nothing, and a
+// point no place sees is not counted. Its gradient in place s is (T_s / D_i) times that place's
+// own (locate's).
+struct Term {
+    float t = 0;   // T_s; 0: this place does not count for the point
+    Vec3 grad{};   // the single residual's gradient in the place
+};
+
+Term density_term(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals, uint32_t i,
+                  Vec3 x, Vec3 axis) {
+    Term out;
+    const Vec3 u = x - pts[i];
+    const float uu = dot(u, u);
+    if (!(uu > 0)) return out;
+    const float dist = std::sqrt(uu), nu = dot(normals[i], u);
+    const float c = std::fabs(nu) / dist;
+    if (!(c >= kViewMinCos)) return out;
+    float w = 1;
+    out.grad = u * (-1.5f / uu) + normals[i] * (0.5f / nu);
+    if (!(axis == Vec3{0, 0, 0})) {
+        const Vec3 q = u - axis * dot(u, axis);
+        const float qq = dot(q, q);
+        w = std::sqrt(qq) / dist;
+        if (!(w >= kViewMinCos)) return Term{};
+        out.grad = out.grad + (u * (1.0f / uu) - q * (1.0f / std::max(qq, 1e-30f))) * 0.5f;
+    }
+    out.t = c / (uu * w);
+    return out;
+}
+
+// Point i's residual from the pair (NaN where neither place counts); share: the second place's
+// part of the density.
+float pair_residual(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                    const std::vector<float>& radii, uint32_t i, const std::array<Vec3, 2>& x,
+                    Vec3 axis, const std::array<bool, 2>& sees, float* share = nullptr) {
+    if (!(radii[i] > 0)) return std::numeric_limits<float>::quiet_NaN();
+    const float t0 = sees[0] ? density_term(pts, normals, i, x[0], axis).t : 0.0f;
+    const float t1 = sees[1] ? density_term(pts, normals, i, x[1], axis).t : 0.0f;
+    const float d = t0 + t1;
+    if (!(d > 0)) return std::numeric_limits<float>::quiet_NaN();
+    if (share) *share = t1 / d;
+    return std::log(radii[i]) + 0.5f * std::log(d);
 }
 
 // The middle of the window of width 4 sigma holding the most of the residuals v (sorted here).
@@ -1166,11 +1219,182 @@ Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
     return x;
 }
 
+// locate for two places at once (7 unknowns: both places and log k), over the points idx,
+// visibility left out.
+std::array<Vec3, 2> locate_pair(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                                const std::vector<float>& radii, const std::vector<uint32_t>& idx,
+                                std::array<Vec3, 2> x, float scale, Vec3 axis, float sigma0) {
+    const size_t m = idx.size();
+    std::vector<float> e(m), v;
+    const std::array<bool, 2> both{true, true};
+    for (const float sigma : {4 * sigma0, 2 * sigma0, sigma0}) {
+        for (int it = 0; it < 10; ++it) {
+            v.clear();
+            for (size_t j = 0; j < m; ++j) {
+                e[j] = pair_residual(pts, normals, radii, idx[j], x, axis, both);
+                if (!std::isnan(e[j])) v.push_back(e[j]);
+            }
+            if (v.size() < kMinScannerPoints) return x;
+            const double centre = residual_peak(v, sigma);
+            double A[7][7] = {}, g[7] = {};
+            for (size_t j = 0; j < m; ++j) {
+                if (std::isnan(e[j])) continue;
+                const double z = (e[j] - centre) / sigma;
+                if (std::fabs(z) > 3) continue;
+                const double w = std::exp(-0.5 * z * z);
+                const Term a = density_term(pts, normals, idx[j], x[0], axis);
+                const Term b = density_term(pts, normals, idx[j], x[1], axis);
+                const double d = double(a.t) + double(b.t), fa = a.t / d, fb = b.t / d;
+                const double J[7] = {fa * a.grad.x, fa * a.grad.y, fa * a.grad.z, fb * b.grad.x,
+                                     fb * b.grad.y, fb * b.grad.z, -1.0};
+                const double r = e[j] - centre;
+                for (int p = 0; p < 7; ++p) {
+                    g[p] -= w * J[p] * r;
+                    for (int q = 0; q < 7; ++q) A[p][q] += w * J[p] * J[q];
+                }
+            }
+            for (int p = 0; p < 7; ++p) A[p][p] = A[p][p] * (1.0 + 1e-3) + 1e-12;
+            if (!solve_small(A, g)) break;
+            float moved = 0;
+            for (int s = 0; s < 2; ++s) {
+                Vec3 dx{float(g[3 * s]), float(g[3 * s + 1]), float(g[3 * s + 2])};
+                const float len = length(dx), cap = 0.25f * scale;
+                if (!(len == len)) return x;
+                if (len > cap) dx = dx * (cap / len);
+                x[s] = x[s] + dx;
+                moved = std::max(moved, len);
+            }
+            if (moved < 1e-4f * scale) break;
+        }
+    }
+    return x;
+}
+
 struct Scanners {
     std::vector<Vec3> at;
     Vec3 axis{0, 0, 0};
     double score = 0;  // the first scanner's
 };
+
+constexpr size_t kPairStarts = 8;  // settled single places, paired with each other
+
+// Two scanners at once (pair_residual), from pairs of the best-ranked single places (settled
+// by the points each candidate sees); the settled pair that fits best with visibility replaces
+// `out` when it passes the single scanner's tests (enough points, few sparser than it makes
+// them, spread in spacing), each place makes most of the density of enough of them, and it
+// fits more points than `out`'s first scanner.
+void pair_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                 const std::vector<Vec3>& normals, const std::vector<float>& radii, float r_med,
+                 float noise, const std::vector<Vec3>& settled,
+                 const std::vector<std::pair<double, size_t>>& ranked,
+                 const std::vector<Vec3>& cand, const std::vector<uint8_t>& seen, size_t m,
+                 float scale, Vec3 axis, float sigma, Scanners& out) {
+    const size_t n = pts.size(), c = cand.size();
+    auto sample = [&](size_t j) { return uint32_t(j * n / m); };
+    auto distinct = [&](const std::vector<Vec3>& from_settled,
+                        const std::vector<std::pair<double, size_t>>& by_rank) {
+        std::vector<Vec3> starts;
+        for (const auto& [score, v] : by_rank) {
+            const Vec3 x = from_settled[v];
+            if (!std::isfinite(x.x) || !std::isfinite(x.y) || !std::isfinite(x.z)) continue;
+            if (std::none_of(starts.begin(), starts.end(),
+                             [&](Vec3 y) { return length(x - y) < 0.05f * scale; }))
+                starts.push_back(x);
+            if (starts.size() == kPairStarts) break;
+        }
+        return starts;
+    };
+    const std::vector<Vec3> starts = distinct(settled, ranked);
+    std::vector<std::array<Vec3, 2>> pairs;
+    for (size_t a = 0; a < starts.size(); ++a)
+        for (size_t b = a + 1; b < starts.size(); ++b) pairs.push_back({starts[a], starts[b]});
+    // With a first scanner found: its partner settled by the points it does not see (those the
+    // other scanner made alone), from every candidate.
+    if (out.at.size() == 1) {
+        const Vec3 x0 = out.at[0];
+        std::vector<uint8_t> left(m);
+        parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
+            for (size_t j = chunk_begin; j < chunk_end; ++j) {
+                const uint32_t i = sample(j);
+                left[j] = std::isnan(spacing_residual(pts, normals, radii, i, x0, axis)) ||
+                          !caster.sees(i, x0, ray_start(radii[i], r_med, noise));
+            }
+        });
+        std::vector<Vec3> settled2(c);
+        std::vector<std::pair<double, size_t>> ranked2(c);
+        parallel_for_range<size_t>(c, 1, [&](size_t chunk_begin, size_t chunk_end) {
+            std::vector<uint32_t> idx, few;
+            std::vector<float> r;
+            for (size_t v = chunk_begin; v < chunk_end; ++v) {
+                idx.clear(), few.clear(), r.clear();
+                for (size_t j = 0; j < m; ++j)
+                    if (left[j] && seen[v * m + j]) idx.push_back(sample(j));
+                const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
+                for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
+                settled2[v] = locate(pts, normals, radii, few, cand[v], scale, axis, sigma);
+                for (const uint32_t i : idx) {
+                    const float x = spacing_residual(pts, normals, radii, i, settled2[v], axis);
+                    if (!std::isnan(x)) r.push_back(x);
+                }
+                ranked2[v] = {-fit_residuals(r, sigma).score, v};
+            }
+        });
+        std::sort(ranked2.begin(), ranked2.end());
+        for (const Vec3 x : distinct(settled2, ranked2)) pairs.push_back({x0, x});
+    }
+    if (pairs.empty()) return;
+    std::vector<uint32_t> few;
+    for (size_t j = 0; j < m; j += std::max<size_t>(1, m / kLocatePoints)) few.push_back(sample(j));
+    std::vector<std::pair<double, size_t>> order(pairs.size());
+    const std::array<bool, 2> both{true, true};
+    parallel_for_range<size_t>(pairs.size(), 1, [&](size_t chunk_begin, size_t chunk_end) {
+        std::vector<float> r;
+        for (size_t k = chunk_begin; k < chunk_end; ++k) {
+            pairs[k] = locate_pair(pts, normals, radii, few, pairs[k], scale, axis, sigma);
+            r.clear();
+            for (size_t j = 0; j < m; ++j) {
+                const float x = pair_residual(pts, normals, radii, sample(j), pairs[k], axis, both);
+                if (!std::isnan(x)) r.push_back(x);
+            }
+            order[k] = {-fit_residuals(r, sigma).score, k};
+        }
+    });
+    std::sort(order.begin(), order.end());
+    Fit best;
+    std::array<Vec3, 2> best_at{};
+    std::vector<float> best_e, best_share, e(m), share(m);
+    for (size_t t = 0; t < std::min(kScannerStarts, order.size()); ++t) {
+        const std::array<Vec3, 2> x = pairs[order[t].second];
+        if (length(x[0] - x[1]) < 0.05f * scale) continue;
+        parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
+            for (size_t j = chunk_begin; j < chunk_end; ++j) {
+                const uint32_t i = sample(j);
+                const float tmin = ray_start(radii[i], r_med, noise);
+                const std::array<bool, 2> sees{caster.sees(i, x[0], tmin),
+                                               caster.sees(i, x[1], tmin)};
+                share[j] = 0;
+                e[j] = pair_residual(pts, normals, radii, i, x, axis, sees, &share[j]);
+            }
+        });
+        std::vector<float> counted;
+        for (const float r : e)
+            if (!std::isnan(r)) counted.push_back(r);
+        const Fit f = fit_residuals(counted, sigma);
+        if (f.score > best.score) best = f, best_at = x, best_e = e, best_share = share;
+    }
+    if (best_e.empty()) return;
+    std::array<std::vector<float>, 2> owned;  // the radii of the inliers each place mostly makes
+    for (size_t j = 0; j < m; ++j)
+        if (!std::isnan(best_e[j]) && std::fabs(best_e[j] - best.centre) < 2 * sigma)
+            owned[best_share[j] > 0.5f ? 1 : 0].push_back(radii[sample(j)]);
+    const size_t need = std::max(kMinScannerPoints, m / 20);
+    if (owned[0].size() < need || owned[1].size() < need ||
+        double(best.sparser) > kSparserShare * double(best.seen) || !(best.score > out.score) ||
+        log_spread(owned[0]) < kExplainedSpread || log_spread(owned[1]) < kExplainedSpread)
+        return;
+    out.at = {best_at[0], best_at[1]};
+    out.score = best.score;
+}
 
 // The scanners for one axis model, given what each candidate sees of the m sampled points.
 Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pts,
@@ -1191,6 +1415,8 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
     std::vector<Vec3> settled(c);
     std::vector<std::pair<double, size_t>> ranked(c);
     std::vector<float> e;
+    std::vector<Vec3> first_settled;
+    std::vector<std::pair<double, size_t>> first_ranked;
     while (out.at.size() < kMaxScanners) {
         // From every candidate, the place that the points it sees (and no scanner explains yet)
         // settle on, ranked by their fit without visibility; the best few then with it.
@@ -1212,6 +1438,7 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
             }
         });
         std::sort(ranked.begin(), ranked.end());
+        if (out.at.empty()) first_settled = settled, first_ranked = ranked;
         Vec3 best_at{};
         Fit best;
         std::vector<float> best_e;  // the best place's residual per sample (NaN: not counted)
@@ -1252,6 +1479,9 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         for (const uint32_t j : mine) explained[j] = 1;
         out.at.push_back(best_at);
     }
+    if (out.at.size() < 2)
+        pair_search(caster, pts, normals, radii, r_med, noise, first_settled, first_ranked, cand,
+                    seen, m, scale, axis, sigma, out);
     return out;
 }
 

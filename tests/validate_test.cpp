@@ -435,6 +435,16 @@ TEST(Scan, TwoOverlappingScannersAreFoundAsAPair) {
     EXPECT_GT(b.share(), 0.99) << b.right << " of " << b.objects;
 }
 
+// ... but not one scanner split in two: two places have more freedom than one, and on
+// test-several's one-scanner scan the pair fit put two places 5 cm apart, one above and one
+// below the scanner, that scored 0.2% above it. A pair must score a tenth more (kPairGain).
+TEST(Scan, OneScannerIsNotSplitIntoAPair) {
+    const BareScanSigns b = bare_scan_signs("scenes/test/test-several.json", 1);
+    ASSERT_EQ(b.rep.scanners.size(), 1u) << b.rep.method;
+    ASSERT_EQ(b.scanners.size(), 1u);
+    EXPECT_LT(length(b.rep.scanners[0] - b.scanners[0]), 0.03f) << b.rep.method;
+}
+
 // `validate --scan`: the scan scored through each raw-cloud path. With its scanner positions the
 // estimated normals take their scanner's side, as the truth's do; bad combinations are errors.
 TEST(Validate, AScanIsScoredThroughTheRawCloudPath) {

@@ -435,6 +435,20 @@ TEST(Scan, TwoOverlappingScannersAreFoundAsAPair) {
     EXPECT_GT(b.share(), 0.99) << b.right << " of " << b.objects;
 }
 
+// And a third, one place at a time: test-tight scanned from three places (two of them 10 cm
+// apart). The pair's places leave the points only the third made; a place settled on them
+// joins the fit, and the three places land within 3.5 cm of the three scanners.
+TEST(Scan, AThirdScannerJoinsThePair) {
+    const BareScanSigns b = bare_scan_signs("scenes/test/test-tight.json", 3);
+    ASSERT_EQ(b.rep.scanners.size(), 3u) << b.rep.method;
+    ASSERT_EQ(b.scanners.size(), 3u);
+    for (const Vec3 t : b.scanners) {
+        float nearest = 1e30f;
+        for (const Vec3 x : b.rep.scanners) nearest = std::min(nearest, length(x - t));
+        EXPECT_LT(nearest, 0.035f) << b.rep.method;
+    }
+}
+
 // ... but not one scanner split in two: two places have more freedom than one, and on
 // test-several's one-scanner scan the pair fit put two places 5 cm apart, one above and one
 // below the scanner, that scored 0.2% above it. A pair must score a tenth more (kPairGain).

@@ -1047,7 +1047,8 @@ int view_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // points alone: the scan keeps the view (step 7) and the other rules. Where two overlap, no
 // second place passes those tests (the points both made are finer than either makes them, and
 // the best single place sits between the two), so a pair of places is also fitted to the sum
-// of their densities (pair_search) and replaces the single one when it explains more.
+// of their densities (joint_search), then one place more at a time up to kMaxJoint, each set
+// replacing the one before when it explains more.
 constexpr float kSpacingSigma = 0.03f;  // the width of a scanner's residual peak (log units)
 // A scan's noise scatters the radii too: by about 0.3 noise / radius in the log (0.09 at a tenth
 // of a spacing per axis, measured on held-lone at the scanner's place); the peak widens so. Past
@@ -1123,17 +1124,26 @@ Term density_term(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals
     return out;
 }
 
-// Point i's residual from the pair (NaN where neither place counts); share: the second place's
-// part of the density.
-float pair_residual(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-                    const std::vector<float>& radii, uint32_t i, const std::array<Vec3, 2>& x,
-                    Vec3 axis, const std::array<bool, 2>& sees, float* share = nullptr) {
+constexpr size_t kMaxJoint = 4;  // places fitted at once, at most
+using Places = std::vector<Vec3>;
+
+// Point i's residual from the places x (NaN where none counts), counting place k only where bit
+// k of `sees` is set; owner: the place that makes most of its density.
+float joint_residual(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                     const std::vector<float>& radii, uint32_t i, const Places& x, Vec3 axis,
+                     uint32_t sees, int* owner = nullptr) {
     if (!(radii[i] > 0)) return std::numeric_limits<float>::quiet_NaN();
-    const float t0 = sees[0] ? density_term(pts, normals, i, x[0], axis).t : 0.0f;
-    const float t1 = sees[1] ? density_term(pts, normals, i, x[1], axis).t : 0.0f;
-    const float d = t0 + t1;
+    float d = 0, top = 0;
+    for (size_t k = 0; k < x.size(); ++k) {
+        if (!(sees >> k & 1)) continue;
+        const float t = density_term(pts, normals, i, x[k], axis).t;
+        d += t;
+        if (t > top) {
+            top = t;
+            if (owner) *owner = int(k);
+        }
+    }
     if (!(d > 0)) return std::numeric_limits<float>::quiet_NaN();
-    if (share) *share = t1 / d;
     return std::log(radii[i]) + 0.5f * std::log(d);
 }
 
@@ -1219,55 +1229,75 @@ Vec3 locate(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
     return x;
 }
 
-// locate for two places at once (7 unknowns: both places and log k), over the points idx,
+// locate for K places at once (3K + 1 unknowns: the places and log k), over the points idx,
 // visibility left out.
-std::array<Vec3, 2> locate_pair(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
-                                const std::vector<float>& radii, const std::vector<uint32_t>& idx,
-                                std::array<Vec3, 2> x, float scale, Vec3 axis, float sigma0) {
+template <size_t K>
+void locate_joint(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                  const std::vector<float>& radii, const std::vector<uint32_t>& idx, Places& x,
+                  float scale, Vec3 axis, float sigma0) {
+    constexpr size_t N = 3 * K + 1;
     const size_t m = idx.size();
+    const uint32_t all = (1u << K) - 1;
     std::vector<float> e(m), v;
-    const std::array<bool, 2> both{true, true};
     for (const float sigma : {4 * sigma0, 2 * sigma0, sigma0}) {
         for (int it = 0; it < 10; ++it) {
             v.clear();
             for (size_t j = 0; j < m; ++j) {
-                e[j] = pair_residual(pts, normals, radii, idx[j], x, axis, both);
+                e[j] = joint_residual(pts, normals, radii, idx[j], x, axis, all);
                 if (!std::isnan(e[j])) v.push_back(e[j]);
             }
-            if (v.size() < kMinScannerPoints) return x;
+            if (v.size() < kMinScannerPoints) return;
             const double centre = residual_peak(v, sigma);
-            double A[7][7] = {}, g[7] = {};
+            double A[N][N] = {}, g[N] = {};
             for (size_t j = 0; j < m; ++j) {
                 if (std::isnan(e[j])) continue;
                 const double z = (e[j] - centre) / sigma;
                 if (std::fabs(z) > 3) continue;
                 const double w = std::exp(-0.5 * z * z);
-                const Term a = density_term(pts, normals, idx[j], x[0], axis);
-                const Term b = density_term(pts, normals, idx[j], x[1], axis);
-                const double d = double(a.t) + double(b.t), fa = a.t / d, fb = b.t / d;
-                const double J[7] = {fa * a.grad.x, fa * a.grad.y, fa * a.grad.z, fb * b.grad.x,
-                                     fb * b.grad.y, fb * b.grad.z, -1.0};
+                std::array<Term, K> t;
+                double d = 0;
+                for (size_t k = 0; k < K; ++k) {
+                    t[k] = density_term(pts, normals, idx[j], x[k], axis);
+                    d += double(t[k].t);
+                }
+                double J[N];
+                for (size_t k = 0; k < K; ++k) {
+                    const double f = double(t[k].t) / d;
+                    J[3 * k] = f * t[k].grad.x, J[3 * k + 1] = f * t[k].grad.y,
+                    J[3 * k + 2] = f * t[k].grad.z;
+                }
+                J[N - 1] = -1.0;
                 const double r = e[j] - centre;
-                for (int p = 0; p < 7; ++p) {
+                for (size_t p = 0; p < N; ++p) {
                     g[p] -= w * J[p] * r;
-                    for (int q = 0; q < 7; ++q) A[p][q] += w * J[p] * J[q];
+                    for (size_t q = 0; q < N; ++q) A[p][q] += w * J[p] * J[q];
                 }
             }
-            for (int p = 0; p < 7; ++p) A[p][p] = A[p][p] * (1.0 + 1e-3) + 1e-12;
+            for (size_t p = 0; p < N; ++p) A[p][p] = A[p][p] * (1.0 + 1e-3) + 1e-12;
             if (!solve_small(A, g)) break;
             float moved = 0;
-            for (int s = 0; s < 2; ++s) {
-                Vec3 dx{float(g[3 * s]), float(g[3 * s + 1]), float(g[3 * s + 2])};
+            for (size_t k = 0; k < K; ++k) {
+                Vec3 dx{float(g[3 * k]), float(g[3 * k + 1]), float(g[3 * k + 2])};
                 const float len = length(dx), cap = 0.25f * scale;
-                if (!(len == len)) return x;
+                if (!(len == len)) return;
                 if (len > cap) dx = dx * (cap / len);
-                x[s] = x[s] + dx;
+                x[k] = x[k] + dx;
                 moved = std::max(moved, len);
             }
             if (moved < 1e-4f * scale) break;
         }
     }
-    return x;
+}
+
+void locate_places(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                   const std::vector<float>& radii, const std::vector<uint32_t>& idx, Places& x,
+                   float scale, Vec3 axis, float sigma) {
+    switch (x.size()) {
+        case 2: return locate_joint<2>(pts, normals, radii, idx, x, scale, axis, sigma);
+        case 3: return locate_joint<3>(pts, normals, radii, idx, x, scale, axis, sigma);
+        case 4: return locate_joint<4>(pts, normals, radii, idx, x, scale, axis, sigma);
+        default: return;
+    }
 }
 
 struct Scanners {
@@ -1284,19 +1314,24 @@ constexpr size_t kPairStarts = 8;  // settled single places, paired with each ot
 // "Scans: two scanners as a pair").
 constexpr double kPairGain = 1.1;
 
-// Two scanners at once (pair_residual), from pairs of the best-ranked single places (settled
-// by the points each candidate sees); the settled pair that fits best with visibility replaces
-// `out` when it passes the single scanner's tests (enough points, few sparser than it makes
-// them, spread in spacing), each place makes most of the density of enough of them, and it
-// scores kPairGain times the best single place or more.
-void pair_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
-                 const std::vector<Vec3>& normals, const std::vector<float>& radii, float r_med,
-                 float noise, const std::vector<Vec3>& settled,
-                 const std::vector<std::pair<double, size_t>>& ranked,
-                 const std::vector<Vec3>& cand, const std::vector<uint8_t>& seen, size_t m,
-                 float scale, Vec3 axis, float sigma, Scanners& out) {
+// Several scanners at once (joint_residual). First a pair, from pairs of the best-ranked single
+// places (settled by the points each candidate sees) and, where a first scanner was found, from
+// that scanner with each of the best places settled on the points it does not see (those the
+// other made alone); then, while that passes, one place more at a time, settled on the points
+// none of the places found sees. The settled set that fits best with visibility replaces `out`
+// when it passes the single scanner's tests (enough points, few sparser than it makes them,
+// spread in spacing), each place makes most of the density of enough of them, and it scores
+// kPairGain times `out` or more.
+void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                  const std::vector<Vec3>& normals, const std::vector<float>& radii, float r_med,
+                  float noise, const std::vector<Vec3>& settled,
+                  const std::vector<std::pair<double, size_t>>& ranked,
+                  const std::vector<Vec3>& cand, const std::vector<uint8_t>& seen, size_t m,
+                  float scale, Vec3 axis, float sigma, Scanners& out) {
     const size_t n = pts.size(), c = cand.size();
     auto sample = [&](size_t j) { return uint32_t(j * n / m); };
+    auto tmin = [&](uint32_t i) { return ray_start(radii[i], r_med, noise); };
+    const float apart = 0.05f * scale;
     auto distinct = [&](const std::vector<Vec3>& from_settled,
                         const std::vector<std::pair<double, size_t>>& by_rank) {
         std::vector<Vec3> starts;
@@ -1304,26 +1339,22 @@ void pair_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
             const Vec3 x = from_settled[v];
             if (!std::isfinite(x.x) || !std::isfinite(x.y) || !std::isfinite(x.z)) continue;
             if (std::none_of(starts.begin(), starts.end(),
-                             [&](Vec3 y) { return length(x - y) < 0.05f * scale; }))
+                             [&](Vec3 y) { return length(x - y) < apart; }))
                 starts.push_back(x);
             if (starts.size() == kPairStarts) break;
         }
         return starts;
     };
-    const std::vector<Vec3> starts = distinct(settled, ranked);
-    std::vector<std::array<Vec3, 2>> pairs;
-    for (size_t a = 0; a < starts.size(); ++a)
-        for (size_t b = a + 1; b < starts.size(); ++b) pairs.push_back({starts[a], starts[b]});
-    // With a first scanner found: its partner settled by the points it does not see (those the
-    // other scanner made alone), from every candidate.
-    if (out.at.size() == 1) {
-        const Vec3 x0 = out.at[0];
+    // The best places settled on the sampled points that none of `at` sees (not grazing).
+    auto unseen_starts = [&](const Places& at) {
         std::vector<uint8_t> left(m);
         parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
             for (size_t j = chunk_begin; j < chunk_end; ++j) {
                 const uint32_t i = sample(j);
-                left[j] = std::isnan(spacing_residual(pts, normals, radii, i, x0, axis)) ||
-                          !caster.sees(i, x0, ray_start(radii[i], r_med, noise));
+                left[j] = std::none_of(at.begin(), at.end(), [&](Vec3 x) {
+                    return !std::isnan(spacing_residual(pts, normals, radii, i, x, axis)) &&
+                           caster.sees(i, x, tmin(i));
+                });
             }
         });
         std::vector<Vec3> settled2(c);
@@ -1346,61 +1377,87 @@ void pair_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
             }
         });
         std::sort(ranked2.begin(), ranked2.end());
-        for (const Vec3 x : distinct(settled2, ranked2)) pairs.push_back({x0, x});
-    }
-    if (pairs.empty()) return;
+        return distinct(settled2, ranked2);
+    };
     std::vector<uint32_t> few;
     for (size_t j = 0; j < m; j += std::max<size_t>(1, m / kLocatePoints)) few.push_back(sample(j));
-    std::vector<std::pair<double, size_t>> order(pairs.size());
-    const std::array<bool, 2> both{true, true};
-    parallel_for_range<size_t>(pairs.size(), 1, [&](size_t chunk_begin, size_t chunk_end) {
-        std::vector<float> r;
-        for (size_t k = chunk_begin; k < chunk_end; ++k) {
-            pairs[k] = locate_pair(pts, normals, radii, few, pairs[k], scale, axis, sigma);
-            r.clear();
-            for (size_t j = 0; j < m; ++j) {
-                const float x = pair_residual(pts, normals, radii, sample(j), pairs[k], axis, both);
-                if (!std::isnan(x)) r.push_back(x);
-            }
-            order[k] = {-fit_residuals(r, sigma).score, k};
-        }
-    });
-    std::sort(order.begin(), order.end());
-    Fit best;
-    std::array<Vec3, 2> best_at{};
-    std::vector<float> best_e, best_share, e(m), share(m);
-    for (size_t t = 0; t < std::min(kScannerStarts, order.size()); ++t) {
-        const std::array<Vec3, 2> x = pairs[order[t].second];
-        if (length(x[0] - x[1]) < 0.05f * scale) continue;
-        parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
-            for (size_t j = chunk_begin; j < chunk_end; ++j) {
-                const uint32_t i = sample(j);
-                const float tmin = ray_start(radii[i], r_med, noise);
-                const std::array<bool, 2> sees{caster.sees(i, x[0], tmin),
-                                               caster.sees(i, x[1], tmin)};
-                share[j] = 0;
-                e[j] = pair_residual(pts, normals, radii, i, x, axis, sees, &share[j]);
+    // Settles each set, then scores the best few with visibility; true when the best replaced
+    // `out`.
+    auto try_sets = [&](std::vector<Places>& sets) {
+        if (sets.empty()) return false;
+        std::vector<std::pair<double, size_t>> order(sets.size());
+        parallel_for_range<size_t>(sets.size(), 1, [&](size_t chunk_begin, size_t chunk_end) {
+            std::vector<float> r;
+            for (size_t k = chunk_begin; k < chunk_end; ++k) {
+                locate_places(pts, normals, radii, few, sets[k], scale, axis, sigma);
+                r.clear();
+                const uint32_t all = (1u << sets[k].size()) - 1;
+                for (size_t j = 0; j < m; ++j) {
+                    const float x =
+                        joint_residual(pts, normals, radii, sample(j), sets[k], axis, all);
+                    if (!std::isnan(x)) r.push_back(x);
+                }
+                order[k] = {-fit_residuals(r, sigma).score, k};
             }
         });
-        std::vector<float> counted;
-        for (const float r : e)
-            if (!std::isnan(r)) counted.push_back(r);
-        const Fit f = fit_residuals(counted, sigma);
-        if (f.score > best.score) best = f, best_at = x, best_e = e, best_share = share;
+        std::sort(order.begin(), order.end());
+        Fit best;
+        Places best_at;
+        std::vector<float> best_e, e(m);
+        std::vector<int> best_owner, owner(m);
+        for (size_t t = 0; t < std::min(kScannerStarts, order.size()); ++t) {
+            const Places& x = sets[order[t].second];
+            bool close = false;
+            for (size_t a = 0; a < x.size(); ++a)
+                for (size_t b = a + 1; b < x.size(); ++b) close |= length(x[a] - x[b]) < apart;
+            if (close) continue;
+            parallel_for_range<size_t>(m, 64, [&](size_t chunk_begin, size_t chunk_end) {
+                for (size_t j = chunk_begin; j < chunk_end; ++j) {
+                    const uint32_t i = sample(j);
+                    uint32_t sees = 0;
+                    for (size_t k = 0; k < x.size(); ++k)
+                        sees |= uint32_t(caster.sees(i, x[k], tmin(i))) << k;
+                    owner[j] = 0;
+                    e[j] = joint_residual(pts, normals, radii, i, x, axis, sees, &owner[j]);
+                }
+            });
+            std::vector<float> counted;
+            for (const float r : e)
+                if (!std::isnan(r)) counted.push_back(r);
+            const Fit f = fit_residuals(counted, sigma);
+            if (f.score > best.score) best = f, best_at = x, best_e = e, best_owner = owner;
+        }
+        if (best_e.empty()) return false;
+        // The radii of the inliers each place mostly makes.
+        std::vector<std::vector<float>> owned(best_at.size());
+        for (size_t j = 0; j < m; ++j)
+            if (!std::isnan(best_e[j]) && std::fabs(best_e[j] - best.centre) < 2 * sigma)
+                owned[size_t(best_owner[j])].push_back(radii[sample(j)]);
+        const size_t need = std::max(kMinScannerPoints, m / 20);
+        for (const std::vector<float>& o : owned)
+            if (o.size() < need || log_spread(o) < kExplainedSpread) return false;
+        if (double(best.sparser) > kSparserShare * double(best.seen) ||
+            !(best.score > kPairGain * out.score))
+            return false;
+        out.at = best_at;
+        out.score = best.score;
+        return true;
+    };
+    std::vector<Places> sets;
+    const std::vector<Vec3> starts = distinct(settled, ranked);
+    for (size_t a = 0; a < starts.size(); ++a)
+        for (size_t b = a + 1; b < starts.size(); ++b) sets.push_back({starts[a], starts[b]});
+    if (out.at.size() == 1)
+        for (const Vec3 x : unseen_starts(out.at)) sets.push_back({out.at[0], x});
+    if (!try_sets(sets)) return;
+    while (out.at.size() < kMaxJoint) {
+        sets.clear();
+        for (const Vec3 x : unseen_starts(out.at)) {
+            sets.push_back(out.at);
+            sets.back().push_back(x);
+        }
+        if (!try_sets(sets)) return;
     }
-    if (best_e.empty()) return;
-    std::array<std::vector<float>, 2> owned;  // the radii of the inliers each place mostly makes
-    for (size_t j = 0; j < m; ++j)
-        if (!std::isnan(best_e[j]) && std::fabs(best_e[j] - best.centre) < 2 * sigma)
-            owned[best_share[j] > 0.5f ? 1 : 0].push_back(radii[sample(j)]);
-    const size_t need = std::max(kMinScannerPoints, m / 20);
-    if (owned[0].size() < need || owned[1].size() < need ||
-        double(best.sparser) > kSparserShare * double(best.seen) ||
-        !(best.score > kPairGain * out.score) ||
-        log_spread(owned[0]) < kExplainedSpread || log_spread(owned[1]) < kExplainedSpread)
-        return;
-    out.at = {best_at[0], best_at[1]};
-    out.score = best.score;
 }
 
 // The scanners for one axis model, given what each candidate sees of the m sampled points.
@@ -1487,8 +1544,8 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         out.at.push_back(best_at);
     }
     if (out.at.size() < 2)
-        pair_search(caster, pts, normals, radii, r_med, noise, first_settled, first_ranked, cand,
-                    seen, m, scale, axis, sigma, out);
+        joint_search(caster, pts, normals, radii, r_med, noise, first_settled, first_ranked, cand,
+                     seen, m, scale, axis, sigma, out);
     return out;
 }
 

@@ -417,6 +417,17 @@ TEST(Scan, TheViewsRegionLeavesOutPlacesThatSeeMoreShadow) {
     EXPECT_GT(b.share(), 0.7) << b.right << " of " << b.objects;
 }
 
+// That the estimate found `count` places, and one within `within` of each of the scan's scanners.
+void expect_each_scanner_found(const BareScanSigns& b, size_t count, float within) {
+    ASSERT_EQ(b.rep.scanners.size(), count) << b.rep.method;
+    ASSERT_EQ(b.scanners.size(), count);
+    for (const Vec3 t : b.scanners) {
+        float nearest = 1e30f;
+        for (const Vec3 x : b.rep.scanners) nearest = std::min(nearest, length(x - t));
+        EXPECT_LT(nearest, within) << b.rep.method;
+    }
+}
+
 // Two scanners as a pair: cornell-bunny scanned bare from two places 18 cm apart. Where both
 // see a point it is finer than either makes it, so the best single place sat between them and no
 // second place passed the scanner tests: the view signed the rest, 95.2% of the objects' points
@@ -424,13 +435,7 @@ TEST(Scan, TheViewsRegionLeavesOutPlacesThatSeeMoreShadow) {
 // 55.5 cm wide): 99.6%.
 TEST(Scan, TwoOverlappingScannersAreFoundAsAPair) {
     const BareScanSigns b = bare_scan_signs("scenes/cornell-bunny.json", 2);
-    ASSERT_EQ(b.rep.scanners.size(), 2u) << b.rep.method;
-    ASSERT_EQ(b.scanners.size(), 2u);
-    for (const Vec3 t : b.scanners) {
-        float nearest = 1e30f;
-        for (const Vec3 x : b.rep.scanners) nearest = std::min(nearest, length(x - t));
-        EXPECT_LT(nearest, 0.03f) << b.rep.method;
-    }
+    expect_each_scanner_found(b, 2, 0.03f);
     ASSERT_GT(b.objects, 2000u);
     EXPECT_GT(b.share(), 0.99) << b.right << " of " << b.objects;
 }
@@ -440,13 +445,7 @@ TEST(Scan, TwoOverlappingScannersAreFoundAsAPair) {
 // joins the fit, and the three places land within 3.5 cm of the three scanners.
 TEST(Scan, AThirdScannerJoinsThePair) {
     const BareScanSigns b = bare_scan_signs("scenes/test/test-tight.json", 3);
-    ASSERT_EQ(b.rep.scanners.size(), 3u) << b.rep.method;
-    ASSERT_EQ(b.scanners.size(), 3u);
-    for (const Vec3 t : b.scanners) {
-        float nearest = 1e30f;
-        for (const Vec3 x : b.rep.scanners) nearest = std::min(nearest, length(x - t));
-        EXPECT_LT(nearest, 0.035f) << b.rep.method;
-    }
+    expect_each_scanner_found(b, 3, 0.035f);
 }
 
 // ... but not one scanner split in two: two places have more freedom than one, and on

@@ -1300,6 +1300,40 @@ void locate_places(const std::vector<Vec3>& pts, const std::vector<Vec3>& normal
     }
 }
 
+// From every candidate, the place that the sampled points it sees (and `use(j)` keeps) settle on
+// (locate), and the candidates ranked by their fit there without visibility, best first.
+struct Settled {
+    std::vector<Vec3> at;
+    std::vector<std::pair<double, size_t>> ranked;  // (-score, candidate)
+};
+template <class Use>
+Settled settle_candidates(const std::vector<Vec3>& pts, const std::vector<Vec3>& normals,
+                          const std::vector<float>& radii, const std::vector<Vec3>& cand,
+                          const std::vector<uint8_t>& seen, size_t m, float scale, Vec3 axis,
+                          float sigma, Use use) {
+    const size_t n = pts.size(), c = cand.size();
+    Settled out{std::vector<Vec3>(c), std::vector<std::pair<double, size_t>>(c)};
+    parallel_for_range<size_t>(c, 1, [&](size_t chunk_begin, size_t chunk_end) {
+        std::vector<uint32_t> idx, few;
+        std::vector<float> r;
+        for (size_t v = chunk_begin; v < chunk_end; ++v) {
+            idx.clear(), few.clear(), r.clear();
+            for (size_t j = 0; j < m; ++j)
+                if (use(j) && seen[v * m + j]) idx.push_back(uint32_t(j * n / m));
+            const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
+            for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
+            out.at[v] = locate(pts, normals, radii, few, cand[v], scale, axis, sigma);
+            for (const uint32_t i : idx) {
+                const float x = spacing_residual(pts, normals, radii, i, out.at[v], axis);
+                if (!std::isnan(x)) r.push_back(x);
+            }
+            out.ranked[v] = {-fit_residuals(r, sigma).score, v};
+        }
+    });
+    std::sort(out.ranked.begin(), out.ranked.end());
+    return out;
+}
+
 struct Scanners {
     std::vector<Vec3> at;
     Vec3 axis{0, 0, 0};
@@ -1324,19 +1358,18 @@ constexpr double kPairGain = 1.1;
 // kPairGain times `out` or more.
 void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
                   const std::vector<Vec3>& normals, const std::vector<float>& radii, float r_med,
-                  float noise, const std::vector<Vec3>& settled,
-                  const std::vector<std::pair<double, size_t>>& ranked,
-                  const std::vector<Vec3>& cand, const std::vector<uint8_t>& seen, size_t m,
-                  float scale, Vec3 axis, float sigma, Scanners& out) {
-    const size_t n = pts.size(), c = cand.size();
+                  float noise, const Settled& first, const std::vector<Vec3>& cand,
+                  const std::vector<uint8_t>& seen, size_t m, float scale, Vec3 axis, float sigma,
+                  Scanners& out) {
+    const size_t n = pts.size();
     auto sample = [&](size_t j) { return uint32_t(j * n / m); };
     auto tmin = [&](uint32_t i) { return ray_start(radii[i], r_med, noise); };
     const float apart = 0.05f * scale;
-    auto distinct = [&](const std::vector<Vec3>& from_settled,
-                        const std::vector<std::pair<double, size_t>>& by_rank) {
+    // The best-ranked settled places, at least `apart` from each other.
+    auto distinct = [&](const Settled& s) {
         std::vector<Vec3> starts;
-        for (const auto& [score, v] : by_rank) {
-            const Vec3 x = from_settled[v];
+        for (const auto& [score, v] : s.ranked) {
+            const Vec3 x = s.at[v];
             if (!std::isfinite(x.x) || !std::isfinite(x.y) || !std::isfinite(x.z)) continue;
             if (std::none_of(starts.begin(), starts.end(),
                              [&](Vec3 y) { return length(x - y) < apart; }))
@@ -1357,27 +1390,8 @@ void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
                 });
             }
         });
-        std::vector<Vec3> settled2(c);
-        std::vector<std::pair<double, size_t>> ranked2(c);
-        parallel_for_range<size_t>(c, 1, [&](size_t chunk_begin, size_t chunk_end) {
-            std::vector<uint32_t> idx, few;
-            std::vector<float> r;
-            for (size_t v = chunk_begin; v < chunk_end; ++v) {
-                idx.clear(), few.clear(), r.clear();
-                for (size_t j = 0; j < m; ++j)
-                    if (left[j] && seen[v * m + j]) idx.push_back(sample(j));
-                const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
-                for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
-                settled2[v] = locate(pts, normals, radii, few, cand[v], scale, axis, sigma);
-                for (const uint32_t i : idx) {
-                    const float x = spacing_residual(pts, normals, radii, i, settled2[v], axis);
-                    if (!std::isnan(x)) r.push_back(x);
-                }
-                ranked2[v] = {-fit_residuals(r, sigma).score, v};
-            }
-        });
-        std::sort(ranked2.begin(), ranked2.end());
-        return distinct(settled2, ranked2);
+        return distinct(settle_candidates(pts, normals, radii, cand, seen, m, scale, axis, sigma,
+                                          [&](size_t j) { return left[j] != 0; }));
     };
     std::vector<uint32_t> few;
     for (size_t j = 0; j < m; j += std::max<size_t>(1, m / kLocatePoints)) few.push_back(sample(j));
@@ -1444,7 +1458,7 @@ void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
         return true;
     };
     std::vector<Places> sets;
-    const std::vector<Vec3> starts = distinct(settled, ranked);
+    const std::vector<Vec3> starts = distinct(first);
     for (size_t a = 0; a < starts.size(); ++a)
         for (size_t b = a + 1; b < starts.size(); ++b) sets.push_back({starts[a], starts[b]});
     if (out.at.size() == 1)
@@ -1476,33 +1490,16 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         return spacing_residual(pts, normals, radii, i, x, axis);
     };
     std::vector<uint8_t> explained(m, 0);
-    std::vector<Vec3> settled(c);
-    std::vector<std::pair<double, size_t>> ranked(c);
     std::vector<float> e;
-    std::vector<Vec3> first_settled;
-    std::vector<std::pair<double, size_t>> first_ranked;
+    Settled first;  // the first search's
     while (out.at.size() < kMaxScanners) {
         // From every candidate, the place that the points it sees (and no scanner explains yet)
         // settle on, ranked by their fit without visibility; the best few then with it.
-        parallel_for_range<size_t>(c, 1, [&](size_t chunk_begin, size_t chunk_end) {
-            std::vector<uint32_t> idx, few;
-            std::vector<float> r;
-            for (size_t v = chunk_begin; v < chunk_end; ++v) {
-                idx.clear(), few.clear(), r.clear();
-                for (size_t j = 0; j < m; ++j)
-                    if (!explained[j] && seen[v * m + j]) idx.push_back(sample(j));
-                const size_t stride = std::max<size_t>(1, idx.size() / kLocatePoints);
-                for (size_t j = 0; j < idx.size(); j += stride) few.push_back(idx[j]);
-                settled[v] = locate(pts, normals, radii, few, cand[v], scale, axis, sigma);
-                for (const uint32_t i : idx) {
-                    const float x = spacing_residual(pts, normals, radii, i, settled[v], axis);
-                    if (!std::isnan(x)) r.push_back(x);
-                }
-                ranked[v] = {-fit_residuals(r, sigma).score, v};
-            }
-        });
-        std::sort(ranked.begin(), ranked.end());
-        if (out.at.empty()) first_settled = settled, first_ranked = ranked;
+        const Settled st = settle_candidates(pts, normals, radii, cand, seen, m, scale, axis,
+                                             sigma, [&](size_t j) { return !explained[j]; });
+        const std::vector<Vec3>& settled = st.at;
+        const std::vector<std::pair<double, size_t>>& ranked = st.ranked;
+        if (out.at.empty()) first = st;
         Vec3 best_at{};
         Fit best;
         std::vector<float> best_e;  // the best place's residual per sample (NaN: not counted)
@@ -1544,8 +1541,8 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
         out.at.push_back(best_at);
     }
     if (out.at.size() < 2)
-        joint_search(caster, pts, normals, radii, r_med, noise, first_settled, first_ranked, cand,
-                     seen, m, scale, axis, sigma, out);
+        joint_search(caster, pts, normals, radii, r_med, noise, first, cand, seen, m, scale, axis,
+                     sigma, out);
     return out;
 }
 

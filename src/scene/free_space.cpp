@@ -1337,7 +1337,7 @@ Settled settle_candidates(const std::vector<Vec3>& pts, const std::vector<Vec3>&
 struct Scanners {
     std::vector<Vec3> at;
     Vec3 axis{0, 0, 0};
-    double score = 0;  // the first scanner's
+    double score = 0;  // the first scanner's fit, or the joint set's when one replaced it
 };
 
 constexpr size_t kPairStarts = 8;  // settled single places, paired with each other

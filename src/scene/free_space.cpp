@@ -1300,6 +1300,17 @@ void locate_places(const std::vector<Vec3>& pts, const std::vector<Vec3>& normal
     }
 }
 
+// Point i's residual from the place x where x sees it (not grazing, no disc between them); NaN
+// where not. The arithmetic first, the ray only where it counts.
+float seen_residual(const DiscCaster& caster, const std::vector<Vec3>& pts,
+                    const std::vector<Vec3>& normals, const std::vector<float>& radii,
+                    float r_med, float noise, uint32_t i, Vec3 x, Vec3 axis) {
+    const float e = spacing_residual(pts, normals, radii, i, x, axis);
+    if (std::isnan(e) || !caster.sees(i, x, ray_start(radii[i], r_med, noise)))
+        return std::numeric_limits<float>::quiet_NaN();
+    return e;
+}
+
 // From every candidate, the place that the sampled points it sees (and `use(j)` keeps) settle on
 // (locate), and the candidates ranked by their fit there without visibility, best first.
 struct Settled {
@@ -1385,8 +1396,8 @@ void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
             for (size_t j = chunk_begin; j < chunk_end; ++j) {
                 const uint32_t i = sample(j);
                 left[j] = std::none_of(at.begin(), at.end(), [&](Vec3 x) {
-                    return !std::isnan(spacing_residual(pts, normals, radii, i, x, axis)) &&
-                           caster.sees(i, x, tmin(i));
+                    return !std::isnan(
+                        seen_residual(caster, pts, normals, radii, r_med, noise, i, x, axis));
                 });
             }
         });
@@ -1485,9 +1496,7 @@ Scanners scanners_for_axis(const DiscCaster& caster, const std::vector<Vec3>& pt
     out.axis = axis;
     auto sample = [&](size_t j) { return uint32_t(j * n / m); };
     auto residual = [&](uint32_t i, Vec3 x) {
-        if (!caster.sees(i, x, ray_start(radii[i], r_med, noise)))
-            return std::numeric_limits<float>::quiet_NaN();
-        return spacing_residual(pts, normals, radii, i, x, axis);
+        return seen_residual(caster, pts, normals, radii, r_med, noise, i, x, axis);
     };
     std::vector<uint8_t> explained(m, 0);
     std::vector<float> e;

@@ -24,7 +24,7 @@ struct ProgressInfo {
 
 // Called at the start of a stage (done == 0), about ten times a second while it runs (possibly
 // from a worker thread, never from two at once) and at its end (done == total). Return false to
-// cancel: the call then stops early and throws vmap::Cancelled.
+// cancel: the call then stops early and throws vmap::Cancelled, without calling back again.
 using ProgressCallback = std::function<bool(const ProgressInfo&)>;
 
 // Seconds on the steady clock since t0 (how the library times its stages, for callers that time

@@ -43,7 +43,9 @@ void Progress::throw_if_cancelled() const {
 }
 
 void Progress::report(uint64_t done, bool force) {
-    if (!cb_) return;
+    // Once the callback has said stop, it is not called again: the work winds down to its next
+    // throw_if_cancelled() and may report on its way there.
+    if (!cb_ || cancelled()) return;
     const auto now = std::chrono::steady_clock::now();
     const int64_t ns = std::chrono::duration_cast<std::chrono::nanoseconds>(now - start_).count();
     int64_t last = last_ns_.load(std::memory_order_relaxed);
@@ -54,6 +56,7 @@ void Progress::report(uint64_t done, bool force) {
         lock.lock();
     else if (!lock.try_lock())
         return;
+    if (cancelled()) return;
     ProgressInfo info;
     info.stage = stage_;
     info.total = total_;

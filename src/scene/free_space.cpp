@@ -1397,8 +1397,8 @@ int two_sided(const DiscCaster& caster, const std::vector<Vec3>& pts,
 // sets that passed the other tests on the seventeen scenes' two- and three-scanner scans (rooms
 // and objects alone, noise 0 and 0.1): 193 of 239 under 1%, 28 at 1-20% (a hollow shell's thin
 // walls 4-15%), 18 at 23-49% (places under a table's top, beside cornell-dragon's two scanners,
-// around a lone object). At 10% test-open-hollow's objects alone lost their pair (docs/validation.md
-// "Scans: noisy scans of objects").
+// around a lone object). At 10% test-open-hollow's objects alone lost their pair
+// (docs/validation.md "Scans: noisy scans of objects").
 constexpr double kTwoSidedShare = 0.2;
 
 constexpr size_t kPairStarts = 8;  // settled single places, paired with each other
@@ -1518,7 +1518,8 @@ void joint_search(const DiscCaster& caster, const std::vector<Vec3>& pts,
         // No place may stand behind what the others scanned (two_sided).
         size_t seen_by_any = 0, two = 0;
         for (size_t j = 0; j < m; ++j) {
-            const int sides = two_sided(caster, pts, normals, sample(j), best_at, tmin(sample(j)));
+            const uint32_t i = sample(j);
+            const int sides = two_sided(caster, pts, normals, i, best_at, tmin(i));
             seen_by_any += sides != 0;
             two += sides == 3;
         }
@@ -1667,18 +1668,8 @@ std::string axis_words(const std::array<Vec3, 3>& frame, Vec3 a) {
 int scanners_side(const DiscCaster& caster, const std::vector<Vec3>& pts,
                   const std::vector<Vec3>& normals, uint32_t i, const std::vector<Vec3>& at,
                   float tmin) {
-    int side = 0;
-    for (const Vec3 x : at) {
-        const Vec3 to = x - pts[i];
-        const float dist = length(to);
-        if (!(dist > 0)) continue;
-        const float cs = dot(normals[i], to) / dist;
-        if (!(std::fabs(cs) >= kViewMinCos) || !caster.sees(i, x, tmin)) continue;
-        const int s = cs > 0 ? 1 : -1;
-        if (side != 0 && s != side) return 0;
-        side = s;
-    }
-    return side;
+    const int sides = two_sided(caster, pts, normals, i, at, tmin);
+    return sides == 1 ? 1 : sides == 2 ? -1 : 0;
 }
 
 }  // namespace

@@ -103,8 +103,6 @@ TEST(Bresenham, FindsNoOccluderBruteForceDoesNotAndEveryOneInACrossedCell) {
         const int32_t a = rng() % L, b = rng() % L;
         if (a == b) continue;
         const Vec3 p = leaf_discs(f.t)[a].centroid, q = leaf_discs(f.t)[b].centroid;
-        const Vec3 d = q - p;
-        const float len = length(d);
         std::set<int32_t> brute;
         for (int32_t l = 0; l < L; ++l)
             if (l != a && l != b &&

@@ -115,7 +115,9 @@ TEST_F(RayQueryTest, DirectionLengthDoesNotMatter) {
         for (const float s : {1e20f, 1e-23f}) {
             const RayHit h = shoot_ray(*vm_, i, {0.3f * s, 0.8f * s, 0.1f * s});
             ASSERT_EQ(h.hit, unit.hit) << i << " x" << s;
-            if (h.hit) EXPECT_EQ(h.id, unit.id) << i << " x" << s;
+            if (h.hit) {
+                EXPECT_EQ(h.id, unit.id) << i << " x" << s;
+            }
         }
         compared += unit.hit;
     }

@@ -5,6 +5,7 @@
 #include <tbb/global_control.h>
 
 #include <algorithm>
+#include <thread>
 #include <set>
 
 #include "backend_fixture.h"
@@ -205,6 +206,29 @@ TEST_P(VmapBuild, LinksAreStoredAtBothEndsSorted) {
             EXPECT_TRUE(std::binary_search(back.begin(), back.end(), n));
         }
     }
+}
+
+TEST_P(VmapBuild, AContextMadeOnAnotherThreadWhileSamplingGivesTheSameLinks) {
+    // vmap build makes the GPU's context on a thread of its own while it reads the input
+    // (warm_up_gpu); the build then runs on that context from the main thread. The reference:
+    // the CPU's build. On the CPU backend the warm-up does nothing.
+    BuildParams bp = build_params(7, 3);
+    std::jthread warm([p = bp] { warm_up_gpu(p); });
+    const PointSet ps = test::sample(test::scene_path("cornell-bunny"), 2500, 4);
+    warm.join();
+    BuildStats st;
+    const VisibilityMap vm = build_vmap(ps, bp, &st);
+    expect_ran_here(st.backend);
+    const VisibilityMap ref = build_vmap(ps, test::cpu_params(7, 3));
+    EXPECT_GT(ref.num_links(), 100u);
+    EXPECT_EQ(vm.link_offsets(), ref.link_offsets());
+    EXPECT_TRUE(std::ranges::equal(vm.link_targets(), ref.link_targets()));
+    // Called again, and with a device that is not there, it neither throws nor breaks a build.
+    warm_up_gpu(bp);
+    BuildParams absent = bp;
+    absent.device = 1 << 20;
+    warm_up_gpu(absent);
+    EXPECT_EQ(build_vmap(ps, bp).link_offsets(), ref.link_offsets());
 }
 
 VMAP_ON_EACH_BACKEND(VmapBuild);

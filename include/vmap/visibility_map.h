@@ -183,6 +183,12 @@ class VisibilityMap {
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats = nullptr,
                          const std::string& source = "points");
 
+// Makes the GPU context a build with these params will use, now: the first CUDA call of a
+// process takes a few tenths of a second. Called on a thread of its own while the input is read
+// (`vmap build` does), it takes that wait off build_vmap. Does nothing for backend cpu, the grid
+// walk, or a vmap built without CUDA; never throws (build_vmap reports a missing GPU).
+void warm_up_gpu(const BuildParams& params) noexcept;
+
 // For benchmarks (`vmap bench`, bench/bench.cpp), the backends of build_vmap apart from a build:
 // the CUDA backend's name as BuildStats::backend gives it ("cuda (NVIDIA H200, 132 SMs)") when
 // a usable device is present, else an empty string with the reason in *why.

@@ -36,6 +36,19 @@ std::optional<std::string> cuda_device(std::string* why) {
 #endif
 }
 
+void warm_cuda(int device) noexcept {
+#ifdef VMAP_HAVE_CUDA
+    int count = 0;
+    if (cudaGetDeviceCount(&count) == cudaSuccess && count > 0) {
+        const int d = device < 0 ? 0 : device;
+        if (d < count && cudaSetDevice(d) == cudaSuccess) cudaFree(nullptr);
+    }
+    cudaGetLastError();  // nothing sticky is left on this thread
+#else
+    (void)device;
+#endif
+}
+
 void fall_back_to_cpu(vmap::Backend requested, const std::string& what, const std::string& why,
                       std::string* note) {
     if (requested == vmap::Backend::kCuda)

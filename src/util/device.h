@@ -19,4 +19,10 @@ std::optional<std::string> cuda_device(std::string* why);
 void fall_back_to_cpu(vmap::Backend requested, const std::string& what, const std::string& why,
                       std::string* note);
 
+// Makes CUDA device `device`'s primary context (-1: device 0) now, where there is one: a
+// process's first CUDA call takes a few tenths of a second (the driver, the context), which a
+// thread calling this while the host reads its input takes off the build. Errors are left for
+// the build to report (they stay on this thread); does nothing in a build without CUDA.
+void warm_cuda(int device) noexcept;
+
 }  // namespace vmap::detail

@@ -27,6 +27,7 @@
 #include "vmap/frontier.h"
 #include "vmap/map_access.h"
 #include "octree/records.h"
+#include "util/device.h"
 
 namespace vmap {
 namespace {
@@ -200,6 +201,11 @@ auto in_arena(const BuildParams& params, F&& f) {
 }
 
 }  // namespace
+
+void warm_up_gpu(const BuildParams& params) noexcept {
+    if (params.backend == Backend::kCpu || params.occluders == OccluderSearch::kGridWalk) return;
+    detail::warm_cuda(params.device);
+}
 
 VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats* stats,
                          const std::string& source) {

@@ -5,7 +5,6 @@
 
 #include <algorithm>
 #include <chrono>
-#include <cstdlib>
 #include <filesystem>
 #include <memory>
 #include <thread>
@@ -247,13 +246,11 @@ int run_build(BuildOptions& o) {
     } else {
         // The GPU's context is made while the input is read (a copy of the params: reading may
         // set the octree's from the scene file).
-        std::jthread warm;
-        if (!std::getenv("VMAP_NO_WARM"))
-            warm = std::jthread([p = o.params] { warm_up_gpu(p); });
+        std::jthread warm([p = o.params] { warm_up_gpu(p); });
         const auto ti = std::chrono::steady_clock::now();
         PointSet pts = read_build_input(o, o.params, what);
         input_s = seconds_since(ti);
-        if (warm.joinable()) warm.join();
+        warm.join();
         npts = pts.size();
         vm = build_vmap(std::move(pts), o.params, &st, o.input.path);
         const auto ts = std::chrono::steady_clock::now();

@@ -1,8 +1,8 @@
 #!/bin/bash
 # On the device (carry .device and bench/internal/warm-up/ctx, built here with
 #   nvcc -O2 -arch=sm_90 -cudart static -o bench/internal/warm-up/ctx bench/internal/warm-up/ctx.cu):
-#   scripts/device.sh run none; bash bench/internal/warm-up/ab.sh   (at commit with VMAP_NO_WARM)
-# A/B of the CUDA warm-up during input (VMAP_NO_WARM=1 switches it off), interleaved.
+#   scripts/device.sh run none; bash bench/internal/warm-up/ab.sh   (at ccc0691, whose vmap had the switch)
+# A/B of the CUDA warm-up during input (VMAP_NO_WARM=1 switched it off at ccc0691 only), interleaved.
 set -u
 OUT=${OUT:-/tmp/out}; mkdir -p $OUT
 export LD_LIBRARY_PATH=$PWD/.device/lib

@@ -656,6 +656,12 @@ if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 -
     --bounces 1 --backend cpu --compare-brute; then
     expect_stdout "gi --compare-brute prints the difference" 'relative RMS vs brute force 0\.0[0-4]'
 fi
+# bench-gi at its default backends (cpu, and cuda where there is a GPU): without one the table
+# leaves the GPU column out (the solver's refusal used to end the command with exit status 1).
+if expect_ok "bench-gi at its default backends" bench-gi --points 300 --runs 1 --bounces 1 \
+    --brute-max 0; then
+    expect_stdout "bench-gi prints a row of 300 points" '^\| 300 \| [0-9]+ \|'
+fi
 expect_usage_error "gi --theta 0" gi x.vmap --theta 0
 expect_usage_error "gi --theta -1" gi x.vmap --theta -1
 expect_usage_error "gi --bounces -1" gi x.vmap --bounces -1

@@ -424,6 +424,7 @@ BuildStats reduce_stats(Run& r) {
     BuildStats st = r.probe_stats;
     if (r.c.rank != 0) return st;
     add_counters(st, sum, levels, leaves);
+    st.leaf_pairs = uint64_t(leaves) * (leaves - 1) / 2;  // the whole job's (the probe's is 0)
     if (!r.share.stats.construction.empty()) st.construction = r.share.stats.construction;
     st.backend = r.share.stats.backend;  // the probe built the octree only
     if (st.note.empty()) st.note = r.share.stats.note;

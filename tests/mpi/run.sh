@@ -88,6 +88,13 @@ check "progress names the ranks" bash -c "${mpi[*]} -np 2 '$vmap' build \
     '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \
     -o '$tmp/p.vmap' 2> '$tmp/err' && grep -q '^leaf pairs: [0-9]* to do on 2 ranks, cpu' '$tmp/err'"
 
+# Rank 0's summary counts the whole job's leaf pairs, as one process does (it said "of 0").
+check "summary: all leaf pairs" bash -c "'$vmap' build '$src/scenes/cornell-bunny.json' \
+    --points 3000 --max-height 6 --backend cpu -o '$tmp/p1.vmap' > '$tmp/out1' &&
+    ${mpi[*]} -np 2 '$vmap' build '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 \
+    --backend cpu -o '$tmp/p.vmap' > '$tmp/out' &&
+    n=\$(grep -oE 'of [1-9][0-9]* leaf pairs walked' '$tmp/out1') && grep -qF \"\$n\" '$tmp/out'"
+
 # Rank 0's summary: the backend the ranks ran and the slowest rank's seconds per phase.
 check "summary: backend and phases" bash -c "${mpi[*]} -np 2 '$vmap' build \
     '$src/scenes/cornell-bunny.json' --points 3000 --max-height 6 --backend cpu \

@@ -155,6 +155,10 @@ if [[ "$cmd" == bundle ]]; then
 fi
 
 if [[ "$cmd" == run ]]; then
+    [[ -d .device/bin ]] || {
+        echo "device.sh run: no .device/bin here: run scripts/device.sh bundle on the build machine first, and carry .device" >&2
+        exit 1
+    }
     : "${OUT:=$root/out/device}"
     mkdir -p "$OUT"
     # The binaries find scenes, models and tests/data from their own folder up (vmap::data_dir()).

@@ -21,6 +21,10 @@
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
+[[ -d .device/bin ]] || {
+    echo "gi-device.sh: no .device/bin here: run scripts/device.sh bundle on the build machine first, and carry .device" >&2
+    exit 1
+}
 : "${OUT:=$root/out/device}"
 mkdir -p "$OUT"
 # The binaries find scenes and models from their own folder up (vmap::data_dir()).
@@ -28,9 +32,11 @@ export LD_LIBRARY_PATH="$root/.device/lib${LD_LIBRARY_PATH:+:$LD_LIBRARY_PATH}"
 # The bundle compresses the large libraries and the test binaries.
 for f in .device/lib/*.xz .device/bin/*.xz; do [[ -e "$f" ]] && xz -d -k -f "$f"; done
 mkdir -p models
-for f in .device/models/*.gz; do
-    n="models/$(basename "$f" .gz)"
-    [[ -s "$n" ]] || gunzip -c "$f" >"$n"
+# The bundle's models are xz-compressed (scripts/device.sh bundle).
+for f in .device/models/*.xz; do
+    [[ -e "$f" ]] || continue
+    n="models/$(basename "$f" .xz)"
+    [[ -s "$n" ]] || xz -d -c "$f" >"$n"
 done
 nvidia-smi --query-gpu=name,memory.total --format=csv,noheader >"$OUT/gpu.txt" 2>&1 || true
 cat "$OUT/gpu.txt"

@@ -187,18 +187,23 @@ std::string md_row(const Options& o, const Header& hd, const Row& r) {
     const double speed = r.gpu_done && r.cpu_done ? r.cpu.median / r.gpu.median : 0;
     const double ntp = double(r.work.node_tests) / std::max<uint64_t>(1, r.work.pairs);
     const double kern = stat(r.kernel).median;
+    // A row whose only time is the CPU's estimate built nothing: no counts to show.
+    const bool counted = r.gpu_done || (r.cpu_done && !r.cpu_estimated);
+    auto count = [&](std::string text) { return counted ? text : std::string("-"); };
     return fmt::format(
-        "| {} | {} | {} | {} | {:.3g} | {:.1f}% | {:.3g} | {:.3g} | {} | {} | {} | {} | {} | {} | "
-        "{:.1f} | {} | {} | {} |\n",
+        "| {} | {} | {} | {} | {:.3g} | {} | {} | {} | {} | {} | {} | {} | {} | {} | "
+        "{} | {} | {} | {} |\n",
         r.scene, r.points, r.height, r.leaves, double(r.pairs),
-        100.0 * r.walked / std::max<uint64_t>(1, r.pairs), double(r.node_pairs_tested),
-        double(r.links), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
+        count(fmt::format("{:.1f}%", 100.0 * r.walked / std::max<uint64_t>(1, r.pairs))),
+        count(fmt::format("{:.3g}", double(r.node_pairs_tested))),
+        count(fmt::format("{:.3g}", double(r.links))), fmt_time(r.cpu, r.cpu_done, r.cpu_estimated),
         fmt_time(r.gpu, r.gpu_done, false), speed > 0 ? fmt::format("{:.1f}x", speed) : "-",
         r.gpu_done ? fmt::format("{:.3g}", gpu_rate) : "-",
         r.gpu_done ? fmt::format("{:.3g}", r.pairs / std::max(1e-9, kern)) : "-",
-        r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / hd.cores) : "-", ntp,
+        r.cpu_done ? fmt::format("{:.3g}", r.cpu_pair_rate / hd.cores) : "-",
+        count(fmt::format("{:.1f}", ntp)),
         r.gpu_done ? fmt::format("{:.3g}", r.work.node_tests / std::max(1e-9, kern)) : "-",
-        o.save ? fmt::format("{:.3g}", r.save.median) : "-",
+        o.save && counted ? fmt::format("{:.3g}", r.save.median) : "-",
         r.gpu_done ? fmt::format("{:.0f}", r.device_bytes / 1048576.0) : "-");
 }
 

@@ -656,6 +656,12 @@ if expect_ok "gi on a scene against the brute force" gi "$SCENE" --points 1500 -
     --bounces 1 --backend cpu --compare-brute; then
     expect_stdout "gi --compare-brute prints the difference" 'relative RMS vs brute force 0\.0[0-4]'
 fi
+# bench: a row the CPU only estimated built nothing, so it shows no counts (it showed 0.0%
+# walked, 0 node pairs and 0 links).
+if expect_ok "bench with the CPU's time estimated" bench --scene "$SCENE" --points 3000 \
+    --heights 5 --runs 1 --cpu-budget 0 --backends cpu; then
+    expect_stdout "an estimated row shows no counts" '^\| cornell-empty \| 3000 \| 5 \| [0-9]+ \| [0-9.e+]+ \| - \| - \| - \| [0-9.e+-]+ \(est\.\) \|'
+fi
 # bench-gi at its default backends (cpu, and cuda where there is a GPU): without one the table
 # leaves the GPU column out (the solver's refusal used to end the command with exit status 1).
 if expect_ok "bench-gi at its default backends" bench-gi --points 300 --runs 1 --bounces 1 \

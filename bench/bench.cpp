@@ -224,7 +224,7 @@ std::string md_table(const Options& o, const Header& hd, const std::vector<Row>&
         "{}\n\n",
         hd.cores, hd.device, o.runs, o.leaf_points, name_of(o.construction), git_commit(), hd.date);
     md +=
-        "| scene | points | height | leaves | leaf pairs | walked | node pairs tested | links | "
+        "| scene | points | max height | leaves | leaf pairs | walked | node pairs tested | links | "
         "CPU s | GPU s | speedup | GPU pairs/s | GPU kernel pairs/s | CPU pairs/s/core | "
         "node tests/pair | GPU node tests/s | save s | device MiB |\n";
     md += "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";

@@ -225,10 +225,11 @@ void warn_if_long(const std::string& what, uint64_t points, const OctreeParams& 
         1, std::min<size_t>(
                tbb::this_task_arena::max_concurrency(),
                tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism)));
-    // Rates from docs/results.md: about 3e7 leaf pairs/s per CPU core (the packet walk with node
-    // decisions), 2e9/s on an H100/H200 (the CPU backend's expected_pairs_per_second says the
-    // same).
-    const double cpu_s = pairs / (3e7 * cores), gpu_s = pairs / 2e9;
+    // Rates from docs/results.md: 4.5e7 leaf pairs/s per CPU core (the packet walk with node
+    // decisions; the CPU backend's expected_pairs_per_second, src/visibility/host_backend.h, whose
+    // estimate the build's first progress report then gives: the two agree), 2e9/s on an
+    // H100/H200.
+    const double cpu_s = pairs / (4.5e7 * cores), gpu_s = pairs / 2e9;
     if (cpu_s < 600) return;
     auto span = [](double s) {
         return s < 120         ? fmt::format("{:.0f} s", s)

@@ -60,6 +60,17 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
     if (in.vmap) {
         build_s = seconds_since(t0);
         what = fmt::format("V-map {} (loaded in {:.2f} s)", o.in.path, build_s);
+        count_emitters(in.vmap->points(), o.in.path);  // its one error before any note
+        // A map saved by `vmap build` at its defaults has no end window; the GI's own maps have
+        // one (docs/gi.md "The end window"): say so, the map is still used as it is.
+        const VisibilityParams& vp = in.vmap->visibility_params();
+        if (vp.end_window != kGiVmapEndWindow || vp.K != kGiVmapK || vp.eps != kGiVmapEps)
+            fmt::print(stderr,
+                       "vmap gi: note: {} was built with -K {} --eps {} --end-window {}; the V-map "
+                       "vmap gi builds itself has -K {} --eps {} --end-window {} (closer to exact "
+                       "GI: docs/gi.md \"The end window\"; vmap build takes the same options)\n",
+                       o.in.path, vp.K, vp.eps, vp.end_window, kGiVmapK, kGiVmapEps,
+                       kGiVmapEndWindow);
         return std::move(*in.vmap);
     }
     count_emitters(in.points, o.in.path);

@@ -629,6 +629,13 @@ if expect_ok "gi on a .vmap, PLY out" gi x.vmap --bounces 3 --ply lit.ply --back
 fi
 if expect_ok "gi converges by default" gi x.vmap --backend cpu --tolerance 0.01; then
     expect_stdout "gi says it converged" '^converged: '
+    # x.vmap has vmap build's predicate (no end window): gi says its own maps differ.
+    if grep -q 'note: x.vmap was built with -K 2 --eps 0.01 --end-window 0; the V-map vmap gi builds itself has -K 2 --eps 0.01 --end-window 2' err.txt; then
+        ok "gi notes a loaded map without the GI's end window"
+    else
+        fail "gi said nothing of the loaded map's end window"
+        sed 's/^/  stderr: /' err.txt | head -5
+    fi
 fi
 if expect_ok "gi renders a PNG and a PFM" gi x.vmap --bounces 1 --backend cpu -o lit.png \
     --pfm lit.pfm --size 64x48; then

@@ -70,7 +70,7 @@ CloudOptions cloud_options(const BuildOptions& o) {
 }
 
 nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const BuildStats& st,
-                          double input_s, size_t npts, double save_s) {
+                          double input_s, size_t npts, double save_s, const SaveStats& ss) {
     const auto& w = st.work;
     nlohmann::json j = params_json(vm);
     j["input"] = o.input.path;
@@ -98,7 +98,11 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
                     {"backend", st.seconds_backend},
                     {"extract", st.seconds_extract},
                     {"links", st.seconds_links},
-                    {"save", save_s}};
+                    {"save", save_s},
+                    {"save_encode", ss.encode_seconds},
+                    {"save_write", ss.write_seconds},
+                    {"save_sync", ss.sync_seconds}};
+    j["file_bytes"] = ss.bytes;
     j["peak_device_bytes"] = st.peak_device_bytes;
     j["warnings"] = st.warnings;
     j["output"] = o.count_links ? nlohmann::json(nullptr) : nlohmann::json(o.output);
@@ -106,7 +110,7 @@ nlohmann::json build_json(const BuildOptions& o, const VisibilityMap& vm, const 
 }
 
 void print_build_details(const VisibilityMap& vm, const BuildStats& st, double input_s,
-                         double save_s) {
+                         double save_s, const SaveStats& ss) {
     const auto& w = st.work;
     const int cores = tbb::this_task_arena::max_concurrency();
     fmt::print(
@@ -124,6 +128,11 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double i
         st.seconds_plan, st.seconds_wait, st.seconds_extract,
         st.lanes > 1 ? fmt::format(" (summed over {} lanes)", st.lanes) : std::string(),
         st.seconds_links, save_s);
+    if (ss.bytes)
+        fmt::print(
+            "saving:     {:.1f} MB: links coded {:.3f} s, hashed and written {:.3f} s, synced to "
+            "disk {:.3f} s\n",
+            ss.bytes / 1e6, ss.encode_seconds, ss.write_seconds, ss.sync_seconds);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
     fmt::print(
         "throughput: {:.3g} leaf pairs/s end to end ({:.3g} per core on {} cores); the "
@@ -135,7 +144,8 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double i
 }
 
 void print_build_summary(const BuildOptions& o, const std::string& what, const VisibilityMap& vm,
-                         const BuildStats& st, size_t npts, double input_s, double save_s) {
+                         const BuildStats& st, size_t npts, double input_s, double save_s,
+                         const SaveStats& ss) {
     const bool verbose = verbosity() == Verbosity::kVerbose;
     const auto& w = st.work;
     fmt::print("input:      {}\n", what);
@@ -154,7 +164,7 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
         fmt::print("links:      {} ({} bytes as link ends)\n", st.links, st.links * 8);
     fmt::print("time:       {:.3f} s total{}\n", st.seconds_total,
                verbose ? "" : " (-v for the breakdown and the links per level)");
-    if (verbose) print_build_details(vm, st, input_s, save_s);
+    if (verbose) print_build_details(vm, st, input_s, save_s, ss);
     if (!o.count_links) fmt::print("wrote:      {}\n", o.output);
 }
 
@@ -227,6 +237,7 @@ int run_build(BuildOptions& o) {
     size_t npts = 0;
     VisibilityMap vm;
     double save_s = 0, input_s = 0;
+    SaveStats ss;  // the single process's save; mpirun's rank 0 reports only its time
     std::vector<std::string> ranks;
     if (mpi::launched()) {  // mpirun -np N vmap build: the ranks share the work, rank 0 reports
         auto read = [&](BuildParams& bp) {
@@ -254,14 +265,14 @@ int run_build(BuildOptions& o) {
         npts = pts.size();
         vm = build_vmap(std::move(pts), o.params, &st, o.input.path);
         const auto ts = std::chrono::steady_clock::now();
-        if (!o.count_links) save_vmap(o.output, vm);
+        if (!o.count_links) save_vmap(o.output, vm, &ss);
         save_s = seconds_since(ts);
     }
     for (const std::string& w : st.warnings) fmt::print(stderr, "vmap build: warning: {}\n", w);
     if (o.json)
-        fmt::print("{}\n", build_json(o, vm, st, input_s, npts, save_s).dump(2));
+        fmt::print("{}\n", build_json(o, vm, st, input_s, npts, save_s, ss).dump(2));
     else if (verbosity() != Verbosity::kQuiet)
-        print_build_summary(o, what, vm, st, npts, input_s, save_s);
+        print_build_summary(o, what, vm, st, npts, input_s, save_s, ss);
     if (!o.json && verbosity() != Verbosity::kQuiet)
         for (const std::string& line : ranks) fmt::print("{}\n", line);
     return 0;

@@ -250,6 +250,37 @@ TEST_F(VmapFile, SavingTheSameMapTwiceGivesTheSameBytes) {
     EXPECT_EQ(a, slurp(dir.path("c.vmap")));
 }
 
+// A file of several of the writer's 8 MiB chunks, whose 1 MiB checksum blocks straddle the
+// pieces it is written from: the header holds the hash of the payload as one buffer
+// (payload_hash), the stats give the file's size, and it loads back whole.
+TEST(VmapFileChunks, AFileOfManyChunksHoldsTheChecksumOfItsWholePayload) {
+    Scene sc = load_scene(std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-empty.json");
+    sc.points = 600000;
+    sc.pattern = SamplePattern::kUniform;  // quick; the file's size is what matters here
+    BuildParams bp;
+    bp.backend = Backend::kCpu;
+    bp.octree.max_height = 3;
+    bp.octree.leaf_points = 64;
+    const VisibilityMap vm = build_vmap(sample_scene(sc), bp, nullptr, "test");
+    ScratchDir dir;
+    const std::string p = dir.path("big.vmap");
+    SaveStats ss;
+    save_vmap(p, vm, &ss);
+    const std::string bytes = slurp(p);
+    EXPECT_EQ(ss.bytes, bytes.size());
+    ASSERT_GT(bytes.size(), size_t(3) << 23);  // more than three chunks
+    EXPECT_GE(ss.encode_seconds, 0.0);
+    EXPECT_GT(ss.write_seconds, 0.0);
+    EXPECT_GE(ss.sync_seconds, 0.0);
+    uint64_t size = 0, sum = 0;
+    std::memcpy(&size, bytes.data() + 16, 8);
+    std::memcpy(&sum, bytes.data() + 24, 8);
+    EXPECT_EQ(size, bytes.size() - kHeaderBytes);
+    EXPECT_EQ(sum, detail::payload_hash(reinterpret_cast<const uint8_t*>(bytes.data()) + kHeaderBytes,
+                                        bytes.size() - kHeaderBytes));
+    expect_same_map(vm, load_vmap(p));
+}
+
 TEST_F(VmapFile, AMapWithoutColoursRadiiOrEmissionRoundTrips) {
     // Points with normals only: the optional arrays must stay absent, not come back empty-sized
     // or filled in.

@@ -29,6 +29,10 @@ class AtomicFile {
     // Writes at an offset without throwing (safe from several threads at once); returns 0 or
     // the errno of the failure. Pass it to fail() on the calling thread.
     int write_at(const void* data, size_t n, off_t at) noexcept;
+    // Starts the disk's writeback of bytes [at, at + n) already written, without waiting for
+    // it (Linux's sync_file_range; nothing elsewhere). A large file written in pieces so has
+    // most of its bytes on disk by the time commit()'s fsync waits. Thread-safe; best effort.
+    void start_writeback(off_t at, size_t n) noexcept;
     [[noreturn]] void fail(int err);
 
     // fsync, close, rename onto the output, fsync the folder. Throws vmap::Error naming the

@@ -203,7 +203,13 @@ double sampled_cpu_pair_rate(const Octree& tree, const VisibilityParams& vp, uin
 // The .vmap file (versioned binary with a checksum; io/vmap_file.cpp). save writes to a
 // temporary name and renames it; load throws vmap::Error for a missing, truncated, corrupt or
 // wrong-version file, naming the file and the section.
-void save_vmap(const std::string& path, const VisibilityMap& vm);
+struct SaveStats {  // what a save took, when asked for
+    uint64_t bytes = 0;          // the file's size
+    double encode_seconds = 0;   // links coded, the sections laid out
+    double write_seconds = 0;    // hashed and written to the page cache, writeback started
+    double sync_seconds = 0;     // waiting for the disk (fsync), the rename, the folder's fsync
+};
+void save_vmap(const std::string& path, const VisibilityMap& vm, SaveStats* stats = nullptr);
 VisibilityMap load_vmap(const std::string& path);
 
 }  // namespace vmap

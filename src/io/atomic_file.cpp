@@ -48,7 +48,7 @@ void sync_folder(const std::string& path) {
 // during a save). Only names of our own pattern, whose process id is gone, are touched.
 void remove_stale_temps(const std::string& path) {
     const fs::path p(path);
-    const std::string prefix = "." + p.filename().string() + ".";
+    const std::string prefix = fmt::format(".{}.", p.filename().string());
     std::error_code ec;
     for (fs::directory_iterator it(folder_of(path), ec), end; !ec && it != end; it.increment(ec)) {
         const std::string name = it->path().filename().string();
@@ -92,6 +92,16 @@ int AtomicFile::write_at(const void* data, size_t n, off_t at) noexcept {
         done += size_t(got);
     }
     return 0;
+}
+
+void AtomicFile::start_writeback(off_t at, size_t n) noexcept {
+#ifdef __linux__
+    // Only starts the writeback: commit()'s fsync is what makes the bytes durable. A failure
+    // here (a file system without it) changes nothing but the timing.
+    (void)::sync_file_range(fd_, at, off_t(n), SYNC_FILE_RANGE_WRITE);
+#else
+    (void)at, (void)n;
+#endif
 }
 
 void AtomicFile::write(const void* data, size_t n) {

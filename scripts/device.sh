@@ -258,7 +258,7 @@ if [[ "$cmd" == run ]]; then
                             timeout "${CONS_TIMEOUT:-590}" "$bin/$vb" -v build "$@" > "$OUT/cons-$tag-$r.log" 2>&1 ||
                                 { rc=1; echo "FAILED $tag (rc $?)"; }
                             echo "wall $(awk -v a="$t0" -v b="$(date +%s.%N)" 'BEGIN{print b - a}')" >> "$OUT/cons-$tag-$r.log"
-                            { grep -E "^construction|^time:|^ +plan|^wall|^device|^throughput|^leaf pairs:" "$OUT/cons-$tag-$r.log" |
+                            { grep -E "^construction|^time:|^ +plan|^saving:|^wall|^device|^throughput|^leaf pairs:" "$OUT/cons-$tag-$r.log" |
                                 tr '\n' ' '; echo " [$tag $r]"; } | tee -a "$OUT/construction.txt"
                             if [[ ${#bins[@]} -gt 1 && -f /tmp/cons.vmap ]]; then
                                 if [[ $vb == "${bins[0]}" ]]; then mv /tmp/cons.vmap /tmp/cons-first.vmap

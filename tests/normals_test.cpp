@@ -1050,6 +1050,11 @@ TEST(Orientation, ConsistencyCheckSeesRandomSigns) {
     for (Vec3& n : ps.normals)
         if (rng() % 2) n = -n;
     EXPECT_GT(normal_inconsistency(ps), 0.3);
+    // A fifth of the points probed reads the share every point gives, to a few hundredths.
+    const double all = normal_inconsistency(ps, 8, 0), fifth = normal_inconsistency(ps, 8, ps.size() / 5);
+    EXPECT_GT(all, 0.3);
+    EXPECT_NEAR(fifth, all, 0.03);
+    EXPECT_NE(fifth, all);  // a different set of probes
 }
 
 // ---- splat radii ---------------------------------------------------------------------------

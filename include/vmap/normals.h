@@ -140,8 +140,10 @@ float even_sampling_radius_scale(double close_share);
 
 // The fraction of neighbouring point pairs on one smooth surface (near each other's tangent
 // plane, normals within ~35 degrees of one axis) whose normals point to opposite sides: about 0
-// for consistent normals. Needs normals; 0 for fewer than 2 points.
-double normal_inconsistency(const PointSet& points, size_t k = 8);
+// for consistent normals. Needs normals; 0 for fewer than 2 points. Read at most `max_probes`
+// points, at a fixed stride (0: every point): a share, which 100,000 points' neighbours give to
+// well under a tenth of a point.
+double normal_inconsistency(const PointSet& points, size_t k = 8, size_t max_probes = 100000);
 
 // A scan's surface noise (range noise, registration jitter): points scattered off the surface
 // they sample. sigma is the median, over at most kNoiseProbes points at a fixed stride, of the

@@ -151,8 +151,9 @@ void print_build_summary(const BuildOptions& o, const std::string& what, const V
     fmt::print("input:      {}\n", what);
     fmt::print("points:     {}\n", npts);
     print_params(vm);
-    if (!st.note.empty()) fmt::print("note:       {}\n", st.note);
-    fmt::print("backend:    {}\n", st.backend);
+    // The note (why not the GPU) went to stderr as the build began; here it rides on the
+    // backend's line, so that a terminal does not show it twice as a note.
+    fmt::print("backend:    {}{}\n", st.backend, st.note.empty() ? "" : "; " + st.note);
     fmt::print("leaf pairs: {} tested, {} facing ({:.1f}%), {} visible ({:.1f}%)\n", w.pairs,
                w.facing_pairs, 100.0 * w.facing_pairs / std::max<uint64_t>(1, w.pairs),
                w.visible_pairs, 100.0 * w.visible_pairs / std::max<uint64_t>(1, w.pairs));

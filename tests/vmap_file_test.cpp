@@ -96,7 +96,7 @@ std::string with_links(const std::string& bytes, std::span<const uint64_t> offse
         body.append(reinterpret_cast<const char*>(&chunks), 8);
         body.append(reinterpret_cast<const char*>(e.chunk_node.data()), e.chunk_node.size() * 4);
         body.append(reinterpret_cast<const char*>(e.chunk_byte.data()), e.chunk_byte.size() * 8);
-        for (const auto& c : e.chunks) body.append(reinterpret_cast<const char*>(c.data()), c.size());
+        body.append(reinterpret_cast<const char*>(e.stream.data()), e.stream.size());
     }
     const uint64_t len = body.size();
     put("LINK", 4), put(&len, 8);
@@ -591,6 +591,35 @@ TEST(LinkCodec, StreamLengthsMatchTheEncoder) {
     }
 }
 
+// encode_links counts each chunk's bytes before coding it with its own coder: the count and the
+// bytes must be the library's.
+TEST(LinkCodec, CountedLengthsAndOurCodersBytesMatchTheLibrary) {
+    std::mt19937 rng(9);
+    for (uint32_t count : {0u, 1u, 2u, 3u, 4u, 5u, 8u, 9u, 100u, 1027u}) {
+        for (uint32_t width : {1u, 8u, 9u, 16u, 17u, 24u, 25u, 31u}) {
+            SCOPED_TRACE(::testing::Message() << count << " gaps below 2^" << width);
+            std::vector<uint32_t> v(count);
+            uint32_t at = 0;
+            for (auto& x : v) {  // increasing; gaps at and around the byte boundaries too
+                const uint32_t r = rng() % 4;
+                const uint32_t gap = r == 0   ? (1u << (width - 1))
+                                     : r == 1 ? (1u << (width - 1)) - 1
+                                              : rng() & ((1u << (width - 1)) - 1);
+                if (uint64_t(at) + gap < 0x7fffffffu) at += gap;  // a node id stays an int32
+                x = at;
+            }
+            std::vector<uint8_t> lib(streamvbyte_max_compressedbytes(count) + 1);
+            const size_t n = streamvbyte_delta_encode(v.data(), count, lib.data(), 0);
+            EXPECT_EQ(detail::delta_stream_bytes(v.data(), count), n);
+            // Our coder: the library's bytes, and nothing written past the stream's 3 spare bytes.
+            std::vector<uint8_t> ours(n + 3 + 16, 0xa5);
+            EXPECT_EQ(detail::encode_delta_stream(v.data(), count, ours.data()), n);
+            EXPECT_TRUE(std::equal(lib.begin(), lib.begin() + ptrdiff_t(n), ours.begin()));
+            for (size_t i = n + 3; i < ours.size(); ++i) ASSERT_EQ(ours[i], 0xa5) << i;
+        }
+    }
+}
+
 TEST(LinkCodec, RandomListsRoundTrip) {
     // Empty nodes, one huge node, many chunks (over 2^22 ends), gaps of every width.
     std::mt19937 rng(11);
@@ -608,8 +637,7 @@ TEST(LinkCodec, RandomListsRoundTrip) {
     }
     const detail::EncodedLinks e = detail::encode_links(off, t);
     EXPECT_GT(e.chunk_node.size(), 2u);
-    std::vector<uint8_t> stream;
-    for (const auto& c : e.chunks) stream.insert(stream.end(), c.begin(), c.end());
+    const std::vector<uint8_t> stream(e.stream.begin(), e.stream.end());
     ASSERT_EQ(stream.size(), e.chunk_byte.back());
     std::vector<int32_t> back(t.size(), -1);
     EXPECT_EQ(detail::decode_links(off, e.chunk_node, e.chunk_byte, stream.data(), back.data()), "");

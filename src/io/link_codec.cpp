@@ -5,9 +5,15 @@
 #include <streamvbytedelta.h>
 #include <streamvbyte.h>
 
+#include <tbb/enumerable_thread_specific.h>
+
+#include <algorithm>
 #include <atomic>
+#include <bit>
+#include <cstring>
 #include <mutex>
 
+#include "vmap/error.h"
 #include "vmap/parallel.h"
 
 namespace vmap::detail {
@@ -33,25 +39,77 @@ std::vector<uint32_t> chunk_bounds(std::span<const uint64_t> offsets) {
 
 }  // namespace
 
+size_t delta_stream_bytes(const uint32_t* values, uint32_t count) {
+    size_t data = 0;
+    uint32_t prev = 0;
+    for (uint32_t i = 0; i < count; ++i) {
+        const uint32_t gap = values[i] - prev;
+        prev = values[i];
+        data += 1 + size_t(gap >= (1u << 8)) + size_t(gap >= (1u << 16)) + size_t(gap >= (1u << 24));
+    }
+    return (size_t(count) + 3) / 4 + data;
+}
+
+size_t encode_delta_stream(const uint32_t* values, uint32_t count, uint8_t* out) {
+    static_assert(std::endian::native == std::endian::little, "the gaps' low bytes come first");
+    uint8_t* key = out;
+    uint8_t* data = out + (size_t(count) + 3) / 4;
+    uint32_t prev = 0;
+    for (uint32_t i = 0; i < count; i += 4) {
+        const uint32_t in_key = std::min(4u, count - i);
+        uint8_t k = 0;
+        for (uint32_t j = 0; j < in_key; ++j) {
+            const uint32_t gap = values[i + j] - prev;
+            prev = values[i + j];
+            const uint32_t code =
+                uint32_t(gap >= (1u << 8)) + uint32_t(gap >= (1u << 16)) + uint32_t(gap >= (1u << 24));
+            std::memcpy(data, &gap, 4);  // all four bytes; the next gap writes over the spare ones
+            data += code + 1;
+            k = uint8_t(k | (code << (2 * j)));
+        }
+        *key++ = k;
+    }
+    return size_t(data - out);
+}
+
+// The chunks' sizes are counted first, then each chunk is coded into a buffer of its thread's
+// (reused: a fresh buffer a chunk, zeroed and returned, cost more than the coding on 16 threads,
+// in page faults and unmapping) and copied to its place (the coder writes up to 3 bytes past
+// its stream, which must not reach the next chunk's while another thread codes it).
 EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets) {
     EncodedLinks e;
     e.chunk_node = chunk_bounds(offsets);
     const size_t chunks = e.chunk_node.size() - 1;
-    e.chunks.resize(chunks);
     const auto* t = reinterpret_cast<const uint32_t*>(targets.data());
+    e.chunk_byte.assign(chunks + 1, 0);
+    parallel_for(chunks, [&](size_t k) {
+        size_t bytes = 0;
+        for (uint32_t n = e.chunk_node[k]; n < e.chunk_node[k + 1]; ++n)
+            bytes += delta_stream_bytes(t + offsets[n], uint32_t(offsets[n + 1] - offsets[n]));
+        e.chunk_byte[k + 1] = bytes;
+    });
+    for (size_t k = 0; k < chunks; ++k) e.chunk_byte[k + 1] += e.chunk_byte[k];
+    e.stream.resize(e.chunk_byte[chunks]);
+    tbb::enumerable_thread_specific<std::vector<uint8_t>> scratch;
+    std::atomic<bool> differs{false};
     parallel_for(chunks, [&](size_t k) {
         const uint32_t n0 = e.chunk_node[k], n1 = e.chunk_node[k + 1];
-        std::vector<uint8_t> buf(streamvbyte_max_compressedbytes(uint32_t(offsets[n1] - offsets[n0])) +
-                                 (n1 - n0));
+        std::vector<uint8_t>& buf = scratch.local();
+        const size_t room = e.chunk_byte[k + 1] - e.chunk_byte[k] + 4;
+        if (buf.size() < room) buf.resize(room);
         size_t at = 0;
         for (uint32_t n = n0; n < n1; ++n) {
             const uint32_t len = uint32_t(offsets[n + 1] - offsets[n]);
-            if (len) at += streamvbyte_delta_encode(t + offsets[n], len, buf.data() + at, 0);
+            if (len) at += encode_delta_stream(t + offsets[n], len, buf.data() + at);
         }
-        e.chunks[k].assign(buf.begin(), buf.begin() + ptrdiff_t(at));  // exact size: buf goes
+        if (at != e.chunk_byte[k + 1] - e.chunk_byte[k]) {
+            differs = true;
+            return;
+        }
+        std::memcpy(e.stream.data() + e.chunk_byte[k], buf.data(), at);
     });
-    e.chunk_byte.assign(chunks + 1, 0);
-    for (size_t k = 0; k < chunks; ++k) e.chunk_byte[k + 1] = e.chunk_byte[k] + e.chunks[k].size();
+    if (differs)
+        throw Error("internal error: the link coder wrote another length than was counted");
     return e;
 }
 

@@ -16,16 +16,33 @@
 #include <string>
 #include <vector>
 
+#include "util/huge_array.h"
+
 namespace vmap::detail {
 
 struct EncodedLinks {
-    std::vector<uint32_t> chunk_node;            // chunks + 1 node boundaries, 0 .. nodes
-    std::vector<uint64_t> chunk_byte;            // chunks + 1 byte boundaries, 0 .. stream size
-    std::vector<std::vector<uint8_t>> chunks;    // each chunk's bytes
+    std::vector<uint32_t> chunk_node;  // chunks + 1 node boundaries, 0 .. nodes
+    std::vector<uint64_t> chunk_byte;  // chunks + 1 byte boundaries, 0 .. stream size
+    HugeVector<uint8_t> stream;        // every chunk's bytes, chunk k at chunk_byte[k]
 };
 
-// Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node).
+// Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node). Each
+// chunk's size is counted first (delta_stream_bytes), so the chunks are coded in parallel
+// (encode_delta_stream) into one array of the exact size; throws vmap::Error if a chunk's
+// coding ever differs in length from its count.
 EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets);
+
+// streamvbyte_delta_encode(values, count, out, 0), byte for byte, without its branches: each gap
+// is stored as four bytes and the stream moves on by its length, so `out` needs 3 bytes of room
+// past the stream (delta_stream_bytes + 3). Debian's libstreamvbyte is built without its SIMD
+// coders; its scalar one branches on every gap's length and coded the links at about 13 ns a
+// link end. The library stays the decoder, and the reference in the tests.
+size_t encode_delta_stream(const uint32_t* values, uint32_t count, uint8_t* out);
+
+// The bytes streamvbyte_delta_encode makes of `count` values coded from 0: a control byte for
+// every four values, then each gap from the value before in 1 to 4 bytes (its bytes up to the
+// highest that is not zero; one at least).
+size_t delta_stream_bytes(const uint32_t* values, uint32_t count);
 
 // The length in bytes of a StreamVByte stream of `count` values that starts at p, read off its
 // control bytes; SIZE_MAX when it would run past `avail` bytes.

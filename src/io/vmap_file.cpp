@@ -105,6 +105,7 @@ struct Writer {
         size_t n;
     };
     std::deque<std::vector<uint8_t>> owned;  // stable addresses
+    std::deque<detail::HugeVector<uint8_t>> owned_large;
     std::vector<Piece> pieces;
     size_t size = 0;
     bool open = false;  // owned.back() still takes small fields
@@ -123,12 +124,12 @@ struct Writer {
         open = false;
     }
     // A large buffer of bytes, kept until the file is written.
-    void take(std::vector<uint8_t>&& v) {
+    void take(detail::HugeVector<uint8_t>&& v) {
         if (v.empty()) return;
         close_small();
         size += v.size();
-        owned.push_back(std::move(v));
-        pieces.push_back({owned.back().data(), owned.back().size()});
+        owned_large.push_back(std::move(v));
+        pieces.push_back({owned_large.back().data(), owned_large.back().size()});
     }
     template <class T>
     void put(const T& v) {
@@ -259,7 +260,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.put(uint64_t(links.chunk_node.size() - 1));
     for (uint32_t x : links.chunk_node) w.put(x);  // a few per 4M link ends: copied
     for (uint64_t x : links.chunk_byte) w.put(x);
-    for (auto& c : links.chunks) w.take(std::move(c));
+    w.take(std::move(links.stream));
     w.end(s);
     w.finish();
 }

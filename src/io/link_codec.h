@@ -28,8 +28,7 @@ struct EncodedLinks {
 
 // Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node). Each
 // chunk's size is counted first (delta_stream_bytes), so the chunks are coded in parallel
-// (encode_delta_stream) into one array of the exact size; throws vmap::Error if a chunk's
-// coding ever differs in length from its count.
+// (encode_delta_stream) into one array of the exact size.
 EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets);
 
 // streamvbyte_delta_encode(values, count, out, 0), byte for byte, without its branches: each gap

@@ -75,16 +75,26 @@ uint64_t block_hash(const uint8_t* p, size_t n, uint64_t seed) {
 
 }  // namespace
 
+namespace {
+
+constexpr size_t kBlock = size_t(1) << 20;  // the checksum's blocks
+
+// The blocks' hashes folded in block order, with the payload's length.
+uint64_t fold_hashes(const std::vector<uint64_t>& hs, size_t n) {
+    uint64_t h = 0x84222325cbf29ce4ULL ^ n;
+    for (uint64_t x : hs) h = (h ^ x) * 0x100000001b3ULL;
+    return h;
+}
+
+}  // namespace
+
 uint64_t detail::payload_hash(const uint8_t* p, size_t n) {
-    constexpr size_t kBlock = size_t(1) << 20;
     const size_t blocks = (n + kBlock - 1) / kBlock;
     std::vector<uint64_t> hs(blocks);
     parallel_for(blocks, [&](size_t b) {
         hs[b] = block_hash(p + b * kBlock, std::min(kBlock, n - b * kBlock), b);
     });
-    uint64_t h = 0x84222325cbf29ce4ULL ^ n;
-    for (uint64_t x : hs) h = (h ^ x) * 0x100000001b3ULL;
-    return h;
+    return fold_hashes(hs, n);
 }
 
 namespace {
@@ -275,7 +285,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
 void write_file(const std::string& path, const Writer& w, SaveStats* stats) {
     using Clock = std::chrono::steady_clock;
     const auto t0 = Clock::now();
-    constexpr size_t kBlock = size_t(1) << 20, kChunk = size_t(8) << 20;
+    constexpr size_t kChunk = size_t(8) << 20;
     static_assert(kChunk % kBlock == 0);
     std::vector<size_t> at(w.pieces.size() + 1, 0);  // each piece's payload offset
     for (size_t k = 0; k < w.pieces.size(); ++k) at[k + 1] = at[k] + w.pieces[k].n;
@@ -320,8 +330,7 @@ void write_file(const std::string& path, const Writer& w, SaveStats* stats) {
         file.start_writeback(off_t(kHeader + lo), hi - lo);
     });
     if (err.load() != 0) file.fail(err.load());
-    uint64_t h = 0x84222325cbf29ce4ULL ^ n;  // payload_hash's fold, in block order
-    for (uint64_t x : hs) h = (h ^ x) * 0x100000001b3ULL;
+    const uint64_t h = fold_hashes(hs, n);  // payload_hash's
     std::vector<uint8_t> head;
     head.insert(head.end(), kMagic, kMagic + 8);
     auto put = [&](auto v) {

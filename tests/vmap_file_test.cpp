@@ -592,7 +592,7 @@ TEST(LinkCodec, StreamLengthsMatchTheEncoder) {
 }
 
 // encode_links counts each chunk's bytes before coding it with its own coder: the count and the
-// bytes must be the library's.
+// bytes must be the library's; decode_links' decoder must read the library's streams.
 TEST(LinkCodec, CountedLengthsAndOurCodersBytesMatchTheLibrary) {
     std::mt19937 rng(9);
     for (uint32_t count : {0u, 1u, 2u, 3u, 4u, 5u, 8u, 9u, 100u, 1027u}) {
@@ -616,6 +616,14 @@ TEST(LinkCodec, CountedLengthsAndOurCodersBytesMatchTheLibrary) {
             EXPECT_EQ(detail::encode_delta_stream(v.data(), count, ours.data()), n);
             EXPECT_TRUE(std::equal(lib.begin(), lib.begin() + ptrdiff_t(n), ours.begin()));
             for (size_t i = n + 3; i < ours.size(); ++i) ASSERT_EQ(ours[i], 0xa5) << i;
+            // Our decoder gives the values back, the stream at the very end of its buffer (so
+            // its last gaps are read byte by byte) and with room after it.
+            std::vector<uint8_t> tight(lib.begin(), lib.begin() + ptrdiff_t(n));
+            std::vector<uint32_t> back(count, 7), back2(count, 7);
+            detail::decode_delta_stream(tight.data(), tight.data() + n, count, back.data());
+            EXPECT_EQ(back, v);
+            detail::decode_delta_stream(lib.data(), lib.data() + lib.size(), count, back2.data());
+            EXPECT_EQ(back2, v);
         }
     }
 }

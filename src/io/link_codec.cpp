@@ -78,6 +78,29 @@ size_t encode_delta_stream(const uint32_t* values, uint32_t count, uint8_t* out)
     return size_t(data - out);
 }
 
+void decode_delta_stream(const uint8_t* in, const uint8_t* end, uint32_t count, uint32_t* out) {
+    static constexpr uint32_t kMask[4] = {0xffu, 0xffffu, 0xffffffu, 0xffffffffu};
+    const uint8_t* key = in;
+    const uint8_t* data = in + (size_t(count) + 3) / 4;
+    uint32_t prev = 0;
+    for (uint32_t i = 0; i < count; i += 4) {
+        const uint32_t k = *key++, in_key = std::min(4u, count - i);
+        for (uint32_t j = 0; j < in_key; ++j) {
+            const uint32_t code = (k >> (2 * j)) & 3;
+            uint32_t gap = 0;
+            if (end - data >= 4) {
+                std::memcpy(&gap, data, 4);  // all four bytes, then only the gap's kept
+                gap &= kMask[code];
+            } else {  // the last bytes of the buffer: only what is there
+                std::memcpy(&gap, data, code + 1);
+            }
+            data += code + 1;
+            prev += gap;
+            out[i + j] = prev;
+        }
+    }
+}
+
 // The chunks' sizes are counted first, then each chunk is coded into a buffer of its thread's
 // (reused: a fresh buffer a chunk, zeroed and returned, cost more than the coding on 16 threads,
 // in page faults and unmapping) and copied to its place (the coder writes up to 3 bytes past
@@ -150,7 +173,7 @@ std::string decode_links(std::span<const uint64_t> offsets, std::span<const uint
             if (bytes == SIZE_MAX)
                 return fail(k, fmt::format("node {}'s links run past their chunk", n));
             auto* out = reinterpret_cast<uint32_t*>(targets + offsets[n]);
-            streamvbyte_delta_decode(p, out, uint32_t(len), 0);
+            decode_delta_stream(p, end, uint32_t(len), out);
             p += bytes;
             for (uint64_t i = 0; i < len; ++i) {
                 if (out[i] >= uint64_t(nn))

@@ -35,8 +35,14 @@ EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int
 // is stored as four bytes and the stream moves on by its length, so `out` needs 3 bytes of room
 // past the stream (delta_stream_bytes + 3). Debian's libstreamvbyte is built without its SIMD
 // coders; its scalar one branches on every gap's length and coded the links at about 13 ns a
-// link end. The library stays the decoder, and the reference in the tests.
+// link end. The library stays the reference in the tests.
 size_t encode_delta_stream(const uint32_t* values, uint32_t count, uint8_t* out);
+
+// streamvbyte_delta_decode(in, out, count, 0) without its branches: each gap read as four bytes
+// and masked to its length, where at least four bytes are left before `end` (byte by byte in
+// the last three). The caller has checked that the stream's bytes (stream_bytes) lie before
+// `end`.
+void decode_delta_stream(const uint8_t* in, const uint8_t* end, uint32_t count, uint32_t* out);
 
 // The bytes streamvbyte_delta_encode makes of `count` values coded from 0: a control byte for
 // every four values, then each gap from the value before in 1 to 4 bytes (its bytes up to the

@@ -131,7 +131,7 @@ EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int
             const uint32_t len = uint32_t(offsets[n + 1] - offsets[n]);
             if (len) at += encode_delta_stream(t + offsets[n], len, buf.data() + at);
         }
-        std::memcpy(e.stream.data() + e.chunk_byte[k], buf.data(), at);
+        if (at) std::memcpy(e.stream.data() + e.chunk_byte[k], buf.data(), at);  // none: no array
     });
     return e;
 }

@@ -205,6 +205,10 @@ if grep -Eq '^leaf pairs: [0-9]+ to do on cpu .*, about ' <("$VMAP" build "$SCEN
 if expect_ok "build --json" build "$SCENE" --points 1000 --max-height 4 -o j.vmap --backend cpu --json; then
     if /usr/bin/env python3 -c 'import json,sys; d=json.load(open("out.txt")); assert d["links"] > 0 and d["output"] == "j.vmap"' 2>/dev/null ||
         grep -q '"links": [1-9]' out.txt; then ok "build --json has the links"; else fail "build --json"; fi
+    # The save's size and parts: the file's size, to the byte.
+    if grep -q "\"file_bytes\": $(stat -c %s j.vmap)," out.txt && grep -q '"save_sync": ' out.txt; then
+        ok "build --json gives the file's size and the save's parts"
+    else fail "build --json: no file_bytes equal to the file's size, or no save_sync"; fi
 fi
 
 # ---- batches: --pairs (text, stdin, .npy), --out answers.npy, --from with many ids, --json ----

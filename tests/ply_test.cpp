@@ -680,6 +680,114 @@ TEST(Ply, NonFiniteCoordinatesNormalsColoursAndRadiiAreRejected) {
     }
 }
 
+// A body of 4 MB or more is parsed in pieces in parallel (read_ascii in src/io/ply.cpp): the
+// same model as the binary encoding gives, blank lines and CRLF endings anywhere, and each error
+// the one a line-by-line reader meets first, with its element, index and line number.
+TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError) {
+    ScratchDir dir;
+    const size_t nv = 90000, nf = 60000;
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<double> u(-1, 1);
+    PlyElement vertices{"vertex",
+                        {{"float", "x"},
+                         {"float", "y"},
+                         {"float", "z"},
+                         {"float", "nx"},
+                         {"float", "ny"},
+                         {"float", "nz"},
+                         {"uchar", "red"},
+                         {"uchar", "green"},
+                         {"uchar", "blue"}},
+                        {}};
+    for (size_t i = 0; i < nv; ++i)
+        vertices.rows.push_back({double(float(u(rng))), double(float(u(rng))),
+                                 double(float(u(rng))), double(float(u(rng))),
+                                 double(float(u(rng))), double(float(u(rng))), double(i % 256),
+                                 double(i / 256 % 256), 7});
+    PlyElement quads = faces({});
+    for (size_t f = 0; f < nf; ++f) {
+        const double a = double((f * 7919) % (nv - 3));
+        quads.rows.push_back(f % 3 ? std::vector<double>{3, a, a + 1, a + 2}
+                                   : std::vector<double>{4, a, a + 1, a + 2, a + 3});
+    }
+    const std::vector<PlyElement> elements = {{"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
+                                              vertices, quads};
+    const std::string header = ply_header("ascii", elements);
+    const std::string body = ply_body("ascii", elements);
+    ASSERT_GE(body.size(), size_t(8) << 20) << "the body must span several pieces";
+    const ModelData want = read_ply(dir.write("bin.ply", make_ply("binary_little_endian", elements)));
+    ASSERT_EQ(want.points.size(), nv);
+    auto expect_same = [&](const ModelData& m) {
+        ASSERT_EQ(m.points.size(), nv);
+        EXPECT_EQ(m.points.positions, want.points.positions);
+        EXPECT_EQ(m.points.normals, want.points.normals);
+        EXPECT_EQ(m.points.colors, want.points.colors);
+        EXPECT_EQ(m.triangles, want.triangles);
+        EXPECT_EQ(m.triangles.size(), nf + nf / 3 + (nf % 3 ? 1 : 0));
+    };
+    expect_same(read_ply(dir.write("big.ply", header + body)));
+
+    // Line starts: lines[k] is where body line k begins (line 0 is the camera's element).
+    std::vector<size_t> lines{0};
+    for (size_t i = 0; i + 1 < body.size(); ++i)
+        if (body[i] == '\n') lines.push_back(i + 1);
+    ASSERT_EQ(lines.size(), 1 + nv + nf);
+    const size_t first_line = size_t(std::count(header.begin(), header.end(), '\n')) + 1;
+    auto vertex_line = [&](size_t i) { return 1 + i; };  // body lines before vertex i
+    auto face_line = [&](size_t f) { return 1 + nv + f; };
+    // A body line replaced (without its line end) by `text`.
+    auto with_line = [&](std::string b, size_t line, const std::string& text) {
+        const size_t end = b.find('\n', lines[line]);
+        return b.replace(lines[line], end - lines[line], text);
+    };
+    auto at = [&](size_t body_line) { return "(line " + std::to_string(first_line + body_line) + ")"; };
+
+    // Blank lines and CRLF endings move line numbers, not elements.
+    {
+        std::string b = body;
+        for (size_t line : {face_line(nf - 1), vertex_line(70000), vertex_line(20000), size_t(1)})
+            b.insert(lines[line], " \t\r\n\n");
+        for (size_t i = b.size() / 3; i < b.size(); i += 9973) {
+            const size_t nl = b.find('\n', i);
+            if (nl == std::string::npos) break;
+            if (b[nl - 1] != '\r') b.insert(nl, "\r");
+            i = nl;
+        }
+        expect_same(read_ply(dir.write("blank.ply", header + b)));
+        // An error past the inserted lines is reported on its own line.
+        std::string bad = with_line(body, vertex_line(80000), "0 0 zero 0 0 1 1 2 3");
+        bad.insert(lines[vertex_line(20000)], "\n\n");
+        const std::string where =
+            "vertex 80000 (line " + std::to_string(first_line + vertex_line(80000) + 2) + ")";
+        EXPECT_READ_ERROR(read_ply(dir.write("blank.ply", header + bad)), where,
+                          "invalid number 'zero'");
+    }
+    // Errors late in the body, and the first of two.
+    const std::string late = with_line(body, vertex_line(85000), "0 0 zero 0 0 1 1 2 3");
+    EXPECT_READ_ERROR(read_ply(dir.write("late.ply", header + late)),
+                      "late.ply: vertex 85000 " + at(vertex_line(85000)), "invalid number 'zero'");
+    EXPECT_READ_ERROR(
+        read_ply(dir.write("two.ply", header + with_line(late, vertex_line(10), "0 0 0 1 1 1 300 0 0"))),
+        "two.ply: vertex 10 " + at(vertex_line(10)), "value 300 out of range for uchar");
+    EXPECT_READ_ERROR(
+        read_ply(dir.write("face.ply", header + with_line(body, face_line(nf - 2), "3 0 1 90000"))),
+        "face.ply: face " + std::to_string(nf - 2) + " " + at(face_line(nf - 2)),
+        "vertex index 90000 out of range (90000 vertices)");
+    EXPECT_READ_ERROR(
+        read_ply(dir.write("short.ply", header + with_line(body, vertex_line(60000), "0 0 0 1 1 1 2 3"))),
+        "short.ply: vertex 60000 " + at(vertex_line(60000)), "expected 9 values, found 8");
+    // Truncated, and data after the last element.
+    EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, lines[face_line(nf - 5)]))),
+                      "cut.ply: truncated: expected " + std::to_string(nf) +
+                          " face elements, found " + std::to_string(nf - 5));
+    EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, lines[vertex_line(70000)]))),
+                      "cut.ply: truncated: expected " + std::to_string(nv) +
+                          " vertex elements, found 70000");
+    EXPECT_READ_ERROR(read_ply(dir.write("extra.ply", header + body + "\n \n1 2 3\n")),
+                      "extra.ply: line " + std::to_string(first_line + lines.size() + 2),
+                      "unexpected data after the last element");
+}
+
 TEST(Ply, DamagedFilesOnlyEverThrowVmapErrors) {
     ScratchDir dir;
     std::mt19937 rng(42);

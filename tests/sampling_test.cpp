@@ -419,6 +419,44 @@ TEST(SampleElimination, EqualsTheSerialGreedyOnRandomLists) {
     }
 }
 
+// Large enough (over 65,536 present candidates) that each phase's threshold is found by
+// histograms of W's bits before nth_element (Eliminator::rank_above): weights from a few values
+// (whole digits alike, ties broken by id) and from a continuum.
+TEST(SampleElimination, EqualsTheSerialGreedyWhereTheThresholdIsFoundByDigits) {
+    for (uint64_t seed = 1; seed <= 2; ++seed) {
+        std::mt19937_64 rng(seed);
+        const uint64_t M = 150000;
+        detail::NeighbourLists L;
+        L.id.resize(M);
+        std::iota(L.id.begin(), L.id.end(), 0u);
+        std::shuffle(L.id.begin(), L.id.end(), rng);
+        L.start.assign(1, 0);
+        std::uniform_real_distribution<float> u(0, 1);
+        const float values[] = {0.125f, 0.25f, 0.5f};
+        for (uint64_t i = 0; i < M; ++i) {
+            const int want = 4 + int(rng() % 20);
+            for (int k = 0; k < want; ++k) {
+                const uint64_t j = (i + 1 + rng() % 40) % M;
+                if (std::find(L.nb.begin() + int64_t(L.start.back()), L.nb.end(), uint32_t(j)) !=
+                    L.nb.end())
+                    continue;
+                L.nb.push_back(uint32_t(j));
+                L.weight.push_back(seed == 1 ? values[rng() % 3] : u(rng));
+            }
+            L.start.push_back(L.nb.size());
+        }
+        for (uint64_t keep : {M / 4, M - M / 3}) {
+            SCOPED_TRACE("seed " + std::to_string(seed) + ", keep " + std::to_string(keep));
+            const std::vector<uint64_t> want = serial_elimination(L, keep);
+            for (int threads : {1, 4}) {
+                const std::vector<uint64_t> got = eliminate_with(L, keep, threads);
+                ASSERT_TRUE(got == want) << threads << " threads: " << differ(got, want)
+                                         << " candidates differ from the serial greedy";
+            }
+        }
+    }
+}
+
 TEST(SampleElimination, KeepsAllOrNone) {
     detail::NeighbourLists L;
     L.id = {2, 0, 1};

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cmath>
 #include <memory>
 #include <tuple>
@@ -159,6 +160,13 @@ class Eliminator {
     std::vector<uint64_t> run(uint64_t keep, Progress* progress);
 
   private:
+    // The slot of rank r (0: the first to go) among the slots v by `above`, as nth_element
+    // would find it but without one thread's pass over all of v (it took 0.1 s of the
+    // dragon's sampling on 16 cores): histograms of W's bits, 16 at a time from the top, made
+    // in parallel, narrow v to the digit that holds rank r, and nth_element orders the few
+    // left. W >= 0, so its bits order as the doubles do.
+    uint32_t rank_above(const std::vector<uint32_t>& v, uint64_t r) const;
+
     // The slots that list slot i, ascending: rev_[rev_start_[i] .. rev_start_[i + 1]).
     void build_reverse_lists() {
         std::vector<uint32_t> n(M_ + 1, 0);
@@ -244,6 +252,40 @@ std::vector<uint32_t> select(const std::vector<uint32_t>& v, const std::vector<u
     return out;
 }
 
+uint32_t Eliminator::rank_above(const std::vector<uint32_t>& v, uint64_t r) const {
+    constexpr int kDigit = 16;
+    constexpr uint64_t kBins = uint64_t(1) << kDigit, kChunk = uint64_t(1) << 16;
+    auto digit = [&](uint32_t a, int shift) {
+        return (std::bit_cast<uint64_t>(W_[a]) >> shift) & (kBins - 1);
+    };
+    std::vector<uint32_t> rest;
+    const std::vector<uint32_t>* cur = &v;
+    std::vector<uint8_t> flag;
+    for (int shift = 64 - kDigit; shift >= 0 && cur->size() > kChunk; shift -= kDigit) {
+        const uint64_t n = cur->size(), chunks = (n + kChunk - 1) / kChunk;
+        std::vector<uint32_t> hist(chunks * kBins, 0);
+        parallel_for(chunks, [&](uint64_t c) {
+            uint32_t* h = hist.data() + c * kBins;
+            for (uint64_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+                ++h[digit((*cur)[i], shift)];
+        });
+        std::vector<uint64_t> total(kBins, 0);
+        parallel_for(kBins, [&](uint64_t b) {
+            for (uint64_t c = 0; c < chunks; ++c) total[b] += hist[c * kBins + b];
+        });
+        uint64_t bin = kBins - 1;  // from the largest digit down, to the one holding rank r
+        while (total[bin] <= r) r -= total[bin--];
+        flag.resize(n);
+        parallel_for(n, [&](uint64_t k) { flag[k] = digit((*cur)[k], shift) == bin; });
+        rest = select(*cur, flag);
+        cur = &rest;
+    }
+    if (cur == &v) rest = v;
+    std::nth_element(rest.begin(), rest.begin() + int64_t(r), rest.end(),
+                     [&](uint32_t a, uint32_t b) { return above(a, b); });
+    return rest[r];
+}
+
 // The serial greedy removes the present candidate of largest key, one at a time; its keys only
 // fall (W only falls, and the largest of falling keys cannot rise), so the removal keys never
 // increase. In a phase with `to_remove` candidates still to go, let T be the (to_remove+1)-th
@@ -259,18 +301,15 @@ std::vector<uint64_t> Eliminator::run(uint64_t keep, Progress* progress) {
     std::vector<uint8_t> flag;
     while (live.size() > keep) {
         const uint64_t to_remove = live.size() - keep;
-        // T, and the candidates above it (the first to_remove after the partition).
-        std::vector<uint32_t> order = live;
-        std::nth_element(order.begin(), order.begin() + int64_t(to_remove), order.end(),
-                         [&](uint32_t a, uint32_t b) { return above(a, b); });
-        const uint32_t t = order[to_remove];
+        // T, and the candidates above it (exactly to_remove, in live's order: ascending).
+        const uint32_t t = rank_above(live, to_remove);
         // T is this key, fixed, though W[t] may fall in the phase.
         const double Wt = W_[t];
         const uint32_t idt = id_[t];
         auto above_t = [&](uint32_t a) { return W_[a] > Wt || (W_[a] == Wt && id_[a] > idt); };
-        order.resize(to_remove);
-        parallel_sort(order.begin(), order.end());
-        std::vector<uint32_t> active = std::move(order);
+        flag.resize(live.size());
+        parallel_for(live.size(), [&](size_t k) { flag[k] = above_t(live[k]); });
+        std::vector<uint32_t> active = select(live, flag);
         while (!active.empty()) {
             flag.resize(active.size());
             parallel_for(active.size(), [&](size_t k) { flag[k] = dominant(active[k]); });

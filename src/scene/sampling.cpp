@@ -74,22 +74,43 @@ struct SurfaceDraw {
     std::vector<double> surface_area;
     double area = 0;
 
+    // The areas and the triangles in parallel, the running sums in one thread (in triangle
+    // order: the same doubles, so the same draws, at any thread count).
     explicit SurfaceDraw(const Scene& sc) : scene(sc), surface_area(sc.surfaces.size(), 0.0) {
+        std::vector<double> ar;
+        std::vector<uint32_t> slot;
         for (uint32_t s = 0; s < sc.surfaces.size(); ++s) {
             const Mesh& m = sc.surfaces[s].mesh;
-            for (uint32_t k = 0; k < m.triangles.size(); ++k) {
-                const auto& t = m.triangles[k];
-                const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
-                const Vec3 x = cross(b - a, c - a);
-                const double ar =
-                    0.5 * std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
-                if (!(ar > 0) || !std::isfinite(ar)) continue;  // degenerate triangle: no area
-                tris.push_back({s, k, a, b, c, x / float(2 * ar)});
-                area += ar;
-                surface_area[s] += ar;
+            const uint32_t n = uint32_t(m.triangles.size());
+            ar.resize(n);
+            slot.resize(n);
+            parallel_for(n, [&](uint32_t k) {
+                const double a = twice_area(m, k) * 0.5;
+                ar[k] = a > 0 && std::isfinite(a) ? a : 0;  // degenerate: no area, not drawn
+            });
+            const size_t base = tris.size();
+            uint32_t kept = 0;
+            for (uint32_t k = 0; k < n; ++k) {
+                if (ar[k] == 0) continue;
+                slot[k] = kept++;
+                area += ar[k];
+                surface_area[s] += ar[k];
                 cdf.push_back(area);
             }
+            tris.resize(base + kept);
+            parallel_for(n, [&](uint32_t k) {
+                if (ar[k] == 0) return;
+                const auto& t = m.triangles[k];
+                const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
+                tris[base + slot[k]] = {s, k, a, b, c, cross(b - a, c - a) / float(2 * ar[k])};
+            });
         }
+    }
+    static double twice_area(const Mesh& m, uint32_t k) {
+        const auto& t = m.triangles[k];
+        const Vec3 a = m.vertices[t[0]], b = m.vertices[t[1]], c = m.vertices[t[2]];
+        const Vec3 x = cross(b - a, c - a);
+        return std::sqrt(double(x.x) * x.x + double(x.y) * x.y + double(x.z) * x.z);
     }
 
     // Draw i of the stream `seed` into slot `at` of ps and surf (arrays already sized).

@@ -129,14 +129,29 @@ NeighbourLists same_side_neighbours(const std::vector<Vec3>& pos, const std::vec
             }
         }
     });
-    out.start.assign(M + 1, 0);
-    for (uint64_t q = 0; q < M; ++q) out.start[q + 1] = out.start[q] + count[q];
-    out.nb.resize(out.start[M]);
-    out.weight.resize(out.start[M]);
-    parallel_for(M, [&](uint64_t q) {
-        out.id[q] = by_cell[q].second;
-        std::copy_n(&wide_nb[q * kNb], count[q], out.nb.begin() + int64_t(out.start[q]));
-        std::copy_n(&wide_weight[q * kNb], count[q], out.weight.begin() + int64_t(out.start[q]));
+    // Packed: the lists' starts by a prefix over chunks, then each chunk's lists copied.
+    constexpr uint64_t kChunk = uint64_t(1) << 14;
+    const uint64_t chunks = (M + kChunk - 1) / kChunk;
+    std::vector<uint64_t> chunk_start(chunks + 1, 0);
+    parallel_for(chunks, [&](uint64_t c) {
+        uint64_t n = 0;
+        for (uint64_t q = c * kChunk; q < std::min(M, (c + 1) * kChunk); ++q) n += count[q];
+        chunk_start[c + 1] = n;
+    });
+    for (uint64_t c = 0; c < chunks; ++c) chunk_start[c + 1] += chunk_start[c];
+    out.start.resize(M + 1);
+    out.start[M] = chunk_start[chunks];
+    out.nb.resize(chunk_start[chunks]);
+    out.weight.resize(chunk_start[chunks]);
+    parallel_for(chunks, [&](uint64_t c) {
+        uint64_t at = chunk_start[c];
+        for (uint64_t q = c * kChunk; q < std::min(M, (c + 1) * kChunk); ++q) {
+            out.start[q] = at;
+            out.id[q] = by_cell[q].second;
+            std::copy_n(&wide_nb[q * kNb], count[q], out.nb.begin() + int64_t(at));
+            std::copy_n(&wide_weight[q * kNb], count[q], out.weight.begin() + int64_t(at));
+            at += count[q];
+        }
     });
     return out;
 }

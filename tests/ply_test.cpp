@@ -1,5 +1,6 @@
 // The PLY reader and writer (src/io/ply.cpp): formats, round trips, every kind of bad input.
 #include "io_test_util.h"
+#include "io/ply_pieces.h"
 
 namespace vmap {
 namespace {
@@ -805,6 +806,76 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
         const std::string path = dir.write("damaged.ply", header + b);
         expect_only_vmap_errors(path, [&] { return read_ply(path); });
     }
+}
+
+// What a read gave: the model's arrays, or the error's message.
+std::string outcome(const std::function<ModelData()>& read) {
+    try {
+        const ModelData m = read();
+        std::ostringstream s;
+        auto put = [&](const auto& v) {
+            s << v.size() << ':';
+            s.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(v[0])));
+        };
+        put(m.points.positions), put(m.points.normals), put(m.points.colors), put(m.points.radii);
+        put(m.points.emission), put(m.sensors), put(m.triangles);
+        for (const std::string& n : m.notes) s << n << '\n';
+        return s.str();
+    } catch (const Error& e) {
+        return std::string("error: ") + e.what();
+    }
+}
+
+// Differential: an ascii body cut into pieces of a few bytes (detail::read_ply_in_pieces) reads
+// exactly as line by line, model or error message, for good files and randomly damaged ones.
+TEST(Ply, AsciiBodiesInPiecesReadAsLineByLineEvenWhenDamaged) {
+    ScratchDir dir;
+    std::mt19937 rng(5);
+    const std::vector<PlyElement> elements = {
+        {"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
+        {"vertex",
+         {{"float", "x"},
+          {"float", "y"},
+          {"float", "z"},
+          {"float", "nx"},
+          {"float", "ny"},
+          {"float", "nz"},
+          {"uchar", "red"},
+          {"uchar", "green"},
+          {"uchar", "blue"},
+          {"float", "radius"}},
+         {{0, 0, 0, 0, 0, 1, 1, 2, 3, 0.5},
+          {1, 0, 0, 0, 1, 0, 4, 5, 6, 1},
+          {1, 1, 0, 1, 0, 0, 7, 8, 9, 2},
+          {0, 1, 0.5, 0, 0, -1, 10, 11, 12, 0.25}}},
+        faces({{3, 0, 1, 2}, {4, 0, 1, 2, 3}, {3, 3, 2, 1}}),
+        {"trailer", {{"short", "values", "ushort"}}, {{3, 1, 2, 3}, {0}}},
+    };
+    const std::string good = make_ply("ascii", elements);
+    size_t same_models = 0, same_errors = 0;
+    for (int i = 0; i < 600; ++i) {
+        std::string text = i < 4 ? good : damaged(good, rng);
+        if (i % 4 == 0) {  // harmless edits instead: blanks and CRs beside the body's blanks
+            text = good;
+            const size_t body = text.find("end_header\n") + 11;
+            for (int k = 0; k < 6; ++k) {
+                const size_t at = body + rng() % (text.size() - body);
+                if (text[at] == ' ' || text[at] == '\n') text.insert(at, rng() % 2 ? " \t" : "\r");
+            }
+        }
+        const size_t body_at = text.find("end_header\n");
+        if (i % 5 == 1 && body_at != std::string::npos) text.insert(body_at + 11, "\n \n");
+        const std::string path = dir.write("pieces.ply", text);
+        const std::string want = outcome([&] { return detail::read_ply_in_pieces(path, 0); });
+        for (size_t piece : {size_t(1), size_t(7), size_t(30)}) {
+            SCOPED_TRACE("damage " + std::to_string(i) + ", pieces of " + std::to_string(piece));
+            ASSERT_EQ(outcome([&] { return detail::read_ply_in_pieces(path, piece); }), want)
+                << text;
+        }
+        (want.rfind("error: ", 0) == 0 ? same_errors : same_models)++;
+    }
+    EXPECT_GT(same_models, 20u) << "the damage left too few readable files to compare";
+    EXPECT_GT(same_errors, 100u);
 }
 
 TEST(Ply, DamagedFilesOnlyEverThrowVmapErrors) {

@@ -18,6 +18,7 @@
 #include <system_error>
 #include <vector>
 
+#include "io/ply_pieces.h"
 #include "io/text_util.h"
 #include "vmap/files.h"
 #include "vmap/io.h"
@@ -850,10 +851,10 @@ bool has_data(const char* b, const char* e) {
 // too short for the header's counts, then data after the last element. (A 34 MB model, the
 // dragon, took 0.17 s in one thread; docs/results.md.)
 void read_ascii(const std::string& path, const Header& header, const char* data, const char* end,
-                ModelData& out) {
+                ModelData& out, size_t piece_bytes) {
     std::vector<const char*> cut{data};
-    while (size_t(end - cut.back()) > kAsciiPiece) {
-        const char* at = cut.back() + kAsciiPiece;
+    while (size_t(end - cut.back()) > piece_bytes) {
+        const char* at = cut.back() + piece_bytes;
         const char* eol = static_cast<const char*>(std::memchr(at, '\n', size_t(end - at)));
         if (eol == nullptr || eol + 1 == end) break;
         cut.push_back(eol + 1);
@@ -963,17 +964,18 @@ uint8_t colour_byte(float c) {
     return static_cast<uint8_t>(std::lround(c * 255.0f));
 }
 
-}  // namespace
-
-ModelData read_ply(const std::string& path, const std::array<double, 3>& origin) try {
+// read_ply, with an ascii body of at least `parallel_from` bytes parsed in pieces of about
+// `piece_bytes`.
+ModelData read_ply_pieces(const std::string& path, const std::array<double, 3>& origin,
+                          size_t parallel_from, size_t piece_bytes) try {
     const FileBuffer file = load_file(path);
     if (file.size == 0) fail(path, "empty file");
     const Header header = parse_header(path, file);
     ModelData out;
     out.points.origin = origin;
     const char* data = file.begin() + header.data_offset;
-    if (header.format == Format::kAscii && size_t(file.end() - data) >= kParallelAscii) {
-        read_ascii(path, header, data, file.end(), out);
+    if (header.format == Format::kAscii && size_t(file.end() - data) >= parallel_from) {
+        read_ascii(path, header, data, file.end(), out, std::max<size_t>(piece_bytes, 1));
     } else if (header.format == Format::kAscii) {
         AsciiSource source(path, data, file.end(), header.data_line);
         read_data(path, header, source, out);
@@ -986,6 +988,16 @@ ModelData read_ply(const std::string& path, const std::array<double, 3>& origin)
 } catch (const std::bad_alloc&) {
     // Counts are checked against the file size, so only a file too big for memory gets here.
     fail(path, "out of memory while reading");
+}
+
+}  // namespace
+
+ModelData read_ply(const std::string& path, const std::array<double, 3>& origin) {
+    return read_ply_pieces(path, origin, kParallelAscii, kAsciiPiece);
+}
+
+ModelData detail::read_ply_in_pieces(const std::string& path, size_t piece_bytes) {
+    return read_ply_pieces(path, {0, 0, 0}, piece_bytes == 0 ? SIZE_MAX : 0, piece_bytes);
 }
 
 namespace {

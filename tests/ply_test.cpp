@@ -1,6 +1,6 @@
 // The PLY reader and writer (src/io/ply.cpp): formats, round trips, every kind of bad input.
-#include "io_test_util.h"
 #include "io/ply_pieces.h"
+#include "io_test_util.h"
 
 namespace vmap {
 namespace {
@@ -681,6 +681,17 @@ TEST(Ply, NonFiniteCoordinatesNormalsColoursAndRadiiAreRejected) {
     }
 }
 
+// Vertex properties by name: uchar for the colours, float for the rest.
+std::vector<PlyProp> vertex_props(std::initializer_list<const char*> names) {
+    std::vector<PlyProp> props;
+    for (const char* n : names) {
+        const std::string name = n;
+        props.push_back(
+            {name == "red" || name == "green" || name == "blue" ? "uchar" : "float", name});
+    }
+    return props;
+}
+
 // A body of 4 MB or more is parsed in pieces in parallel (read_ascii in src/io/ply.cpp): the
 // same model as the binary encoding gives, blank lines and CRLF endings anywhere, and each error
 // the one a line-by-line reader meets first, with its element, index and line number.
@@ -689,17 +700,8 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
     const size_t nv = 90000, nf = 60000;
     std::mt19937 rng(7);
     std::uniform_real_distribution<double> u(-1, 1);
-    PlyElement vertices{"vertex",
-                        {{"float", "x"},
-                         {"float", "y"},
-                         {"float", "z"},
-                         {"float", "nx"},
-                         {"float", "ny"},
-                         {"float", "nz"},
-                         {"uchar", "red"},
-                         {"uchar", "green"},
-                         {"uchar", "blue"}},
-                        {}};
+    PlyElement vertices{
+        "vertex", vertex_props({"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue"}), {}};
     for (size_t i = 0; i < nv; ++i)
         vertices.rows.push_back({double(float(u(rng))), double(float(u(rng))),
                                  double(float(u(rng))), double(float(u(rng))),
@@ -711,12 +713,13 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
         quads.rows.push_back(f % 3 ? std::vector<double>{3, a, a + 1, a + 2}
                                    : std::vector<double>{4, a, a + 1, a + 2, a + 3});
     }
-    const std::vector<PlyElement> elements = {{"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
-                                              vertices, quads};
+    const std::vector<PlyElement> elements = {
+        {"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}}, vertices, quads};
     const std::string header = ply_header("ascii", elements);
     const std::string body = ply_body("ascii", elements);
     ASSERT_GE(body.size(), size_t(8) << 20) << "the body must span several pieces";
-    const ModelData want = read_ply(dir.write("bin.ply", make_ply("binary_little_endian", elements)));
+    const ModelData want =
+        read_ply(dir.write("bin.ply", make_ply("binary_little_endian", elements)));
     ASSERT_EQ(want.points.size(), nv);
     auto expect_same = [&](const ModelData& m) {
         ASSERT_EQ(m.points.size(), nv);
@@ -741,7 +744,9 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
         const size_t end = b.find('\n', lines[line]);
         return b.replace(lines[line], end - lines[line], text);
     };
-    auto at = [&](size_t body_line) { return "(line " + std::to_string(first_line + body_line) + ")"; };
+    auto at = [&](size_t body_line) {
+        return "(line " + std::to_string(first_line + body_line) + ")";
+    };
 
     // Blank lines and CRLF endings move line numbers, not elements.
     {
@@ -768,22 +773,25 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
     EXPECT_READ_ERROR(read_ply(dir.write("late.ply", header + late)),
                       "late.ply: vertex 85000 " + at(vertex_line(85000)), "invalid number 'zero'");
     EXPECT_READ_ERROR(
-        read_ply(dir.write("two.ply", header + with_line(late, vertex_line(10), "0 0 0 1 1 1 300 0 0"))),
+        read_ply(
+            dir.write("two.ply", header + with_line(late, vertex_line(10), "0 0 0 1 1 1 300 0 0"))),
         "two.ply: vertex 10 " + at(vertex_line(10)), "value 300 out of range for uchar");
     EXPECT_READ_ERROR(
         read_ply(dir.write("face.ply", header + with_line(body, face_line(nf - 2), "3 0 1 90000"))),
         "face.ply: face " + std::to_string(nf - 2) + " " + at(face_line(nf - 2)),
         "vertex index 90000 out of range (90000 vertices)");
     EXPECT_READ_ERROR(
-        read_ply(dir.write("short.ply", header + with_line(body, vertex_line(60000), "0 0 0 1 1 1 2 3"))),
+        read_ply(dir.write("short.ply",
+                           header + with_line(body, vertex_line(60000), "0 0 0 1 1 1 2 3"))),
         "short.ply: vertex 60000 " + at(vertex_line(60000)), "expected 9 values, found 8");
     // Truncated, and data after the last element.
-    EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, lines[face_line(nf - 5)]))),
-                      "cut.ply: truncated: expected " + std::to_string(nf) +
-                          " face elements, found " + std::to_string(nf - 5));
-    EXPECT_READ_ERROR(read_ply(dir.write("cut.ply", header + body.substr(0, lines[vertex_line(70000)]))),
-                      "cut.ply: truncated: expected " + std::to_string(nv) +
-                          " vertex elements, found 70000");
+    EXPECT_READ_ERROR(
+        read_ply(dir.write("cut.ply", header + body.substr(0, lines[face_line(nf - 5)]))),
+        "cut.ply: truncated: expected " + std::to_string(nf) + " face elements, found " +
+            std::to_string(nf - 5));
+    EXPECT_READ_ERROR(
+        read_ply(dir.write("cut.ply", header + body.substr(0, lines[vertex_line(70000)]))),
+        "cut.ply: truncated: expected " + std::to_string(nv) + " vertex elements, found 70000");
     EXPECT_READ_ERROR(read_ply(dir.write("extra.ply", header + body + "\n \n1 2 3\n")),
                       "extra.ply: line " + std::to_string(first_line + lines.size() + 2),
                       "unexpected data after the last element");
@@ -815,7 +823,8 @@ std::string outcome(const std::function<ModelData()>& read) {
         std::ostringstream s;
         auto put = [&](const auto& v) {
             s << v.size() << ':';
-            s.write(reinterpret_cast<const char*>(v.data()), std::streamsize(v.size() * sizeof(v[0])));
+            s.write(reinterpret_cast<const char*>(v.data()),
+                    std::streamsize(v.size() * sizeof(v[0])));
         };
         put(m.points.positions), put(m.points.normals), put(m.points.colors), put(m.points.radii);
         put(m.points.emission), put(m.sensors), put(m.triangles);
@@ -834,16 +843,7 @@ TEST(Ply, AsciiBodiesInPiecesReadAsLineByLineEvenWhenDamaged) {
     const std::vector<PlyElement> elements = {
         {"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
         {"vertex",
-         {{"float", "x"},
-          {"float", "y"},
-          {"float", "z"},
-          {"float", "nx"},
-          {"float", "ny"},
-          {"float", "nz"},
-          {"uchar", "red"},
-          {"uchar", "green"},
-          {"uchar", "blue"},
-          {"float", "radius"}},
+         vertex_props({"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "radius"}),
          {{0, 0, 0, 0, 0, 1, 1, 2, 3, 0.5},
           {1, 0, 0, 0, 1, 0, 4, 5, 6, 1},
           {1, 1, 0, 1, 0, 0, 7, 8, 9, 2},
@@ -884,21 +884,15 @@ TEST(Ply, DamagedFilesOnlyEverThrowVmapErrors) {
     const std::vector<PlyElement> elements = {
         {"camera", {{"float", "pose", "uchar"}}, {{2, 1, 2}}},
         {"vertex",
-         {{"float", "x"},
-          {"float", "y"},
-          {"float", "z"},
-          {"uchar", "red"},
-          {"uchar", "green"},
-          {"uchar", "blue"},
-          {"float", "radius"}},
+         vertex_props({"x", "y", "z", "red", "green", "blue", "radius"}),
          {{0, 0, 0, 1, 2, 3, 0.5}, {1, 0, 0, 4, 5, 6, 1}, {1, 1, 0, 7, 8, 9, 2}}},
         faces({{3, 0, 1, 2}, {4, 0, 1, 2, 1}}),
     };
     for (const char* format : kPlyFormats) {
         SCOPED_TRACE(format);
-        expect_damage_only_throws_vmap_errors(dir, make_ply(format, elements), ".ply",
-                                              [](const std::string& f) { return read_ply(f); },
-                                              rng);
+        expect_damage_only_throws_vmap_errors(
+            dir, make_ply(format, elements), ".ply",
+            [](const std::string& f) { return read_ply(f); }, rng);
     }
 }
 

@@ -1,6 +1,4 @@
 // Seeded area-weighted sampling of a scene (src/scene/sampling.cpp).
-#include "scene_test_util.h"
-
 #include <tbb/task_arena.h>
 
 #include <numeric>
@@ -8,6 +6,7 @@
 #include <set>
 
 #include "scene/elimination.h"
+#include "scene_test_util.h"
 
 namespace vmap {
 namespace {
@@ -190,7 +189,6 @@ TEST(SceneSampling, DensityCountsMeshAreaToo) {
     EXPECT_GT(double(sc.points), 2500.0 * (total_area(sc) - surface_area(sc.surfaces[6])) + 10);
 }
 
-
 // ---- blue noise (sample elimination) --------------------------------------------------------
 
 // The share of points whose nearest neighbour on the same side of a surface (normals less than
@@ -297,8 +295,7 @@ std::vector<uint64_t> serial_elimination(const detail::NeighbourLists& L, uint64
 }
 
 // detail::eliminate in an arena of `threads` threads.
-std::vector<uint64_t> eliminate_with(const detail::NeighbourLists& L, uint64_t keep,
-                                     int threads) {
+std::vector<uint64_t> eliminate_with(const detail::NeighbourLists& L, uint64_t keep, int threads) {
     tbb::task_arena arena(threads);
     std::vector<uint64_t> kept;
     arena.execute([&] { kept = detail::eliminate(L, keep); });
@@ -381,8 +378,8 @@ TEST(SampleElimination, EqualsTheSerialGreedyOnPointSets) {
                     full += L.start[i + 1] - L.start[i] == detail::NeighbourLists::kMax;
                 ASSERT_GT(full, M / 4) << "the clusters fill their lists";
             }
-            expect_oracle_result(L, "seed " + std::to_string(seed) + ", shape " +
-                                        std::to_string(shape));
+            expect_oracle_result(
+                L, "seed " + std::to_string(seed) + ", shape " + std::to_string(shape));
         }
     }
 }
@@ -498,8 +495,8 @@ TEST(SceneSampling, BlueNoiseReportsProgressAndCancels) {
 TEST(SceneSampling, ThePatternAndTheFloorComeFromTheFile) {
     ScratchDir dir;
     auto scene = [&](const std::string& sampling, const std::string& octree) {
-        return load_scene(dir.write("s.json", R"({ "sampling": { "points": 100)" + sampling +
-                                                  R"( } )" + octree + "}"));
+        return load_scene(dir.write(
+            "s.json", R"({ "sampling": { "points": 100)" + sampling + R"( } )" + octree + "}"));
     };
     const Scene blue = scene("", "");
     EXPECT_EQ(blue.pattern, SamplePattern::kBlueNoise);

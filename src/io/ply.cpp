@@ -866,7 +866,8 @@ void read_ascii(const std::string& path, const Header& header, const char* data,
     parallel_for(pieces, [&](size_t k) {
         uint64_t nl = 0, data_lines = 0;
         for (const char* p = cut[k]; p != cut[k + 1];) {
-            const char* eol = static_cast<const char*>(std::memchr(p, '\n', size_t(cut[k + 1] - p)));
+            const char* eol =
+                static_cast<const char*>(std::memchr(p, '\n', size_t(cut[k + 1] - p)));
             const char* stop = eol ? eol : cut[k + 1];
             data_lines += has_data(p, stop);
             nl += eol != nullptr;

@@ -19,6 +19,26 @@ namespace {
 // depend on it).
 uint64_t cell_hash(uint64_t x) { return splitmix64(x); }
 
+// Chunks of a fixed size (so that the split does not depend on the threads) for parallel
+// compactions: chunk c covers [c kChunk, min(n, (c + 1) kChunk)).
+constexpr uint64_t kChunk = uint64_t(1) << 14;
+uint64_t chunk_end(uint64_t c, uint64_t n) { return std::min(n, (c + 1) * kChunk); }
+
+// Where each chunk's output starts: the sums of count(i) over the chunks before it (chunks + 1
+// values, the last the total), counted in parallel.
+template <class Count>
+std::vector<uint64_t> chunk_starts(uint64_t n, Count count) {
+    const uint64_t chunks = (n + kChunk - 1) / kChunk;
+    std::vector<uint64_t> start(chunks + 1, 0);
+    parallel_for(chunks, [&](uint64_t c) {
+        uint64_t k = 0;
+        for (uint64_t i = c * kChunk; i < chunk_end(c, n); ++i) k += count(i);
+        start[c + 1] = k;
+    });
+    for (uint64_t c = 0; c < chunks; ++c) start[c + 1] += start[c];
+    return start;
+}
+
 }  // namespace
 
 NeighbourLists same_side_neighbours(const std::vector<Vec3>& pos, const std::vector<Vec3>& nrm,
@@ -130,22 +150,15 @@ NeighbourLists same_side_neighbours(const std::vector<Vec3>& pos, const std::vec
         }
     });
     // Packed: the lists' starts by a prefix over chunks, then each chunk's lists copied.
-    constexpr uint64_t kChunk = uint64_t(1) << 14;
-    const uint64_t chunks = (M + kChunk - 1) / kChunk;
-    std::vector<uint64_t> chunk_start(chunks + 1, 0);
-    parallel_for(chunks, [&](uint64_t c) {
-        uint64_t n = 0;
-        for (uint64_t q = c * kChunk; q < std::min(M, (c + 1) * kChunk); ++q) n += count[q];
-        chunk_start[c + 1] = n;
-    });
-    for (uint64_t c = 0; c < chunks; ++c) chunk_start[c + 1] += chunk_start[c];
+    const std::vector<uint64_t> chunk_start = chunk_starts(M, [&](uint64_t q) { return count[q]; });
+    const uint64_t total = chunk_start.back();
     out.start.resize(M + 1);
-    out.start[M] = chunk_start[chunks];
-    out.nb.resize(chunk_start[chunks]);
-    out.weight.resize(chunk_start[chunks]);
-    parallel_for(chunks, [&](uint64_t c) {
+    out.start[M] = total;
+    out.nb.resize(total);
+    out.weight.resize(total);
+    parallel_for(chunk_start.size() - 1, [&](uint64_t c) {
         uint64_t at = chunk_start[c];
-        for (uint64_t q = c * kChunk; q < std::min(M, (c + 1) * kChunk); ++q) {
+        for (uint64_t q = c * kChunk; q < chunk_end(c, M); ++q) {
             out.start[q] = at;
             out.id[q] = by_cell[q].second;
             std::copy_n(&wide_nb[q * kNb], count[q], out.nb.begin() + int64_t(at));
@@ -249,19 +262,12 @@ class Eliminator {
 // The entries of v whose flag is set, in v's order; chunks of a fixed size, so that the work
 // split does not depend on the threads (the result never does).
 std::vector<uint32_t> select(const std::vector<uint32_t>& v, const std::vector<uint8_t>& flag) {
-    constexpr uint64_t kChunk = 1 << 14;
-    const uint64_t n = v.size(), chunks = (n + kChunk - 1) / kChunk;
-    std::vector<uint64_t> start(chunks + 1, 0);
-    parallel_for(chunks, [&](uint64_t c) {
-        uint64_t k = 0;
-        for (uint64_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i) k += flag[i];
-        start[c + 1] = k;
-    });
-    for (uint64_t c = 0; c < chunks; ++c) start[c + 1] += start[c];
-    std::vector<uint32_t> out(start[chunks]);
-    parallel_for(chunks, [&](uint64_t c) {
+    const uint64_t n = v.size();
+    const std::vector<uint64_t> start = chunk_starts(n, [&](uint64_t i) { return flag[i]; });
+    std::vector<uint32_t> out(start.back());
+    parallel_for(start.size() - 1, [&](uint64_t c) {
         uint64_t at = start[c];
-        for (uint64_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+        for (uint64_t i = c * kChunk; i < chunk_end(c, n); ++i)
             if (flag[i]) out[at++] = v[i];
     });
     return out;
@@ -269,19 +275,19 @@ std::vector<uint32_t> select(const std::vector<uint32_t>& v, const std::vector<u
 
 uint32_t Eliminator::rank_above(const std::vector<uint32_t>& v, uint64_t r) const {
     constexpr int kDigit = 16;
-    constexpr uint64_t kBins = uint64_t(1) << kDigit, kChunk = uint64_t(1) << 16;
+    constexpr uint64_t kBins = uint64_t(1) << kDigit, kHistChunk = uint64_t(1) << 16;
     auto digit = [&](uint32_t a, int shift) {
         return (std::bit_cast<uint64_t>(W_[a]) >> shift) & (kBins - 1);
     };
     std::vector<uint32_t> rest;
     const std::vector<uint32_t>* cur = &v;
     std::vector<uint8_t> flag;
-    for (int shift = 64 - kDigit; shift >= 0 && cur->size() > kChunk; shift -= kDigit) {
-        const uint64_t n = cur->size(), chunks = (n + kChunk - 1) / kChunk;
+    for (int shift = 64 - kDigit; shift >= 0 && cur->size() > kHistChunk; shift -= kDigit) {
+        const uint64_t n = cur->size(), chunks = (n + kHistChunk - 1) / kHistChunk;
         std::vector<uint32_t> hist(chunks * kBins, 0);
         parallel_for(chunks, [&](uint64_t c) {
             uint32_t* h = hist.data() + c * kBins;
-            for (uint64_t i = c * kChunk; i < std::min(n, (c + 1) * kChunk); ++i)
+            for (uint64_t i = c * kHistChunk; i < std::min(n, (c + 1) * kHistChunk); ++i)
                 ++h[digit((*cur)[i], shift)];
         });
         std::vector<uint64_t> total(kBins, 0);

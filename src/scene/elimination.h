@@ -4,12 +4,9 @@
 #pragma once
 
 #include <cstdint>
-#include <memory>
-#include <new>
-#include <type_traits>
-#include <utility>
 #include <vector>
 
+#include "util/huge_array.h"
 #include "util/progress.h"
 #include "vmap/vec.h"
 
@@ -20,36 +17,14 @@ namespace vmap::detail {
 // lacks j. The candidates sit in slots, in an order that keeps near ones near in memory (the
 // elimination reads lists at random otherwise); id gives each slot's candidate index, and the
 // lists hold slots.
-// An allocator whose resize leaves new elements uninitialised, for arrays filled in parallel (a
-// zero-fill first is one thread touching every page: 0.07 s for the dragon's lists).
-template <class T>
-struct UninitAllocator {
-    using value_type = T;
-    UninitAllocator() = default;
-    template <class U>
-    UninitAllocator(const UninitAllocator<U>&) noexcept {}
-    T* allocate(size_t n) { return std::allocator<T>().allocate(n); }
-    void deallocate(T* p, size_t n) noexcept { std::allocator<T>().deallocate(p, n); }
-    template <class U>
-    void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
-        ::new (static_cast<void*>(p)) U;
-    }
-    template <class U, class... Args>
-    void construct(U* p, Args&&... args) {
-        ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-    }
-    template <class U>
-    bool operator==(const UninitAllocator<U>&) const noexcept {
-        return true;
-    }
-};
-
 struct NeighbourLists {
     static constexpr int kMax = 32;  // about 14.5 same-side candidates lie within reach at 4x
     std::vector<uint32_t> id;        // slot -> candidate index (a permutation of 0 .. size-1)
     std::vector<uint64_t> start;     // slot s's list at [start[s], start[s + 1]); size + 1 long
-    std::vector<uint32_t, UninitAllocator<uint32_t>> nb;  // the neighbours' slots
-    std::vector<float, UninitAllocator<float>> weight;  // their weights, (1 - max(d, floor_d) / reach)^8
+    std::vector<uint32_t, UninitAllocator<uint32_t>>
+        nb;  // the neighbours' slots (filled in parallel)
+    std::vector<float, UninitAllocator<float>>
+        weight;  // their weights, (1 - max(d, floor_d) / reach)^8
 
     uint64_t size() const { return id.size(); }
 };

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdlib>
 #include <memory>
+#include <new>
 #include <type_traits>
 #include <utility>
 #include <vector>
@@ -32,17 +33,13 @@ HugeArray<T> make_huge_array(size_t n) {
     return HugeArray<T>(static_cast<T*>(allocate_huge(n * sizeof(T))));
 }
 
-// An allocator over allocate_huge for std::vector, whose resize leaves the new elements
-// uninitialised (default-initialised: nothing for trivial types), for arrays the caller fills
-// completely; construction with a value (assign(n, 0), push_back) is as usual.
+// construct() default-initialises, so a std::vector's resize leaves new elements uninitialised
+// (nothing for trivial types), for arrays the caller fills completely (in parallel: a zero-fill
+// first is one thread touching every page); construction with a value (assign(n, 0),
+// push_back) is as usual.
 template <class T>
-struct HugeAllocator {
+struct DefaultInit {
     using value_type = T;
-    HugeAllocator() = default;
-    template <class U>
-    HugeAllocator(const HugeAllocator<U>&) noexcept {}
-    T* allocate(size_t n) { return static_cast<T*>(allocate_huge(n * sizeof(T))); }
-    void deallocate(T* p, size_t) noexcept { std::free(p); }
     template <class U>
     void construct(U* p) noexcept(std::is_nothrow_default_constructible_v<U>) {
         ::new (static_cast<void*>(p)) U;
@@ -51,8 +48,32 @@ struct HugeAllocator {
     void construct(U* p, Args&&... args) {
         ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
     }
+};
+
+// Over allocate_huge (huge pages when large).
+template <class T>
+struct HugeAllocator : DefaultInit<T> {
+    HugeAllocator() = default;
+    template <class U>
+    HugeAllocator(const HugeAllocator<U>&) noexcept {}
+    T* allocate(size_t n) { return static_cast<T*>(allocate_huge(n * sizeof(T))); }
+    void deallocate(T* p, size_t) noexcept { std::free(p); }
     template <class U>
     bool operator==(const HugeAllocator<U>&) const noexcept {
+        return true;
+    }
+};
+
+// Over the standard allocator (small pages).
+template <class T>
+struct UninitAllocator : DefaultInit<T> {
+    UninitAllocator() = default;
+    template <class U>
+    UninitAllocator(const UninitAllocator<U>&) noexcept {}
+    T* allocate(size_t n) { return std::allocator<T>().allocate(n); }
+    void deallocate(T* p, size_t n) noexcept { std::allocator<T>().deallocate(p, n); }
+    template <class U>
+    bool operator==(const UninitAllocator<U>&) const noexcept {
         return true;
     }
 };

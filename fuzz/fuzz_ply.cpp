@@ -2,34 +2,11 @@
 // (detail::read_ply_in_pieces, the parallel path that large bodies take) against the same body
 // read line by line: the same model, or the same error message; anything else is a finding.
 #include <cstdlib>
-#include <cstring>
 #include <string>
 
 #include "fuzz/fuzz_input.h"
 #include "io/ply_pieces.h"
 #include "vmap/io.h"
-
-namespace {
-
-// The model's arrays, or the error's message.
-std::string outcome(const std::string& path, size_t piece_bytes) {
-    try {
-        const vmap::ModelData m = vmap::detail::read_ply_in_pieces(path, piece_bytes);
-        std::string s;
-        auto put = [&](const auto& v) {
-            s += std::to_string(v.size()) + ':';
-            s.append(reinterpret_cast<const char*>(v.data()), v.size() * sizeof(v[0]));
-        };
-        put(m.points.positions), put(m.points.normals), put(m.points.colors), put(m.points.radii);
-        put(m.points.emission), put(m.sensors), put(m.triangles);
-        for (const std::string& n : m.notes) s += n + '\n';
-        return s;
-    } catch (const vmap::Error& e) {
-        return std::string("error: ") + e.what();
-    }
-}
-
-}  // namespace
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     const vmap::fuzz::MemFile file(data, size, "fuzz.ply");
@@ -39,9 +16,10 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         (void)vmap::read_ply(file.path(), {{512345.0, 4123456.0, 210.0}});
     });
     vmap::fuzz::expect_only_vmap_errors([&] {
-        const std::string lines = outcome(file.path(), 0);
+        const std::string lines = vmap::detail::read_outcome(file.path(), 0);
         for (size_t piece : {size_t(1), size_t(13)})
-            if (outcome(file.path(), piece) != lines) std::abort();  // pieces disagree
+            if (vmap::detail::read_outcome(file.path(), piece) != lines)
+                std::abort();  // pieces disagree
     });
     return 0;
 }

@@ -816,25 +816,6 @@ TEST(Ply, LargeAsciiBodiesReadInPiecesAsTheBinaryEncodingAndFailAtTheFirstError)
     }
 }
 
-// What a read gave: the model's arrays, or the error's message.
-std::string outcome(const std::function<ModelData()>& read) {
-    try {
-        const ModelData m = read();
-        std::ostringstream s;
-        auto put = [&](const auto& v) {
-            s << v.size() << ':';
-            s.write(reinterpret_cast<const char*>(v.data()),
-                    std::streamsize(v.size() * sizeof(v[0])));
-        };
-        put(m.points.positions), put(m.points.normals), put(m.points.colors), put(m.points.radii);
-        put(m.points.emission), put(m.sensors), put(m.triangles);
-        for (const std::string& n : m.notes) s << n << '\n';
-        return s.str();
-    } catch (const Error& e) {
-        return std::string("error: ") + e.what();
-    }
-}
-
 // Differential: an ascii body cut into pieces of a few bytes (detail::read_ply_in_pieces) reads
 // exactly as line by line, model or error message, for good files and randomly damaged ones.
 TEST(Ply, AsciiBodiesInPiecesReadAsLineByLineEvenWhenDamaged) {
@@ -866,11 +847,10 @@ TEST(Ply, AsciiBodiesInPiecesReadAsLineByLineEvenWhenDamaged) {
         const size_t body_at = text.find("end_header\n");
         if (i % 5 == 1 && body_at != std::string::npos) text.insert(body_at + 11, "\n \n");
         const std::string path = dir.write("pieces.ply", text);
-        const std::string want = outcome([&] { return detail::read_ply_in_pieces(path, 0); });
+        const std::string want = detail::read_outcome(path, 0);
         for (size_t piece : {size_t(1), size_t(7), size_t(30)}) {
             SCOPED_TRACE("damage " + std::to_string(i) + ", pieces of " + std::to_string(piece));
-            ASSERT_EQ(outcome([&] { return detail::read_ply_in_pieces(path, piece); }), want)
-                << text;
+            ASSERT_EQ(detail::read_outcome(path, piece), want) << text;
         }
         (want.rfind("error: ", 0) == 0 ? same_errors : same_models)++;
     }

@@ -1,7 +1,7 @@
 #pragma once
-// Large scratch arrays that page in as transparent huge pages: the GI refinement and the V-map's
-// link targets fill hundreds of megabytes once, where 4 KiB pages cost a page fault every few
-// writes (on a virtual machine most of the time goes there). Uninitialised: the caller writes
+// Large scratch arrays that page in as transparent huge pages from 1 GiB on (huge_array.cpp says
+// why not below): the GI refinement and the V-map's link targets fill gigabytes once on large
+// scenes, where 4 KiB pages cost a page fault every few writes. Uninitialised: the caller writes
 // every element before reading it.
 
 #include <cstddef>
@@ -18,8 +18,8 @@ struct FreeDeleter {
     void operator()(void* p) const { std::free(p); }
 };
 
-// `bytes` of memory, released with std::free: 2 MiB aligned and advised as huge pages when
-// large (only advice: without transparent huge pages the pages stay small). Throws
+// `bytes` of memory, released with std::free: 2 MiB aligned and advised as huge pages from
+// 1 GiB (only advice: without transparent huge pages the pages stay small). Throws
 // std::bad_alloc.
 void* allocate_huge(size_t bytes);
 

@@ -130,8 +130,8 @@ void print_build_details(const VisibilityMap& vm, const BuildStats& st, double i
         st.seconds_links, save_s);
     if (ss.bytes)
         fmt::print(
-            "saving:     {:.1f} MB: links coded {:.3f} s, hashed and written {:.3f} s, synced to "
-            "disk {:.3f} s\n",
+            "saving:     {:.1f} MB: laid out {:.3f} s, links coded, hashed and written {:.3f} s, "
+            "synced to disk {:.3f} s\n",
             ss.bytes / 1e6, ss.encode_seconds, ss.write_seconds, ss.sync_seconds);
     const double pps = w.pairs / std::max(1e-9, st.seconds_visibility);
     fmt::print(

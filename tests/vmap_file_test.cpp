@@ -4,6 +4,7 @@
 #include "octree/records.h"
 #include "io/vmap_file.h"
 #include "io/link_codec.h"
+#include "vmap/build_parts.h"
 
 #include <gtest/gtest.h>
 #include <streamvbytedelta.h>
@@ -650,6 +651,54 @@ TEST(LinkCodec, RandomListsRoundTrip) {
     std::vector<int32_t> back(t.size(), -1);
     EXPECT_EQ(detail::decode_links(off, e.chunk_node, e.chunk_byte, stream.data(), back.data()), "");
     EXPECT_EQ(back, t);
+}
+
+// save_vmap codes the links' stream as it writes the file, each chunk by whichever writer reaches
+// it first while the others wait (LazyLinks in io/vmap_file.cpp). Many coded chunks, each 8 MiB
+// piece of the file holding parts of several and some chunks cut by a piece's end, must give
+// exactly encode_links' bytes, and load back as they were.
+TEST(VmapFileLinks, LinksCodedWhileTheFileIsWrittenAreEncodeLinksBytes) {
+    Scene sc = load_scene(std::string(VMAP_SOURCE_DIR) + "/scenes/cornell-empty.json");
+    sc.points = 20000;
+    BuildParams bp;
+    bp.backend = Backend::kCpu;
+    bp.octree.max_height = 8;
+    bp.octree.leaf_points = 1;
+    BuildStats st;
+    VisibilityMap vm = detail::build_octree(sample_scene(sc), bp, st, "test");
+    const int32_t nn = vm.octree().num_nodes();
+    ASSERT_GT(nn, 20000);
+    std::mt19937 rng(5);
+    std::vector<std::pair<int32_t, int32_t>> pairs;
+    std::vector<int32_t> to;
+    for (int32_t a = 0; a + 1 < nn; ++a) {  // distinct partners above a, 0 to 900 of them
+        to.clear();
+        const uint32_t deg = rng() % 901;
+        for (uint32_t k = 0; k < deg; ++k) to.push_back(a + 1 + int32_t(rng() % uint32_t(nn - a - 1)));
+        std::sort(to.begin(), to.end());
+        to.erase(std::unique(to.begin(), to.end()), to.end());
+        for (int32_t b : to) pairs.emplace_back(a, b);
+    }
+    set_links(vm, std::move(pairs));
+    const detail::EncodedLinks e = detail::encode_links(vm.link_offsets(), vm.link_targets());
+    ASSERT_GT(e.chunk_node.size(), 6u);  // several chunks of 2^22 link ends
+    ScratchDir dir;
+    const std::string p = dir.path("many.vmap");
+    save_vmap(p, vm);
+    const std::string bytes = slurp(p);
+    ASSERT_GT(bytes.size(), size_t(3) << 23);  // several 8 MiB pieces of the file
+    const size_t link = section_data(bytes, "LINK");
+    const size_t stream = link + vm.link_offsets().size() * 8 + 8 + e.chunk_node.size() * 4 +
+                          e.chunk_byte.size() * 8;
+    ASSERT_EQ(bytes.size(), stream + e.stream.size());
+    EXPECT_TRUE(std::equal(e.stream.begin(), e.stream.end(),
+                           reinterpret_cast<const uint8_t*>(bytes.data()) + stream));
+    const VisibilityMap back = load_vmap(p);
+    ASSERT_EQ(back.num_links(), vm.num_links());
+    for (int32_t n = 0; n < nn; ++n) {
+        const auto x = vm.links(n), y = back.links(n);
+        ASSERT_TRUE(std::equal(x.begin(), x.end(), y.begin(), y.end())) << n;
+    }
 }
 
 TEST_F(VmapFile, AnInconsistentTreeIsRejected) {

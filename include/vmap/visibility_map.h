@@ -205,8 +205,8 @@ double sampled_cpu_pair_rate(const Octree& tree, const VisibilityParams& vp, uin
 // wrong-version file, naming the file and the section.
 struct SaveStats {  // what a save took, when asked for
     uint64_t bytes = 0;          // the file's size
-    double encode_seconds = 0;   // links coded, the sections laid out
-    double write_seconds = 0;    // hashed and written to the page cache, writeback started
+    double encode_seconds = 0;   // the sections laid out, the coded links' sizes counted
+    double write_seconds = 0;    // links coded, hashed, written to the page cache, writeback started
     double sync_seconds = 0;     // waiting for the disk (fsync), the rename, the folder's fsync
 };
 void save_vmap(const std::string& path, const VisibilityMap& vm, SaveStats* stats = nullptr);

@@ -101,39 +101,43 @@ void decode_delta_stream(const uint8_t* in, const uint8_t* end, uint32_t count, 
     }
 }
 
-// The chunks' sizes are counted first, then each chunk is coded into a buffer of its thread's
+// The chunks' sizes are counted first; then each chunk is coded into a buffer of its thread's
 // (reused: a fresh buffer a chunk, zeroed and returned, cost more than the coding on 16 threads,
 // in page faults and unmapping) and copied to its place (the coder writes up to 3 bytes past
 // its stream, which must not reach the next chunk's while another thread codes it). The count
 // and the coder share gap_code, so a chunk's buffer of its count and 4 bytes always holds it.
-EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets) {
-    EncodedLinks e;
-    e.chunk_node = chunk_bounds(offsets);
-    const size_t chunks = e.chunk_node.size() - 1;
-    const auto* t = reinterpret_cast<const uint32_t*>(targets.data());
-    e.chunk_byte.assign(chunks + 1, 0);
-    parallel_for(chunks, [&](size_t k) {
+LinkCoder::LinkCoder(std::span<const uint64_t> offsets, std::span<const int32_t> targets)
+    : offsets_(offsets), targets_(reinterpret_cast<const uint32_t*>(targets.data())) {
+    e_.chunk_node = chunk_bounds(offsets);
+    const size_t n = chunks();
+    e_.chunk_byte.assign(n + 1, 0);
+    parallel_for(n, [&](size_t k) {
         size_t bytes = 0;
-        for (uint32_t n = e.chunk_node[k]; n < e.chunk_node[k + 1]; ++n)
-            bytes += delta_stream_bytes(t + offsets[n], uint32_t(offsets[n + 1] - offsets[n]));
-        e.chunk_byte[k + 1] = bytes;
+        for (uint32_t v = e_.chunk_node[k]; v < e_.chunk_node[k + 1]; ++v)
+            bytes += delta_stream_bytes(targets_ + offsets[v], uint32_t(offsets[v + 1] - offsets[v]));
+        e_.chunk_byte[k + 1] = bytes;
     });
-    for (size_t k = 0; k < chunks; ++k) e.chunk_byte[k + 1] += e.chunk_byte[k];
-    e.stream.resize(e.chunk_byte[chunks]);
+    for (size_t k = 0; k < n; ++k) e_.chunk_byte[k + 1] += e_.chunk_byte[k];
+    e_.stream.resize(e_.chunk_byte[n]);  // (not zeroed: every byte is coded)
+}
+
+void LinkCoder::code(size_t k, std::vector<uint8_t>& buf) {
+    const uint32_t n0 = e_.chunk_node[k], n1 = e_.chunk_node[k + 1];
+    const size_t room = e_.chunk_byte[k + 1] - e_.chunk_byte[k] + 4;
+    if (buf.size() < room) buf.resize(room);
+    size_t at = 0;
+    for (uint32_t n = n0; n < n1; ++n) {
+        const uint32_t len = uint32_t(offsets_[n + 1] - offsets_[n]);
+        if (len) at += encode_delta_stream(targets_ + offsets_[n], len, buf.data() + at);
+    }
+    if (at) std::memcpy(e_.stream.data() + e_.chunk_byte[k], buf.data(), at);  // none: no array
+}
+
+EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets) {
+    LinkCoder c(offsets, targets);
     tbb::enumerable_thread_specific<std::vector<uint8_t>> scratch;
-    parallel_for(chunks, [&](size_t k) {
-        const uint32_t n0 = e.chunk_node[k], n1 = e.chunk_node[k + 1];
-        std::vector<uint8_t>& buf = scratch.local();
-        const size_t room = e.chunk_byte[k + 1] - e.chunk_byte[k] + 4;
-        if (buf.size() < room) buf.resize(room);
-        size_t at = 0;
-        for (uint32_t n = n0; n < n1; ++n) {
-            const uint32_t len = uint32_t(offsets[n + 1] - offsets[n]);
-            if (len) at += encode_delta_stream(t + offsets[n], len, buf.data() + at);
-        }
-        if (at) std::memcpy(e.stream.data() + e.chunk_byte[k], buf.data(), at);  // none: no array
-    });
-    return e;
+    parallel_for(c.chunks(), [&](size_t k) { c.code(k, scratch.local()); });
+    return std::move(c.links());
 }
 
 // StreamVByte: (count + 3) / 4 control bytes, two bits a value (value i in bits 2 (i % 4) of

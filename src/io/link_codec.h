@@ -26,9 +26,27 @@ struct EncodedLinks {
     HugeVector<uint8_t> stream;        // every chunk's bytes, chunk k at chunk_byte[k]
 };
 
-// Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node). Each
-// chunk's size is counted first (delta_stream_bytes), so the chunks are coded in parallel
-// (encode_delta_stream) into one array of the exact size.
+// The links coded in two steps, so that a writer can code each chunk just before it writes it:
+// the constructor counts every chunk's bytes (delta_stream_bytes, in parallel), which fixes
+// every chunk's place in the stream (allocated, not yet written); code(k) then codes chunk k
+// into its place, from any thread, in any order (each chunk once).
+class LinkCoder {
+  public:
+    LinkCoder(std::span<const uint64_t> offsets, std::span<const int32_t> targets);
+    size_t chunks() const { return e_.chunk_node.size() - 1; }
+    const EncodedLinks& links() const { return e_; }
+    EncodedLinks& links() { return e_; }
+    // Codes chunk k; `scratch` is the calling thread's buffer (reused across calls).
+    void code(size_t k, std::vector<uint8_t>& scratch);
+
+  private:
+    std::span<const uint64_t> offsets_;
+    const uint32_t* targets_;
+    EncodedLinks e_;
+};
+
+// Encodes the per-node link lists (offsets: nodes + 1 entries; targets sorted per node): a
+// LinkCoder's chunks, all coded in parallel.
 EncodedLinks encode_links(std::span<const uint64_t> offsets, std::span<const int32_t> targets);
 
 // streamvbyte_delta_encode(values, count, out, 0), byte for byte, without its branches: each gap

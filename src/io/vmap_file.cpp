@@ -25,6 +25,7 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <fmt/format.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -37,6 +38,8 @@
 #include <deque>
 #include <filesystem>
 #include <fstream>
+#include <memory>
+#include <thread>
 #include <type_traits>
 
 #include "mpi/shard_file.h"
@@ -107,15 +110,46 @@ void copy_bytes(uint8_t* dst, const uint8_t* src, size_t n) {
     });
 }
 
+// The links' stream, coded chunk by chunk as write_file's writers reach it: a writer codes the
+// chunks its bytes lie in, or waits for the thread already coding one (which codes it alone,
+// without tasks that could queue behind the waiting one), so the coding runs beside the writing
+// instead of before it, and each chunk is hashed and written while it is still in the cache.
+// The bytes are encode_links' (vmap_file_test checks the file against them).
+struct LazyLinks {
+    detail::LinkCoder coder;
+    std::unique_ptr<std::atomic<uint8_t>[]> state;  // per chunk: 0 not begun, 1 coding, 2 coded
+    tbb::enumerable_thread_specific<std::vector<uint8_t>> scratch;
+    explicit LazyLinks(detail::LinkCoder&& c)
+        : coder(std::move(c)), state(new std::atomic<uint8_t>[coder.chunks()]) {
+        for (size_t k = 0; k < coder.chunks(); ++k) state[k].store(0, std::memory_order_relaxed);
+    }
+    // Makes the stream's bytes [lo, hi) (lo < hi).
+    void ready(size_t lo, size_t hi) {
+        const std::vector<uint64_t>& at = coder.links().chunk_byte;
+        size_t k = size_t(std::upper_bound(at.begin(), at.end(), lo) - at.begin()) - 1;
+        for (; k < coder.chunks() && at[k] < hi; ++k) {
+            uint8_t s = 0;
+            if (state[k].compare_exchange_strong(s, 1, std::memory_order_acq_rel)) {
+                coder.code(k, scratch.local());
+                state[k].store(2, std::memory_order_release);
+            } else {
+                while (state[k].load(std::memory_order_acquire) != 2) std::this_thread::yield();
+            }
+        }
+    }
+};
+
 // The payload as a list of pieces: small fields in buffers of its own, the large arrays in place
-// (no copy of gigabytes of links before writing them).
+// (no copy of gigabytes of links before writing them), the links' stream coded as it is written.
 struct Writer {
     struct Piece {
         const uint8_t* p;
         size_t n;
+        LazyLinks* lazy = nullptr;  // bytes to make (lazy->ready) before they are read
     };
     std::deque<std::vector<uint8_t>> owned;  // stable addresses
     std::deque<detail::HugeVector<uint8_t>> owned_large;
+    std::unique_ptr<LazyLinks> links;
     std::vector<Piece> pieces;
     size_t size = 0;
     bool open = false;  // owned.back() still takes small fields
@@ -140,6 +174,15 @@ struct Writer {
         size += v.size();
         owned_large.push_back(std::move(v));
         pieces.push_back({owned_large.back().data(), owned_large.back().size()});
+    }
+    // The coder's stream, coded as it is written (LazyLinks).
+    void take(detail::LinkCoder&& c) {
+        links = std::make_unique<LazyLinks>(std::move(c));
+        const detail::HugeVector<uint8_t>& v = links->coder.links().stream;
+        if (v.empty()) return;
+        close_small();
+        size += v.size();
+        pieces.push_back({v.data(), v.size(), links.get()});
     }
     template <class T>
     void put(const T& v) {
@@ -266,11 +309,11 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.end(s);
     s = w.begin("LINK");
     w.vec(vm.link_offsets());
-    detail::EncodedLinks links = detail::encode_links(vm.link_offsets(), vm.link_targets());
-    w.put(uint64_t(links.chunk_node.size() - 1));
-    for (uint32_t x : links.chunk_node) w.put(x);  // a few per 4M link ends: copied
-    for (uint64_t x : links.chunk_byte) w.put(x);
-    w.take(std::move(links.stream));
+    detail::LinkCoder links(vm.link_offsets(), vm.link_targets());  // sized, coded when written
+    w.put(uint64_t(links.chunks()));
+    for (uint32_t x : links.links().chunk_node) w.put(x);  // a few per 4M link ends: copied
+    for (uint64_t x : links.links().chunk_byte) w.put(x);
+    w.take(std::move(links));
     w.end(s);
     w.finish();
 }
@@ -278,7 +321,8 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
 // The header (magic, version, payload size and checksum), then the payload, through an
 // AtomicFile (vmap/files.h). The payload goes out in chunks of 8 MiB at their offsets, in
 // parallel (the page cache takes that several times faster than one stream). Each chunk's
-// 1 MiB blocks are hashed just before they are written, while they are in the cache, and the
+// links are coded first where it holds some (LazyLinks), and its 1 MiB blocks are hashed
+// just before they are written, while they are in the cache, and the
 // chunk's writeback is started at once, so the disk works while later chunks are hashed and
 // written and the final fsync waits only for the last few. The header, which holds the hash of
 // the whole payload, is written last, at offset 0. Times go to *stats when given.
@@ -302,6 +346,9 @@ void write_file(const std::string& path, const Writer& w, SaveStats* stats) {
         const size_t lo = c * kChunk, hi = std::min(n, lo + kChunk);
         // The chunk's pieces: from the one holding lo on.
         const size_t first = size_t(std::upper_bound(at.begin(), at.end(), lo) - at.begin()) - 1;
+        for (size_t k = first; k < w.pieces.size() && at[k] < hi; ++k)
+            if (w.pieces[k].lazy)
+                w.pieces[k].lazy->ready(std::max(lo, at[k]) - at[k], std::min(hi, at[k + 1]) - at[k]);
         std::vector<uint8_t> tmp;
         for (size_t b = lo; b < hi; b += kBlock) {  // the hashes of its blocks
             const size_t len = std::min(kBlock, n - b);

@@ -3,6 +3,8 @@
 
 #include <fmt/format.h>
 
+#include <utility>
+
 #include "octree/records.h"
 #include "visibility/leaf_pair.h"
 #include "vmap/normals.h"
@@ -17,13 +19,34 @@ void prepare_points(PointSet& points, BuildStats& stats, const std::string& sour
         stats.warnings.push_back(
             "no splat radii given: estimated from the spacing of same-surface neighbours");
     }
-    const double opposed = normal_inconsistency(points);
-    if (opposed > kInconsistent) {
+}
+
+NormalsCheck::~NormalsCheck() {
+    try {
+        group_.wait();
+    } catch (...) {  // (a destructor must not throw; finish() reports the error when called)
+    }
+}
+
+void NormalsCheck::start(const PointSet& points) {
+    const size_t n = points.size();
+    if (n < 2 || points.normals.size() != n) return;
+    copy_.positions = points.positions;
+    copy_.normals = points.normals;
+    started_ = true;
+    group_.run([this] { opposed_ = normal_inconsistency(copy_); });
+}
+
+void NormalsCheck::finish(BuildStats& stats) {
+    if (!std::exchange(started_, false)) return;
+    group_.wait();
+    copy_ = PointSet();
+    if (opposed_ > kInconsistent) {
         stats.warnings.push_back(fmt::format(
             "normals look inconsistent: {:.1f}% of neighbouring points on one surface have "
             "opposite normals (consistent normals give about 0%); re-estimate them (vmap build "
             "--normals estimate) or give the scanner position (--viewpoint)",
-            100.0 * opposed));
+            100.0 * opposed_));
     }
 }
 

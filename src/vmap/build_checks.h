@@ -2,6 +2,8 @@
 // missing splat radii, normals that look inconsistent, and leaf pairs that almost never face.
 #pragma once
 
+#include <tbb/task_group.h>
+
 #include <string>
 
 #include "vmap/visibility_map.h"
@@ -14,9 +16,31 @@ constexpr double kFewFacing = 0.02;
 // inconsistent (correct ones give about 0; independent random signs give 0.5).
 constexpr double kInconsistent = 0.05;
 
-// Estimates radii when points have none (estimate_radii) and checks the normals' consistency;
-// records both in stats.warnings. Points without normals are left to the octree to reject.
+// Estimates radii when points have none (estimate_radii), recorded in stats.warnings. Points
+// without normals are left to the octree to reject.
 void prepare_points(PointSet& points, BuildStats& stats, const std::string& source);
+
+// The normals' consistency check (normal_inconsistency), which only warns, run beside the
+// octree and the construction instead of before them: on a 300,000-point scene it builds two
+// k-d trees one thread at a time (0.25 s of the dragon's 0.3 s octree step on 2 cores). start()
+// takes a copy of the positions and normals (the octree reorders the points) and runs the check
+// as a task of the current arena; finish() waits for it and records the warning, if any, in
+// stats.warnings. Without start(), finish() does nothing.
+class NormalsCheck {
+  public:
+    NormalsCheck() = default;
+    NormalsCheck(const NormalsCheck&) = delete;
+    NormalsCheck& operator=(const NormalsCheck&) = delete;
+    ~NormalsCheck();
+    void start(const PointSet& points);
+    void finish(BuildStats& stats);
+
+  private:
+    tbb::task_group group_;
+    PointSet copy_;
+    double opposed_ = 0;
+    bool started_ = false;
+};
 
 // Leaf pairs probed by flipped_facing_share.
 constexpr int kFlipProbePairs = 1 << 16;

@@ -89,13 +89,11 @@ void prepare_node_tests(const Octree& t, const BuildParams& params, NodeTests& n
     nt.ctx.leaves_stored = true;  // node_bounds() stores the leaves' bounds too
 }
 
-// Points to octree (in the unit frame), with the point order and its inverse; the normals' check
-// started beside it (check.finish records its warning).
+// Points to octree (in the unit frame), with the point order and its inverse.
 VisibilityMap octree_step(PointSet points, const BuildParams& params, BuildStats& st,
-                          const std::string& source, detail::NormalsCheck& check) {
+                          const std::string& source) {
     const auto t0 = Clock::now();
     detail::prepare_points(points, st, source);
-    check.start(points);
     VisibilityMap vm;
     detail::MapData& d = detail::MapAccess::data(vm);
     d.octree_params = params.octree;
@@ -180,15 +178,18 @@ void links_step(VisibilityMap& vm, detail::Frontier& fr, const BuildParams& para
 }
 
 // The construction over the points and octree of vm (octree_step's), from t0 (the build's start).
-// The normals' check, when started, finishes after the construction (it ran beside it).
+// check_normals: the normals' consistency check runs beside the construction (the points stay
+// in vm, unchanged, until it is done).
 VisibilityMap links_in_arena(VisibilityMap vm, const BuildParams& params, BuildStats& st,
-                             const std::string& source, Clock::time_point t0,
-                             detail::NormalsCheck* check, std::vector<detail::Link>* raw = nullptr) {
+                             const std::string& source, Clock::time_point t0, bool check_normals,
+                             std::vector<detail::Link>* raw = nullptr) {
     const auto t1 = Clock::now();
+    detail::NormalsCheck check;
+    if (check_normals) check.start(vm.points());
     NodeTests nt;
     std::unique_ptr<detail::Frontier> fr = frontier_step(vm.octree(), params, source, st, nt);
     links_step(vm, *fr, params, st, raw);
-    if (check) check->finish(st);
+    check.finish(st);
     st.seconds_visibility = seconds_since(t1);
     st.seconds_total = seconds_since(t0);
     // (A share of the pairs cannot judge the whole.)
@@ -217,9 +218,8 @@ VisibilityMap build_vmap(PointSet points, const BuildParams& params, BuildStats*
     return in_arena(params, [&] {
         const auto t0 = Clock::now();
         BuildStats st;
-        detail::NormalsCheck check;
-        VisibilityMap vm = octree_step(std::move(points), params, st, source, check);
-        vm = links_in_arena(std::move(vm), params, st, source, t0, &check);
+        VisibilityMap vm = octree_step(std::move(points), params, st, source);
+        vm = links_in_arena(std::move(vm), params, st, source, t0, true);
         if (stats) *stats = std::move(st);
         return vm;
     });
@@ -231,8 +231,9 @@ VisibilityMap build_octree(PointSet points, const BuildParams& params, BuildStat
                            const std::string& source) {
     params.check(source);
     return in_arena(params, [&] {
+        VisibilityMap vm = octree_step(std::move(points), params, stats, source);
         detail::NormalsCheck check;
-        VisibilityMap vm = octree_step(std::move(points), params, stats, source, check);
+        check.start(vm.points());
         check.finish(stats);
         return vm;
     });
@@ -244,7 +245,7 @@ VisibilityMap build_links(VisibilityMap base, const BuildParams& params, BuildSt
     return in_arena(params, [&] {
         BuildStats st;
         VisibilityMap vm =
-            links_in_arena(std::move(base), params, st, source, Clock::now(), nullptr, raw);
+            links_in_arena(std::move(base), params, st, source, Clock::now(), false, raw);
         if (stats) *stats = std::move(st);
         return vm;
     });

@@ -31,16 +31,13 @@ NormalsCheck::~NormalsCheck() {
 void NormalsCheck::start(const PointSet& points) {
     const size_t n = points.size();
     if (n < 2 || points.normals.size() != n) return;
-    copy_.positions = points.positions;
-    copy_.normals = points.normals;
     started_ = true;
-    group_.run([this] { opposed_ = normal_inconsistency(copy_); });
+    group_.run([this, &points] { opposed_ = normal_inconsistency(points); });
 }
 
 void NormalsCheck::finish(BuildStats& stats) {
     if (!std::exchange(started_, false)) return;
     group_.wait();
-    copy_ = PointSet();
     if (opposed_ > kInconsistent) {
         stats.warnings.push_back(fmt::format(
             "normals look inconsistent: {:.1f}% of neighbouring points on one surface have "

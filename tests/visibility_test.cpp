@@ -306,6 +306,55 @@ TEST_P(Facing, BothNormalsMustFaceTheOther) {
 
 VMAP_ON_EACH_BACKEND(Facing);
 
+// slab_meets_box_regular (the GPU's packet walk where no lane's direction has a component under
+// 1e-30 in magnitude) answers as slab_meets_box on such segments, on each backend: random
+// segments and boxes, flat boxes (a wall patch's), boxes whose faces pass exactly through the
+// segment's first or last point, and direction components from 1e-29 to 1e3 in magnitude.
+class Slab : public OnBackend {};
+
+TEST_P(Slab, TheTestWithoutPerAxisChecksAnswersAsSlabMeetsBox) {
+    std::mt19937 rng(17);
+    std::uniform_real_distribution<float> u(-1, 1);
+    std::vector<test::PredicateCase> cases;
+    std::vector<uint8_t> want;
+    for (int it = 0; it < 40000; ++it) {
+        test::PredicateCase c;
+        c.what = test::Predicate::kSlabRegular;
+        c.p = {u(rng), u(rng), u(rng)};
+        Vec3 d{u(rng), u(rng), u(rng)};
+        float* dc[3] = {&d.x, &d.y, &d.z};
+        if (it % 4 == 1) *dc[rng() % 3] = std::ldexp(u(rng) >= 0 ? 1.f : -1.f, -96 + int(rng() % 30));
+        if (it % 8 == 3) *dc[rng() % 3] *= 1000.f;
+        if (detail::has_tiny_component(d)) continue;
+        c.d = d;
+        c.t0 = 0.01f * 0.999f, c.t1 = 1.f - 0.01f * 0.999f;
+        // Half of the boxes about a point of the segment's line, so that about half meet it.
+        const Vec3 at = it % 2 ? c.p + d * (0.5f + 0.7f * u(rng)) : Vec3{u(rng), u(rng), u(rng)};
+        const Vec3 half{0.2f * (u(rng) + 1), 0.2f * (u(rng) + 1), 0.2f * (u(rng) + 1)};
+        Vec3 lo = at - half + Vec3{0.1f * u(rng), 0.1f * u(rng), 0.1f * u(rng)}, hi = lo + half * 2.f;
+        if (it % 5 == 2) hi.y = lo.y;  // flat
+        if (it % 7 == 4) {             // a face through the sub-segment's first or last point
+            const Vec3 e = c.p + d * (rng() % 2 ? c.t0 : c.t1);
+            float* l[3] = {&lo.x, &lo.y, &lo.z};
+            const float ec[3] = {e.x, e.y, e.z};
+            const int k = int(rng() % 3);
+            *l[k] = ec[k];
+        }
+        c.box = Box{lo, hi};
+        cases.push_back(c);
+        want.push_back(detail::slab_meets_box(detail::slab_ray(c.p, c.d, c.t0, c.t1), c.box, 0.f));
+    }
+    const std::vector<uint8_t> got = test::answers_on(backend(), cases);
+    ASSERT_EQ(got.size(), want.size());
+    size_t hits = 0, differ = 0;
+    for (size_t i = 0; i < got.size(); ++i) hits += want[i], differ += got[i] != want[i];
+    EXPECT_EQ(differ, 0u);
+    EXPECT_GT(hits, 2000u);
+    EXPECT_GT(got.size() - hits, 2000u);
+}
+
+VMAP_ON_EACH_BACKEND(Slab);
+
 // The traversal (sphere pruning, early exit at K) against testing every leaf.
 bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
                              const VisibilityParams& vp) {

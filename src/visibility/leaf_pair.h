@@ -60,6 +60,28 @@ VMAP_HD bool slab_meets_box(const SlabRay& r, const Box& b, float g) {
     return tmin <= tmax;
 }
 
+// slab_meets_box for a segment whose direction has no component under 1e-30 in magnitude, with
+// g = 0: the same float operations in the same order without the per-axis test for such a
+// component, so the same answer (visibility_test's Slab checks it on each backend). The GPU's
+// packet walk uses it where no lane of a warp needs the test (cuda_backend.cu, walk_packet).
+VMAP_HD bool slab_meets_box_regular(const SlabRay& r, const Box& b) {
+    float tmin = r.t0, tmax = r.t1;
+    float ta = (b.lo.x - r.p.x) * r.inv.x, tb = (b.hi.x - r.p.x) * r.inv.x;
+    tmin = max_f(tmin, min_f(ta, tb));
+    tmax = min_f(tmax, max_f(ta, tb));
+    ta = (b.lo.y - r.p.y) * r.inv.y, tb = (b.hi.y - r.p.y) * r.inv.y;
+    tmin = max_f(tmin, min_f(ta, tb));
+    tmax = min_f(tmax, max_f(ta, tb));
+    ta = (b.lo.z - r.p.z) * r.inv.z, tb = (b.hi.z - r.p.z) * r.inv.z;
+    tmin = max_f(tmin, min_f(ta, tb));
+    tmax = min_f(tmax, max_f(ta, tb));
+    return tmin <= tmax;
+}
+// Does any component of d lie under 1e-30 in magnitude (slab_meets_box's special case)?
+VMAP_HD bool has_tiny_component(Vec3 d) {
+    return fabsf(d.x) < 1e-30f || fabsf(d.y) < 1e-30f || fabsf(d.z) < 1e-30f;
+}
+
 // Is leaf x an actual occluder of segment p + t d (paper §5.1, Fig. 7)?
 // The crossing's t goes to *t_out when given.
 VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,

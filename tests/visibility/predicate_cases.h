@@ -14,19 +14,28 @@
 
 namespace vmap::test {
 
-enum class Predicate : uint8_t { kActualOccluder, kCountsAsOccluder, kLeavesFace, kInFrontOfEnds };
+enum class Predicate : uint8_t {
+    kActualOccluder,
+    kCountsAsOccluder,
+    kLeavesFace,
+    kInFrontOfEnds,
+    kSlabRegular
+};
 
 // One question about the segment from leaf a's centroid p along d (length len) to leaf b:
 //   kActualOccluder    is_actual_occluder(p, d, len, x, vp)
 //   kCountsAsOccluder  counts_as_occluder(pair_segment(a, b, vp), x, vp)
 //   kLeavesFace        leaves_face(a, b, d, len, vp)
 //   kInFrontOfEnds     in_front_of_ends(pair_segment(a, b, vp), x)
+//   kSlabRegular       slab_meets_box_regular(slab_ray(p, d, t0, t1), box)
 struct PredicateCase {
     Predicate what = Predicate::kActualOccluder;
     LeafDisc a, b, x;
     Vec3 p{0, 0, 0}, d{0, 0, 0};
     float len = 0;
     VisibilityParams vp;
+    Box box{};
+    float t0 = 0, t1 = 1;
 };
 
 VMAP_HD bool answer(const PredicateCase& c) {
@@ -39,6 +48,8 @@ VMAP_HD bool answer(const PredicateCase& c) {
             return detail::leaves_face(c.a, c.b, c.d, c.len, c.vp);
         case Predicate::kInFrontOfEnds:
             return detail::in_front_of_ends(detail::pair_segment(c.a, c.b, c.vp), c.x);
+        case Predicate::kSlabRegular:
+            return detail::slab_meets_box_regular(detail::slab_ray(c.p, c.d, c.t0, c.t1), c.box);
     }
     return false;
 }

@@ -127,23 +127,6 @@ __global__ void __launch_bounds__(kWarpsPerBlock * 32)
     flush_counters(wc, lane, counters);
 }
 
-// slab_meets_box (leaf_pair.h) for a segment whose direction has no component under 1e-30 in
-// magnitude: the same float operations in the same order, without the per-axis test for such a
-// component, so the same answer.
-VMAP_HD bool slab_meets_box_regular(const SlabRay& r, const WalkNode& b) {
-    float tmin = r.t0, tmax = r.t1;
-    float ta = (b.lo.x - r.p.x) * r.inv.x, tb = (b.hi.x - r.p.x) * r.inv.x;
-    tmin = max_f(tmin, min_f(ta, tb));
-    tmax = min_f(tmax, max_f(ta, tb));
-    ta = (b.lo.y - r.p.y) * r.inv.y, tb = (b.hi.y - r.p.y) * r.inv.y;
-    tmin = max_f(tmin, min_f(ta, tb));
-    tmax = min_f(tmax, max_f(ta, tb));
-    ta = (b.lo.z - r.p.z) * r.inv.z, tb = (b.hi.z - r.p.z) * r.inv.z;
-    tmin = max_f(tmin, min_f(ta, tb));
-    tmax = min_f(tmax, max_f(ta, tb));
-    return tmin <= tmax;
-}
-
 // The same walk for a warp's 32 lanes as a packet. The lanes hold neighbouring leaf pairs, so
 // their segments form a thin bundle. The warp walks the preorder tree once, entering a node
 // when any lane's own walk would enter it; node and leaf records are then warp-uniform loads
@@ -178,7 +161,7 @@ __device__ inline void walk_packet(const OctreeView& t, const VisibilityParams& 
             if (vis && n >= resume) {
                 wc.node_tests++;
                 if constexpr (decltype(regular)::value)
-                    hit = slab_meets_box_regular(s.ray, w);
+                    hit = slab_meets_box_regular(s.ray, Box{w.lo, w.hi});
                 else
                     hit = slab_meets_box(s.ray, Box{w.lo, w.hi}, 0.f);
                 if (!hit) resume = w.skip;
@@ -192,9 +175,7 @@ __device__ inline void walk_packet(const OctreeView& t, const VisibilityParams& 
             n = any_hit ? n + 1 : w.skip;
         }
     };
-    const Vec3 d = s.ray.d;
-    const bool tiny = fabsf(d.x) < 1e-30f || fabsf(d.y) < 1e-30f || fabsf(d.z) < 1e-30f;
-    if (__all_sync(0xffffffffu, !(vis && tiny)))
+    if (__all_sync(0xffffffffu, !(vis && has_tiny_component(s.ray.d))))
         walk(std::true_type{});
     else
         walk(std::false_type{});

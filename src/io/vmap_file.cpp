@@ -39,6 +39,7 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <new>
 #include <thread>
 #include <type_traits>
 
@@ -117,7 +118,8 @@ void copy_bytes(uint8_t* dst, const uint8_t* src, size_t n) {
 // The bytes are encode_links' (vmap_file_test checks the file against them).
 struct LazyLinks {
     detail::LinkCoder coder;
-    std::unique_ptr<std::atomic<uint8_t>[]> state;  // per chunk: 0 not begun, 1 coding, 2 coded
+    // per chunk: 0 not begun, 1 coding, 2 coded, 3 failed (its coder threw: no waiter may spin)
+    std::unique_ptr<std::atomic<uint8_t>[]> state;
     tbb::enumerable_thread_specific<std::vector<uint8_t>> scratch;
     explicit LazyLinks(detail::LinkCoder&& c)
         : coder(std::move(c)), state(new std::atomic<uint8_t>[coder.chunks()]) {
@@ -130,11 +132,17 @@ struct LazyLinks {
         for (; k < coder.chunks() && at[k] < hi; ++k) {
             uint8_t s = 0;
             if (state[k].compare_exchange_strong(s, 1, std::memory_order_acq_rel)) {
-                coder.code(k, scratch.local());
+                try {
+                    coder.code(k, scratch.local());  // (throws only std::bad_alloc)
+                } catch (...) {
+                    state[k].store(3, std::memory_order_release);
+                    throw;
+                }
                 state[k].store(2, std::memory_order_release);
-            } else {
-                while (state[k].load(std::memory_order_acquire) != 2) std::this_thread::yield();
+                continue;
             }
+            while ((s = state[k].load(std::memory_order_acquire)) == 1) std::this_thread::yield();
+            if (s == 3) throw std::bad_alloc();
         }
     }
 };

@@ -156,7 +156,6 @@ struct Writer {
         LazyLinks* lazy = nullptr;  // bytes to make (lazy->ready) before they are read
     };
     std::deque<std::vector<uint8_t>> owned;  // stable addresses
-    std::deque<detail::HugeVector<uint8_t>> owned_large;
     std::unique_ptr<LazyLinks> links;
     std::vector<Piece> pieces;
     size_t size = 0;
@@ -174,14 +173,6 @@ struct Writer {
         if (!open) return;
         pieces.push_back({owned.back().data(), owned.back().size()});
         open = false;
-    }
-    // A large buffer of bytes, kept until the file is written.
-    void take(detail::HugeVector<uint8_t>&& v) {
-        if (v.empty()) return;
-        close_small();
-        size += v.size();
-        owned_large.push_back(std::move(v));
-        pieces.push_back({owned_large.back().data(), owned_large.back().size()});
     }
     // The coder's stream, coded as it is written (LazyLinks).
     void take(detail::LinkCoder&& c) {

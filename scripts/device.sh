@@ -42,9 +42,11 @@
 #                  LINKS_RUNS runs (default 3); tables in $OUT/links.md
 #   bundle takes BEFORE=/path/to/vmap: another vmap binary (e.g. a device build of an older
 #   commit), bundled as .device/bin/vmap-before for gi-throughput.
-#      Logs and tables go to $OUT. At the end every file in $OUT goes into $OUT/logs.tgz and the
-#      *.log files are deleted (few files come back from the device): redirect a caller's own
-#      output to a name not ending in .log (e.g. $OUT/run.txt), and do not write logs.tgz.
+#      Logs and tables go to $OUT. At the end every file in $OUT goes into $OUT/logs.tgz (or
+#      logs-2.tgz, logs-3.tgz, ... when an earlier run in the same call left one: a second run
+#      does not overwrite the first's logs) and the *.log files are deleted (few files come back
+#      from the device): redirect a caller's own output to a name not ending in .log and not
+#      device-gpu.txt (e.g. $OUT/run.txt), and do not write logs*.tgz.
 set -euo pipefail
 root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 cd "$root"
@@ -169,8 +171,8 @@ if [[ "$cmd" == run ]]; then
         n="models/$(basename "$f" .xz)"
         [[ -s "$n" ]] || xz -d -c "$f" > "$n"
     done
-    nvidia-smi --query-gpu=name,memory.total,clocks.max.sm --format=csv > "$OUT/gpu.txt" 2>&1 || true
-    cat "$OUT/gpu.txt"
+    nvidia-smi --query-gpu=name,memory.total,clocks.max.sm --format=csv > "$OUT/device-gpu.txt" 2>&1 || true
+    cat "$OUT/device-gpu.txt"
     bin=.device/bin
     VMAP_COMMIT="$(cat .device/commit 2>/dev/null || echo unknown)"
     export VMAP_COMMIT
@@ -434,8 +436,10 @@ print("%.2f" % (time.time() - t))'
     done
     # Only a few files come back from the device: every log travels in one archive, and the
     # summaries beside it.
-    (cd "$OUT" && find . -maxdepth 1 -type f ! -name logs.tgz -printf '%P\n' |
-        tar czf logs.tgz -T - && find . -maxdepth 1 -type f \( -name '*.log' \) -delete)
+    archive=logs.tgz
+    for k in $(seq 2 99); do [[ -e "$OUT/$archive" ]] && archive=logs-$k.tgz; done
+    (cd "$OUT" && find . -maxdepth 1 -type f ! -name 'logs*.tgz' -printf '%P\n' |
+        tar czf "$archive" -T - && find . -maxdepth 1 -type f \( -name '*.log' \) -delete)
     exit $rc
 fi
 echo "usage: scripts/device.sh bundle | run [gpu|sanitize|cpu|dragon|bench|links|...]..." >&2

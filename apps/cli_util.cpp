@@ -67,6 +67,12 @@ void add_predicate_options(CLI::App* app, VisibilityParams& vp) {
     app->add_option("--end-window", vp.end_window, end_window_help())
         ->check(end_window_check())
         ->capture_default_str();
+    app->add_option("--core", vp.core,
+                    "A crossing within this share of an occluder's disc radius from its centre "
+                    "counts as K occluders (0: every crossing counts one; no core counts where "
+                    "the roughness is above 0)")
+        ->check(checked_by(&P::core, fmt::format("FLOAT in [0 - {}]", P::kCoreLimit)))
+        ->capture_default_str();
 }
 
 void add_input_options(CLI::App* app, InputOptions& in, const std::string& help) {

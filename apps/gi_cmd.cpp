@@ -48,9 +48,10 @@ VisibilityMap input_vmap(GiOptions& o, std::string& what, double& build_s,
     const auto t0 = Clock::now();
     if (has_extension(o.in.path, ".vmap") &&
         (o.K != kGiVmapK || o.eps != kGiVmapEps || o.end_window != kGiVmapEndWindow ||
-         o.in.delta_floor))
+         o.core != kGiVmapCore || o.in.delta_floor))
         throw Error(fmt::format(
-            "{}: -K/--eps/--end-window/--delta-floor apply when the V-map is built, not to a .vmap",
+            "{}: -K/--eps/--end-window/--core/--delta-floor apply when the V-map is built, not to "
+            "a .vmap",
             o.in.path));
     o.in.progress = sampling_progress();
     Input in = load_input(o.in);
@@ -304,6 +305,7 @@ BuildParams gi_build_params(const OctreeParams& octree, const GiOptions& o) {
     bp.visibility.K = o.K;
     bp.visibility.eps = o.eps;
     bp.visibility.end_window = o.end_window;
+    bp.visibility.core = o.core;
     bp.backend = o.gi.backend;
     bp.progress = stderr_progress();
     return bp;
@@ -378,6 +380,11 @@ void add_build_options(CLI::App* gi, GiOptions* o) {
                    "V-map built here: " + end_window_help() +
                        " (the GI's default is 2, vmap build's 0: docs/gi.md \"The end window\")")
         ->check(end_window_check())
+        ->capture_default_str();
+    gi->add_option("--core", o->core,
+                   "V-map built here: a crossing within this share of an occluder's disc radius "
+                   "from its centre counts as K occluders")
+        ->check(CLI::Range(0.f, VisibilityParams::kCoreLimit))
         ->capture_default_str();
 }
 

@@ -20,6 +20,7 @@ namespace vmap::cli {
 inline constexpr int kGiVmapK = 2;
 inline constexpr float kGiVmapEps = 0.01f;
 inline constexpr float kGiVmapEndWindow = 2.0f;
+inline constexpr float kGiVmapCore = VisibilityParams::kDefaultCore;
 // Its occluder discs' floor is vmap build's (scene_octree: by how the scene is sampled; docs/gi.md
 // "The occluder disc's floor").
 
@@ -31,6 +32,7 @@ struct GiOptions {
     int K = kGiVmapK;  // the predicate for a V-map built here
     float eps = kGiVmapEps;
     float end_window = kGiVmapEndWindow;
+    float core = kGiVmapCore;
     GiParams gi;
     std::optional<int> bounces;  // fixed bounce count (the final gather included); else converge
     double tolerance = 1e-3;     // converged: the last bounce added less than this of the power

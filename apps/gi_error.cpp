@@ -301,9 +301,10 @@ VisibilityMap reference_vmap(const GiOptions& o, Scene& sc, std::vector<uint32_t
     PointSet ps = sample_scene(sc, &surf);
     if (saved) {
         if (o.K != kGiVmapK || o.eps != kGiVmapEps || o.end_window != kGiVmapEndWindow ||
-            o.in.delta_floor)
+            o.core != kGiVmapCore || o.in.delta_floor)
             throw Error(fmt::format(
-                "{}: -K/--eps/--end-window/--delta-floor apply to a V-map built from a scene file",
+                "{}: -K/--eps/--end-window/--core/--delta-floor apply to a V-map built from a "
+                "scene file",
                 o.in.path));
         VisibilityMap vm = load_vmap(o.in.path);
         bool same = vm.points().size() == ps.size();

@@ -50,8 +50,9 @@ void print_params(const VisibilityMap& vm) {
         o.max_height, o.leaf_points, o.delta_floor, vm.octree().height(), vm.octree().num_nodes(),
         vm.octree().num_leaves());
     fmt::print(
-        "predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}, end_window {}, roughness {}\n",
-        v.K, v.eps, v.facing_tol, v.parallel_tol, v.end_window, v.roughness);
+        "predicate:  K {}, eps {}, facing_tol {}, parallel_tol {}, end_window {}, roughness {}, "
+        "core {}\n",
+        v.K, v.eps, v.facing_tol, v.parallel_tol, v.end_window, v.roughness, v.core);
 }
 
 nlohmann::json params_json(const VisibilityMap& vm) {
@@ -68,7 +69,8 @@ nlohmann::json params_json(const VisibilityMap& vm) {
             {"facing_tol", short_decimal(v.facing_tol)},
             {"parallel_tol", short_decimal(v.parallel_tol)},
             {"end_window", short_decimal(v.end_window)},
-            {"roughness", short_decimal(v.roughness)}};
+            {"roughness", short_decimal(v.roughness)},
+            {"core", short_decimal(v.core)}};
 }
 
 }  // namespace vmap::cli

@@ -168,7 +168,7 @@ Command add_validate_command(CLI::App& app) {
           "--backend",  "--predict",    "--delta-scale",  "--splat-floor",  "--ray-offset",
           "--md",       "--json",       "--runs",         "--embree-pairs", "--eyes",
           "--eye-seed", "--as-cloud",   "--cloud",        "--dump-eyes",    "--roughness",
-          "--noise",    "--scan",       "--scan-seed"})
+          "--noise",    "--scan",       "--scan-seed",  "--core"})
         c->get_option(name)->multi_option_policy(CLI::MultiOptionPolicy::TakeLast);
     return {c, [] { return run_validate_command(); }, true};
 }

@@ -80,7 +80,7 @@ struct BuildArgs {
     int K = VisibilityParams{}.K;
     float eps = VisibilityParams{}.eps, facing_tol = VisibilityParams{}.facing_tol,
           parallel_tol = VisibilityParams{}.parallel_tol,
-          end_window = VisibilityParams{}.end_window;
+          end_window = VisibilityParams{}.end_window, core = VisibilityParams{}.core;
     std::optional<float> roughness;  // None: a cloud's measured noise (0 for a scene file)
     std::string backend = "auto", occluders = "spheres";
     int threads = 0;
@@ -93,7 +93,8 @@ struct BuildArgs {
         if (max_height) bp.octree.max_height = *max_height;
         if (leaf_points) bp.octree.leaf_points = *leaf_points;
         if (delta_floor) bp.octree.delta_floor = *delta_floor;
-        bp.visibility = {K, eps, facing_tol, parallel_tol, end_window, roughness.value_or(0.f)};
+        bp.visibility = {K,          eps, facing_tol, parallel_tol, end_window, roughness.value_or(0.f),
+                         core};
         bp.backend = parse<Backend>(backend, "backend");
         bp.occluders = parse<OccluderSearch>(occluders, "occluders");
         bp.threads = threads;
@@ -297,6 +298,7 @@ BuildArgs build_args(const py::kwargs& kw) {
         {"parallel_tol", [](BuildArgs& a, py::handle v) { a.parallel_tol = v.cast<float>(); }},
         {"end_window", [](BuildArgs& a, py::handle v) { a.end_window = v.cast<float>(); }},
         {"roughness", [](BuildArgs& a, py::handle v) { a.roughness = v.cast<float>(); }},
+        {"core", [](BuildArgs& a, py::handle v) { a.core = v.cast<float>(); }},
         {"backend", [](BuildArgs& a, py::handle v) { a.backend = v.cast<std::string>(); }},
         {"occluders", [](BuildArgs& a, py::handle v) { a.occluders = v.cast<std::string>(); }},
         {"threads", [](BuildArgs& a, py::handle v) { a.threads = v.cast<int>(); }},
@@ -333,8 +335,8 @@ void def_build(py::module_& m) {
         "V-map of a point set: points N x 3; normals N x 3 (estimated when None), radii N "
         "(splat radii), colors N x 3 (albedo, 0.8 grey when None), emission N x 3. Options as "
         "the CLI's build: max_height, leaf_points, delta_floor, K, eps, facing_tol, parallel_tol, "
-        "end_window, roughness (None: the points' measured noise, vmap.surface_noise), backend "
-        "('auto', "
+        "end_window, roughness (None: the points' measured noise, vmap.surface_noise), core, "
+        "backend ('auto', "
         "'cpu', 'cuda'), occluders, threads (0: all cores), batch_pairs, progress "
         "(a function of a dict; returning False cancels).");
     m.def(

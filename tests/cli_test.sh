@@ -365,7 +365,7 @@ fi
 if expect_ok "build a noisy cloud with --roughness 0" \
     build noisy.ply --max-height 6 --roughness 0 -o rough0.vmap --backend cpu; then
     if ! grep -q 'surface noise' err.txt && run info rough0.vmap &&
-        grep -qE '^predicate: .*roughness 0$' out.txt; then
+        grep -qE '^predicate: .*roughness 0, core' out.txt; then
         ok "--roughness replaces the measured noise"
     else
         fail "--roughness 0: the noise still measured, or the map's roughness not 0"

@@ -120,6 +120,61 @@ TEST_P(Fig7, LeafWithoutAPlaneOccludesWithinItsSphere) {
 
 VMAP_ON_EACH_BACKEND(Fig7);
 
+// The cores (VisibilityParams::core, occluder_weight): a crossing within core x Delta of a
+// disc's centre counts K occluders, one farther out (still on the disc) counts one. Ends a at
+// the origin and b at (1, 0, 0), facing each other; an occluder across the segment at x = 0.5,
+// its disc of radius 0.1 centred `off` above the segment's line.
+struct Cores : OnBackend {
+    VisibilityParams vp;
+    LeafDisc a = disc({0, 0, 0}, {1, 0, 0}, 0.05f), b = disc({1, 0, 0}, {-1, 0, 0}, 0.05f);
+    int weight(float off) const {
+        test::PredicateCase c;
+        c.what = test::Predicate::kOccluderWeight;
+        c.a = a, c.b = b, c.x = disc({0.5f, off, 0}, {1, 0, 0}, 0.1f), c.vp = vp;
+        return test::answers_on(backend(), std::span(&c, 1))[0];
+    }
+};
+
+TEST_P(Cores, ACrossingInTheCoreCountsKAndOneOnTheRimCountsOne) {
+    vp.core = 0.5f;  // the core: within 0.05 of the centre
+    EXPECT_EQ(weight(0.f), vp.K);
+    EXPECT_EQ(weight(0.049f), vp.K);
+    EXPECT_EQ(weight(0.051f), 1);
+    EXPECT_EQ(weight(0.099f), 1);
+    EXPECT_EQ(weight(0.101f), 0);  // off the disc
+    vp.K = 3;
+    EXPECT_EQ(weight(0.02f), 3);
+    EXPECT_EQ(weight(0.07f), 1);
+}
+TEST_P(Cores, WithoutCoresEveryCrossingCountsOne) {
+    vp.core = 0.f;
+    EXPECT_EQ(weight(0.f), 1);
+    EXPECT_EQ(weight(0.099f), 1);
+    EXPECT_EQ(weight(0.101f), 0);
+}
+TEST_P(Cores, ARoughSheetOrKOneHasNoCores) {
+    vp.core = 0.5f;
+    vp.roughness = 1e-3f;  // a scan's noise: no crossing is sure
+    EXPECT_EQ(weight(0.f), 1);
+    vp.roughness = 0.f;
+    vp.K = 1;  // every crossing counts K already
+    EXPECT_EQ(weight(0.f), 1);
+    EXPECT_EQ(weight(0.099f), 1);
+}
+TEST_P(Cores, ACoreOfTheWholeDiscCountsEveryCrossingK) {
+    vp.core = 1.f;
+    EXPECT_EQ(weight(0.099f), vp.K);
+    EXPECT_EQ(weight(0.101f), 0);
+}
+TEST_P(Cores, AnOccluderThatDoesNotCountWeighsNothingInItsCore) {
+    vp.core = 0.5f;
+    // a turned away from b: the occluder lies behind a's tangent plane (in_front_of_ends)
+    a = disc({0, 0, 0}, {-1, 0, 0}, 0.05f);
+    EXPECT_EQ(weight(0.f), 0);
+}
+
+VMAP_ON_EACH_BACKEND(Cores);
+
 // A convex neighbour of end a: its centroid just behind a's tangent plane, its disc tilted so it
 // reaches into the segment's first stretch. It cuts the segment as a disc, but no surface
 // wholly behind a's plane can lie on a segment in front of it.
@@ -362,11 +417,10 @@ bool visible_without_pruning(const OctreeView& t, int32_t a, int32_t b,
     const Vec3 d = lb.centroid - la.centroid;
     const float len = sqrtf(length2(d));
     if (!(len > 0.f) || !detail::leaves_face(la, lb, d, len, vp)) return false;
-    int occ = 0;
+    int occ = 0;  // each leaf's weight: 1, or K crossed in its core (occluder_weight)
     for (int32_t l = 0; l < t.num_leaves; ++l)
-        if (l != a && l != b &&
-            detail::counts_as_occluder(detail::pair_segment(la, lb, vp), t.leaves[l], vp))
-            ++occ;
+        if (l != a && l != b)
+            occ += detail::occluder_weight(detail::pair_segment(la, lb, vp), t.leaves[l], vp);
     return occ < vp.K;
 }
 

@@ -79,13 +79,13 @@ void drop_parm_tail(std::string& out, size_t bytes) {
 }
 
 // A file image with its LINK section (the last one) replaced by one holding `offsets` and
-// `targets`, coded (version 7) or raw (version 4, the header's version set to match).
+// `targets`, coded (version 8) or raw (version 4, the header's version set to match).
 std::string with_links(const std::string& bytes, std::span<const uint64_t> offsets,
                        std::span<const int32_t> targets, bool raw) {
     std::string out = bytes.substr(0, section_data(bytes, "LINK") - 12);
-    // version 4's PARM ends before delta_floor, end_window and roughness (the last 12 bytes of
-    // version 7's)
-    if (raw) drop_parm_tail(out, 12);
+    // version 4's PARM ends before delta_floor, end_window, roughness and core (the last 16
+    // bytes of version 8's)
+    if (raw) drop_parm_tail(out, 16);
     auto put = [&](const void* p, size_t n) { out.append(static_cast<const char*>(p), n); };
     std::string body;
     body.append(reinterpret_cast<const char*>(offsets.data()), offsets.size() * 8);
@@ -102,7 +102,7 @@ std::string with_links(const std::string& bytes, std::span<const uint64_t> offse
     const uint64_t len = body.size();
     put("LINK", 4), put(&len, 8);
     out += body;
-    const uint32_t version = raw ? 4 : 7;
+    const uint32_t version = raw ? 4 : 8;
     std::memcpy(out.data() + 8, &version, 4);
     return out;
 }
@@ -136,6 +136,7 @@ void expect_same_map(const VisibilityMap& a, const VisibilityMap& b) {
     EXPECT_EQ(a.visibility_params().parallel_tol, b.visibility_params().parallel_tol);
     EXPECT_EQ(a.visibility_params().end_window, b.visibility_params().end_window);
     EXPECT_EQ(a.visibility_params().roughness, b.visibility_params().roughness);
+    EXPECT_EQ(a.visibility_params().core, b.visibility_params().core);
 
     expect_same_bytes(a.points().positions, b.points().positions, "positions");
     expect_same_bytes(a.points().normals, b.points().normals, "normals");
@@ -189,6 +190,7 @@ class VmapFile : public ::testing::Test {
         bp.octree.delta_floor = 2.25f;
         bp.visibility.end_window = 1.5f;
         bp.visibility.roughness = 0.002f;  // a scan's, kept through the file
+        bp.visibility.core = 0.25f;        // not the default either
         map_ = std::make_unique<VisibilityMap>(build_vmap(sample_scene(sc), bp, nullptr, "test"));
     }
     static void TearDownTestSuite() { map_.reset(); }
@@ -369,7 +371,7 @@ TEST_F(VmapFile, BadMagicIsRejected) {
 TEST_F(VmapFile, AnotherVersionIsRejectedNamingTheVersion) {
     ScratchDir dir;
     const std::string whole = slurp(saved(dir));
-    for (uint32_t version : {0u, 1u, 2u, 3u, 8u, 0xffffffffu}) {
+    for (uint32_t version : {0u, 1u, 2u, 3u, 9u, 0xffffffffu}) {
         SCOPED_TRACE(version);
         std::string bytes = whole;
         std::memcpy(bytes.data() + 8, &version, 4);
@@ -491,7 +493,7 @@ TEST_F(VmapFile, AVersion4FileWithRawLinksStillLoads) {
 TEST_F(VmapFile, AVersion5FileLoadsWithoutEndWindows) {
     ScratchDir dir;
     std::string bytes = slurp(saved(dir));
-    drop_parm_tail(bytes, 8);  // version 5's PARM ends with delta_floor
+    drop_parm_tail(bytes, 12);  // version 5's PARM ends with delta_floor
     const uint32_t version = 5;
     std::memcpy(bytes.data() + 8, &version, 4);
     const VisibilityMap back = load_vmap(write_resealed(dir, "v5.vmap", bytes));
@@ -508,7 +510,7 @@ TEST_F(VmapFile, AnEndWindowOutOfRangeIsRejected) {
     std::memcpy(&n, bytes.data() + parm - 8, 8);
     for (float bad : {-1.f, 1e6f, std::numeric_limits<float>::quiet_NaN()}) {
         SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + parm + n - 8, &bad, 4);
+        std::memcpy(bytes.data() + parm + n - 12, &bad, 4);
         EXPECT_LOAD_ERROR(write_resealed(dir, "window.vmap", bytes), "PARM", "end_window");
     }
 }
@@ -516,7 +518,7 @@ TEST_F(VmapFile, AnEndWindowOutOfRangeIsRejected) {
 TEST_F(VmapFile, AVersion6FileLoadsWithoutRoughness) {
     ScratchDir dir;
     std::string bytes = slurp(saved(dir));
-    drop_parm_tail(bytes, 4);  // version 6's PARM ends with end_window
+    drop_parm_tail(bytes, 8);  // version 6's PARM ends with end_window
     const uint32_t version = 6;
     std::memcpy(bytes.data() + 8, &version, 4);
     const VisibilityMap back = load_vmap(write_resealed(dir, "v6.vmap", bytes));
@@ -534,8 +536,33 @@ TEST_F(VmapFile, ARoughnessOutOfRangeIsRejected) {
     for (float bad :
          {-1.f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
         SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + parm + n - 4, &bad, 4);
+        std::memcpy(bytes.data() + parm + n - 8, &bad, 4);
         EXPECT_LOAD_ERROR(write_resealed(dir, "rough.vmap", bytes), "PARM", "roughness");
+    }
+}
+
+TEST_F(VmapFile, AVersion7FileLoadsWithoutCores) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    drop_parm_tail(bytes, 4);  // version 7's PARM ends with roughness
+    const uint32_t version = 7;
+    std::memcpy(bytes.data() + 8, &version, 4);
+    const VisibilityMap back = load_vmap(write_resealed(dir, "v7.vmap", bytes));
+    EXPECT_EQ(back.visibility_params().core, 0.f);
+    EXPECT_EQ(back.visibility_params().roughness, map().visibility_params().roughness);
+    EXPECT_EQ(back.link_offsets(), map().link_offsets());
+}
+
+TEST_F(VmapFile, ACoreOutOfRangeIsRejected) {
+    ScratchDir dir;
+    std::string bytes = slurp(saved(dir));
+    const size_t parm = section_data(bytes, "PARM");
+    uint64_t n;
+    std::memcpy(&n, bytes.data() + parm - 8, 8);
+    for (float bad : {-0.5f, 1.5f, std::numeric_limits<float>::quiet_NaN()}) {
+        SCOPED_TRACE(bad);
+        std::memcpy(bytes.data() + parm + n - 4, &bad, 4);
+        EXPECT_LOAD_ERROR(write_resealed(dir, "core.vmap", bytes), "PARM", "core");
     }
 }
 

@@ -11,6 +11,7 @@ struct VisibilityParams {
     static constexpr float kEpsLimit = 0.5f;   // eps in [0, kEpsLimit)
     static constexpr float kTolLimit = 1.0f;   // facing_tol, parallel_tol in [0, kTolLimit)
     static constexpr float kEndWindowLimit = 100.0f;  // end_window in [0, kEndWindowLimit]
+    static constexpr float kCoreLimit = 1.0f;         // core in [0, kCoreLimit]
     int K = 2;                   // actual occluders that make a pair invisible (>= 1)
     float eps = 0.01f;           // an occluder's plane must cut the segment at t in (eps, 1-eps)
     float facing_tol = 0.001f;   // facing: n_a . d > facing_tol |d| (a rounding guard)
@@ -25,10 +26,17 @@ struct VisibilityParams {
     // design.md "Noisy scans"). `vmap build` sets it from the cloud's measured noise
     // (estimate_surface_noise in vmap/normals.h); samples of a scene lie on their surfaces: 0.
     float roughness = 0.f;
+    // A crossing within core x Delta of an occluder leaf's centroid (the inner part of its disc,
+    // about the sample's own share of the surface) counts as K occluders: one sure hit hides
+    // (occluder_weight in src/visibility/leaf_pair.h; docs/validation.md "Sure hits: the discs'
+    // cores"). 0: every crossing counts one. Not on a rough sheet (roughness > 0: a sample off
+    // its surface is no surer at its centre) nor with K 1. Maps before file version 8 have 0.
+    float core = kDefaultCore;
+    static constexpr float kDefaultCore = 0.5f;
 
     // Throws vmap::Error naming `source` and the field for a value out of range: K 1..1000,
     // eps [0, 0.5), facing_tol and parallel_tol [0, 1), end_window [0, 100], roughness finite
-    // and >= 0.
+    // and >= 0, core [0, 1].
     void check(const std::string& source) const;
 };
 

@@ -6,7 +6,8 @@
 //           (payload_hash below)
 //   payload: sections, each: 4-char tag | u64 bytes | data
 //     PARM: octree and visibility parameters (version 5: the octree's delta_floor; version 6:
-//           the predicate's end_window; version 7: its roughness, in the input's units, last)
+//           the predicate's end_window; version 7: its roughness, in the input's units;
+//           version 8: its core, last)
 //     PNTS: u64 n | u8 mask (1 colours, 2 radii, 4 emission, 8 origin) | positions, normals,
 //           [colours], [radii], [emission]  (octree order), [f64 origin[3]: where the input's
 //           coordinates had the positions' zero, PointSet::origin; files without it are as before)
@@ -53,11 +54,11 @@ namespace vmap {
 namespace {
 
 constexpr char kMagic[8] = {'V', 'M', 'A', 'P', 'F', 'I', 'L', 'E'};
-constexpr uint32_t kVersion = 7;     // 2: 64-bit link offsets; 3: emission in octree order and
+constexpr uint32_t kVersion = 8;     // 2: 64-bit link offsets; 3: emission in octree order and
                                      // the measured Delta rule (a version-2 file is built wrong);
                                      // 4: the octree's frame (scale); 5: coded link targets,
                                      // the octree's delta_floor; 6: the predicate's end_window;
-                                     // 7: the predicate's roughness
+                                     // 7: the predicate's roughness; 8: its core
 constexpr uint32_t kOldestRead = 4;  // version 4 lacks PARM's delta_floor and codes no links
 constexpr size_t kHeader = 8 + 4 + 4 + 8 + 8;
 
@@ -277,6 +278,7 @@ void write_payload(Writer& w, const VisibilityMap& vm) {
     w.put(vm.octree_params().delta_floor);
     w.put(vm.visibility_params().end_window);
     w.put(vm.visibility_params().roughness);
+    w.put(vm.visibility_params().core);
     w.end(s);
     s = w.begin("PNTS");
     const uint64_t n = ps.size();
@@ -509,6 +511,10 @@ uint64_t read_points(Reader& r, detail::MapData& d, uint32_t version) {
     d.visibility_params.roughness = version >= 7 ? r.get<float>() : 0.f;
     if (!(d.visibility_params.roughness >= 0 && std::isfinite(d.visibility_params.roughness)))
         r.fail(fmt::format("roughness {} out of range", d.visibility_params.roughness));
+    // Versions 4 to 7 predate the cores: their maps were built without (0).
+    d.visibility_params.core = version >= 8 ? r.get<float>() : 0.f;
+    if (!(d.visibility_params.core >= 0 && d.visibility_params.core <= VisibilityParams::kCoreLimit))
+        r.fail(fmt::format("core {} out of range", d.visibility_params.core));
     r.end_section(e);
 
     e = r.begin_section("PNTS");

@@ -723,12 +723,12 @@ std::string validation_markdown(const ValidationReport& r) {
         r.truth_seconds);
     s += fmt::format(
         "Prediction: {} ({} occluders); K {}, eps {:g}, facing_tol {:g}, parallel_tol {:g}, "
-        "roughness {:g}; "
+        "roughness {:g}, core {:g}; "
         "leaf_points {}; Delta = {:g} max(farthest point, {:g} splat radius).  \n"
         "Buried points (a triangle within {:.3g} in front): {} ({}); pairs without one "
         "(\"live\"): {}{}.\n\n",
         p.predict == "vmap" ? "V-map query" : "leaf-pair predicate on the pairs' leaves (direct)",
-        name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, vp.roughness,
+        name_of(p.occluders), vp.K, vp.eps, vp.facing_tol, vp.parallel_tol, vp.roughness, vp.core,
         p.leaf_points, p.delta_scale, r.delta_floor, r.bury_distance, r.buried_points,
         pct(double(r.buried_points) / r.points), r.live_pairs,
         r.dropped_points ? fmt::format(" (after dropping {} buried points before sampling pairs)",
@@ -809,6 +809,7 @@ std::string validation_json(const ValidationReport& r) {
            {"facing_tol", p.visibility.facing_tol},
            {"parallel_tol", p.visibility.parallel_tol},
            {"roughness", p.visibility.roughness},
+           {"core", p.visibility.core},
            {"delta_scale", p.delta_scale},
            {"splat_floor", r.delta_floor},
            {"model_points", r.model_points},

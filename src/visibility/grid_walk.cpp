@@ -57,7 +57,8 @@ bool grid_walk_leaf_pair_visible(const Octree& t, const LeafGrid& g, int32_t a, 
         s.p, s.q, vp.eps * 0.999f, 1.f - vp.eps * 0.999f, a, b, &wc->cells_stepped,
         [&](int32_t l) {
             wc->occluder_tests++;
-            return !(counts_as_occluder(s, leaf_discs(t)[l], vp) && ++occluders >= vp.K);
+            occluders += occluder_weight(s, leaf_discs(t)[l], vp);
+            return occluders < vp.K;
         });
 }
 

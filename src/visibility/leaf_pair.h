@@ -82,10 +82,27 @@ VMAP_HD bool has_tiny_component(Vec3 d) {
     return fabsf(d.x) < 1e-30f || fabsf(d.y) < 1e-30f || fabsf(d.z) < 1e-30f;
 }
 
+// Whether crossings in the discs' cores count K (VisibilityParams::core): not on a rough sheet
+// (roughness > 0, a scan's noise), where a sample lies off its surface and its disc's centre
+// is no surer than its rim (docs/validation.md "Sure hits: the discs' cores"), and not with K 1,
+// where every crossing already does.
+VMAP_HD bool cores_on(const VisibilityParams& vp) {
+    return vp.core > 0.f && vp.roughness == 0.f && vp.K > 1;
+}
+// The radius of leaf x's core: a crossing nearer its centre than this counts as K occluders
+// (0 where cores_on is false: none is nearer). The walks on every backend square this float (no
+// contraction) and compare with <, so they agree.
+VMAP_HD float core_radius(const LeafDisc& x, const VisibilityParams& vp) {
+    return cores_on(vp) ? vp.core * x.delta : 0.f;
+}
+
 // Is leaf x an actual occluder of segment p + t d (paper §5.1, Fig. 7)?
-// The crossing's t goes to *t_out when given.
+// The crossing's t goes to *t_out when given; *core_out says whether it lies in x's core
+// (core_radius), when given and x is an actual occluder.
 VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
-                                const VisibilityParams& vp, float* t_out = nullptr) {
+                                const VisibilityParams& vp, float* t_out = nullptr,
+                                bool* core_out = nullptr) {
+    const float rc = core_radius(x, vp);
     if (x.flags & kLeafNormalDegenerate) {
         // No tangent plane: the disc degenerates to its sphere; occludes if the segment's
         // interior passes within Delta of the centroid.
@@ -94,7 +111,9 @@ VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
         const float t = dot(v, d) / dd;
         if (t_out) *t_out = t;
         if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
-        return length2(v - d * t) <= x.delta * x.delta;
+        const float r2 = length2(v - d * t);
+        if (core_out) *core_out = r2 < rc * rc;
+        return r2 <= x.delta * x.delta;
     }
     const float nd = dot(x.normal, d);
     // Tangent plane (nearly) parallel to pq: no proper crossing (x5 in Fig. 7).
@@ -105,7 +124,9 @@ VMAP_HD bool is_actual_occluder(Vec3 p, Vec3 d, float len, const LeafDisc& x,
     if (!(t > vp.eps && t < 1.f - vp.eps)) return false;
     // The crossing lies farther than Delta from the centroid (x4 in Fig. 7).
     const Vec3 hit = p + d * t;
-    return length2(hit - x.centroid) <= x.delta * x.delta;
+    const float r2 = length2(hit - x.centroid);
+    if (core_out) *core_out = r2 < rc * rc;
+    return r2 <= x.delta * x.delta;
 }
 
 // Facing test: n_a . d > tol |d| and n_b . (-d) > tol |d|. A leaf whose normals cancel out has
@@ -266,14 +287,26 @@ VMAP_HD bool beyond_the_end_windows(const PairSegment& s, float t) {
     return !(from_nearer_end(s, t) < (t < 0.5f ? s.window_a : s.window_b));
 }
 
-// Leaf x is one of the K occluders of the pair's segment: an actual occluder (Fig. 7) that
-// stands in front of both ends, is not crossed from behind right at an end, and is cut outside
-// the end windows.
+// How many of the K occluders of the pair's segment leaf x makes: none unless it is an actual
+// occluder (Fig. 7) that stands in front of both ends, is not crossed from behind right at an
+// end, and is cut outside the end windows; K when it is crossed in its core (core_radius);
+// else one.
+// The core (docs/validation.md "Sure hits: the discs' cores"): Delta reaches past the sample's
+// own share of the surface (the disc floor widens it to close the gaps between samples, and a
+// disc stands out past a curved or thin part's silhouette), which is why one crossing is not
+// enough (K 2). The inner part of the disc, about the sample's own splat, is surface: a segment
+// through it is hidden, whatever else it crosses.
+VMAP_HD int occluder_weight(const PairSegment& s, const LeafDisc& x, const VisibilityParams& vp) {
+    float t = 0.f;
+    bool core = false;
+    if (!(in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp, &t, &core) &&
+          !exits_at_an_end(s, x, t) && beyond_the_end_windows(s, t)))
+        return 0;
+    return core ? vp.K : 1;
+}
 VMAP_HD bool counts_as_occluder(const PairSegment& s, const LeafDisc& x,
                                 const VisibilityParams& vp) {
-    float t = 0.f;
-    return in_front_of_ends(s, x) && is_actual_occluder(s.p, s.d, s.len, x, vp, &t) &&
-           !exits_at_an_end(s, x, t) && beyond_the_end_windows(s, t);
+    return occluder_weight(s, x, vp) > 0;
 }
 
 // A node reached by the walk (its box meets the segment): when it is a leaf other than a and b,
@@ -283,7 +316,8 @@ VMAP_HD bool occluder_reached(const OctreeView& t, const PairSegment& s, int32_t
                               int32_t b, const VisibilityParams& vp, int& occluders, Counters* wc) {
     if (leaf < 0 || leaf == a || leaf == b) return false;
     if (kCount) wc->occluder_tests++;
-    return counts_as_occluder(s, t.leaves[leaf], vp) && ++occluders >= vp.K;
+    occluders += occluder_weight(s, t.leaves[leaf], vp);
+    return occluders >= vp.K;
 }
 
 // Visibility of leaves a != b. Potential occluders are the leaves reached by descending from

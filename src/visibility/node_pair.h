@@ -43,7 +43,8 @@
 //       So every bound here, an upper bound on the leaves with eps < t < 1 - eps whose disc the
 //       segment meets, bounds the leaves that count, and "fewer than K may occlude" stays a
 //       proof. (A rule that let a leaf count at t <= eps, or t >= 1 - eps, would need flat_end
-//       and the shaft's t range redone; none does.)
+//       and the shaft's t range redone; none does.) A leaf crossed in its core counts K
+//       (occluder_weight): count_possible_occluders bounds that with the core's own disc.
 // Doubles carry relative errors near 1e-16, far inside E.
 #pragma once
 
@@ -407,6 +408,14 @@ VMAP_HD bool shaft_clear_of_disc(const Shaft& s, const LeafDisc& x, double E) {
     return lb * (1 - 1e-9) - w > E;
 }
 
+// The shaft of node pair (A, B): the segments between their centroid boxes at t in
+// [eps, 1 - eps].
+VMAP_HD Shaft pair_shaft(const NodePairContext& c, int32_t A, int32_t B) {
+    const NodeBounds na = bounds_at(c, A);
+    const NodeBounds nbb = bounds_at(c, B);
+    return make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
+}
+
 // Walks the tree nodes that may hold an actual occluder of some segment from A's centroids to
 // B's (e4), like leaf_pair_visible walks the preorder array, pruning a subtree when the shaft
 // misses its box, when it lies under A or B with that end flat, or when the shaft clears all its
@@ -416,10 +425,7 @@ VMAP_HD bool shaft_clear_of_disc(const Shaft& s, const LeafDisc& x, double E) {
 template <class Counters, class Enter>
 VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool flat_a, bool flat_b,
                         Counters* wc, Enter&& enter) {
-    const NodeBounds na = bounds_at(c, A);
-    const NodeBounds nbb = bounds_at(c, B);
-    const Shaft s =
-        make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
+    const Shaft s = pair_shaft(c, A, B);
     const double E = c.margin;
     const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
     int32_t n = 0;
@@ -448,16 +454,37 @@ VMAP_HD void flat_ends(const NodePairContext& c, int32_t A, int32_t B, bool* fa,
     *fb = flat_end(nbb, -1, db, c.vp.eps, c.margin);
 }
 
-// The leaves that may be actual occluders of some segment from A's centroids to B's, counted up
-// to `limit`.
+// Leaf x's core (VisibilityParams::core) as a disc of its own: x with Delta = core_radius, the
+// float the walks square.
+VMAP_HD LeafDisc core_disc(const LeafDisc& x, const VisibilityParams& vp) {
+    LeafDisc k = x;
+    k.delta = core_radius(x, vp);
+    return k;
+}
+
+// The occluders some segment from A's centroids to B's may count, up to `limit`: each leaf that
+// may be an actual occluder of one counts one, or `limit` when a segment may also cross its core
+// (a crossing there counts K: occluder_weight). The core is a disc like x's own with radius
+// rc = core_radius(x), the float the walks compare with: (e3) with rc for Delta puts a crossing
+// the float test finds in the core within E of the core disc, so shaft_clear_of_disc with rc
+// (e4 iv) proves that no segment crosses it. Without cores (cores_on) every crossing counts one,
+// or, with K 1, already K.
 template <class Counters>
 VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_t B, int limit,
                                      Counters* wc) {
     bool flat_a, flat_b;
     flat_ends(c, A, B, &flat_a, &flat_b);
+    const bool cores = cores_on(c.vp);
+    const Shaft s = pair_shaft(c, A, B);
     int count = 0;
-    walk_shaft(c, A, B, flat_a, flat_b, wc,
-               [&](int32_t n) { return !(c.tree.walk[n].leaf >= 0 && ++count >= limit); });
+    walk_shaft(c, A, B, flat_a, flat_b, wc, [&](int32_t n) {
+        const int32_t leaf = c.tree.walk[n].leaf;
+        if (leaf < 0) return true;
+        count += cores && !shaft_clear_of_disc(s, core_disc(c.tree.leaves[leaf], c.vp), c.margin)
+                     ? limit
+                     : 1;
+        return count < limit;
+    });
     return count;
 }
 

@@ -328,10 +328,7 @@ inline void box_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
     orig.clear();
     bool flat_a, flat_b;
     flat_ends(c, A, B, &flat_a, &flat_b);
-    const NodeBounds na = bounds_at(c, A);
-    const NodeBounds nbb = bounds_at(c, B);
-    const Shaft s =
-        make_shaft(na.clo, na.chi, nbb.clo, nbb.chi, double(c.vp.eps), double(1.f - c.vp.eps));
+    const Shaft s = pair_shaft(c, A, B);
     const double E = c.margin;
     const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
     for (int32_t n = 0; n < c.tree.num_nodes;) {
@@ -826,6 +823,8 @@ class SegmentPacket {
         const __m256 eps = _mm256_set1_ps(vp.eps), eps1 = _mm256_set1_ps(1.f - vp.eps);
         const __m256 ptol = _mm256_set1_ps(vp.parallel_tol);
         const __m256 dd = _mm256_set1_ps(x.delta * x.delta);
+        const float rc = core_radius(x, vp);
+        const __m256 cc = _mm256_set1_ps(rc * rc);
         const __m256 rough_ = _mm256_set1_ps(vp.roughness),
                      sheet_cos = _mm256_set1_ps(kSameSheetCos);
         const bool rough_on = vp.roughness > 0;
@@ -866,8 +865,10 @@ class SegmentPacket {
             const __m256 ex = _mm256_sub_ps(_mm256_add_ps(px, _mm256_mul_ps(dx, tt)), cx);
             const __m256 ey = _mm256_sub_ps(_mm256_add_ps(py, _mm256_mul_ps(dy, tt)), cy);
             const __m256 ez = _mm256_sub_ps(_mm256_add_ps(pz, _mm256_mul_ps(dz, tt)), cz);
-            m &= bits_ymm(_mm256_cmp_ps(dot_ymm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ));
+            const __m256 r2 = dot_ymm(ex, ey, ez, ex, ey, ez);
+            m &= bits_ymm(_mm256_cmp_ps(r2, dd, _CMP_LE_OQ));
             if (!m) continue;
+            const uint32_t in_core = bits_ymm(_mm256_cmp_ps(r2, cc, _CMP_LT_OQ));
             // exits_at_an_end and beyond_the_end_windows, by the nearer end (blendv takes its
             // second operand where the mask is set, as mask_blend does)
             const __m256 near_v = _mm256_cmp_ps(tt, half, _CMP_LT_OQ);
@@ -895,10 +896,11 @@ class SegmentPacket {
                                    (bits_ymm(_mm256_cmp_ps(from_end, hd, _CMP_LT_OQ)) | rough);
             const __m256 win = _mm256_blendv_ps(ld(win_b_ + o), ld(win_a_ + o), near_v);
             m &= ~exits & bits_ymm(_mm256_cmp_ps(from_end, win, _CMP_NLT_UQ));
-            // The K rule, lane by lane.
+            // The K rule, lane by lane; a crossing in x's core counts K (occluder_weight).
             for (; m; m &= m - 1) {
-                const int i = o + __builtin_ctz(m);
-                if (++occluders_[i] < vp.K) continue;
+                const int b = __builtin_ctz(m), i = o + b;
+                occluders_[i] += (in_core >> b & 1u) ? vp.K : 1;
+                if (occluders_[i] < vp.K) continue;
                 live_ &= ~(1u << i);
                 resume_[i] = INT_MAX;
                 ++left;
@@ -1002,10 +1004,13 @@ class SegmentPacket {
         const __m512 eps = _mm512_set1_ps(vp.eps), eps1 = _mm512_set1_ps(1.f - vp.eps);
         const __m512 ptol = _mm512_set1_ps(vp.parallel_tol);
         const __m512 dd = _mm512_set1_ps(x.delta * x.delta);
+        const float rc = core_radius(x, vp);
+        const __m512 cc = _mm512_set1_ps(rc * rc);
         const __m512 rough_ = _mm512_set1_ps(vp.roughness),
                      sheet_cos = _mm512_set1_ps(kSameSheetCos);
         const bool rough_on = vp.roughness > 0;
-        const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K);
+        const __m512i lf = _mm512_set1_epi32(leaf), kk = _mm512_set1_epi32(vp.K),
+                      more = _mm512_set1_epi32(vp.K - 1);
         const __m512 absmask = _mm512_castsi512_ps(_mm512_set1_epi32(0x7fffffff));
         int left = 0;
         for (int h = 0; h < 2; ++h) {
@@ -1041,7 +1046,9 @@ class SegmentPacket {
             const __m512 ex = _mm512_sub_ps(_mm512_add_ps(px, _mm512_mul_ps(dx, tt)), cx);
             const __m512 ey = _mm512_sub_ps(_mm512_add_ps(py, _mm512_mul_ps(dy, tt)), cy);
             const __m512 ez = _mm512_sub_ps(_mm512_add_ps(pz, _mm512_mul_ps(dz, tt)), cz);
-            m &= _mm512_cmp_ps_mask(dot_zmm(ex, ey, ez, ex, ey, ez), dd, _CMP_LE_OQ);
+            const __m512 r2 = dot_zmm(ex, ey, ez, ex, ey, ez);
+            m &= _mm512_cmp_ps_mask(r2, dd, _CMP_LE_OQ);
+            const __mmask16 in_core = _mm512_cmp_ps_mask(r2, cc, _CMP_LT_OQ);
             // exits_at_an_end (x has a plane) and beyond_the_end_windows, by the nearer end
             const __mmask16 near_a = _mm512_cmp_ps_mask(tt, half, _CMP_LT_OQ);
             const __m512 from_end =
@@ -1077,9 +1084,11 @@ class SegmentPacket {
             const __m512 win = _mm512_mask_blend_ps(near_a, _mm512_load_ps(win_b_ + o),
                                                     _mm512_load_ps(win_a_ + o));
             m &= __mmask16(~exits) & _mm512_cmp_ps_mask(from_end, win, _CMP_NLT_UQ);
-            // The K rule: a lane at its K-th occluder is hidden and leaves the walk.
+            // The K rule: a lane at its K-th occluder is hidden and leaves the walk; a crossing in
+            // x's core counts K (occluder_weight).
             __m512i occ = _mm512_load_si512(occluders_ + o);
             occ = _mm512_mask_add_epi32(occ, m, occ, _mm512_set1_epi32(1));
+            occ = _mm512_mask_add_epi32(occ, m & in_core, occ, more);
             _mm512_store_si512(occluders_ + o, occ);
             const __mmask16 done = _mm512_mask_cmpge_epi32_mask(m, occ, kk);
             if (!done) continue;

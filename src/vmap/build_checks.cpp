@@ -21,8 +21,13 @@ void prepare_points(PointSet& points, BuildStats& stats, const std::string& sour
     }
 }
 
+// Reached without finish() only when the build failed or was cancelled: the check's result is
+// not wanted, so a task not yet started is skipped and a running one stops early (with one
+// thread the task would otherwise run whole here, after the construction, before the error
+// gets out).
 NormalsCheck::~NormalsCheck() {
     try {
+        if (started_) group_.cancel();
         group_.wait();
     } catch (...) {  // (a destructor must not throw; finish() reports the error when called)
     }

@@ -36,6 +36,8 @@ void VisibilityParams::check(const std::string& source) const {
                                 kEndWindowLimit));
     if (!(roughness >= 0 && std::isfinite(roughness)))
         throw Error(fmt::format("{}: roughness {} out of range (finite, >= 0)", source, roughness));
+    if (!(core >= 0 && core <= kCoreLimit))
+        throw Error(fmt::format("{}: core {} out of range [0, {}]", source, core, kCoreLimit));
 }
 
 void BuildParams::check(const std::string& source) const {

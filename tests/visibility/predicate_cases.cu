@@ -13,7 +13,7 @@ namespace {
 struct Answer {
     const PredicateCase* cases;
     uint8_t* out;
-    __device__ void operator()(uint64_t i) const { out[i] = answer(cases[i]) ? 1 : 0; }
+    __device__ void operator()(uint64_t i) const { out[i] = uint8_t(answer(cases[i])); }
 };
 
 }  // namespace

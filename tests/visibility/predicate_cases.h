@@ -19,7 +19,8 @@ enum class Predicate : uint8_t {
     kCountsAsOccluder,
     kLeavesFace,
     kInFrontOfEnds,
-    kSlabRegular
+    kSlabRegular,
+    kOccluderWeight
 };
 
 // One question about the segment from leaf a's centroid p along d (length len) to leaf b:
@@ -28,6 +29,7 @@ enum class Predicate : uint8_t {
 //   kLeavesFace        leaves_face(a, b, d, len, vp)
 //   kInFrontOfEnds     in_front_of_ends(pair_segment(a, b, vp), x)
 //   kSlabRegular       slab_meets_box_regular(slab_ray(p, d, t0, t1), box)
+//   kOccluderWeight    occluder_weight(pair_segment(a, b, vp), x, vp) (0, 1 or K)
 struct PredicateCase {
     Predicate what = Predicate::kActualOccluder;
     LeafDisc a, b, x;
@@ -38,7 +40,7 @@ struct PredicateCase {
     float t0 = 0, t1 = 1;
 };
 
-VMAP_HD bool answer(const PredicateCase& c) {
+VMAP_HD int answer(const PredicateCase& c) {
     switch (c.what) {
         case Predicate::kActualOccluder:
             return detail::is_actual_occluder(c.p, c.d, c.len, c.x, c.vp);
@@ -50,8 +52,10 @@ VMAP_HD bool answer(const PredicateCase& c) {
             return detail::in_front_of_ends(detail::pair_segment(c.a, c.b, c.vp), c.x);
         case Predicate::kSlabRegular:
             return detail::slab_meets_box_regular(detail::slab_ray(c.p, c.d, c.t0, c.t1), c.box);
+        case Predicate::kOccluderWeight:
+            return detail::occluder_weight(detail::pair_segment(c.a, c.b, c.vp), c.x, c.vp);
     }
-    return false;
+    return 0;
 }
 
 #ifdef VMAP_TEST_CUDA
@@ -63,11 +67,11 @@ inline std::vector<uint8_t> answers_on_cuda(std::span<const PredicateCase>) {
 }
 #endif
 
-// answer() of each case on backend b (cpu or cuda).
+// answer() of each case on backend b (cpu or cuda), as a byte.
 inline std::vector<uint8_t> answers_on(Backend b, std::span<const PredicateCase> cases) {
     if (b == Backend::kCuda) return answers_on_cuda(cases);
     std::vector<uint8_t> out;
-    for (const PredicateCase& c : cases) out.push_back(answer(c));
+    for (const PredicateCase& c : cases) out.push_back(uint8_t(answer(c)));
     return out;
 }
 

@@ -296,7 +296,8 @@ uint64_t input_hash(const VisibilityMap& vm) {
                                     vp.facing_tol,
                                     vp.parallel_tol,
                                     vp.end_window,
-                                    vp.roughness};
+                                    vp.roughness,
+                                    vp.core};
     uint64_t x = h(vm.points().positions) ^ h(vm.points().normals) * 3 ^ h(vm.points().radii) * 5 ^
                  h(vm.order()) * 7 ^ h(params) * 11;
     return x ^ uint64_t(vm.octree().num_nodes()) * 0x9e3779b97f4a7c15ULL;

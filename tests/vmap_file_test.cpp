@@ -490,80 +490,65 @@ TEST_F(VmapFile, AVersion4FileWithRawLinksStillLoads) {
     EXPECT_EQ(back.octree_params().leaf_points, map().octree_params().leaf_points);
 }
 
+// The saved map as an older version would have written it: PARM cut by `tail` bytes and the
+// header's version set, loaded back.
+VisibilityMap as_older_version(const ScratchDir& dir, const std::string& whole, size_t tail,
+                               uint32_t version) {
+    std::string bytes = whole;
+    drop_parm_tail(bytes, tail);
+    std::memcpy(bytes.data() + 8, &version, 4);
+    return load_vmap(write_resealed(dir, "v" + std::to_string(version) + ".vmap", bytes));
+}
+
+// Each bad value written into the PARM float `from_end` bytes before the section's end is
+// refused naming PARM and `field`.
+void expect_parm_float_rejected(const ScratchDir& dir, const std::string& whole, size_t from_end,
+                                const char* field, std::initializer_list<float> bad_values) {
+    std::string bytes = whole;
+    const size_t parm = section_data(bytes, "PARM");
+    uint64_t n;
+    std::memcpy(&n, bytes.data() + parm - 8, 8);
+    for (float bad : bad_values) {
+        SCOPED_TRACE(bad);
+        std::memcpy(bytes.data() + parm + n - from_end, &bad, 4);
+        EXPECT_LOAD_ERROR(write_resealed(dir, std::string(field) + ".vmap", bytes), "PARM", field);
+    }
+}
+
+// PARM ends with delta_floor (version 5), end_window (6), roughness (7) and core (8), 4 bytes
+// each.
 TEST_F(VmapFile, AVersion5FileLoadsWithoutEndWindows) {
     ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    drop_parm_tail(bytes, 12);  // version 5's PARM ends with delta_floor
-    const uint32_t version = 5;
-    std::memcpy(bytes.data() + 8, &version, 4);
-    const VisibilityMap back = load_vmap(write_resealed(dir, "v5.vmap", bytes));
+    const VisibilityMap back = as_older_version(dir, slurp(saved(dir)), 12, 5);
     EXPECT_EQ(back.visibility_params().end_window, 0.f);
     EXPECT_EQ(back.octree_params().delta_floor, map().octree_params().delta_floor);
     EXPECT_EQ(back.link_offsets(), map().link_offsets());
 }
 
-TEST_F(VmapFile, AnEndWindowOutOfRangeIsRejected) {
-    ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    const size_t parm = section_data(bytes, "PARM");
-    uint64_t n;
-    std::memcpy(&n, bytes.data() + parm - 8, 8);
-    for (float bad : {-1.f, 1e6f, std::numeric_limits<float>::quiet_NaN()}) {
-        SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + parm + n - 12, &bad, 4);
-        EXPECT_LOAD_ERROR(write_resealed(dir, "window.vmap", bytes), "PARM", "end_window");
-    }
-}
-
 TEST_F(VmapFile, AVersion6FileLoadsWithoutRoughness) {
     ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    drop_parm_tail(bytes, 8);  // version 6's PARM ends with end_window
-    const uint32_t version = 6;
-    std::memcpy(bytes.data() + 8, &version, 4);
-    const VisibilityMap back = load_vmap(write_resealed(dir, "v6.vmap", bytes));
+    const VisibilityMap back = as_older_version(dir, slurp(saved(dir)), 8, 6);
     EXPECT_EQ(back.visibility_params().roughness, 0.f);
     EXPECT_EQ(back.visibility_params().end_window, map().visibility_params().end_window);
     EXPECT_EQ(back.link_offsets(), map().link_offsets());
 }
 
-TEST_F(VmapFile, ARoughnessOutOfRangeIsRejected) {
-    ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    const size_t parm = section_data(bytes, "PARM");
-    uint64_t n;
-    std::memcpy(&n, bytes.data() + parm - 8, 8);
-    for (float bad :
-         {-1.f, std::numeric_limits<float>::infinity(), std::numeric_limits<float>::quiet_NaN()}) {
-        SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + parm + n - 8, &bad, 4);
-        EXPECT_LOAD_ERROR(write_resealed(dir, "rough.vmap", bytes), "PARM", "roughness");
-    }
-}
-
 TEST_F(VmapFile, AVersion7FileLoadsWithoutCores) {
     ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    drop_parm_tail(bytes, 4);  // version 7's PARM ends with roughness
-    const uint32_t version = 7;
-    std::memcpy(bytes.data() + 8, &version, 4);
-    const VisibilityMap back = load_vmap(write_resealed(dir, "v7.vmap", bytes));
+    const VisibilityMap back = as_older_version(dir, slurp(saved(dir)), 4, 7);
     EXPECT_EQ(back.visibility_params().core, 0.f);
     EXPECT_EQ(back.visibility_params().roughness, map().visibility_params().roughness);
     EXPECT_EQ(back.link_offsets(), map().link_offsets());
 }
 
-TEST_F(VmapFile, ACoreOutOfRangeIsRejected) {
+TEST_F(VmapFile, PredicateParametersOutOfRangeAreRejected) {
     ScratchDir dir;
-    std::string bytes = slurp(saved(dir));
-    const size_t parm = section_data(bytes, "PARM");
-    uint64_t n;
-    std::memcpy(&n, bytes.data() + parm - 8, 8);
-    for (float bad : {-0.5f, 1.5f, std::numeric_limits<float>::quiet_NaN()}) {
-        SCOPED_TRACE(bad);
-        std::memcpy(bytes.data() + parm + n - 4, &bad, 4);
-        EXPECT_LOAD_ERROR(write_resealed(dir, "core.vmap", bytes), "PARM", "core");
-    }
+    const std::string whole = slurp(saved(dir));
+    constexpr float kNaN = std::numeric_limits<float>::quiet_NaN(),
+                    kInf = std::numeric_limits<float>::infinity();
+    expect_parm_float_rejected(dir, whole, 12, "end_window", {-1.f, 1e6f, kNaN});
+    expect_parm_float_rejected(dir, whole, 8, "roughness", {-1.f, kInf, kNaN});
+    expect_parm_float_rejected(dir, whole, 4, "core", {-0.5f, 1.5f, kNaN});
 }
 
 // PNTS: the byte after the point count is the fields' mask (1 colours, 2 radii, 4 emission,

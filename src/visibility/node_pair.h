@@ -422,10 +422,10 @@ VMAP_HD Shaft pair_shaft(const NodePairContext& c, int32_t A, int32_t B) {
 // planes, and a leaf when the shaft clears its disc. A or B itself, when a leaf, is the pair's
 // own end and never entered. Calls enter(n) for each node entered, in preorder; a false return
 // stops the walk. Counts the nodes tested into wc->shaft_node_tests.
+// `s` is pair_shaft(c, A, B).
 template <class Counters, class Enter>
-VMAP_HD void walk_shaft(const NodePairContext& c, int32_t A, int32_t B, bool flat_a, bool flat_b,
-                        Counters* wc, Enter&& enter) {
-    const Shaft s = pair_shaft(c, A, B);
+VMAP_HD void walk_shaft(const NodePairContext& c, const Shaft& s, int32_t A, int32_t B,
+                        bool flat_a, bool flat_b, Counters* wc, Enter&& enter) {
     const double E = c.margin;
     const bool a_leaf = c.tree.walk[A].leaf >= 0, b_leaf = c.tree.walk[B].leaf >= 0;
     int32_t n = 0;
@@ -477,7 +477,7 @@ VMAP_HD int count_possible_occluders(const NodePairContext& c, int32_t A, int32_
     const bool cores = cores_on(c.vp);
     const Shaft s = pair_shaft(c, A, B);
     int count = 0;
-    walk_shaft(c, A, B, flat_a, flat_b, wc, [&](int32_t n) {
+    walk_shaft(c, s, A, B, flat_a, flat_b, wc, [&](int32_t n) {
         const int32_t leaf = c.tree.walk[n].leaf;
         if (leaf < 0) return true;
         count += cores && !shaft_clear_of_disc(s, core_disc(c.tree.leaves[leaf], c.vp), c.margin)
@@ -522,7 +522,7 @@ inline void shaft_walk_nodes(const NodePairContext& c, int32_t A, int32_t B,
     struct {
         uint64_t shaft_node_tests = 0;
     } wc;
-    walk_shaft(c, A, B, flat_a, flat_b, &wc, [&](int32_t n) {
+    walk_shaft(c, pair_shaft(c, A, B), A, B, flat_a, flat_b, &wc, [&](int32_t n) {
         out.push_back(c.tree.walk[n]);
         orig.push_back(n);
         return true;

@@ -454,6 +454,10 @@ void def_map(py::module_& m) {
             "The predicate's roughness (the input's units): steps below it between a point and "
             "its own sheet did not occlude; 0 for samples of a scene.")
         .def_property_readonly(
+            "core", [](const VisibilityMap& v) { return v.visibility_params().core; },
+            "The predicate's core: a crossing within this share of an occluder's disc radius "
+            "from its centre counted as K occluders (not where the roughness is above 0).")
+        .def_property_readonly(
             "points", [](const VisibilityMap& v) { return input_order(v, v.points().positions); },
             "Positions, N x 3 float32, in input order, relative to origin.")
         .def_property_readonly(

@@ -140,6 +140,18 @@ def test_surface_noise_and_roughness(tmp_path):
     assert vmap.build(exact, max_height=5, backend="cpu").roughness == 0.0
 
 
+def test_core_is_an_option_and_kept(tmp_path):
+    exact = noisy_sphere(0.0)
+    m = vmap.build(exact, max_height=5, backend="cpu")
+    assert m.core == pytest.approx(0.5)  # the default
+    m0 = vmap.build(exact, max_height=5, backend="cpu", core=0.0)
+    assert m0.core == 0.0
+    m0.save(str(tmp_path / "c.vmap"))
+    assert vmap.load(str(tmp_path / "c.vmap")).core == 0.0
+    with pytest.raises(vmap.Error, match="core"):
+        vmap.build(exact, max_height=5, backend="cpu", core=2.0)
+
+
 def test_one_thread_gives_the_same_map(small):
     one = vmap.build_file(SCENE, points=2000, seed=3, threads=1, **OPTS)
     pairs = np.random.default_rng(5).integers(0, small.num_points, size=(2000, 2))
